@@ -1,0 +1,39 @@
+"""Packaging for flexure_sim.
+
+One layout serves colcon (ament_python) and plain pip:
+- colcon honours setup.cfg's install_scripts, so console scripts land in lib/flexure_sim;
+- pip ignores it, so small launchers are also installed as data_files under
+  lib/flexure_sim/ (what `ros2 run` looks for), next to the ament index marker.
+"""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "flexure_sim"
+EXECUTABLES = {
+    "stage_node": "flexure_sim.node.stage_node:main",
+    "replay": "flexure_sim.tools.replay:main",
+}
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    package_data={PACKAGE: ["py.typed"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+        (f"lib/{PACKAGE}", [f"scripts/ros2run/{name}" for name in sorted(EXECUTABLES)]),
+    ],
+    install_requires=["numpy", "scipy", "PyYAML", "mcap", "mcap-ros2-support", "matplotlib"],
+    zip_safe=True,
+    maintainer="flexure_sim developers",
+    maintainer_email="flexure-sim@example.com",
+    description="Twistor-based simulation of planar flexure mechanisms, with a ROS 2 stage node.",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [f"{name}={target}" for name, target in EXECUTABLES.items()]
+        + ["flexure-sim=flexure_sim.cli:main"],
+    },
+)
