@@ -1,0 +1,238 @@
+"""Hinge laws: potential energy, wrench and dissipation of an elastic element (Ch. 3, 4).
+
+A hinge joins frame a (on body A) and frame b (on body B) that coincide when unstressed.
+Its state is the relative displacement of b in a, written r = (alpha, p1, p2): alpha the
+rotation of b relative to a, p the origin of b in a's coordinates.
+
+A law is a potential U(c) in *law coordinates* c(r), plus a dissipation function
+D = 1/2 c_dot^T C c_dot in the rates of the same coordinates:
+- ``twistor``: c = (sigma, xi, x1, x2) (eqs. 2.132-2.135); the quadratic potential is
+  U = 2 [xi; x]^T K [xi; x] (eq. 4.7) and the damping wrench 2 Lambda^T B dx (4.40-4.42)
+  is the gradient of D = 2 [xi_dot; x_dot]^T B [xi_dot; x_dot].
+- ``twist``: c = (tau, t1, t2) (eqs. 2.107-2.108); U = 1/2 d^T K d (eq. 3.4), and
+  D = 1/2 d_dot^T B d_dot (the printed 3.62-3.64 repeat the twistor form; the two agree to
+  second order in the displacement).
+
+The wrench exerted *by body B on the element*, in frame b coordinates, moment about b's
+origin (m_b of eqs. 3.53 and 4.35), follows from the virtual work
+dW = m_b . (delta tau, delta t_b): with delta r = (delta tau, R(alpha) delta t_b),
+m_b = (dU/dalpha, R(alpha)^T dU/dp). The element exerts -m_b on body B and the opposite
+wrench on body A (the potential depends on the relative displacement only).
+
+Everything is vectorised over hinges: alpha has shape (n,), p shape (n, 2).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, Sequence
+
+import numpy as np
+
+from .kinematics import J, half_cot, rot
+
+# ------------------------------------------------------------------ law coordinates
+
+
+@dataclass(frozen=True)
+class CoordinateMap:
+    """Law coordinates c(r) with first and second derivatives with respect to r.
+
+    c: (n, k); dc: (n, k, 3) = dc/dr; d2c: (n, k, 3, 3) = d2c/dr2.
+    """
+
+    c: np.ndarray
+    dc: np.ndarray
+    d2c: np.ndarray
+
+
+def twistor_coordinates(alpha: np.ndarray, p: np.ndarray) -> CoordinateMap:
+    """Twistor parameters (sigma, xi, x1, x2) of r = (alpha, p) and their derivatives.
+
+    sigma = cos(alpha/2), xi = sin(alpha/2), x = 1/2 R(-alpha/2) p (eq. 2.178); the
+    derivatives follow from d/dalpha R(-alpha/2) = -1/2 J R(-alpha/2), so that
+    d[xi; x] = 1/2 Lambda^T-map of eq. 4.27 applied to (d alpha, R(alpha)^T dp).
+    """
+    alpha = np.asarray(alpha, dtype=float)
+    p = np.asarray(p, dtype=float)
+    n = alpha.shape[0]
+    half = 0.5 * alpha
+    sigma, xi = np.cos(half), np.sin(half)
+    Rh = rot(-half)  # (n, 2, 2), R(-alpha/2)
+    x = 0.5 * np.einsum("nij,nj->ni", Rh, p)
+    Jx = x @ J.T
+    c = np.column_stack([sigma, xi, x])
+    dc = np.zeros((n, 4, 3))
+    dc[:, 0, 0] = -0.5 * xi
+    dc[:, 1, 0] = 0.5 * sigma
+    dc[:, 2:, 0] = -0.5 * Jx
+    dc[:, 2:, 1:] = 0.5 * Rh
+    d2c = np.zeros((n, 4, 3, 3))
+    d2c[:, 0, 0, 0] = -0.25 * sigma
+    d2c[:, 1, 0, 0] = -0.25 * xi
+    d2c[:, 2:, 0, 0] = -0.25 * x
+    mixed = -0.25 * np.einsum("ij,njk->nik", J, Rh)
+    d2c[:, 2:, 0, 1:] = mixed
+    d2c[:, 2:, 1:, 0] = mixed
+    return CoordinateMap(c, dc, d2c)
+
+
+def twist_coordinates(alpha: np.ndarray, p: np.ndarray) -> CoordinateMap:
+    """Twist (tau, t1, t2) of r = (alpha, p) and its derivatives (eqs. 2.106-2.108).
+
+    tau = alpha, t = f(alpha) p - (alpha/2) J p with f = (alpha/2) cot(alpha/2).
+    """
+    alpha = np.asarray(alpha, dtype=float)
+    p = np.asarray(p, dtype=float)
+    n = alpha.shape[0]
+    f, f1, f2 = _half_cot_derivatives(alpha)
+    Jp = p @ J.T
+    t = f[:, None] * p - 0.5 * alpha[:, None] * Jp
+    c = np.column_stack([alpha, t])
+    dc = np.zeros((n, 3, 3))
+    dc[:, 0, 0] = 1.0
+    dc[:, 1:, 0] = f1[:, None] * p - 0.5 * Jp
+    dc[:, 1:, 1:] = f[:, None, None] * np.eye(2) - 0.5 * alpha[:, None, None] * J
+    d2c = np.zeros((n, 3, 3, 3))
+    d2c[:, 1:, 0, 0] = f2[:, None] * p
+    mixed = f1[:, None, None] * np.eye(2) - 0.5 * J
+    d2c[:, 1:, 0, 1:] = mixed
+    d2c[:, 1:, 1:, 0] = mixed
+    return CoordinateMap(c, dc, d2c)
+
+
+def _half_cot_derivatives(alpha: np.ndarray):
+    """f = (a/2) cot(a/2) and its first two derivatives, with series near a = 0."""
+    small = np.abs(alpha) < 1e-2
+    a = np.where(small, 1.0, alpha)
+    s, co = np.sin(0.5 * a), np.cos(0.5 * a)
+    f_exact = half_cot(a)
+    f1_exact = 0.5 * co / s - 0.25 * a / s**2
+    # f'' = -1/(2 s^2) + a cos / (4 s^3)
+    f2_exact = -0.5 / s**2 + 0.25 * a * co / s**3
+    a2 = alpha * alpha
+    a4 = a2 * a2
+    f = np.where(small, 1.0 - a2 / 12.0 - a4 / 720.0 - a4 * a2 / 30240.0, f_exact)
+    f1 = np.where(small, -alpha * (1.0 / 6.0 + a2 / 180.0 + a4 / 5040.0), f1_exact)
+    f2 = np.where(small, -1.0 / 6.0 - a2 / 60.0 - a4 / 1008.0, f2_exact)
+    return f, f1, f2
+
+
+COORDINATES = {"twistor": twistor_coordinates, "twist": twist_coordinates}
+
+# ------------------------------------------------------------------------ the laws
+
+
+@dataclass(frozen=True)
+class LawEvaluation:
+    """Laws evaluated at r = (alpha, p) with rates r_dot, for n hinges.
+
+    energy (n,); grad (n, 3) = dU/dr; hess (n, 3, 3) = d2U/dr2;
+    damping (n, 3, 3) = C_r, the matrix of the dissipation D = 1/2 r_dot^T C_r r_dot;
+    damping_force (n, 3) = C_r r_dot; damping_force_dr (n, 3, 3) = d(C_r r_dot)/dr at fixed
+    r_dot (exact, from the second derivatives of the coordinate map).
+    """
+
+    energy: np.ndarray
+    grad: np.ndarray
+    hess: np.ndarray
+    damping: np.ndarray
+    damping_force: np.ndarray
+    damping_force_dr: np.ndarray
+
+
+class HingeLaw(Protocol):
+    """What the solver needs of a hinge law."""
+
+    coordinates: str
+
+    def potential(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """U(c), dU/dc, d2U/dc2 for c of shape (m, k) (rows are configurations)."""
+
+    def dissipation_matrix(self) -> np.ndarray:
+        """C (k, k) of D = 1/2 c_dot^T C c_dot."""
+
+
+@dataclass(frozen=True)
+class QuadraticLaw:
+    """U = 1/2 c^T W c, the quadratic laws of eqs. 3.4 and 4.7.
+
+    For ``twistor`` coordinates c = (sigma, xi, x1, x2) the metric acts on (xi, x1, x2)
+    with W = 4 K (so U = 2 [xi; x]^T K [xi; x], eq. 4.7) and damping metric 4 B (eq. 4.40);
+    for ``twist`` coordinates W = K (eq. 3.4) and damping metric B.
+    K, B: 3x3, moment first, forces second, in the hinge frame.
+    """
+
+    coordinates: str
+    K: np.ndarray
+    B: np.ndarray
+
+    def _embed(self, M: np.ndarray) -> np.ndarray:
+        if self.coordinates == "twistor":
+            out = np.zeros((4, 4))
+            out[1:, 1:] = 4.0 * M
+            return out
+        return np.array(M, dtype=float)
+
+    def metric(self) -> np.ndarray:
+        """W (k, k) with U = 1/2 c^T W c."""
+        return self._embed(self.K)
+
+    def potential(self, c):
+        W = self.metric()
+        Wc = c @ W.T
+        return 0.5 * np.einsum("ni,ni->n", c, Wc), Wc, np.broadcast_to(W, (c.shape[0],) + W.shape)
+
+    def dissipation_matrix(self):
+        return self._embed(self.B)
+
+
+def evaluate(laws: Sequence[HingeLaw], alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray) -> LawEvaluation:
+    """Evaluate n hinges that share one coordinate type (by the chain rule through c(r)).
+
+    grad_r = dc^T U_c; hess_r = dc^T U_cc dc + sum_k U_c,k d2c_k; C_r = dc^T C dc;
+    d(C_r r_dot)/dr = sum_k (C dc r_dot)_k d2c_k + dc^T C (d2c . r_dot).
+    Quadratic laws are evaluated all at once; other laws one hinge at a time.
+    """
+    coords = {law.coordinates for law in laws}
+    if len(coords) != 1:
+        raise ValueError(f"laws must share one coordinate type, got {sorted(coords)}")
+    cmap = COORDINATES[coords.pop()](alpha, p)
+    n, k = cmap.c.shape
+    if all(isinstance(law, QuadraticLaw) for law in laws):
+        W = np.stack([law.metric() for law in laws])
+        Uc = np.einsum("nij,nj->ni", W, cmap.c)
+        energy = 0.5 * np.einsum("ni,ni->n", cmap.c, Uc)
+        Ucc = W
+    else:
+        energy, Uc, Ucc = np.empty(n), np.empty((n, k)), np.empty((n, k, k))
+        for i, law in enumerate(laws):
+            e, g, h = law.potential(cmap.c[i:i + 1])
+            energy[i], Uc[i], Ucc[i] = e[0], g[0], h[0]
+    C = np.stack([law.dissipation_matrix() for law in laws])
+    grad = np.einsum("nki,nk->ni", cmap.dc, Uc)
+    hess = np.einsum("nki,nkl,nlj->nij", cmap.dc, Ucc, cmap.dc) + np.einsum("nk,nkij->nij", Uc, cmap.d2c)
+    CJ = np.einsum("nkl,nlj->nkj", C, cmap.dc)
+    damping = np.einsum("nki,nkj->nij", cmap.dc, CJ)
+    cdot = np.einsum("nki,ni->nk", cmap.dc, rdot)
+    w = np.einsum("nkl,nl->nk", C, cdot)
+    damping_force = np.einsum("nki,nk->ni", cmap.dc, w)
+    d2c_rdot = np.einsum("nkjl,nl->nkj", cmap.d2c, rdot)
+    damping_force_dr = np.einsum("nk,nkij->nij", w, cmap.d2c) + np.einsum(
+        "nki,nkl,nlj->nij", cmap.dc, C, d2c_rdot
+    )
+    return LawEvaluation(energy, grad, hess, damping, damping_force, damping_force_dr)
+
+
+def wrench_on_element(alpha: np.ndarray, grad_r: np.ndarray) -> np.ndarray:
+    """m_b: wrench by body B on the element, frame b coordinates, about b's origin.
+
+    From dW = grad_r . delta r and delta r = (delta tau, R(alpha) delta t_b):
+    m_b = (dU/dalpha, R(alpha)^T dU/dp) -- eqs. 3.53 and 4.35 (for the twistor quadratic
+    law this equals 2 Lambda^T K [xi; x], a test checks it against comply_quat2.sci).
+    Works for the dissipative part too with grad_r replaced by C_r r_dot.
+    """
+    R = rot(np.asarray(alpha, dtype=float))
+    m = np.empty_like(grad_r)
+    m[:, 0] = grad_r[:, 0]
+    m[:, 1:] = np.einsum("nji,nj->ni", R, grad_r[:, 1:])
+    return m
