@@ -1,0 +1,150 @@
+"""Mechanisms as plain data: bodies, hinges, constraints, drive (the MjModel of flexure_sim).
+
+A mechanism holds constants only; the evolving state lives in ``solver.State``.
+
+Coordinates: every body has a pose (x, y, theta) of its body frame (at its mass centre) in
+the root frame ``stage`` (REP-103: x forward/right in the drawing, y up, z out of the
+plane, theta counter-clockwise), and velocities (vx, vy, omega) in the root frame.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional, Union
+
+import numpy as np
+
+from .hinge_laws import HingeLaw
+
+#: Names of the three generalized coordinates of a planar body.
+COORDINATE_NAMES = ("x", "y", "theta")
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid body: mass (kg), rotational inertia about its mass centre (kg m^2), and the
+    initial (unstressed) pose (x, y, theta) of its body frame in the root frame."""
+
+    name: str
+    mass: float
+    inertia: float
+    pose: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A frame fixed to a body: position (m) and angle (rad) in the body frame."""
+
+    body: str
+    position: tuple[float, float]
+    angle: float = 0.0
+
+
+@dataclass(frozen=True)
+class Hinge:
+    """An elastic element joining frame ``a`` on body A and frame ``b`` on body B, which
+    coincide in the unstressed pose. ``K`` and ``B`` are 3x3 (moment first) in the hinge
+    frame; ``law`` evaluates potential and dissipation (see hinge_laws)."""
+
+    name: str
+    a: Frame
+    b: Frame
+    K: np.ndarray
+    B: np.ndarray
+    law: HingeLaw
+    stiffness_source: str = "matrix"
+
+
+@dataclass(frozen=True)
+class Fixed:
+    """Body held at its initial pose (all three coordinates prescribed)."""
+
+    body: str
+
+
+@dataclass(frozen=True)
+class Drive:
+    """The driven input: the body's displacement along ``axis`` (unit vector in the root
+    frame) equals the actuator output u; its other coordinates are held.
+
+    The actuator output follows the command through a first-order lag,
+    du/dt = (command - u) / response_time: the slow pole of the dissertation's second-order
+    input constraint (eqs. 6.21-6.23), which with B = t_char K is overdamped with a slow
+    time constant t_char. ``stroke`` is the actuator's range [min, max] (m) and
+    ``slew_rate`` its speed limit (m/s); the node enforces both on commands.
+    """
+
+    body: str
+    axis: tuple[float, float]
+    response_time: float
+    stroke: tuple[float, float]
+    slew_rate: float
+
+
+@dataclass(frozen=True)
+class SineRate:
+    """Prescribed rate omega(t) = amplitude * sin(2 pi frequency t + phase) of one coordinate
+    (the four-bar driver omega2 = 0.5 pi^2 sin(10 pi t), eqs. 5.26 and 5.34)."""
+
+    body: str
+    coordinate: str
+    amplitude: float
+    frequency: float
+    phase: float = 0.0
+
+    def offset(self, t: float) -> tuple[float, float, float]:
+        """Displacement from the initial value, its rate and acceleration at time t."""
+        w = 2.0 * np.pi * self.frequency
+        a = self.amplitude
+        return (
+            a / w * (np.cos(self.phase) - np.cos(w * t + self.phase)),
+            a * np.sin(w * t + self.phase),
+            a * w * np.cos(w * t + self.phase),
+        )
+
+
+Constraint = Union[Fixed, Drive, SineRate]
+
+
+@dataclass(frozen=True)
+class Output:
+    """The displacement reported as the mechanism's output: body origin along axis."""
+
+    body: str
+    axis: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Mechanism:
+    """A planar flexure mechanism. ``compression_hinge`` names the hinge whose compression
+    (displacement of its frame on body B minus that on body A, along the drive axis) is
+    reported, as joint a of the micropositioning stage (Figure 6.4)."""
+
+    name: str
+    bodies: tuple[Body, ...]
+    hinges: tuple[Hinge, ...]
+    constraints: tuple[Constraint, ...]
+    output: Optional[Output] = None
+    compression_hinge: Optional[str] = None
+    description: str = ""
+    source: str = ""
+    metadata: dict = field(default_factory=dict)
+
+    def body_index(self, name: str) -> int:
+        """Index of a body by name (ValueError naming it if unknown)."""
+        for i, body in enumerate(self.bodies):
+            if body.name == name:
+                return i
+        raise ValueError(f"unknown body {name!r} in mechanism {self.name!r}")
+
+    def hinge_index(self, name: str) -> int:
+        """Index of a hinge by name (ValueError naming it if unknown)."""
+        for i, hinge in enumerate(self.hinges):
+            if hinge.name == name:
+                return i
+        raise ValueError(f"unknown hinge {name!r} in mechanism {self.name!r}")
+
+    @property
+    def drive(self) -> Optional[Drive]:
+        """The drive constraint, if the mechanism has one."""
+        drives = [c for c in self.constraints if isinstance(c, Drive)]
+        return drives[0] if drives else None
