@@ -1,0 +1,164 @@
+"""Solver: the stage's static and dynamic answers, the four-bars' energy budget, exact Jacobians,
+and the invariance of the whole stage (Sections 3.3, 4.6)."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from flexure_sim import kinematics as kin
+from flexure_sim.config import load_mechanism
+from flexure_sim.hinge_laws import QuadraticLaw
+from flexure_sim.solver import Simulation
+
+U_IN = 1.35e-6
+
+
+@pytest.fixture(scope="module")
+def stage():
+    return load_mechanism("microstage")
+
+
+@pytest.fixture(scope="module")
+def stage_static(stage):
+    return Simulation(stage).static(U_IN)
+
+
+def test_stage_static_gain_and_joint_a_compression(stage_static):
+    snap = stage_static.snapshot
+    gain = snap.output / U_IN
+    # The independent reimplementation of the same model: gain 27.63, compression 192 nm.
+    assert abs(gain - 27.63) / 27.63 < 1e-3
+    assert round(snap.compression * 1e9) == 192
+    assert stage_static.residual < 1e-6  # N, against hinge forces of tens of newtons
+    assert stage_static.iterations <= 8
+    # The drive pushes body 6 along +x and the forces balance: drive force = -(sum of hinge
+    # a's wrench on body 6 along x), a positive push of tens of newtons.
+    assert snap.drive_force > 0
+    assert snap.drive_force == pytest.approx(-snap.wrenches[0, 1], rel=1e-6)
+
+
+def test_rigid_lever_gain_when_hinges_do_not_stretch(stage):
+    """Translationally rigid hinges recover the lever-arm gain (41/9)(24/3) = 36.4."""
+    def stiff(h):
+        K = h.K.copy()
+        K[1:, 1:] *= 1e4
+        return dataclasses.replace(h, K=K, B=1e-3 * K, law=QuadraticLaw(h.law.coordinates, K, 1e-3 * K))
+    rigid = dataclasses.replace(stage, hinges=tuple(stiff(h) for h in stage.hinges))
+    gain = Simulation(rigid).static(U_IN).snapshot.output / U_IN
+    assert gain == pytest.approx(41 / 9 * 24 / 3, rel=2e-3)
+    assert gain > 36.0
+
+
+def test_stage_step_settles_to_the_static_answer(stage, stage_static):
+    sim = Simulation(stage)
+    sim.set_command(U_IN)
+    outputs = []
+    for _ in range(50):
+        sim.step(10)                      # 1 ms
+        outputs.append(sim.snapshot().output)
+    final = sim.snapshot()
+    target = stage_static.snapshot.output
+    assert final.t == pytest.approx(0.05)
+    assert abs(final.output - target) / target < 1e-4
+    assert abs(final.compression - stage_static.snapshot.compression) / stage_static.snapshot.compression < 1e-4
+    # It moves: a third of the way at 1 ms, most of the way by 5 ms.
+    assert 0.3 * target < outputs[0] < 0.8 * target
+    assert outputs[4] > 0.99 * target
+    # The actuator output followed its first-order lag (time constant 1 ms).
+    assert final.drive_input == pytest.approx(U_IN * (1 - np.exp(-50)), rel=1e-12)
+
+
+def test_jacobian_reuse_matches_relinearizing_every_step(stage):
+    a, b = Simulation(stage), Simulation(stage, relinearize_tol=1e-4)
+    for s in (a, b):
+        s.set_command(U_IN)
+        s.step(100)
+    assert b.stats.linearizations < a.stats.linearizations / 5
+    assert b.snapshot().output == pytest.approx(a.snapshot().output, rel=1e-9)
+
+
+@pytest.mark.parametrize("name", ["microstage", "fourbar_mixed"])
+def test_force_jacobians_are_exact(name):
+    mech = load_mechanism(name)
+    sim = Simulation(mech)
+    rng = np.random.default_rng(11)
+    n = len(sim.z0)
+    z = sim.z0 + rng.normal(size=n) * np.tile([2e-4, 2e-4, 0.05], n // 3)
+    v = rng.normal(size=n) * np.tile([0.01, 0.01, 1.0], n // 3)
+    hf = sim.assembly.forces(z, v, jacobian=True)
+    for vec, jac, h in ((z, hf.dQ_dz, 1e-8), (v, hf.dQ_dv, 1e-6)):
+        fd = np.zeros((n, n))
+        for j in range(n):
+            e = np.zeros(n)
+            e[j] = h
+            plus = sim.assembly.forces(z + e if vec is z else z, v + e if vec is v else v).Q
+            minus = sim.assembly.forces(z - e if vec is z else z, v - e if vec is v else v).Q
+            fd[:, j] = (plus - minus) / (2 * h)
+        assert jac == pytest.approx(fd, rel=1e-4, abs=1e-6 * np.abs(jac).max())
+
+
+def _swap(h):
+    return dataclasses.replace(h, a=h.b, b=h.a)
+
+
+def _move_frames(h, R, p, transform_K=True):
+    """Put both coincident frames of hinge h at a*G, b*G with G = (R, p)."""
+    def moved(f):
+        pos = np.array(f.position) + kin.rot(f.angle) @ p
+        return dataclasses.replace(f, position=(pos[0], pos[1]), angle=f.angle + kin.angle_of(R))
+    K = kin.transform_stiffness(h.K, R, p) if transform_K else h.K
+    B = kin.transform_stiffness(h.B, R, p) if transform_K else h.B
+    return dataclasses.replace(h, a=moved(h.a), b=moved(h.b), K=K, B=B, law=QuadraticLaw(h.law.coordinates, K, B))
+
+
+@pytest.mark.parametrize("law", ["twistor", "twist"])
+def test_whole_stage_is_body_and_frame_independent(stage, law):
+    def with_law(h):
+        return dataclasses.replace(h, law=QuadraticLaw(law, h.K, h.B))
+    base_mech = dataclasses.replace(stage, hinges=tuple(with_law(h) for h in stage.hinges))
+    base = Simulation(base_mech).static(U_IN)
+    rng = np.random.default_rng(2)
+    moves = [(kin.rot(rng.uniform(-3, 3)), rng.normal(size=2) * 3e-3) for _ in stage.hinges]
+
+    swapped = dataclasses.replace(base_mech, hinges=tuple(_swap(h) for h in base_mech.hinges))
+    moved = dataclasses.replace(base_mech, hinges=tuple(_move_frames(h, *g) for h, g in zip(base_mech.hinges, moves)))
+    control = dataclasses.replace(
+        base_mech, hinges=tuple(_move_frames(h, *g, transform_K=False) for h, g in zip(base_mech.hinges, moves)))
+    for variant in (swapped, moved):
+        res = Simulation(variant).static(U_IN)
+        assert res.z == pytest.approx(base.z, rel=0, abs=1e-9 * np.abs(base.z - Simulation(stage).z0).max())
+        assert res.snapshot.output == pytest.approx(base.snapshot.output, rel=1e-9)
+        assert res.snapshot.drive_force == pytest.approx(base.snapshot.drive_force, rel=1e-9)
+    ctrl = Simulation(control).static(U_IN)
+    assert abs(ctrl.snapshot.output - base.snapshot.output) / base.snapshot.output > 1e-3
+
+
+def _run_fourbar(name, dt):
+    mech = load_mechanism(name)
+    sim = Simulation(mech, dt=dt)
+    i2 = mech.body_index("link2")
+    driver = [c for c in mech.constraints if hasattr(c, "offset")][0]
+    worst = 0.0
+    for _ in range(int(round(0.2 / dt / 50))):
+        sim.step(50)
+        worst = max(worst, abs(sim.state.z[3 * i2 + 2] - driver.offset(sim.state.t)[0]))
+    s = sim.snapshot()
+    budget = s.kinetic_energy + s.potential_energy + s.dissipated - s.drive_work
+    return sim, s, worst, abs(budget) / s.drive_work
+
+
+@pytest.mark.parametrize("name", ["fourbar_cantilever", "fourbar_mixed"])
+def test_fourbar_runs_follows_its_driver_and_closes_its_energy_budget(name):
+    sim, s, worst, rel = _run_fourbar(name, 1e-4)
+    assert s.t == pytest.approx(0.2)
+    assert np.all(np.isfinite(s.poses))
+    assert worst < 1e-12                      # link 2 follows theta2(t) = int omega2 dt
+    assert s.drive_work > 1e-4                # the driver did work (J) ...
+    assert rel < 1e-3                         # ... and T + U + dissipated = W to 1e-3
+    # The linkage moved: link 4 (follower) rotated by more than 0.05 rad at some point.
+    assert s.dissipated > 0.5 * s.drive_work
+
+
+def test_fourbar_energy_budget_tightens_as_the_step_shrinks():
+    errors = [_run_fourbar("fourbar_mixed", dt)[3] for dt in (4e-4, 2e-4, 1e-4)]
+    assert errors[0] > 2.5 * errors[1] > 2.5 * 2.5 * errors[2]
