@@ -1,0 +1,182 @@
+"""The ``flexure-sim`` command: offline simulation without ROS (and, from the tools
+package, analysis of recorded runs).
+
+    flexure-sim simulate microstage --drive step:1.35e-6 --duration 0.05 [--json]
+    flexure-sim simulate microstage --drive step:1.35e-6 --static [--json]
+    flexure-sim simulate config/fourbar_mixed.yaml --duration 0.2
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from typing import Optional, Sequence
+
+import numpy as np
+
+from .config import ConfigError, load_mechanism
+from .solver import DEFAULT_STEP, Simulation, SolverError, Snapshot
+
+#: Times (s) at which the step response is reported, as in the acceptance figures.
+REPORT_TIMES = (1e-3, 2e-3, 5e-3)
+
+
+class UsageError(ValueError):
+    """A command-line argument is invalid (the message names it)."""
+
+
+def parse_drive(spec: str) -> float:
+    """``step:AMPLITUDE`` (m) -> AMPLITUDE; ``none`` -> 0."""
+    if spec == "none":
+        return 0.0
+    kind, _, value = spec.partition(":")
+    if kind != "step" or not value:
+        raise UsageError(f"--drive {spec!r}: expected step:AMPLITUDE (metres) or none")
+    try:
+        amplitude = float(value)
+    except ValueError:
+        raise UsageError(f"--drive {spec!r}: {value!r} is not a number") from None
+    if not np.isfinite(amplitude):
+        raise UsageError(f"--drive {spec!r}: amplitude must be finite")
+    return amplitude
+
+
+def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
+    """The figures the command prints, as a JSON-ready dict (SI units)."""
+    mech = sim.mechanism
+    gain = None
+    if snap.output is not None and amplitude != 0.0:
+        gain = snap.output / amplitude
+    return {
+        "mechanism": mech.name,
+        "t": snap.t,
+        "input": amplitude if sim.drive else None,
+        "drive_input": snap.drive_input if sim.drive else None,
+        "output_displacement": snap.output,
+        "gain": gain,
+        "joint_a_compression": snap.compression,
+        "drive_force": snap.drive_force if sim.drive else None,
+        "hinges": {
+            h.name: {
+                "rotation": float(snap.deflections[i, 0]),
+                "x": float(snap.deflections[i, 1]),
+                "y": float(snap.deflections[i, 2]),
+                "wrench_on_b": [float(w) for w in snap.wrenches[i]],
+            }
+            for i, h in enumerate(mech.hinges)
+        },
+        "bodies": {b.name: [float(x) for x in snap.poses[i]] for i, b in enumerate(mech.bodies)},
+        "energy": {
+            "kinetic": snap.kinetic_energy,
+            "potential": snap.potential_energy,
+            "dissipated": snap.dissipated,
+            "drive_work": snap.drive_work,
+        },
+    }
+
+
+def run_simulate(args: argparse.Namespace) -> dict:
+    mech = load_mechanism(args.mechanism)
+    amplitude = parse_drive(args.drive)
+    if args.duration <= 0 or not np.isfinite(args.duration):
+        raise UsageError(f"--duration {args.duration!r}: must be a positive number of seconds")
+    if args.dt <= 0 or not np.isfinite(args.dt):
+        raise UsageError(f"--dt {args.dt!r}: must be a positive number of seconds")
+    sim = Simulation(mech, dt=args.dt, relinearize_tol=args.relinearize_tol)
+    if amplitude and sim.drive is None:
+        raise UsageError(f"--drive: mechanism {mech.name!r} has no drive")
+    start = time.perf_counter()
+    if args.static:
+        result = sim.static(amplitude)
+        wall = time.perf_counter() - start
+        out = summarize(sim, result.snapshot, amplitude)
+        out.update(mode="static", newton_iterations=result.iterations, residual=result.residual, wall_s=wall)
+        return out
+    if sim.drive is not None:
+        sim.set_command(amplitude)
+    n_steps = int(round(args.duration / args.dt))
+    samples = {}
+    marks = {int(round(t / args.dt)): t for t in REPORT_TIMES if t <= args.duration}
+    for k in range(1, n_steps + 1):
+        sim.step()
+        if k in marks and mech.output is not None:
+            samples[f"{marks[k]:g}"] = sim.snapshot().output
+    wall = time.perf_counter() - start
+    out = summarize(sim, sim.snapshot(), amplitude)
+    out.update(
+        mode="dynamic", duration=args.duration, dt=args.dt, steps=n_steps,
+        output_at=samples, wall_s=wall, real_time_factor=args.duration / wall if wall > 0 else None,
+        linearizations=sim.stats.linearizations,
+    )
+    return out
+
+
+def _fmt(v: Optional[float], unit: str, scale: float = 1.0, digits: int = 6) -> str:
+    return "n/a" if v is None else f"{v * scale:.{digits}g} {unit}"
+
+
+def print_table(out: dict) -> None:
+    print(f"mechanism: {out['mechanism']}   mode: {out['mode']}   t = {out['t']:.6g} s")
+    if out["input"] is not None:
+        print(f"input:               {_fmt(out['input'], 'um', 1e6)}")
+        print(f"output displacement: {_fmt(out['output_displacement'], 'um', 1e6)}")
+        print(f"gain:                {_fmt(out['gain'], '')}")
+        print(f"joint-a compression: {_fmt(out['joint_a_compression'], 'nm', 1e9)}")
+        print(f"drive force:         {_fmt(out['drive_force'], 'N')}")
+    for t, v in out.get("output_at", {}).items():
+        print(f"output at {float(t) * 1e3:g} ms:      {_fmt(v, 'um', 1e6)}")
+    print("hinge deflection, frame b in frame a:  rotation [urad]  x [nm]  y [nm]")
+    for name, h in out["hinges"].items():
+        print(f"{name:6s} {h['rotation'] * 1e6:14.6g} {h['x'] * 1e9:11.6g} {h['y'] * 1e9:11.6g}")
+    e = out["energy"]
+    print(f"energy [J]: kinetic {e['kinetic']:.6g}, potential {e['potential']:.6g}, "
+          f"dissipated {e['dissipated']:.6g}, drive work {e['drive_work']:.6g}")
+    extra = f", real-time factor {out['real_time_factor']:.3g}" if out.get("real_time_factor") else ""
+    print(f"wall time: {out['wall_s']:.4g} s{extra}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="flexure-sim", description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    sim = sub.add_parser("simulate", help="simulate a mechanism offline (no ROS)")
+    sim.add_argument("mechanism", help="built-in name (microstage, fourbar_cantilever, fourbar_mixed) or YAML path")
+    sim.add_argument("--drive", default="none", help="step:AMPLITUDE in metres, or none (default)")
+    sim.add_argument("--duration", type=float, default=0.05, help="simulated time in seconds (default 0.05)")
+    sim.add_argument("--dt", type=float, default=DEFAULT_STEP, help=f"fixed step in seconds (default {DEFAULT_STEP:g})")
+    sim.add_argument("--relinearize-tol", type=float, default=0.0,
+                     help="reuse the Jacobian until the configuration moves this much (0: every step)")
+    sim.add_argument("--static", action="store_true", help="solve the static equilibrium instead")
+    sim.add_argument("--json", action="store_true", help="print one JSON object")
+    _add_tool_commands(sub)
+    return parser
+
+
+def _add_tool_commands(sub) -> None:
+    """Tools that work on recorded runs register themselves here when present."""
+    try:
+        from .tools import commands  # noqa: F401  (optional until the tools exist)
+    except ImportError:
+        return
+    commands.register(sub)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command != "simulate":
+        return args.handler(args)
+    try:
+        out = run_simulate(args)
+    except (ConfigError, UsageError, SolverError) as exc:
+        print(f"flexure-sim: error: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print_table(out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
