@@ -153,11 +153,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_tool_commands(sub) -> None:
-    """Tools that work on recorded runs register themselves here when present."""
-    try:
-        from .tools import commands  # noqa: F401  (optional until the tools exist)
-    except ImportError:
-        return
+    """Tools that work on recorded runs, fitting, etc. (see tools/commands.py)."""
+    from .tools import commands
+
     commands.register(sub)
 
 

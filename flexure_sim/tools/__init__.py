@@ -1,0 +1,1 @@
+"""Command-line tools built on the engine and the recording layer (analysis, replay, fitting)."""

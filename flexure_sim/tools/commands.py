@@ -1,0 +1,18 @@
+"""Registry of the ``flexure-sim`` subcommands that live in the tools package.
+
+Each tool module defines ``register(subparsers)``, which adds its subparser and sets
+``handler=<function(args) -> exit code>`` with ``set_defaults``. Add one line per module.
+"""
+from __future__ import annotations
+
+import importlib
+
+#: Tool modules, in the order their commands appear in ``flexure-sim --help``.
+TOOL_MODULES: tuple[str, ...] = (
+)
+
+
+def register(subparsers) -> None:
+    """Add every tool's subcommand to the ``flexure-sim`` parser."""
+    for name in TOOL_MODULES:
+        importlib.import_module(f"flexure_sim.tools.{name}").register(subparsers)
