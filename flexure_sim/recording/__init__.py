@@ -1,0 +1,48 @@
+"""MCAP recording in the rosbag2 (ROS 2 Jazzy) format: write with `McapRecorder`, read back
+with `read_log` / `log_info`. Needs mcap and mcap-ros2-support; never imports rclpy.
+"""
+from .bag_metadata import (
+    TopicRecord,
+    build_bag_metadata,
+    metadata_yaml,
+    parse_serialized_metadata,
+)
+from .errors import (
+    CorruptLogError,
+    RecorderClosedError,
+    RecorderFailedError,
+    RecordingError,
+    SchemaNotFoundError,
+)
+from .info import LogInfo, log_info
+from .qos import QosDescription, parse_qos_profiles_yaml, qos_profiles_yaml
+from .reader import LogMessage, McapLog, TopicInfo, read_log
+from .schema import MessageSchema, SchemaResolver, ament_prefixes, load_schema
+from .writer import McapRecorder, RecordingStats
+
+__all__ = [
+    "CorruptLogError",
+    "LogInfo",
+    "LogMessage",
+    "McapLog",
+    "McapRecorder",
+    "MessageSchema",
+    "QosDescription",
+    "RecorderClosedError",
+    "RecorderFailedError",
+    "RecordingError",
+    "RecordingStats",
+    "SchemaNotFoundError",
+    "SchemaResolver",
+    "TopicInfo",
+    "TopicRecord",
+    "ament_prefixes",
+    "build_bag_metadata",
+    "load_schema",
+    "log_info",
+    "metadata_yaml",
+    "parse_qos_profiles_yaml",
+    "parse_serialized_metadata",
+    "qos_profiles_yaml",
+    "read_log",
+]
