@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .hinge_laws import evaluate, wrench_on_element
+from .hinge_laws import LawBatch, QuadraticLaw, wrench_on_element
 from .kinematics import J, rot
 from .mechanism import Mechanism
 
@@ -62,40 +62,73 @@ class Assembly:
         self.phib = np.array([h.b.angle for h in hinges], dtype=float)
         # Global coordinate indices of (x_A, y_A, th_A, x_B, y_B, th_B) per hinge.
         self.dofs = np.concatenate([3 * self.ia[:, None] + np.arange(3), 3 * self.ib[:, None] + np.arange(3)], axis=1)
-        groups: dict[str, list[int]] = {}
+        # Batches share a coordinate type and a law kind, so quadratic laws stay vectorised.
+        groups: dict[tuple[str, bool], list[int]] = {}
         for i, h in enumerate(hinges):
-            groups.setdefault(h.law.coordinates, []).append(i)
-        self.groups = [(np.array(idx), [hinges[i].law for i in idx]) for idx in groups.values()]
+            groups.setdefault((h.law.coordinates, isinstance(h.law, QuadraticLaw)), []).append(i)
+        self.groups = [(np.array(idx), LawBatch([hinges[i].law for i in idx])) for idx in groups.values()]
+        # Scatter of each hinge's six local coordinates into the global vector:
+        # S[a, h, j] = 1 where global coordinate a is local coordinate j of hinge h.
+        n, N = len(hinges), 3 * self.n_bodies
+        self.scatter = np.zeros((N, n, 6))
+        for h in range(n):
+            for j in range(6):
+                self.scatter[self.dofs[h, j], h, j] += 1.0
+        self._scatter_flat = self.scatter.reshape(N, 6 * n)
 
     # ------------------------------------------------------------------ geometry
     def relative(self, z: np.ndarray, second: bool = True):
         """r (n, 3), dr/dzz (n, 3, 6) and, if asked, d2r/dzz2 (n, 3, 6, 6), where zz are the
-        six coordinates (x_A, y_A, theta_A, x_B, y_B, theta_B) of each hinge's bodies."""
+        six coordinates (x_A, y_A, theta_A, x_B, y_B, theta_B) of each hinge's bodies.
+
+        With beta = theta_A + phi_a, w_a = R(theta_A) c_a, w_b = R(theta_B) c_b and
+        Delta = P_B + w_b - P_A - w_a: p = R(beta)^T Delta, so
+        dp/dP_B = -dp/dP_A = R(beta)^T, dp/dtheta_A = -J p - R(beta)^T J w_a,
+        dp/dtheta_B = R(beta)^T J w_b.
+        """
         Z = np.asarray(z, dtype=float).reshape(self.n_bodies, 3)
         A, B = Z[self.ia], Z[self.ib]
-        RA, RB = rot(A[:, 2]), rot(B[:, 2])
+        ca, sa = np.cos(A[:, 2]), np.sin(A[:, 2])
+        cb, sb = np.cos(B[:, 2]), np.sin(B[:, 2])
         beta = A[:, 2] + self.phia
-        RbT = np.swapaxes(rot(beta), 1, 2)  # R(beta)^T
-        wa = np.einsum("nij,nj->ni", RA, self.ca)
-        wb = np.einsum("nij,nj->ni", RB, self.cb)
-        delta = B[:, :2] + wb - A[:, :2] - wa
-        p = np.einsum("nij,nj->ni", RbT, delta)
+        cbe, sbe = np.cos(beta), np.sin(beta)
+        wa1 = ca * self.ca[:, 0] - sa * self.ca[:, 1]
+        wa2 = sa * self.ca[:, 0] + ca * self.ca[:, 1]
+        wb1 = cb * self.cb[:, 0] - sb * self.cb[:, 1]
+        wb2 = sb * self.cb[:, 0] + cb * self.cb[:, 1]
+        d1 = B[:, 0] + wb1 - A[:, 0] - wa1
+        d2 = B[:, 1] + wb2 - A[:, 1] - wa2
+        # p = R(beta)^T Delta; R(beta)^T = [[c, s], [-s, c]]
+        p1 = cbe * d1 + sbe * d2
+        p2 = -sbe * d1 + cbe * d2
         alpha = B[:, 2] + self.phib - beta
         n = len(alpha)
-        r = np.column_stack([alpha, p])
-
-        Jwa, Jwb, Jp = wa @ J.T, wb @ J.T, p @ J.T
-        RbT_Jwa = np.einsum("nij,nj->ni", RbT, Jwa)
-        RbT_Jwb = np.einsum("nij,nj->ni", RbT, Jwb)
-        dp_dthA = -Jp - RbT_Jwa
+        r = np.empty((n, 3))
+        r[:, 0], r[:, 1], r[:, 2] = alpha, p1, p2
+        # R(beta)^T J w = R(beta)^T (-w2, w1)
+        ta1 = -cbe * wa2 + sbe * wa1
+        ta2 = sbe * wa2 + cbe * wa1
+        tb1 = -cbe * wb2 + sbe * wb1
+        tb2 = sbe * wb2 + cbe * wb1
         dr = np.zeros((n, 3, 6))
         dr[:, 0, 2], dr[:, 0, 5] = -1.0, 1.0
-        dr[:, 1:, 0:2] = -RbT
-        dr[:, 1:, 2] = dp_dthA
-        dr[:, 1:, 3:5] = RbT
-        dr[:, 1:, 5] = RbT_Jwb
+        dr[:, 1, 0], dr[:, 1, 1] = -cbe, -sbe
+        dr[:, 2, 0], dr[:, 2, 1] = sbe, -cbe
+        dr[:, 1, 3], dr[:, 1, 4] = cbe, sbe
+        dr[:, 2, 3], dr[:, 2, 4] = -sbe, cbe
+        dr[:, 1, 2] = p2 - ta1          # -J p = (p2, -p1)
+        dr[:, 2, 2] = -p1 - ta2
+        dr[:, 1, 5] = tb1
+        dr[:, 2, 5] = tb2
         if not second:
             return r, dr, None
+        RbT = np.empty((n, 2, 2))
+        RbT[:, 0, 0], RbT[:, 0, 1], RbT[:, 1, 0], RbT[:, 1, 1] = cbe, sbe, -sbe, cbe
+        wa = np.column_stack([wa1, wa2])
+        wb = np.column_stack([wb1, wb2])
+        RbT_Jwa = np.column_stack([ta1, ta2])
+        RbT_Jwb = np.column_stack([tb1, tb2])
+        dp_dthA = dr[:, 1:, 2]
         d2 = np.zeros((n, 3, 6, 6))
         J_RbT = np.einsum("ij,njk->nik", J, RbT)
         d2[:, 1:, 2, 2] = -dp_dthA @ J.T + np.einsum("ij,nj->ni", J, RbT_Jwa) + np.einsum("nij,nj->ni", RbT, wa)
@@ -123,16 +156,15 @@ class Assembly:
         hess = Cr = fdamp_dr = None
         if jacobian:
             hess, Cr, fdamp_dr = np.empty((n, 3, 3)), np.empty((n, 3, 3)), np.empty((n, 3, 3))
-        for idx, laws in self.groups:
-            ev = evaluate(laws, r[idx, 0], r[idx, 1:], rdot[idx])
+        for idx, batch in self.groups:
+            ev = batch.evaluate(r[idx, 0], r[idx, 1:], rdot[idx], jacobian=jacobian)
             energy[idx], grad[idx], fdamp[idx] = ev.energy, ev.grad, ev.damping_force
             if jacobian:
                 hess[idx], Cr[idx], fdamp_dr[idx] = ev.hess, ev.damping, ev.damping_force_dr
         total = grad + fdamp
         q_local = -np.einsum("nki,nk->ni", dr, total)  # (n, 6)
         N = 3 * self.n_bodies
-        Q = np.zeros(N)
-        np.add.at(Q, self.dofs, q_local)
+        Q = self._scatter_flat @ q_local.ravel()
         dQ_dz = dQ_dv = None
         if jacobian:
             # d/dzz of dr^T (grad + fdamp(r, rdot)) with rdot = dr . vv
@@ -143,12 +175,9 @@ class Assembly:
                 + np.einsum("nki,nkl,nlj->nij", dr, Cr, d2_vv)
             )
             C_local = np.einsum("nki,nkl,nlj->nij", dr, Cr, dr)
-            dQ_dz = np.zeros((N, N))
-            dQ_dv = np.zeros((N, N))
-            rows = np.repeat(self.dofs[:, :, None], 6, axis=2)
-            cols = np.repeat(self.dofs[:, None, :], 6, axis=1)
-            np.add.at(dQ_dz, (rows, cols), -K_local)
-            np.add.at(dQ_dv, (rows, cols), -C_local)
+            S = self.scatter
+            dQ_dz = -np.einsum("anj,njk,bnk->ab", S, K_local, S, optimize=True)
+            dQ_dv = -np.einsum("anj,njk,bnk->ab", S, C_local, S, optimize=True)
         dissipation = np.einsum("ni,ni->n", fdamp, rdot)
         wrench_b = -wrench_on_element(r[:, 0], total)
         return HingeForces(Q, dQ_dz, dQ_dv, r, rdot, energy, dissipation, wrench_b)

@@ -45,38 +45,46 @@ class CoordinateMap:
     d2c: np.ndarray
 
 
-def twistor_coordinates(alpha: np.ndarray, p: np.ndarray) -> CoordinateMap:
+def twistor_coordinates(alpha: np.ndarray, p: np.ndarray, second: bool = True) -> CoordinateMap:
     """Twistor parameters (sigma, xi, x1, x2) of r = (alpha, p) and their derivatives.
 
-    sigma = cos(alpha/2), xi = sin(alpha/2), x = 1/2 R(-alpha/2) p (eq. 2.178); the
-    derivatives follow from d/dalpha R(-alpha/2) = -1/2 J R(-alpha/2), so that
-    d[xi; x] = 1/2 Lambda^T-map of eq. 4.27 applied to (d alpha, R(alpha)^T dp).
+    sigma = cos(alpha/2), xi = sin(alpha/2), x = 1/2 R(-alpha/2) p (eq. 2.178), with
+    R(-alpha/2) = [[sigma, xi], [-xi, sigma]]. From d/dalpha R(-alpha/2) = -1/2 J R(-alpha/2):
+    dx/dalpha = -1/2 J x, dx/dp = 1/2 R(-alpha/2) -- the virtual displacement map of eq.
+    4.27 written in r. ``second=False`` skips the second derivatives (d2c is then None).
     """
     alpha = np.asarray(alpha, dtype=float)
     p = np.asarray(p, dtype=float)
     n = alpha.shape[0]
-    half = 0.5 * alpha
-    sigma, xi = np.cos(half), np.sin(half)
-    Rh = rot(-half)  # (n, 2, 2), R(-alpha/2)
-    x = 0.5 * np.einsum("nij,nj->ni", Rh, p)
-    Jx = x @ J.T
-    c = np.column_stack([sigma, xi, x])
+    sigma, xi = np.cos(0.5 * alpha), np.sin(0.5 * alpha)
+    p1, p2 = p[:, 0], p[:, 1]
+    x1 = 0.5 * (sigma * p1 + xi * p2)
+    x2 = 0.5 * (-xi * p1 + sigma * p2)
+    c = np.empty((n, 4))
+    c[:, 0], c[:, 1], c[:, 2], c[:, 3] = sigma, xi, x1, x2
     dc = np.zeros((n, 4, 3))
     dc[:, 0, 0] = -0.5 * xi
     dc[:, 1, 0] = 0.5 * sigma
-    dc[:, 2:, 0] = -0.5 * Jx
-    dc[:, 2:, 1:] = 0.5 * Rh
+    dc[:, 2, 0] = 0.5 * x2          # -1/2 (J x)_1 = +1/2 x2
+    dc[:, 3, 0] = -0.5 * x1         # -1/2 (J x)_2 = -1/2 x1
+    dc[:, 2, 1] = dc[:, 3, 2] = 0.5 * sigma
+    dc[:, 2, 2] = 0.5 * xi
+    dc[:, 3, 1] = -0.5 * xi
+    if not second:
+        return CoordinateMap(c, dc, None)
     d2c = np.zeros((n, 4, 3, 3))
     d2c[:, 0, 0, 0] = -0.25 * sigma
     d2c[:, 1, 0, 0] = -0.25 * xi
-    d2c[:, 2:, 0, 0] = -0.25 * x
-    mixed = -0.25 * np.einsum("ij,njk->nik", J, Rh)
-    d2c[:, 2:, 0, 1:] = mixed
-    d2c[:, 2:, 1:, 0] = mixed
+    d2c[:, 2, 0, 0] = -0.25 * x1
+    d2c[:, 3, 0, 0] = -0.25 * x2
+    # d2x/dalpha dp = -1/4 J R(-alpha/2) = -1/4 [[xi, -sigma], [sigma, xi]]
+    for i, j, val in ((2, 1, -0.25 * xi), (2, 2, 0.25 * sigma), (3, 1, -0.25 * sigma), (3, 2, -0.25 * xi)):
+        d2c[:, i, 0, j] = val
+        d2c[:, i, j, 0] = val
     return CoordinateMap(c, dc, d2c)
 
 
-def twist_coordinates(alpha: np.ndarray, p: np.ndarray) -> CoordinateMap:
+def twist_coordinates(alpha: np.ndarray, p: np.ndarray, second: bool = True) -> CoordinateMap:
     """Twist (tau, t1, t2) of r = (alpha, p) and its derivatives (eqs. 2.106-2.108).
 
     tau = alpha, t = f(alpha) p - (alpha/2) J p with f = (alpha/2) cot(alpha/2).
@@ -92,6 +100,8 @@ def twist_coordinates(alpha: np.ndarray, p: np.ndarray) -> CoordinateMap:
     dc[:, 0, 0] = 1.0
     dc[:, 1:, 0] = f1[:, None] * p - 0.5 * Jp
     dc[:, 1:, 1:] = f[:, None, None] * np.eye(2) - 0.5 * alpha[:, None, None] * J
+    if not second:
+        return CoordinateMap(c, dc, None)
     d2c = np.zeros((n, 3, 3, 3))
     d2c[:, 1:, 0, 0] = f2[:, None] * p
     mixed = f1[:, None, None] * np.eye(2) - 0.5 * J
@@ -186,41 +196,61 @@ class QuadraticLaw:
         return self._embed(self.B)
 
 
-def evaluate(laws: Sequence[HingeLaw], alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray) -> LawEvaluation:
-    """Evaluate n hinges that share one coordinate type (by the chain rule through c(r)).
+class LawBatch:
+    """Hinges that share one coordinate type, evaluated together.
 
-    grad_r = dc^T U_c; hess_r = dc^T U_cc dc + sum_k U_c,k d2c_k; C_r = dc^T C dc;
-    d(C_r r_dot)/dr = sum_k (C dc r_dot)_k d2c_k + dc^T C (d2c . r_dot).
-    Quadratic laws are evaluated all at once; other laws one hinge at a time.
+    Quadratic laws are evaluated all at once from their stacked metrics (built here,
+    once); other laws one hinge at a time through ``potential``.
     """
-    coords = {law.coordinates for law in laws}
-    if len(coords) != 1:
-        raise ValueError(f"laws must share one coordinate type, got {sorted(coords)}")
-    cmap = COORDINATES[coords.pop()](alpha, p)
-    n, k = cmap.c.shape
-    if all(isinstance(law, QuadraticLaw) for law in laws):
-        W = np.stack([law.metric() for law in laws])
-        Uc = np.einsum("nij,nj->ni", W, cmap.c)
-        energy = 0.5 * np.einsum("ni,ni->n", cmap.c, Uc)
-        Ucc = W
-    else:
-        energy, Uc, Ucc = np.empty(n), np.empty((n, k)), np.empty((n, k, k))
-        for i, law in enumerate(laws):
-            e, g, h = law.potential(cmap.c[i:i + 1])
-            energy[i], Uc[i], Ucc[i] = e[0], g[0], h[0]
-    C = np.stack([law.dissipation_matrix() for law in laws])
-    grad = np.einsum("nki,nk->ni", cmap.dc, Uc)
-    hess = np.einsum("nki,nkl,nlj->nij", cmap.dc, Ucc, cmap.dc) + np.einsum("nk,nkij->nij", Uc, cmap.d2c)
-    CJ = np.einsum("nkl,nlj->nkj", C, cmap.dc)
-    damping = np.einsum("nki,nkj->nij", cmap.dc, CJ)
-    cdot = np.einsum("nki,ni->nk", cmap.dc, rdot)
-    w = np.einsum("nkl,nl->nk", C, cdot)
-    damping_force = np.einsum("nki,nk->ni", cmap.dc, w)
-    d2c_rdot = np.einsum("nkjl,nl->nkj", cmap.d2c, rdot)
-    damping_force_dr = np.einsum("nk,nkij->nij", w, cmap.d2c) + np.einsum(
-        "nki,nkl,nlj->nij", cmap.dc, C, d2c_rdot
-    )
-    return LawEvaluation(energy, grad, hess, damping, damping_force, damping_force_dr)
+
+    def __init__(self, laws: Sequence[HingeLaw]):
+        coords = {law.coordinates for law in laws}
+        if len(coords) != 1:
+            raise ValueError(f"laws must share one coordinate type, got {sorted(coords)}")
+        self.laws = list(laws)
+        self.coordinates = coords.pop()
+        self._map = COORDINATES[self.coordinates]
+        self.quadratic = all(isinstance(law, QuadraticLaw) for law in laws)
+        self.W = np.stack([law.metric() for law in laws]) if self.quadratic else None
+        self.C = np.stack([law.dissipation_matrix() for law in laws])
+
+    def evaluate(self, alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray, jacobian: bool = True) -> LawEvaluation:
+        """Energy, dU/dr and C_r r_dot by the chain rule through c(r); with ``jacobian``
+        also d2U/dr2, C_r and d(C_r r_dot)/dr (else those fields are None):
+
+        grad_r = dc^T U_c; hess_r = dc^T U_cc dc + sum_k U_c,k d2c_k; C_r = dc^T C dc;
+        d(C_r r_dot)/dr = sum_k (C dc r_dot)_k d2c_k + dc^T C (d2c . r_dot).
+        """
+        cmap = self._map(alpha, p, second=jacobian)
+        c, dc = cmap.c, cmap.dc
+        if self.quadratic:
+            Uc = np.einsum("nij,nj->ni", self.W, c)
+            energy = 0.5 * np.einsum("ni,ni->n", c, Uc)
+            Ucc = self.W
+        else:
+            n, k = c.shape
+            energy, Uc, Ucc = np.empty(n), np.empty((n, k)), np.empty((n, k, k))
+            for i, law in enumerate(self.laws):
+                e, g, h = law.potential(c[i:i + 1])
+                energy[i], Uc[i], Ucc[i] = e[0], g[0], h[0]
+        grad = np.einsum("nki,nk->ni", dc, Uc)
+        cdot = np.einsum("nki,ni->nk", dc, rdot)
+        w = np.einsum("nkl,nl->nk", self.C, cdot)
+        damping_force = np.einsum("nki,nk->ni", dc, w)
+        if not jacobian:
+            return LawEvaluation(energy, grad, None, None, damping_force, None)
+        d2c = cmap.d2c
+        hess = np.einsum("nki,nkl,nlj->nij", dc, Ucc, dc) + np.einsum("nk,nkij->nij", Uc, d2c)
+        CJ = np.einsum("nkl,nlj->nkj", self.C, dc)
+        damping = np.einsum("nki,nkj->nij", dc, CJ)
+        d2c_rdot = np.einsum("nkjl,nl->nkj", d2c, rdot)
+        damping_force_dr = np.einsum("nk,nkij->nij", w, d2c) + np.einsum("nki,nkj->nij", CJ, d2c_rdot)
+        return LawEvaluation(energy, grad, hess, damping, damping_force, damping_force_dr)
+
+
+def evaluate(laws: Sequence[HingeLaw], alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray) -> LawEvaluation:
+    """Evaluate n hinges sharing one coordinate type, with all derivatives (see LawBatch)."""
+    return LawBatch(laws).evaluate(alpha, p, rdot, jacobian=True)
 
 
 def wrench_on_element(alpha: np.ndarray, grad_r: np.ndarray) -> np.ndarray:
