@@ -24,6 +24,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+        (f"share/{PACKAGE}/config/examples", sorted(glob("config/examples/*"))),
         (f"lib/{PACKAGE}", [f"scripts/ros2run/{name}" for name in sorted(EXECUTABLES)]),
     ],
     install_requires=["numpy", "scipy", "PyYAML", "mcap", "mcap-ros2-support", "matplotlib"],

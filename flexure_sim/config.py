@@ -13,7 +13,7 @@ Format (SI units; see config/microstage.yaml for a complete example)::
         a: {body: body2, at: [0.007, 0.012]}  # frame on body A, body coordinates [x, y(, angle)]
         b: {body: body6, at: [-0.007, 0.0]}
         stiffness: notch                      # a name above, or an inline {model: ...}
-        law: twistor                          # twistor (Ch. 4) | twist (Ch. 3)
+        law: twistor                          # twistor (Ch. 4) | twist (Ch. 3) | {polynomial: FILE}
         damping: {t_char: 1.0e-3}             # B = t_char K, or {B: [[...], [...], [...]]}
     constraints:
       - {type: fixed, body: body1}
@@ -25,6 +25,10 @@ Format (SI units; see config/microstage.yaml for a complete example)::
 
 Stiffness models: ``notch`` (D, h, t, E, nu), ``cantilever`` (length, thickness, width, E,
 nu), ``matrix`` (K: 3x3, or Ko, Kt: [kx, ky] and optional Kc: [cx, cy]).
+
+``law: {polynomial: FILE}`` uses a polynomial law fitted by ``flexure-sim fit`` (FILE relative
+to the mechanism file); such a hinge has no ``stiffness`` key: K is the law's Hessian at rest,
+and ``damping: {t_char}`` means B = t_char K as for the other laws.
 """
 from __future__ import annotations
 
@@ -48,6 +52,8 @@ from .mechanism import (
     Output,
     SineRate,
 )
+from .polynomial import PolynomialFileError, PolynomialLaw
+from .polynomial import load_law as load_polynomial_law
 
 #: Directory of the built-in mechanisms (installed to share/flexure_sim/config too).
 BUILTIN_DIRS = (
@@ -329,6 +335,7 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
     if not isinstance(raw, list) or not raw:
         raise ctx.fail("hinges", "expected a non-empty list of hinges")
     hinges, seen = [], set()
+    polynomials: dict[Path, PolynomialLaw] = {}
     for i, spec in enumerate(raw):
         key = f"hinges[{i}]"
         spec = _mapping(ctx, key, spec)
@@ -350,20 +357,48 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
                 key, f"frames a and b do not coincide in the unstressed pose: a at "
                 f"({pa[0]:.6g}, {pa[1]:.6g}, {tha:.6g} rad), b at ({pb[0]:.6g}, {pb[1]:.6g}, {thb:.6g} rad)"
             )
-        sspec = _require(ctx, key, spec, "stiffness")
-        if isinstance(sspec, str):
-            if sspec not in named_stiffness:
-                raise ctx.fail(f"{key}.stiffness", f"unknown stiffness model name {sspec!r}")
-            K, source = named_stiffness[sspec]
-        else:
-            K, source = _stiffness(ctx, f"{key}.stiffness", sspec)
-        _check_spd(ctx, f"{key}.stiffness", K, "stiffness")
+        law_key = f"{key}.law" if "law" in spec else "defaults.law"
         law_name = spec.get("law", defaults.get("law", "twistor"))
-        if law_name not in COORDINATES:
-            raise ctx.fail(f"{key}.law", f"unknown law {law_name!r} ({', '.join(COORDINATES)})")
+        poly = _polynomial_law(ctx, law_key, law_name, polynomials) if isinstance(law_name, dict) else None
+        if poly is not None:
+            if "stiffness" in spec:
+                raise ctx.fail(f"{key}.stiffness", "a polynomial law defines the stiffness (its Hessian at rest): "
+                               "remove this key")
+            K, source = poly.stiffness_at_rest(), f"polynomial:{poly.source}"
+            _check_spd(ctx, law_key, K, "stiffness at rest (Hessian of the polynomial law)")
+        else:
+            sspec = _require(ctx, key, spec, "stiffness")
+            if isinstance(sspec, str):
+                if sspec not in named_stiffness:
+                    raise ctx.fail(f"{key}.stiffness", f"unknown stiffness model name {sspec!r}")
+                K, source = named_stiffness[sspec]
+            else:
+                K, source = _stiffness(ctx, f"{key}.stiffness", sspec)
+            _check_spd(ctx, f"{key}.stiffness", K, "stiffness")
+            if not isinstance(law_name, str) or law_name not in COORDINATES:
+                raise ctx.fail(law_key,
+                               f"unknown law {law_name!r} ({', '.join(COORDINATES)}, or {{polynomial: FILE}})")
         B = _damping(ctx, f"{key}.damping", spec.get("damping", defaults.get("damping")), K)
-        hinges.append(Hinge(name, fa, fb, K, B, QuadraticLaw(law_name, K, B), source))
+        law = poly.with_damping(B) if poly is not None else QuadraticLaw(law_name, K, B)
+        hinges.append(Hinge(name, fa, fb, K, B, law, source))
     return hinges
+
+
+def _polynomial_law(ctx: _Ctx, key: str, spec: dict, cache: dict) -> PolynomialLaw:
+    """``law: {polynomial: FILE}``: a fitted polynomial law (flexure-sim fit), FILE relative
+    to the mechanism file (to the working directory for documents without a file)."""
+    _no_unknown(ctx, key, spec, {"polynomial"})
+    ref = _require(ctx, key, spec, "polynomial")
+    if not isinstance(ref, str) or not ref:
+        raise ctx.fail(f"{key}.polynomial", f"expected the path of a polynomial hinge file, got {ref!r}")
+    origin = Path(ctx.source)
+    path = (origin.parent if origin.is_file() else Path.cwd()) / ref
+    if path not in cache:
+        try:
+            cache[path] = load_polynomial_law(path)
+        except PolynomialFileError as exc:
+            raise ctx.fail(f"{key}.polynomial", str(exc)) from None
+    return cache[path]
 
 
 def _damping(ctx: _Ctx, key: str, spec: Any, K: np.ndarray) -> np.ndarray:

@@ -9,6 +9,7 @@ import importlib
 
 #: Tool modules, in the order their commands appear in ``flexure-sim --help``.
 TOOL_MODULES: tuple[str, ...] = (
+    "fit",
 )
 
 

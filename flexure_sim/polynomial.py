@@ -1,0 +1,506 @@
+"""Polynomial hinge laws: potentials of order N in twistor or twist coordinates (4.69, 3.67).
+
+The dissertation writes the potential of an elastic element as a polynomial of order N in
+its law coordinates c (Sections 3.6 and 4.7),
+
+    twistor (4.69):  U = sum_{i1+i2+i3+i4 <= N} c_U(idx) sigma^i1 xi^i2 x1^i3 x2^i4,
+    twist   (3.67):  U = sum_{i1+i2+i3 <= N}    c_U(idx) tau^i1 t1^i2 t2^i3,
+
+with the coefficients in one array indexed by idx4.sci (Appendix B). flexure_sim stores the
+same polynomials written about the unstressed pose and in scaled variables,
+
+    U(c) = E * sum_j a_j prod_k u_k^(e_jk),    u_k = (c_k - c_k^rest) / s_k,
+
+rest = (1, 0, 0, 0) for twistors and 0 for twists. Expanding the powers of
+u_sigma = (sigma - 1)/s_sigma gives back the form of 4.69 with the same order N; the shift and
+the scales s_k (lengths for x, t; the data ranges in a fit) keep the monomials of order up
+to 8 of size one, and the energy scale E keeps the coefficients of size one.
+
+*Unstressed equilibrium.* U(rest) = 0 and dU/dr(rest) = 0 (the zero- and first-order
+conditions of Section 3.6): the constant term and the terms linear in the vector
+coordinates (xi, x1, x2) or (tau, t1, t2) must be absent. For twistors the term u_sigma is
+allowed: dsigma/dr = (-xi/2, 0, 0) vanishes at rest, so (sigma - 1) ~ -alpha^2/8 is second
+order in the displacement.
+
+*Generalized forces.* dU/dc_k is again a polynomial, of order N - 1, whose coefficients
+follow from those of U (eqs. 4.75-4.78 for twistors, 3.73-3.75 for twists):
+c_k(idx(i - e_k)) = i_k c_U(idx(i)); the second derivatives apply the same rule twice. The
+wrench m_b then follows through the virtual-displacement map (eqs. 4.82-4.84, 3.82), which
+``hinge_laws.evaluate`` and ``hinge_laws.wrench_on_element`` implement for every law.
+
+*Independence of bodies and frames (3.69, 4.70).* Moving both hinge frames by G = (R, p)
+maps the coordinates linearly (d = Ad(G) d', and for twistors sigma = sigma',
+[xi; x] = Ad(G)[xi'; x']), so the law becomes another polynomial of the same order:
+``transform_frames``. Swapping bodies A and B inverts the displacement (d -> -d,
+(sigma, xi, x) -> (sigma, -xi, -x)), again a linear map: ``swap_bodies``. The *same*
+coefficients give the same energy after a swap only when the polynomial is even in the
+vector coordinates (as the quadratic laws are); see docs/polynomial_hinges.md.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from .hinge_laws import QuadraticLaw, evaluate
+from .kinematics import adjoint, transform_stiffness
+
+#: Names of the law coordinates, in the order of c.
+VARIABLES: dict[str, tuple[str, ...]] = {
+    "twistor": ("sigma", "xi", "x1", "x2"),
+    "twist": ("tau", "t1", "t2"),
+}
+
+#: Law coordinates of the unstressed pose.
+REST: dict[str, tuple[float, ...]] = {"twistor": (1.0, 0.0, 0.0, 0.0), "twist": (0.0, 0.0, 0.0)}
+
+#: Identifies the YAML files written by ``PolynomialLaw.save`` (and ``flexure-sim fit``).
+FILE_FORMAT = "flexure_sim.polynomial_hinge"
+FILE_VERSION = 1
+
+#: Highest order accepted (the monomial count grows as N^4 / 24 for twistors).
+MAX_ORDER = 12
+
+
+class PolynomialFileError(ValueError):
+    """A polynomial hinge file is invalid; the message names the file, the key and the problem."""
+
+
+# ------------------------------------------------------------------ monomial indexing
+
+@lru_cache(maxsize=None)
+def _exponent_table(n_vars: int, order: int) -> np.ndarray:
+    def rec(nv: int, budget: int) -> list[tuple[int, ...]]:
+        if nv == 1:
+            return [(i,) for i in range(budget + 1)]
+        return [head + (last,) for last in range(budget + 1) for head in rec(nv - 1, budget - last)]
+
+    table = np.array(rec(n_vars, order), dtype=int)
+    table.setflags(write=False)
+    return table
+
+
+def monomial_exponents(n_vars: int, order: int) -> np.ndarray:
+    """All exponent tuples of total degree <= order, shape (C(order + n_vars, n_vars), n_vars).
+
+    The order is that of evalpoly4.sci / idx4.sci (Appendix B): the last variable varies
+    slowest and the first fastest, so row j holds the exponents of coefficient idx = j + 1.
+    """
+    return _exponent_table(int(n_vars), int(order))
+
+
+@lru_cache(maxsize=None)
+def _index_map(n_vars: int, order: int) -> dict[tuple[int, ...], int]:
+    return {tuple(int(v) for v in e): j for j, e in enumerate(_exponent_table(n_vars, order))}
+
+
+def monomial_index(exponents, order: int) -> int:
+    """0-based position of a monomial in the coefficient array of an order-N polynomial
+    (idx4.sci returns this plus one)."""
+    e = tuple(int(v) for v in exponents)
+    if min(e) < 0 or sum(e) > order:
+        raise ValueError(f"exponents {list(e)} are not those of a monomial of order <= {order}")
+    return _index_map(len(e), int(order))[e]
+
+
+def monomials(u: np.ndarray, exponents: np.ndarray) -> np.ndarray:
+    """Values of the monomials prod_k u_k^e_jk: u (n, k), exponents (M, k) -> (n, M)."""
+    u = np.asarray(u, dtype=float)
+    exponents = np.asarray(exponents, dtype=int)
+    top = int(exponents.max()) if exponents.size else 0
+    powers = u[:, :, None] ** np.arange(top + 1)  # (n, k, top + 1); 0.0 ** 0 == 1
+    return np.prod(powers[:, np.arange(u.shape[1])[None, :], exponents], axis=-1)
+
+
+def monomial_gradients(u: np.ndarray, exponents: np.ndarray) -> np.ndarray:
+    """d/du_k of the monomials: u (n, k), exponents (M, k) -> (n, M, k)."""
+    exponents = np.asarray(exponents, dtype=int)
+    k = exponents.shape[1]
+    out = np.empty((np.shape(u)[0], exponents.shape[0], k))
+    for i in range(k):
+        lowered = exponents.copy()
+        lowered[:, i] = np.maximum(lowered[:, i] - 1, 0)
+        out[:, :, i] = monomials(u, lowered) * exponents[:, i]
+    return out
+
+
+def derivative_coefficients(coefficients: np.ndarray, n_vars: int, order: int, var: int) -> np.ndarray:
+    """Coefficients of dP/du_var for P given by a dense coefficient array of order N.
+
+    Eqs. 4.75-4.78 (3.73-3.75): c_k(idx(i)) = (i_k + 1) c_U(idx(i + e_k)). The result is
+    kept in the order-N index space (its degree-N entries are zero).
+    """
+    exps = monomial_exponents(n_vars, order)
+    src = np.nonzero(exps[:, var] > 0)[0]
+    lowered = exps[src].copy()
+    lowered[:, var] -= 1
+    imap = _index_map(n_vars, order)
+    dst = np.array([imap[tuple(e)] for e in lowered], dtype=int)
+    out = np.zeros(len(exps))
+    out[dst] = exps[src, var] * np.asarray(coefficients, dtype=float)[src]
+    return out
+
+
+def compose_linear(coefficients: np.ndarray, n_vars: int, order: int, M: np.ndarray) -> np.ndarray:
+    """Dense coefficients of P(M u') for P given by dense order-N coefficients.
+
+    Each homogeneous part of degree d is a symmetric tensor T (T[i1..id] = a_e / multinomial(e));
+    substituting u = M u' contracts every slot with M. Exact up to rounding; the degree of
+    every term is preserved, which is why a polynomial of order N in one set of twist(or)
+    coordinates is one of order N in any other (3.69, 4.70).
+    """
+    M = np.asarray(M, dtype=float)
+    a = np.asarray(coefficients, dtype=float)
+    exps = monomial_exponents(n_vars, order)
+    degree = exps.sum(axis=1)
+    radix = (order + 1) ** np.arange(n_vars)
+    lookup = {int(code): j for j, code in enumerate(exps @ radix)}
+    out = np.zeros_like(a)
+    out[degree == 0] = a[degree == 0]
+    for d in range(1, order + 1):
+        tuples = np.indices((n_vars,) * d).reshape(d, -1).T  # (k^d, d)
+        counts = np.zeros((len(tuples), n_vars), dtype=int)
+        for j in range(d):
+            counts[np.arange(len(tuples)), tuples[:, j]] += 1
+        mono = np.array([lookup[int(c)] for c in counts @ radix])
+        multinomial = math.factorial(d) / np.prod(
+            [[math.factorial(int(v)) for v in row] for row in counts], axis=1
+        )
+        T = (a[mono] / multinomial).reshape((n_vars,) * d)
+        for _ in range(d):
+            T = np.tensordot(T, M, axes=([0], [0]))
+        np.add.at(out, mono, T.ravel())
+    return out
+
+
+def describe_monomial(exponents, names: tuple[str, ...]) -> str:
+    """A monomial as text, e.g. xi^2*x1 (the constant is "1")."""
+    parts = [n if e == 1 else f"{n}^{e}" for n, e in zip(names, exponents) if e]
+    return "*".join(parts) or "1"
+
+
+# ------------------------------------------------------------------------- the law
+
+@dataclass(frozen=True)
+class PolynomialLaw:
+    """U(c) = energy * sum_j coefficients[j] * prod_k ((c_k - rest_k) / scale_k)^exponents[j, k].
+
+    coordinates: "twistor" (c = sigma, xi, x1, x2) or "twist" (c = tau, t1, t2);
+    order: N, the largest total degree allowed; exponents (M, k) and coefficients (M,) the
+    terms; scale (k,) the s_k (dimensionless for sigma, xi, tau; metres for x, t);
+    energy: E in joules; B: 3x3 damping matrix (moment first, in the hinge frame), mapped to
+    the law coordinates as the quadratic laws do (4 B on (xi, x) for twistors, B for
+    twists), so that a polynomial fitted to a quadratic law damps like it.
+    The terms must leave the unstressed pose an unstressed equilibrium (module docstring).
+    """
+
+    coordinates: str
+    order: int
+    exponents: np.ndarray
+    coefficients: np.ndarray
+    scale: np.ndarray
+    energy: float
+    B: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    source: str = ""
+    _table: np.ndarray = field(init=False, repr=False, compare=False)
+    _pairs: tuple = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.coordinates not in VARIABLES:
+            raise ValueError(f"coordinates must be one of {sorted(VARIABLES)}, got {self.coordinates!r}")
+        names = VARIABLES[self.coordinates]
+        k = len(names)
+        integer = isinstance(self.order, (int, np.integer)) and not isinstance(self.order, bool)
+        if not integer or not 1 <= self.order <= MAX_ORDER:
+            raise ValueError(f"order must be an integer in 1..{MAX_ORDER}, got {self.order!r}")
+        order = int(self.order)
+        exps = np.asarray(self.exponents)
+        if exps.ndim != 2 or exps.shape[1] != k or (exps.size and not np.all(exps == np.round(exps))):
+            raise ValueError(f"exponents must be an (M, {k}) array of integers, got shape {exps.shape}")
+        exps = exps.astype(int)
+        coef = np.asarray(self.coefficients, dtype=float)
+        if coef.shape != (exps.shape[0],):
+            raise ValueError(f"coefficients must have shape ({exps.shape[0]},), got {coef.shape}")
+        if not np.all(np.isfinite(coef)):
+            raise ValueError("coefficients must be finite")
+        scale = np.asarray(self.scale, dtype=float)
+        if scale.shape != (k,) or not np.all(np.isfinite(scale)) or np.any(scale <= 0):
+            raise ValueError(f"scale must be {k} positive numbers ({', '.join(names)}), got {self.scale!r}")
+        if not (np.isfinite(self.energy) and self.energy > 0):
+            raise ValueError(f"energy must be a positive number of joules, got {self.energy!r}")
+        B = np.asarray(self.B, dtype=float)
+        if B.shape != (3, 3) or not np.all(np.isfinite(B)) or not np.allclose(B, B.T, rtol=1e-12, atol=0.0):
+            raise ValueError("B must be a symmetric 3x3 matrix")
+        if np.any(exps < 0) or np.any(exps.sum(axis=1) > order):
+            bad = int(np.nonzero((exps < 0).any(axis=1) | (exps.sum(axis=1) > order))[0][0])
+            raise ValueError(
+                f"term {bad} ({describe_monomial(exps[bad], names)}) is not a monomial of order <= {order}"
+            )
+        if len({tuple(e) for e in exps}) != len(exps):
+            raise ValueError("exponents repeat a monomial (each term must appear once)")
+        # The vector coordinates: all but sigma for twistors (u_sigma may appear alone).
+        vector = names[1:] if self.coordinates == "twistor" else names
+        for e, a in zip(exps, coef):
+            deg = int(e.sum())
+            if a != 0.0 and (deg == 0 or (deg == 1 and names[int(np.argmax(e))] in vector)):
+                raise ValueError(
+                    f"term {describe_monomial(e, names)} has degree {deg}: the unstressed pose must be an "
+                    f"unstressed equilibrium (U = 0 and dU/dr = 0 at rest), so the constant term "
+                    f"and the terms linear in {', '.join(vector)} must be absent"
+                )
+        object.__setattr__(self, "exponents", exps)
+        object.__setattr__(self, "coefficients", coef)
+        object.__setattr__(self, "scale", scale)
+        object.__setattr__(self, "energy", float(self.energy))
+        object.__setattr__(self, "order", order)
+        object.__setattr__(self, "B", B)
+        # Dense coefficients of U and of its first and second derivatives (4.75-4.78).
+        dense = np.zeros(len(monomial_exponents(k, order)))
+        for e, a in zip(exps, coef):
+            dense[monomial_index(e, order)] = a
+        first = [derivative_coefficients(dense, k, order, i) for i in range(k)]
+        pairs = tuple((i, j) for i in range(k) for j in range(i, k))
+        second = [derivative_coefficients(first[i], k, order, j) for i, j in pairs]
+        object.__setattr__(self, "_table", np.column_stack([dense, *first, *second]))
+        object.__setattr__(self, "_pairs", pairs)
+
+    # ------------------------------------------------------------ HingeLaw protocol
+    @property
+    def variables(self) -> tuple[str, ...]:
+        """Names of the law coordinates."""
+        return VARIABLES[self.coordinates]
+
+    @property
+    def rest(self) -> np.ndarray:
+        """Law coordinates of the unstressed pose."""
+        return np.array(REST[self.coordinates])
+
+    def potential(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """U (m,), dU/dc (m, k), d2U/dc2 (m, k, k) for rows c (m, k) -- exact (4.69-4.78)."""
+        c = np.atleast_2d(np.asarray(c, dtype=float))
+        k = len(self.scale)
+        u = (c - self.rest) / self.scale
+        vals = monomials(u, monomial_exponents(k, self.order)) @ self._table
+        U = self.energy * vals[:, 0]
+        grad = self.energy * vals[:, 1:1 + k] / self.scale
+        hess = np.empty((len(c), k, k))
+        for col, (i, j) in enumerate(self._pairs):
+            h = self.energy * vals[:, 1 + k + col] / (self.scale[i] * self.scale[j])
+            hess[:, i, j] = h
+            hess[:, j, i] = h
+        return U, grad, hess
+
+    def dissipation_matrix(self) -> np.ndarray:
+        """C of D = 1/2 c_dot^T C c_dot: B embedded as the quadratic laws embed it (4.40, 3.62)."""
+        return QuadraticLaw(self.coordinates, np.zeros((3, 3)), self.B).dissipation_matrix()
+
+    # ------------------------------------------------------------------- helpers
+    def stiffness_at_rest(self) -> np.ndarray:
+        """K = d2U/dr2 at the unstressed pose (3x3, moment first, hinge frame): the
+        small-displacement stiffness (eq. 4.52), used for reporting and default damping."""
+        ev = evaluate([self], np.zeros(1), np.zeros((1, 2)), np.zeros((1, 3)))
+        H = ev.hess[0]
+        return 0.5 * (H + H.T)
+
+    def with_damping(self, B: np.ndarray) -> "PolynomialLaw":
+        """The same potential with damping matrix B (3x3)."""
+        return dataclasses.replace(self, B=np.asarray(B, dtype=float))
+
+    def dense_coefficients(self) -> np.ndarray:
+        """Coefficients of all monomials of order <= N, in idx4.sci order (first column of
+        the internal table)."""
+        return self._table[:, 0].copy()
+
+    def _from_dense(self, dense: np.ndarray, B: np.ndarray) -> "PolynomialLaw":
+        exps = monomial_exponents(len(self.scale), self.order)
+        keep = dense != 0.0
+        return dataclasses.replace(self, exponents=exps[keep], coefficients=dense[keep], B=B)
+
+    def _linear_map(self, T: np.ndarray) -> "PolynomialLaw":
+        """The law P'(c') = P(T c') for c - rest = T (c' - rest) (a linear map of the vector
+        coordinates that fixes the rest pose)."""
+        k = len(self.scale)
+        M = (T / self.scale[:, None]) * self.scale[None, :]
+        return self._from_dense(compose_linear(self.dense_coefficients(), k, self.order, M), self.B)
+
+
+def transform_frames(law: PolynomialLaw, R: np.ndarray, p: np.ndarray) -> PolynomialLaw:
+    """The law for hinge frames moved by G = (R, p) on both bodies (3.69, 4.70).
+
+    The relative displacement is conjugated by G, so its twist maps as d = Ad(G) d' and the
+    twistor as sigma = sigma', [xi; x] = Ad(G) [xi'; x'] (4.65, the vector part is
+    proportional to the twist). The returned law U'(c') = U(c) is a polynomial of the same
+    order; its damping is B' = Ad^T B Ad, as for the stiffness (transform_stiffness).
+    """
+    Ad = adjoint(np.asarray(R, dtype=float), np.asarray(p, dtype=float))
+    k = len(law.scale)
+    T = np.eye(k)
+    T[k - 3:, k - 3:] = Ad
+    moved = law._linear_map(T)
+    return dataclasses.replace(moved, B=transform_stiffness(law.B, R, p))
+
+
+def swap_bodies(law: PolynomialLaw) -> PolynomialLaw:
+    """The law seen with bodies A and B exchanged: the displacement of a in b is the inverse
+    one, whose twist is -d and whose twistor is (sigma, -xi, -x). U'(c') = U(c) flips the sign
+    of every term of odd degree in the vector coordinates; the damping is unchanged."""
+    k = len(law.scale)
+    T = -np.eye(k)
+    if law.coordinates == "twistor":
+        T[0, 0] = 1.0
+    return law._linear_map(T)
+
+
+# ---------------------------------------------------------------------- file I/O
+
+def law_to_dict(law: PolynomialLaw) -> dict[str, Any]:
+    """The YAML document of a law (without fit report or provenance)."""
+    return {
+        "format": FILE_FORMAT,
+        "version": FILE_VERSION,
+        "coordinates": law.coordinates,
+        "variables": list(law.variables),
+        "order": law.order,
+        "potential": "U = energy * sum(coefficient * prod(((c - rest) / scale) ** exponents))",
+        "rest": [float(v) for v in law.rest],
+        "scale": [float(v) for v in law.scale],
+        "energy": law.energy,
+        "terms": [
+            {"exponents": [int(v) for v in e], "coefficient": float(a)}
+            for e, a in zip(law.exponents, law.coefficients)
+        ],
+        "stiffness_at_rest": [[float(v) for v in row] for row in law.stiffness_at_rest()],
+    }
+
+
+def save_law(law: PolynomialLaw, path: str | Path, extra: dict[str, Any] | None = None) -> None:
+    """Write a law (and optional extra sections, e.g. fit report, provenance) as YAML."""
+    doc = law_to_dict(law)
+    doc.update(extra or {})
+    header = (
+        "# Polynomial hinge law for flexure_sim (dissertation 3.6 / 4.7); reference it from a\n"
+        "# mechanism as  law: {polynomial: <this file>}.  stiffness_at_rest, fit and provenance\n"
+        "# are informational.\n"
+    )
+    Path(path).write_text(header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100))
+
+
+def law_from_dict(doc: Any, source: str = "<dict>") -> PolynomialLaw:
+    """Validate a parsed polynomial hinge document and build the law (damping B = 0)."""
+
+    def fail(key: str, problem: str) -> PolynomialFileError:
+        return PolynomialFileError(f"{source}: {key}: {problem}")
+
+    if not isinstance(doc, dict):
+        raise PolynomialFileError(f"{source}: the document must be a mapping, got {type(doc).__name__}")
+    if doc.get("format") != FILE_FORMAT:
+        raise fail("format", f"expected {FILE_FORMAT!r} (a file written by flexure-sim fit), got {doc.get('format')!r}")
+    if doc.get("version") != FILE_VERSION:
+        raise fail("version", f"unsupported version {doc.get('version')!r} (this flexure_sim reads {FILE_VERSION})")
+    coords = doc.get("coordinates")
+    if coords not in VARIABLES:
+        raise fail("coordinates", f"expected one of {', '.join(VARIABLES)}, got {coords!r}")
+    names = VARIABLES[coords]
+    k = len(names)
+    if "variables" in doc and list(doc["variables"]) != list(names):
+        raise fail("variables", f"expected {list(names)} for {coords} coordinates, got {doc['variables']!r}")
+    order = doc.get("order")
+    if isinstance(order, bool) or not isinstance(order, int) or not 1 <= order <= MAX_ORDER:
+        raise fail("order", f"expected an integer in 1..{MAX_ORDER}, got {order!r}")
+
+    def numbers(key: str, value: Any, n: int) -> list[float]:
+        if not isinstance(value, list) or len(value) != n:
+            raise fail(key, f"expected a list of {n} numbers, got {value!r}")
+        out = []
+        for i, v in enumerate(value):
+            out.append(_finite(fail, f"{key}[{i}]", v))
+        return out
+
+    if "rest" in doc and not np.allclose(numbers("rest", doc["rest"], k), REST[coords], rtol=0, atol=0):
+        raise fail("rest", f"must be {list(REST[coords])}: the polynomial is written about the unstressed pose")
+    scale = numbers("scale", doc.get("scale"), k)
+    for i, s in enumerate(scale):
+        if s <= 0:
+            raise fail(f"scale[{i}]", f"must be positive, got {s}")
+    energy = _finite(fail, "energy", doc.get("energy"))
+    if energy <= 0:
+        raise fail("energy", f"must be positive, got {energy}")
+    terms = doc.get("terms")
+    if not isinstance(terms, list) or not terms:
+        raise fail("terms", "expected a non-empty list of {exponents: [...], coefficient: number}")
+    exps, coefs = [], []
+    for i, term in enumerate(terms):
+        key = f"terms[{i}]"
+        if not isinstance(term, dict) or set(term) != {"exponents", "coefficient"}:
+            raise fail(key, f"expected a mapping with keys exponents and coefficient, got {term!r}")
+        e = term["exponents"]
+        naturals = isinstance(e, list) and all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in e)
+        if not naturals or len(e) != k:
+            raise fail(f"{key}.exponents", f"expected {k} non-negative integers ({', '.join(names)}), got {e!r}")
+        if sum(e) > order:
+            raise fail(f"{key}.exponents", f"total degree {sum(e)} exceeds the order {order}")
+        exps.append(e)
+        coefs.append(_finite(fail, f"{key}.coefficient", term["coefficient"]))
+    try:
+        return PolynomialLaw(coords, order, np.array(exps, dtype=int), np.array(coefs), np.array(scale), energy,
+                             source=source)
+    except ValueError as exc:
+        raise fail("terms", str(exc)) from None
+
+
+def _finite(fail, key: str, value: Any) -> float:
+    if isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
+        raise fail(key, f"expected a finite number, got {value!r}")
+    return float(value)
+
+
+def load_law(path: str | Path) -> PolynomialLaw:
+    """Read a polynomial hinge file (as written by ``flexure-sim fit``)."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise PolynomialFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise PolynomialFileError(f"{path}: not valid YAML: {exc}") from None
+    return law_from_dict(doc, source=str(path))
+
+
+def quadratic_as_polynomial(K: np.ndarray, coordinates: str, B: np.ndarray | None = None) -> PolynomialLaw:
+    """The quadratic law of ``coordinates`` with stiffness K -- U = 2 [xi; x]^T K [xi; x]
+    (4.7) or U = 1/2 d^T K d (3.4) -- written as a PolynomialLaw of order 2 (unit scales,
+    E = 1 J): the same energy as QuadraticLaw(coordinates, K, B) everywhere."""
+    W = QuadraticLaw(coordinates, np.asarray(K, dtype=float), np.zeros((3, 3))).metric()
+    k = W.shape[0]
+    exps, coefs = [], []
+    for i in range(k):
+        for j in range(i, k):
+            if W[i, j] != 0.0:
+                e = [0] * k
+                e[i] += 1
+                e[j] += 1
+                exps.append(e)
+                coefs.append(0.5 * W[i, i] if i == j else W[i, j])
+    return PolynomialLaw(coordinates, 2, np.array(exps, dtype=int), np.array(coefs), np.ones(k), 1.0,
+                         np.zeros((3, 3)) if B is None else np.asarray(B, dtype=float))
+
+
+__all__ = [
+    "FILE_FORMAT", "MAX_ORDER", "REST", "VARIABLES", "PolynomialFileError", "PolynomialLaw",
+    "compose_linear", "derivative_coefficients", "describe_monomial", "law_from_dict", "law_to_dict", "load_law",
+    "monomial_exponents", "monomial_gradients", "monomial_index", "monomials",
+    "quadratic_as_polynomial", "save_law", "swap_bodies", "transform_frames",
+]
