@@ -27,7 +27,7 @@ setup(
         (f"share/{PACKAGE}/config/examples", sorted(glob("config/examples/*"))),
         (f"lib/{PACKAGE}", [f"scripts/ros2run/{name}" for name in sorted(EXECUTABLES)]),
     ],
-    install_requires=["numpy", "scipy", "PyYAML", "mcap", "mcap-ros2-support", "matplotlib"],
+    install_requires=["numpy", "scipy", "numba", "PyYAML", "mcap", "mcap-ros2-support", "matplotlib"],
     zip_safe=True,
     maintainer="flexure_sim developers",
     maintainer_email="flexure-sim@example.com",

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import kernels
 from .hinge_laws import LawBatch, QuadraticLaw, wrench_on_element
 from .kinematics import J, rot
 from .mechanism import Mechanism
@@ -75,6 +76,15 @@ class Assembly:
             for j in range(6):
                 self.scatter[self.dofs[h, j], h, j] += 1.0
         self._scatter_flat = self.scatter.reshape(N, 6 * n)
+        # Compiled path (kernels.quadratic_forces) when every law is quadratic.
+        self.compiled = all(isinstance(h.law, QuadraticLaw) for h in hinges)
+        if self.compiled:
+            offset = [1 if h.law.coordinates == "twistor" else 0 for h in hinges]
+            self._kind = np.array([kernels.TWISTOR if o else kernels.TWIST for o in offset], dtype=np.int64)
+            self._W = np.ascontiguousarray([h.law.metric()[o:, o:] for h, o in zip(hinges, offset)])
+            self._C = np.ascontiguousarray([h.law.dissipation_matrix()[o:, o:] for h, o in zip(hinges, offset)])
+            self._ia, self._ib = self.ia.astype(np.int64), self.ib.astype(np.int64)
+            self._ca, self._cb = np.ascontiguousarray(self.ca), np.ascontiguousarray(self.cb)
 
     # ------------------------------------------------------------------ geometry
     def relative(self, z: np.ndarray, second: bool = True):
@@ -143,6 +153,19 @@ class Assembly:
         return r, dr, d2
 
     # -------------------------------------------------------------------- forces
+    def generalized_forces(self, z: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, float, float]:
+        """Q, total potential energy and total dissipated power: the per-step hot path.
+
+        Uses the compiled kernel when every law is quadratic, else ``forces``.
+        """
+        if self.compiled:
+            Q = np.empty(3 * self.n_bodies)
+            energy, dissipation = kernels.quadratic_forces(
+                z, v, self._ia, self._ib, self._ca, self._cb, self.phia, self.phib, self._kind, self._W, self._C, Q)
+            return Q, energy, dissipation
+        hf = self.forces(z, v)
+        return hf.Q, float(hf.energy.sum()), float(hf.dissipation.sum())
+
     def forces(self, z: np.ndarray, v: np.ndarray, jacobian: bool = False) -> HingeForces:
         """Hinge forces at coordinates z and velocities v (both length 3 n_bodies)."""
         r, dr, d2 = self.relative(z, second=jacobian)

@@ -144,8 +144,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--drive", default="none", help="step:AMPLITUDE in metres, or none (default)")
     sim.add_argument("--duration", type=float, default=0.05, help="simulated time in seconds (default 0.05)")
     sim.add_argument("--dt", type=float, default=DEFAULT_STEP, help=f"fixed step in seconds (default {DEFAULT_STEP:g})")
-    sim.add_argument("--relinearize-tol", type=float, default=0.0,
-                     help="reuse the Jacobian until the configuration moves this much (0: every step)")
+    sim.add_argument("--relinearize-tol", type=float, default=None,
+                     help="also re-linearize when the configuration moved this much (rad, or m per "
+                          "mechanism size; 0: every step). Default: only when the step's iteration needs it")
     sim.add_argument("--static", action="store_true", help="solve the static equilibrium instead")
     sim.add_argument("--json", action="store_true", help="print one JSON object")
     _add_tool_commands(sub)

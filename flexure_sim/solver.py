@@ -14,17 +14,20 @@ force the drive must supply is the drive-axis component of lambda). Unlike the
 dissertation's Baumgarte-stabilised multipliers (6.21-6.23), nothing drifts.
 
 The driven coordinate follows the actuator output u, a first-order lag of the command
-(``Drive``); u is part of the integrated state, so within a step the whole system is
-autonomous. Stepping uses the **exponential Rosenbrock-Euler** method:
+(``Drive``); u is part of the integrated state y = (z_F, v_F, u). Stepping uses the
+**exponential trapezoidal rule**: with A an exact Jacobian dF/dy taken at some earlier
+state, F0 = F(y_n, t_n) and N(y, t) = F(y, t) - F0 - A (y - y_n),
 
-    y_{n+1} = y_n + h phi_1(h A) F(y_n) + h^2 phi_2(h A) dF/dt,
+    y_{n+1} = y_n + h phi_1(hA) F0 + h phi_2(hA) N(y_{n+1}, t_{n+1}),
 
-with A = dF/dy the exact Jacobian. It is exact for linear dynamics at any step, hence
-stable for the stage's stiff, heavily damped hinge modes (eigenvalues near -2e7 1/s), and
-second order for nonlinear ones. phi_1, phi_2 come from one matrix exponential of an
-augmented matrix. The Jacobian (and its exponential) may be reused while the
-configuration barely moves (``relinearize_tol``), which makes a step a matrix-vector
-product plus one force evaluation.
+the variation-of-constants formula with the remainder N interpolated linearly over the
+step. The linear part is integrated exactly at any step, so the stage's stiff, heavily
+damped hinge modes (eigenvalues near -1e8 1/s) are no constraint on h; the remainder is
+solved by fixed-point iteration, which contracts by about |J - A| / |J| per sweep (two
+sweeps for the stage), so A can be reused for many steps: it is re-computed only when the
+iteration stops contracting (or, optionally, when the configuration moved by more than
+``relinearize_tol``). The converged step does not depend on where A was taken; the method
+is second order. phi_1 and phi_2 come from one matrix exponential per linearization.
 
 The static equilibrium for a given drive input is Newton's method on Q_F(z) = 0 with the
 exact stiffness dQ_F/dz_F.
@@ -37,7 +40,9 @@ from typing import Optional
 import numpy as np
 import scipy.linalg
 
-from .assembly import Assembly, HingeForces
+from . import stepping
+
+from .assembly import Assembly
 from .mechanism import COORDINATE_NAMES, Drive, Fixed, Mechanism, SineRate
 
 #: Default fixed step (s): 10 steps per millisecond.
@@ -114,6 +119,17 @@ class StepStats:
 
     steps: int = 0
     linearizations: int = 0
+    iterations: int = 0
+
+
+@dataclass(frozen=True)
+class _Linearization:
+    """Where and what: configuration z, Jacobian A, h phi_1(hA), h phi_2(hA)."""
+
+    z: np.ndarray
+    A: np.ndarray
+    phi1: np.ndarray
+    phi2: np.ndarray
 
 
 @dataclass
@@ -129,27 +145,68 @@ class _Partition:
 class Simulation:
     """A mechanism, its state, and the stepping / static solvers.
 
-    ``dt``: fixed step (s). ``relinearize_tol``: the Jacobian is recomputed when the
-    configuration has moved by more than this (rad for angles, and metres / ``length_scale``
-    for positions) since the last linearization; 0 recomputes it every step.
+    ``dt``: fixed step (s). The Jacobian is computed at the first step and again whenever
+    the remainder iteration stops contracting; with ``relinearize_tol`` it is also
+    recomputed when the configuration has moved by more than that (rad for angles, metres /
+    ``length_scale`` for positions) since the last linearization (0: every step).
+    The answer does not depend on where the Jacobian was taken, only the iteration count.
     """
 
-    def __init__(self, mechanism: Mechanism, dt: float = DEFAULT_STEP, relinearize_tol: float = 0.0):
+    #: The remainder iteration has converged when its last change is below
+    #: iteration_rtol |y| + atol in every component (atol: 1e-12 of the mechanism's size in
+    #: positions, 1e-12 rad in angles, those per step in rates, 1e-12 of the stroke in u).
+    iteration_rtol = 1e-10
+    #: Largest number of remainder iterations before re-linearizing within the step.
+    max_iterations = 8
+    #: A step that needed more iterations than this re-linearizes before the next one.
+    relinearize_after = 3
+
+    def __init__(self, mechanism: Mechanism, dt: float = DEFAULT_STEP, relinearize_tol: Optional[float] = None):
         if not (dt > 0 and np.isfinite(dt)):
             raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
         self.mechanism = mechanism
         self.assembly = Assembly(mechanism)
         self.dt = float(dt)
-        self.relinearize_tol = float(relinearize_tol)
+        if relinearize_tol is not None and not relinearize_tol >= 0:
+            raise ValueError(f"relinearize_tol must be None or >= 0, got {relinearize_tol!r}")
+        self.relinearize_tol = relinearize_tol
         self.drive: Optional[Drive] = mechanism.drive
         nb = len(mechanism.bodies)
         self.mass = np.repeat([[b.mass, b.mass, b.inertia] for b in mechanism.bodies], 1, axis=0).ravel()
         self.z0 = np.array([b.pose for b in mechanism.bodies], dtype=float).ravel()
         self.part = self._partition(mechanism, nb)
+        self._motion = self._motion_arrays()
         self.length_scale = max(1e-3, float(np.ptp(self.z0.reshape(nb, 3)[:, :2]))) if nb > 1 else 1.0
         self.stats = StepStats()
-        self._lin: Optional[tuple[np.ndarray, np.ndarray]] = None  # (z at linearization, h phi_1)
+        self._lin: Optional[_Linearization] = None
+        self._cache: Optional[tuple] = None  # (state, command, F, drive power, dissipation)
+        self._mass_free = self.mass[self.part.free]
         self.state = self.initial_state()
+        self._atol = self._iteration_atol()
+        self._args = self._kernel_args() if self.assembly.compiled else None
+
+    def _motion_arrays(self) -> tuple:
+        """Arguments of stepping.prescribed_motion after (t, u, command)."""
+        part = self.part
+        sines = [c for _, c in part.timed]
+        return (
+            self.drive.response_time if self.drive else 1.0,
+            self.drive is not None,
+            self.z0[part.prescribed].copy(),
+            part.du.astype(float),
+            np.array([j for j, _ in part.timed], dtype=np.int64),
+            np.array([c.amplitude for c in sines], dtype=float),
+            np.array([2.0 * np.pi * c.frequency for c in sines], dtype=float),
+            np.array([c.phase for c in sines], dtype=float),
+        )
+
+    def _iteration_atol(self) -> np.ndarray:
+        free = self.part.free
+        per_coord = np.where(free % 3 == 2, 1e-12, 1e-12 * self.length_scale)
+        parts = [per_coord, per_coord / self.dt]
+        if self.drive:
+            parts.append([1e-12 * (self.drive.stroke[1] - self.drive.stroke[0])])
+        return np.concatenate(parts)
 
     # --------------------------------------------------------------- structure
     def _partition(self, mech: Mechanism, nb: int) -> _Partition:
@@ -181,68 +238,45 @@ class Simulation:
         self.state = self.initial_state()
         self.stats = StepStats()
         self._lin = None
+        self._cache = None
 
     # ------------------------------------------------------- prescribed motion
     def _prescribed(self, t: float, u: float, command: float):
-        """z_P, v_P, a_P and their explicit time derivatives (dz_P/dt, dv_P/dt at fixed u)."""
-        part = self.part
-        tau = self.drive.response_time if self.drive else 1.0
-        udot = (command - u) / tau
-        uddot = -udot / tau
-        zP = self.z0[part.prescribed] + part.du * u
-        vP = part.du * udot
-        aP = part.du * uddot
-        zt = np.zeros_like(zP)
-        vt = np.zeros_like(zP)
-        for j, c in part.timed:
-            off, rate, acc = c.offset(t)
-            zP[j] += off
-            vP[j] = rate
-            aP[j] = acc
-            zt[j] = rate
-            vt[j] = acc
-        return zP, vP, aP, zt, vt
+        """z_P, v_P, a_P: prescribed coordinates, their rates and accelerations."""
+        return stepping.prescribed_motion(t, u, command, *self._motion)
 
     def _full(self, zF, vF, t, u, command):
         part = self.part
-        zP, vP, aP, zt, vt = self._prescribed(t, u, command)
+        zP, vP, aP = self._prescribed(t, u, command)
         z = np.empty(len(self.z0))
         v = np.empty(len(self.z0))
         z[part.free], z[part.prescribed] = zF, zP
         v[part.free], v[part.prescribed] = vF, vP
-        return z, v, aP, zt, vt
+        return z, v, aP
 
     # ------------------------------------------------------------- dynamics
-    def _rhs(self, y, t, command, jacobian):
+    def _jacobian(self, y: np.ndarray, t: float, command: float) -> np.ndarray:
+        """Exact A = dF/dy for y = (z_F, v_F, u): rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v),
+        du/dt = (command - u)/tau, with z_P, v_P depending on u through the drive axis."""
         part = self.part
         nF = len(part.free)
-        zF, vF = y[:nF], y[nF:2 * nF]
         u = y[2 * nF] if self.drive else 0.0
-        z, v, aP, zt, vt = self._full(zF, vF, t, u, command)
-        hf = self.assembly.forces(z, v, jacobian=jacobian)
-        mF = self.mass[part.free]
-        F = np.empty_like(y)
-        F[:nF] = vF
-        F[nF:2 * nF] = hf.Q[part.free] / mF
-        tau = self.drive.response_time if self.drive else 1.0
+        z, v, _ = self._full(y[:nF], y[nF:2 * nF], t, u, command)
+        hf = self.assembly.forces(z, v, jacobian=True)
+        mF = self._mass_free
+        m = len(y)
+        A = np.zeros((m, m))
+        A[:nF, nF:2 * nF] = np.eye(nF)
+        Kzz, Kvv = hf.dQ_dz, hf.dQ_dv
+        FF = np.ix_(part.free, part.free)
+        A[nF:2 * nF, :nF] = Kzz[FF] / mF[:, None]
+        A[nF:2 * nF, nF:2 * nF] = Kvv[FF] / mF[:, None]
         if self.drive:
-            F[2 * nF] = (command - u) / tau
-        A = Ft = None
-        if jacobian:
-            m = len(y)
-            A = np.zeros((m, m))
-            A[:nF, nF:2 * nF] = np.eye(nF)
-            Kzz, Kvv = hf.dQ_dz, hf.dQ_dv
-            FF = np.ix_(part.free, part.free)
+            tau = self.drive.response_time
             FP = np.ix_(part.free, part.prescribed)
-            A[nF:2 * nF, :nF] = Kzz[FF] / mF[:, None]
-            A[nF:2 * nF, nF:2 * nF] = Kvv[FF] / mF[:, None]
-            if self.drive:
-                A[nF:2 * nF, 2 * nF] = (Kzz[FP] @ part.du - Kvv[FP] @ part.du / tau) / mF
-                A[2 * nF, 2 * nF] = -1.0 / tau
-            Ft = np.zeros(m)
-            Ft[nF:2 * nF] = (Kzz[FP] @ zt + Kvv[FP] @ vt) / mF
-        return F, A, Ft, hf, z, v, aP
+            A[nF:2 * nF, 2 * nF] = (Kzz[FP] @ part.du - Kvv[FP] @ part.du / tau) / mF
+            A[2 * nF, 2 * nF] = -1.0 / tau
+        return A
 
     def _pack(self, state: State) -> np.ndarray:
         part = self.part
@@ -251,75 +285,115 @@ class Simulation:
             parts.append([state.u])
         return np.concatenate(parts)
 
-    def _drive_power(self, hf: HingeForces, v: np.ndarray, aP: np.ndarray) -> tuple[float, np.ndarray]:
-        """Constraint forces lambda_P = M_P a_P - Q_P and their power on the prescribed motion."""
-        P = self.part.prescribed
-        lam = self.mass[P] * aP - hf.Q[P]
-        return float(lam @ v[P]), lam
+    def _linearize(self, y: np.ndarray, t: float, command: float) -> None:
+        """Exact Jacobian A at y and the matrices h phi_1(hA), h phi_2(hA) of the step.
 
-    def _phi_vector(self, A: np.ndarray, Ft: np.ndarray, F0: np.ndarray) -> np.ndarray:
-        """h phi_1(hA) F0 + h^2 phi_2(hA) Ft from one exponential of an (m+2) matrix."""
-        m = len(F0)
-        aug = np.zeros((m + 2, m + 2))
-        aug[:m, :m] = A
-        aug[:m, m] = Ft
-        aug[:m, m + 1] = F0
-        aug[m, m + 1] = 1.0
-        return scipy.linalg.expm(self.dt * aug)[:m, m + 1]
+        Both come from one exponential of the block matrix [[hA, I, 0], [0, 0, I], [0, 0, 0]]
+        (its first block row is [e^{hA}, h phi_1(hA), h^2 phi_2(hA)] up to the powers of h).
+        """
+        A = self._jacobian(y, t, command)
+        m, h = A.shape[0], self.dt
+        aug = np.zeros((3 * m, 3 * m))
+        aug[:m, :m] = h * A
+        aug[:m, m:2 * m] = np.eye(m)
+        aug[m:2 * m, 2 * m:] = np.eye(m)
+        E = scipy.linalg.expm(aug)
+        self._lin = _Linearization(self._z_of(y, t, command), A, h * E[:m, m:2 * m], h * E[:m, 2 * m:])
+        self.stats.linearizations += 1
 
-    def _phi_matrix(self, A: np.ndarray) -> np.ndarray:
-        """h phi_1(hA) as a matrix, for reuse over several steps."""
-        m = A.shape[0]
-        aug = np.zeros((2 * m, 2 * m))
-        aug[:m, :m] = A
-        aug[:m, m:] = np.eye(m)
-        return scipy.linalg.expm(self.dt * aug)[:m, m:]
-
-    def _needs_linearization(self, s: State) -> bool:
-        if self._lin is None or self.relinearize_tol <= 0 or self.part.timed:
-            return True
-        moved = np.abs(s.z - self._lin[0])
+    def _moved_too_far(self, z: np.ndarray) -> bool:
+        tol = self.relinearize_tol
+        if tol is None:
+            return False
+        moved = np.abs(z - self._lin.z)
         moved[0::3] /= self.length_scale
         moved[1::3] /= self.length_scale
-        return bool(np.max(moved) > self.relinearize_tol)
+        return bool(np.max(moved) > tol)
+
+    def _rhs_python(self, y: np.ndarray, t: float, command: float, _args=None):
+        """F(y, t), drive power and dissipated power through Assembly (any hinge law)."""
+        part = self.part
+        nF = len(part.free)
+        u = y[2 * nF] if self.drive else 0.0
+        z, v, aP = self._full(y[:nF], y[nF:2 * nF], t, u, command)
+        Q, _, dissipation = self.assembly.generalized_forces(z, v)
+        F = np.empty_like(y)
+        F[:nF] = y[nF:2 * nF]
+        F[nF:2 * nF] = Q[part.free] / self._mass_free
+        if self.drive:
+            F[2 * nF] = (command - u) / self.drive.response_time
+        P = part.prescribed
+        return F, float((self.mass[P] * aP - Q[P]) @ v[P]), float(dissipation)
+
+    def _kernel_args(self) -> tuple:
+        a = self.assembly
+        part = self.part
+        tau, has_drive, zP0, du, sine_index, sine_amp, sine_w, sine_phase = self._motion
+        return (part.free.astype(np.int64), part.prescribed.astype(np.int64), self.mass, zP0, du, tau, has_drive,
+                sine_index, sine_amp, sine_w, sine_phase, a._ia, a._ib, a._ca, a._cb, a.phia, a.phib, a._kind,
+                a._W, a._C)
+
+    def _rhs(self, y: np.ndarray, t: float, command: float):
+        if self.assembly.compiled:
+            F, p, d = stepping.kernel_rhs(y, t, command, self._args)
+            return F, float(p), float(d)
+        return self._rhs_python(y, t, command)
+
+    def _advance(self, n, y, t, command, F0, p0, d0):
+        lin = self._lin
+        common = (n, y, t, self.dt, command, lin.A, lin.phi1, lin.phi2, self.iteration_rtol, self._atol,
+                  self.max_iterations, self.relinearize_after, F0, p0, d0)
+        if self.assembly.compiled:
+            return stepping.advance(*common, stepping.kernel_rhs, self._args)
+        return stepping.advance.py_func(*common, self._rhs_python, None)
 
     def step(self, n: int = 1) -> None:
-        """Advance n fixed steps with the actuator command held at state.command."""
-        for _ in range(n):
-            self._step_once()
-
-    def _step_once(self) -> None:
+        """Advance n fixed steps of the exponential trapezoidal rule (module docstring) with
+        the actuator command held at state.command."""
         s = self.state
-        y = self._pack(s)
-        if self._needs_linearization(s):
-            F0, A, Ft, hf, z, v, aP = self._rhs(y, s.t, s.command, jacobian=True)
-            self.stats.linearizations += 1
-            if self.relinearize_tol > 0 and not self.part.timed:
-                self._lin = (s.z.copy(), self._phi_matrix(A))
-                dy = self._lin[1] @ F0
-            else:
-                dy = self._phi_vector(A, Ft, F0)
+        command = s.command
+        y, t = self._pack(s), s.t
+        cache = self._cache
+        if cache is not None and cache[0] is s and cache[1] == command:
+            F0, p0, d0 = cache[2:5]
         else:
-            F0, _, _, hf, z, v, aP = self._rhs(y, s.t, s.command, jacobian=False)
-            dy = self._lin[1] @ F0
-        y1 = y + dy
-        p0, _ = self._drive_power(hf, v, aP)
-        d0 = float(hf.dissipation.sum())
-        t1 = s.t + self.dt
+            F0, p0, d0 = self._rhs(y, t, command)
+        dissipated, work = s.dissipated, s.drive_work
+        remaining = int(n)
+        fresh = False
+        while remaining > 0:
+            if self._lin is None or (self.relinearize_tol is not None and self._moved_too_far(self._z_of(y, t, command))):
+                self._linearize(y, t, command)
+                fresh = True
+            chunk = 1 if self.relinearize_tol is not None else remaining
+            y, t, F0, p0, d0, dd, dw, steps, iterations, status = self._advance(chunk, y, t, command, F0, p0, d0)
+            dissipated += dd
+            work += dw
+            remaining -= steps
+            self.stats.steps += steps
+            self.stats.iterations += iterations
+            if status == stepping.NOT_CONTRACTING:
+                if steps == 0 and fresh:
+                    raise SolverError(
+                        f"step to t = {t + self.dt:.6g} s did not converge even with a fresh Jacobian; "
+                        f"reduce the step ({self.dt:g} s)")
+                self._lin = None
+            elif status == stepping.SLOW:
+                self._lin = None
+            if steps:
+                fresh = False
+        if not np.all(np.isfinite(y)):
+            raise SolverError(f"non-finite state at t = {t:.6g} s (step {self.dt:g} s)")
         nF = len(self.part.free)
-        u1 = float(y1[2 * nF]) if self.drive else 0.0
-        z1, v1, aP1, _, _ = self._full(y1[:nF], y1[nF:2 * nF], t1, u1, s.command)
-        if not (np.all(np.isfinite(z1)) and np.all(np.isfinite(v1))):
-            raise SolverError(f"non-finite state after the step to t = {t1:.6g} s (step {self.dt:g} s)")
-        hf1 = self.assembly.forces(z1, v1, jacobian=False)
-        p1, _ = self._drive_power(hf1, v1, aP1)
-        d1 = float(hf1.dissipation.sum())
-        self.state = State(
-            t1, z1, v1, u1, s.command,
-            s.dissipated + 0.5 * self.dt * (d0 + d1),
-            s.drive_work + 0.5 * self.dt * (p0 + p1),
-        )
-        self.stats.steps += 1
+        u = float(y[2 * nF]) if self.drive else 0.0
+        z, v, _ = self._full(y[:nF], y[nF:2 * nF], t, u, command)
+        self.state = State(t, z, v, u, command, dissipated, work)
+        # F at the new state seeds the next call while the command is unchanged.
+        self._cache = (self.state, command, F0, p0, d0)
+
+    def _z_of(self, y, t, command):
+        nF = len(self.part.free)
+        return self._full(y[:nF], y[nF:2 * nF], t, y[2 * nF] if self.drive else 0.0, command)[0]
 
     # -------------------------------------------------------------- command
     def set_command(self, command: float) -> None:
@@ -345,7 +419,7 @@ class Simulation:
         vF = np.zeros(len(part.free))
         it = 0
         for it in range(1, max_iter + 1):
-            z, v, _, _, _ = self._full(zF, vF, t, u, u)
+            z, v, _ = self._full(zF, vF, t, u, u)
             hf = self.assembly.forces(z, np.zeros_like(z), jacobian=True)
             K = hf.dQ_dz[np.ix_(part.free, part.free)]
             try:
@@ -359,7 +433,7 @@ class Simulation:
                 break
         else:
             raise SolverError(f"static solve did not converge in {max_iter} iterations")
-        z, v, _, _, _ = self._full(zF, vF, t, u, u)
+        z, v, _ = self._full(zF, vF, t, u, u)
         hf = self.assembly.forces(z, np.zeros_like(z))
         residual = float(np.max(np.abs(hf.Q[part.free])))
         state = State(t, z, np.zeros_like(z), u, u)
@@ -370,8 +444,8 @@ class Simulation:
         """Everything the simulation reports, at ``state`` (default: the current state)."""
         s = state or self.state
         hf = self.assembly.forces(s.z, s.v)
-        _, _, aP, _, _ = self._prescribed(s.t, s.u, s.command)
-        _, lam = self._drive_power(hf, s.v, aP)
+        _, _, aP = self._prescribed(s.t, s.u, s.command)
+        lam = self.mass[self.part.prescribed] * aP - hf.Q[self.part.prescribed]  # constraint forces
         mech = self.mechanism
         nb = len(mech.bodies)
         drive_force = 0.0
