@@ -113,6 +113,18 @@ class StaticResult:
     z: np.ndarray
 
 
+@dataclass(frozen=True)
+class StaticSweep:
+    """Static answers for a list of drive inputs (m): output displacement (m), compression
+    (m; NaN without a compression hinge), drive force (N), and total Newton iterations."""
+
+    inputs: np.ndarray
+    outputs: np.ndarray
+    compressions: np.ndarray
+    drive_forces: np.ndarray
+    iterations: int
+
+
 @dataclass
 class StepStats:
     """Counters of the stepping work, for diagnostics and benchmarks."""
@@ -408,36 +420,78 @@ class Simulation:
     def static(self, u: float, t: float = 0.0, tol: float = 1e-13, max_iter: int = 50) -> StaticResult:
         """Static equilibrium with the actuator output held at u (and timed constraints at t).
 
-        Newton's method on Q_F(z_F) = 0 with the exact tangent stiffness, from the
-        unstressed pose; converged when the update is below tol (relative to the
-        mechanism's size).
+        Newton's method on Q_F(z_F) = 0 from the unstressed pose with the exact tangent
+        stiffness dQ_F/dz_F (see ``_newton``); converged when the update is below tol
+        (relative to the mechanism's size).
         """
+        zF, iterations = self._newton(u, t, self.z0[self.part.free].copy(), None, tol, max_iter)[:2]
+        z = self._z_static(zF, t, u)
+        residual = float(np.max(np.abs(self.assembly.generalized_forces(z, np.zeros_like(z))[0][self.part.free])))
+        state = State(t, z, np.zeros_like(z), u, u)
+        return StaticResult(self.snapshot(state), iterations, residual, z)
+
+    def static_sweep(self, inputs, t: float = 0.0, tol: float = 1e-13) -> StaticSweep:
+        """Static equilibria for many drive inputs, each started from the previous one and
+        reusing the factorised stiffness while Newton keeps contracting fast."""
+        inputs = np.asarray(inputs, dtype=float)
+        if not np.all(np.isfinite(inputs)):
+            raise ValueError("drive inputs must be finite")
+        out = np.full(len(inputs), np.nan)
+        comp = np.full(len(inputs), np.nan)
+        force = np.zeros(len(inputs))
+        zF = self.z0[self.part.free].copy()
+        lu = None
+        total = 0
+        mech = self.mechanism
+        P = self.part.prescribed
+        for k, u in enumerate(inputs):
+            zF, iterations, lu = self._newton(float(u), t, zF, lu, tol, 50)
+            total += iterations
+            z = self._z_static(zF, t, float(u))
+            if mech.output is not None:
+                i = mech.body_index(mech.output.body)
+                out[k] = (z[3 * i:3 * i + 2] - self.z0[3 * i:3 * i + 2]) @ np.array(mech.output.axis)
+            if self.drive is not None:
+                if mech.compression_hinge is not None:
+                    comp[k] = self.frame_displacement_difference(mech.compression_hinge, z) @ np.array(self.drive.axis)
+                lam = -self.assembly.generalized_forces(z, np.zeros_like(z))[0][P]
+                force[k] = lam @ self.part.du
+        return StaticSweep(inputs, out, comp, force, total)
+
+    def _z_static(self, zF: np.ndarray, t: float, u: float) -> np.ndarray:
+        return self._full(zF, np.zeros(len(zF)), t, u, u)[0]
+
+    def _newton(self, u, t, zF, lu, tol, max_iter):
+        """Newton on Q_F(z_F) = 0 with the exact stiffness, re-factorised whenever an update
+        shrinks by less than a factor 10 (so a factorisation from a nearby solution is
+        reused while it converges fast); returns (z_F, iterations, factorisation)."""
         if not np.isfinite(u):
             raise ValueError(f"drive input must be finite, got {u!r}")
-        part = self.part
-        zF = self.z0[part.free].copy()
-        vF = np.zeros(len(part.free))
-        it = 0
+        free = self.part.free
+        lengths = np.where(np.isin(free % 3, (0, 1)), self.length_scale, 1.0)
+        previous = np.inf
         for it in range(1, max_iter + 1):
-            z, v, _ = self._full(zF, vF, t, u, u)
-            hf = self.assembly.forces(z, np.zeros_like(z), jacobian=True)
-            K = hf.dQ_dz[np.ix_(part.free, part.free)]
-            try:
-                dz = np.linalg.solve(K, -hf.Q[part.free])
-            except np.linalg.LinAlgError:
-                raise SolverError("singular stiffness: a free body is not held by any hinge") from None
+            z = self._z_static(zF, t, u)
+            if lu is None:
+                hf = self.assembly.forces(z, np.zeros_like(z), jacobian=True)
+                K = hf.dQ_dz[np.ix_(free, free)]
+                if not np.all(np.isfinite(K)) or np.linalg.matrix_rank(K) < len(free):
+                    raise SolverError("singular stiffness: a free body is not held by any hinge")
+                lu = scipy.linalg.lu_factor(K)
+                Q = hf.Q[free]
+                fresh = True
+            else:
+                Q = self.assembly.generalized_forces(z, np.zeros_like(z))[0][free]
+                fresh = False
+            dz = scipy.linalg.lu_solve(lu, -Q)
             zF = zF + dz
-            scaled = dz.copy()
-            scaled[np.isin(part.free % 3, (0, 1))] /= self.length_scale
-            if np.max(np.abs(scaled)) < tol:
-                break
-        else:
-            raise SolverError(f"static solve did not converge in {max_iter} iterations")
-        z, v, _ = self._full(zF, vF, t, u, u)
-        hf = self.assembly.forces(z, np.zeros_like(z))
-        residual = float(np.max(np.abs(hf.Q[part.free])))
-        state = State(t, z, np.zeros_like(z), u, u)
-        return StaticResult(self.snapshot(state), it, residual, z)
+            size = float(np.max(np.abs(dz / lengths)))
+            if size < tol:
+                return zF, it, lu
+            if size > 0.1 * previous and not fresh:
+                lu = None  # contracting slowly: exact stiffness at the next iterate
+            previous = size
+        raise SolverError(f"static solve did not converge in {max_iter} iterations")
 
     # ------------------------------------------------------------- reporting
     def snapshot(self, state: Optional[State] = None) -> Snapshot:

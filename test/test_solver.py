@@ -204,3 +204,19 @@ def test_compiled_and_interpreted_stepping_agree(name):
     assert b.state.z == pytest.approx(a.state.z, rel=0, abs=1e-12 * np.abs(a.state.z - a.z0).max())
     assert b.state.dissipated == pytest.approx(a.state.dissipated, rel=1e-9)
     assert b.stats.linearizations == a.stats.linearizations
+
+
+def test_static_sweep_agrees_with_single_solves(stage):
+    sim = Simulation(stage)
+    levels = np.linspace(0.0, 2e-6, 41)
+    sweep = sim.static_sweep(levels)
+    assert sweep.iterations < 6 * len(levels)      # warm starts and a reused factorisation
+    for k in (1, 17, 40):
+        one = sim.static(levels[k]).snapshot
+        assert sweep.outputs[k] == pytest.approx(one.output, rel=1e-9)
+        assert sweep.compressions[k] == pytest.approx(one.compression, rel=1e-8)
+        assert sweep.drive_forces[k] == pytest.approx(one.drive_force, rel=1e-8)
+    assert abs(sweep.outputs[0]) < 1e-15  # m: no input, no output
+    # Nearly linear: the gain varies by less than 1e-3 over the stroke.
+    gains = sweep.outputs[1:] / levels[1:]
+    assert np.ptp(gains) / gains.mean() < 1e-3
