@@ -1,7 +1,17 @@
 """flexure_sim: planar flexure mechanisms with the twistor-based potential energy method.
 
 Layers, top-down (each imports only the ones above it):
-  kinematics  -> hinge_laws (+ stiffness) -> mechanism (+ config) -> drive -> assembly -> solver
-  recording, node, tools, cli build on the engine; the engine never imports ROS.
+  kinematics  -> hinge_laws (+ stiffness, polynomial) -> mechanism (+ config) -> assembly
+  (+ kernels) -> solver (+ stepping); recording, node, tools and cli build on the engine,
+  and the engine never imports ROS.
 """
+import os as _os
+
+# The engine works on small matrices (25x25 for the stage), where a multi-threaded BLAS
+# only adds synchronisation: on a loaded 2-core machine it made a linearization 8x slower
+# (8 ms instead of 0.9 ms, BENCHMARKS.md). Single-threaded BLAS is the default unless the
+# user chose otherwise; it takes effect when flexure_sim is imported before NumPy.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    _os.environ.setdefault(_var, "1")
+
 __version__ = "0.1.0"

@@ -153,6 +153,14 @@ class Assembly:
         return r, dr, d2
 
     # -------------------------------------------------------------------- forces
+    def _assemble(self, local: np.ndarray) -> np.ndarray:
+        """Global matrix sum_h S_h local_h S_h^T from per-hinge 6x6 blocks."""
+        n = local.shape[0]
+        block = np.zeros((n, 6, n, 6))
+        block[np.arange(n), :, np.arange(n), :] = local
+        S = self._scatter_flat
+        return S @ block.reshape(6 * n, 6 * n) @ S.T
+
     def generalized_forces(self, z: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, float, float]:
         """Q, total potential energy and total dissipated power: the per-step hot path.
 
@@ -198,9 +206,8 @@ class Assembly:
                 + np.einsum("nki,nkl,nlj->nij", dr, Cr, d2_vv)
             )
             C_local = np.einsum("nki,nkl,nlj->nij", dr, Cr, dr)
-            S = self.scatter
-            dQ_dz = -np.einsum("anj,njk,bnk->ab", S, K_local, S, optimize=True)
-            dQ_dv = -np.einsum("anj,njk,bnk->ab", S, C_local, S, optimize=True)
+            dQ_dz = -self._assemble(K_local)
+            dQ_dv = -self._assemble(C_local)
         dissipation = np.einsum("ni,ni->n", fdamp, rdot)
         wrench_b = -wrench_on_element(r[:, 0], total)
         return HingeForces(Q, dQ_dz, dQ_dv, r, rdot, energy, dissipation, wrench_b)

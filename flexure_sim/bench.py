@@ -1,0 +1,281 @@
+"""Benchmarks: ``python -m flexure_sim.bench`` (or ``flexure-sim bench``) prints a table and
+writes JSON. Every figure is measured in the same run as its baseline.
+
+Wall times are medians of several runs (7 for flexure_sim, 3 for the baseline).
+
+- stage_step: the stage's response to a 1.35 um step over 0.05 s with the shipped
+  integrator and step, against a converged reference (the same equations at steps of
+  5 and 2.5 us, Richardson-extrapolated), next to scipy's solve_ivp Radau (rtol 1e-8,
+  exact Jacobian, atol 1e-8 of each component's scale of motion) on the same equations.
+- steps_per_s at the node's default step, and the cost of a step's parts.
+- static_sweep: 1000 drive levels from 0 to the stroke.
+- node (with --node): stage_node in fast mode (real-time factor) and real-time mode
+  (missed ticks, tick jitter) at 1 kHz with all topics and recording on.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+
+from .config import load_mechanism
+from .solver import DEFAULT_STEP, Simulation
+
+U_STEP = 1.35e-6
+DURATION = 0.05
+#: Timed runs whose median is reported (shared, noisy machines).
+REPEATS = 7
+BASELINE_REPEATS = 3
+
+
+def _output_trajectory(sim: Simulation, every: int, n_samples: int) -> np.ndarray:
+    """Output displacement after every ``every`` steps, n_samples times."""
+    out = np.empty(n_samples)
+    mech = sim.mechanism
+    i = mech.body_index(mech.output.body)
+    axis = np.array(mech.output.axis)
+    for k in range(n_samples):
+        sim.step(every)
+        out[k] = (sim.state.z[3 * i:3 * i + 2] - sim.z0[3 * i:3 * i + 2]) @ axis
+    return out
+
+
+def reference_trajectory(mech, dt: float, duration: float) -> tuple[np.ndarray, float]:
+    """Converged output on the grid k*dt: steps dt/20 and dt/40, Richardson-extrapolated
+    for the method's second order. Returns the trajectory and its estimated error (the
+    extrapolation's correction, relative to the largest output)."""
+    n = int(round(duration / dt))
+    runs = []
+    for sub in (20, 40):
+        sim = Simulation(mech, dt=dt / sub)
+        sim.set_command(U_STEP)
+        runs.append(_output_trajectory(sim, sub, n))
+    coarse, fine = runs
+    ref = fine + (fine - coarse) / 3.0
+    return ref, float(np.max(np.abs(fine - ref)) / np.max(np.abs(ref)))
+
+
+def bench_stage_step(dt: float = DEFAULT_STEP, radau: bool = True) -> dict:
+    mech = load_mechanism("microstage")
+    n = int(round(DURATION / dt))
+    warm = Simulation(mech, dt=dt)  # compile / load the kernels outside the timing
+    warm.set_command(U_STEP)
+    warm.step(2)
+    ref, ref_err = reference_trajectory(mech, dt, DURATION)
+
+    walls = []
+    for _ in range(REPEATS):  # the median of several runs, each from a fresh Simulation
+        sim = Simulation(mech, dt=dt)
+        sim.set_command(U_STEP)
+        start = time.perf_counter()
+        sim.step(n)
+        walls.append(time.perf_counter() - start)
+    wall = float(np.median(walls))
+    # Same run again, sampled, for the error (sampling costs time, so not timed).
+    sampled = Simulation(mech, dt=dt)
+    sampled.set_command(U_STEP)
+    traj = _output_trajectory(sampled, 1, n)
+    scale = np.max(np.abs(ref))
+    result = {
+        "dt": dt,
+        "duration": DURATION,
+        "steps": n,
+        "wall_s": wall,
+        "rtf": DURATION / wall,
+        "max_rel_error": float(np.max(np.abs(traj - ref)) / scale),
+        "reference_rel_error_estimate": ref_err,
+        "linearizations": sim.stats.linearizations,
+        "iterations_per_step": sim.stats.iterations / sim.stats.steps,
+        "output_final": float(traj[-1]),
+    }
+    if radau:
+        result.update(_radau_baseline(mech, dt, n, ref))
+        result["speedup"] = result["baseline_wall_s"] / wall
+    return result
+
+
+def _radau_baseline(mech, dt: float, n: int, ref: np.ndarray) -> dict:
+    from scipy.integrate import solve_ivp
+
+    sim = Simulation(mech, dt=dt)
+    sim.set_command(U_STEP)
+    y0 = sim._pack(sim.state)
+    nF = len(sim.part.free)
+    # atol: 1e-8 of each component's scale of motion in this run.
+    scale = np.concatenate([np.where(sim.part.free % 3 == 2, 1e-3, 1e-5), np.where(sim.part.free % 3 == 2, 1.0, 1e-2)])
+    if sim.drive is not None:
+        scale = np.append(scale, U_STEP)
+    atol = 1e-8 * scale
+
+    def fun(t, y):
+        return sim._rhs(y, t, U_STEP)[0]
+
+    def jac(t, y):
+        return sim._jacobian(y, t, U_STEP)
+
+    grid = dt * np.arange(1, n + 1)
+    walls = []
+    for _ in range(BASELINE_REPEATS):
+        start = time.perf_counter()
+        sol = solve_ivp(fun, (0.0, DURATION), y0, method="Radau", jac=jac, rtol=1e-8, atol=atol, t_eval=grid)
+        walls.append(time.perf_counter() - start)
+    wall = float(np.median(walls))
+    i = mech.body_index(mech.output.body)
+    col = list(sim.part.free).index(3 * i)
+    out = sol.y[col] - sim.z0[3 * i]
+    return {
+        "baseline": "scipy solve_ivp Radau, rtol 1e-8, exact Jacobian",
+        "baseline_wall_s": wall,
+        "baseline_max_rel_error": float(np.max(np.abs(out - ref)) / np.max(np.abs(ref))),
+        "baseline_nfev": int(sol.nfev),
+        "baseline_njev": int(sol.njev),
+    }
+
+
+def bench_step_cost(dt: float = DEFAULT_STEP, sim_seconds: float = 1.0) -> dict:
+    import timeit
+
+    mech = load_mechanism("microstage")
+    sim = Simulation(mech, dt=dt)
+    sim.set_command(U_STEP)
+    sim.step(10)
+    n = int(round(sim_seconds / dt))
+    start = time.perf_counter()
+    sim.step(n)
+    wall = time.perf_counter() - start
+    y = sim._pack(sim.state)
+    t, cmd = sim.state.t, sim.state.command
+    reps = 2000
+    force = timeit.timeit(lambda: sim._rhs(y, t, cmd), number=reps) / reps
+    jac = timeit.timeit(lambda: sim._jacobian(y, t, cmd), number=50) / 50
+    lin = timeit.timeit(lambda: sim._linearize(y, t, cmd), number=20) / 20
+    return {
+        "steps_per_s": n / wall,
+        "dt": dt,
+        "rtf": sim_seconds / wall,
+        "step_us": wall / n * 1e6,
+        "force_evaluation_us": force * 1e6,
+        "jacobian_us": jac * 1e6,
+        "matrix_exponential_us": (lin - jac) * 1e6,
+        "iterations_per_step": sim.stats.iterations / sim.stats.steps,
+        "linearizations": sim.stats.linearizations,
+        "note": "a step is ~2 force evaluations plus 3 small matrix-vector products; the "
+                "Jacobian and the matrix exponential (phi-functions) are paid per linearization "
+                "(once per run for the stage), there is no linear solve",
+    }
+
+
+def bench_static_sweep(levels: int = 1000) -> dict:
+    mech = load_mechanism("microstage")
+    sim = Simulation(mech)
+    inputs = np.linspace(mech.drive.stroke[0], mech.drive.stroke[1], levels)
+    sim.static_sweep(inputs[:3])  # warm-up
+    start = time.perf_counter()
+    sweep = sim.static_sweep(inputs)
+    wall = time.perf_counter() - start
+    return {
+        "levels": levels,
+        "wall_s": wall,
+        "newton_iterations": sweep.iterations,
+        "gain_at_full_stroke": float(sweep.outputs[-1] / inputs[-1]),
+    }
+
+
+def bench_node(duration: float = 30.0) -> dict:
+    from .node import measure  # needs ROS 2
+
+    return measure.measure_all(realtime_seconds=duration)
+
+
+def machine() -> dict:
+    import numba
+    import scipy
+
+    return {
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cpus": os.cpu_count(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "numba": numba.__version__,
+        "load_average": list(os.getloadavg()),
+    }
+
+
+def print_table(res: dict) -> None:
+    s = res["stage_step"]
+    print(f"machine: {res['machine']['processor']}, {res['machine']['cpus']} cpus, "
+          f"load {', '.join(f'{x:.2f}' for x in res['machine']['load_average'])}")
+    print("\nstage step response, 1.35 um, 0.05 s simulated")
+    print(f"  flexure_sim (exp. trapezoidal, dt {s['dt']:g} s): wall {s['wall_s'] * 1e3:8.2f} ms  "
+          f"RTF {s['rtf']:7.1f}  max rel error {s['max_rel_error']:.2e}")
+    if "baseline_wall_s" in s:
+        print(f"  scipy Radau (rtol 1e-8, exact J):           wall {s['baseline_wall_s'] * 1e3:8.2f} ms  "
+              f"RTF {DURATION / s['baseline_wall_s']:7.2f}  max rel error {s['baseline_max_rel_error']:.2e}")
+        print(f"  speedup: {s['speedup']:.1f}x   (reference error estimate {s['reference_rel_error_estimate']:.1e})")
+    c = res["step_cost"]
+    print(f"\nsteps per second at dt {c['dt']:g} s: {c['steps_per_s']:,.0f}  (RTF {c['rtf']:.1f})")
+    print(f"  per step {c['step_us']:.2f} us ({c['iterations_per_step']:.2f} iterations); force evaluation "
+          f"{c['force_evaluation_us']:.2f} us; per linearization: Jacobian {c['jacobian_us']:.0f} us, "
+          f"matrix exponential {c['matrix_exponential_us']:.0f} us")
+    w = res["static_sweep"]
+    print(f"\nstatic sweep, {w['levels']} levels over the stroke: {w['wall_s'] * 1e3:.1f} ms "
+          f"({w['newton_iterations']} Newton iterations)")
+    if "node" in res:
+        nd = res["node"]
+        print(f"\nstage_node at 1 kHz, all topics, recording on: fast-mode RTF {nd.get('fast_rtf', float('nan')):.2f}; "
+              f"real-time missed ticks {nd.get('missed_tick_fraction', float('nan')):.4%}, "
+              f"jitter p50 {nd.get('jitter_p50_s', float('nan')) * 1e6:.0f} us, "
+              f"p99 {nd.get('jitter_p99_s', float('nan')) * 1e6:.0f} us")
+
+
+def run(args: argparse.Namespace) -> dict:
+    res: dict = {"machine": machine(), "command": " ".join(["python -m flexure_sim.bench", *sys.argv[1:]])}
+    res["stage_step"] = bench_stage_step(args.dt, radau=not args.no_baseline)
+    res["step_cost"] = bench_step_cost(args.dt)
+    res["steps_per_s"] = res["step_cost"]["steps_per_s"]
+    res["static_sweep"] = bench_static_sweep()
+    if args.node:
+        res["node"] = bench_node(args.node_seconds)
+    return res
+
+
+def build_parser(parser: Optional[argparse.ArgumentParser] = None) -> argparse.ArgumentParser:
+    parser = parser or argparse.ArgumentParser(prog="python -m flexure_sim.bench", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--dt", type=float, default=DEFAULT_STEP, help=f"step (s), default {DEFAULT_STEP:g}")
+    parser.add_argument("--json", type=Path, default=Path("bench.json"), help="where to write the JSON (default bench.json)")
+    parser.add_argument("--no-baseline", action="store_true", help="skip the scipy Radau baseline")
+    parser.add_argument("--node", action="store_true", help="also measure stage_node (needs ROS 2)")
+    parser.add_argument("--node-seconds", type=float, default=30.0, help="real-time node measurement length (s)")
+    return parser
+
+
+def handle(args: argparse.Namespace) -> int:
+    res = run(args)
+    print_table(res)
+    args.json.write_text(json.dumps(res, indent=2))
+    print(f"\nJSON written to {args.json}")
+    return 0
+
+
+def register(subparsers) -> None:
+    """``flexure-sim bench``."""
+    p = subparsers.add_parser("bench", help="benchmarks (speed against scipy Radau, steps/s, static sweep)")
+    build_parser(p)
+    p.set_defaults(handler=handle)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    return handle(build_parser().parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
