@@ -37,9 +37,9 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 import numpy as np
-import yaml
 
 from . import stiffness as stiffness_models
+from .yaml_files import read_yaml
 from .hinge_laws import COORDINATES, QuadraticLaw
 from .mechanism import (
     COORDINATE_NAMES,
@@ -184,15 +184,7 @@ def _check_spd(ctx: _Ctx, key: str, M: np.ndarray, what: str) -> None:
 def load_mechanism(name_or_path: str | Path) -> Mechanism:
     """Load a built-in mechanism by name (``microstage``) or a YAML file by path."""
     path = resolve_mechanism_path(name_or_path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from None
-    return mechanism_from_dict(data, source=str(path))
+    return mechanism_from_dict(read_yaml(path, ConfigError), source=str(path))
 
 
 def builtin_names() -> list[str]:

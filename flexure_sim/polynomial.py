@@ -49,6 +49,7 @@ import numpy as np
 import yaml
 
 from .hinge_laws import QuadraticLaw, evaluate
+from .yaml_files import read_yaml
 from .kinematics import adjoint, transform_stiffness
 
 #: Names of the law coordinates, in the order of c.
@@ -468,15 +469,7 @@ def _finite(fail, key: str, value: Any) -> float:
 def load_law(path: str | Path) -> PolynomialLaw:
     """Read a polynomial hinge file (as written by ``flexure-sim fit``)."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise PolynomialFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise PolynomialFileError(f"{path}: not valid YAML: {exc}") from None
-    return law_from_dict(doc, source=str(path))
+    return law_from_dict(read_yaml(path, PolynomialFileError), source=str(path))
 
 
 def quadratic_as_polynomial(K: np.ndarray, coordinates: str, B: np.ndarray | None = None) -> PolynomialLaw:

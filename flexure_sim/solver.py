@@ -462,9 +462,10 @@ class Simulation:
         return self._full(zF, np.zeros(len(zF)), t, u, u)[0]
 
     def _newton(self, u, t, zF, lu, tol, max_iter):
-        """Newton on Q_F(z_F) = 0 with the exact stiffness, re-factorised whenever an update
-        shrinks by less than a factor 10 (so a factorisation from a nearby solution is
-        reused while it converges fast); returns (z_F, iterations, factorisation)."""
+        """Newton on Q_F(z_F) = 0 with the exact stiffness. A factorisation from a nearby
+        solution (``lu``) is reused while its updates shrink at least tenfold; an update that
+        does not is discarded and the stiffness re-factorised at the current point, so the
+        iteration is never worse than Newton's. Returns (z_F, iterations, factorisation)."""
         if not np.isfinite(u):
             raise ValueError(f"drive input must be finite, got {u!r}")
         free = self.part.free
@@ -475,21 +476,24 @@ class Simulation:
             if lu is None:
                 hf = self.assembly.forces(z, np.zeros_like(z), jacobian=True)
                 K = hf.dQ_dz[np.ix_(free, free)]
-                if not np.all(np.isfinite(K)) or np.linalg.matrix_rank(K) < len(free):
+                if not np.all(np.isfinite(K)):
+                    raise SolverError("non-finite stiffness in the static solve")
+                lu = scipy.linalg.lu_factor(K, check_finite=False)
+                if np.any(np.diag(lu[0]) == 0.0):
                     raise SolverError("singular stiffness: a free body is not held by any hinge")
-                lu = scipy.linalg.lu_factor(K)
                 Q = hf.Q[free]
                 fresh = True
             else:
                 Q = self.assembly.generalized_forces(z, np.zeros_like(z))[0][free]
                 fresh = False
             dz = scipy.linalg.lu_solve(lu, -Q)
-            zF = zF + dz
             size = float(np.max(np.abs(dz / lengths)))
+            if not fresh and size > 0.1 * previous:
+                lu = None  # a stale factorisation that no longer contracts fast: refresh here
+                continue
+            zF = zF + dz
             if size < tol:
                 return zF, it, lu
-            if size > 0.1 * previous and not fresh:
-                lu = None  # contracting slowly: exact stiffness at the next iterate
             previous = size
         raise SolverError(f"static solve did not converge in {max_iter} iterations")
 
