@@ -356,8 +356,8 @@ class Simulation:
         common = (n, y, t, self.dt, command, lin.A, lin.phi1, lin.phi2, self.iteration_rtol, self._atol,
                   self.max_iterations, self.relinearize_after, F0, p0, d0)
         if self.assembly.compiled:
-            return stepping.advance(*common, stepping.kernel_rhs, self._args)
-        return stepping.advance.py_func(*common, self._rhs_python, None)
+            return stepping.advance(*common, self._args)
+        return stepping.advance_interpreted(*common, self)
 
     def step(self, n: int = 1) -> None:
         """Advance n fixed steps of the exponential trapezoidal rule (module docstring) with

@@ -10,73 +10,21 @@ fixed-point iteration from y_{n+1} = U. The iteration contracts by about |J - A|
 sweep; it has converged when its last change is below rtol |U| + atol in every component.
 
 ``advance`` runs up to n steps and stops early with a status when the iteration does not
-contract (1) or contracts slowly (2), so the caller can re-linearize. ``rhs(y, t, command,
-args)`` returns (F, drive power, dissipated power). The loop is compiled together with the
-compiled force kernel for quadratic laws (``kernel_rhs``) and runs as plain Python
-(``advance.py_func``) with any other right-hand side, so there is one implementation.
+contract (1) or contracts slowly (2), so the caller can re-linearize. The loop calls
+``rhs(y, t, command, args)`` -> (F, drive power, dissipated power): compiled with the force
+kernel for quadratic laws (``advance``), or as plain Python with ``Simulation._rhs_python``
+for any law (``advance_interpreted``); one source, two bindings of ``rhs``.
 """
 from __future__ import annotations
 
 import math
+import types
 
 import numpy as np
 
 from .kernels import njit, quadratic_forces
 
 CONVERGED, NOT_CONTRACTING, SLOW = 0, 1, 2
-
-
-@njit(cache=True)
-def advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_after, F0, p0, d0, rhs, args):
-    """Up to n steps from (y, t) with F0 = F(y, t), p0, d0 the powers there.
-
-    Returns (y, t, F, p, d, dissipated, work, steps, iterations, status): the state and its
-    F and powers after the steps taken, the trapezoidal integrals of the dissipated and
-    drive powers over them, and why it stopped.
-    """
-    dissipated = 0.0
-    work = 0.0
-    steps = 0
-    iterations = 0
-    status = CONVERGED
-    for _ in range(n):
-        t1 = t + dt
-        U = y + phi1 @ F0
-        weight = rtol * np.abs(U) + atol
-        y1 = U.copy()
-        previous = np.inf
-        converged = False
-        k = 0
-        F1, p1, d1 = F0, p0, d0
-        for k in range(1, max_iter + 1):
-            F1, p1, d1 = rhs(y1, t1, command, args)
-            y_next = U + phi2 @ (F1 - F0 - A @ (y1 - y))
-            change = np.max(np.abs(y_next - y1) / weight)
-            if not math.isfinite(change):
-                break
-            if change <= 1.0:
-                # F at the accepted point, to first order in a change below tolerance.
-                F1 = F1 + A @ (y_next - y1)
-                y1 = y_next
-                converged = True
-                break
-            if change > 0.5 * previous:
-                break
-            previous = change
-            y1 = y_next
-        if not converged:
-            status = NOT_CONTRACTING
-            break
-        dissipated += 0.5 * dt * (d0 + d1)
-        work += 0.5 * dt * (p0 + p1)
-        y, t = y1, t1
-        F0, p0, d0 = F1, p1, d1
-        steps += 1
-        iterations += k
-        if k > slow_after:
-            status = SLOW
-            break
-    return y, t, F0, p0, d0, dissipated, work, steps, iterations, status
 
 
 @njit(cache=True)
@@ -130,3 +78,74 @@ def kernel_rhs(y, t, command, args):
         j = prescribed[i]
         power += (mass[j] * aP[i] - Q[j]) * vP[i]
     return F, power, dissipation
+
+
+def _advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_after, F0, p0, d0, args):
+    """Up to n steps from (y, t) with F0 = F(y, t), p0, d0 the powers there.
+
+    Returns (y, t, F, p, d, dissipated, work, steps, iterations, status): the state and its
+    F and powers after the steps taken, the trapezoidal integrals of the dissipated and
+    drive powers over them, and why it stopped. ``rhs`` is a global of the function (see
+    the end of this module), not an argument: Numba cannot cache functions that take
+    compiled functions as arguments.
+    """
+    dissipated = 0.0
+    work = 0.0
+    steps = 0
+    iterations = 0
+    status = CONVERGED
+    for _ in range(n):
+        t1 = t + dt
+        U = y + phi1 @ F0
+        weight = rtol * np.abs(U) + atol
+        y1 = U.copy()
+        previous = np.inf
+        converged = False
+        k = 0
+        F1, p1, d1 = F0, p0, d0
+        for k in range(1, max_iter + 1):
+            F1, p1, d1 = rhs(y1, t1, command, args)
+            y_next = U + phi2 @ (F1 - F0 - A @ (y1 - y))
+            change = np.max(np.abs(y_next - y1) / weight)
+            if not math.isfinite(change):
+                break
+            if change <= 1.0:
+                # F at the accepted point, to first order in a change below tolerance.
+                F1 = F1 + A @ (y_next - y1)
+                y1 = y_next
+                converged = True
+                break
+            if change > 0.5 * previous:
+                break
+            previous = change
+            y1 = y_next
+        if not converged:
+            status = NOT_CONTRACTING
+            break
+        dissipated += 0.5 * dt * (d0 + d1)
+        work += 0.5 * dt * (p0 + p1)
+        y, t = y1, t1
+        F0, p0, d0 = F1, p1, d1
+        steps += 1
+        iterations += k
+        if k > slow_after:
+            status = SLOW
+            break
+    return y, t, F0, p0, d0, dissipated, work, steps, iterations, status
+
+
+#: The right-hand side the compiled loop calls (resolved when Numba compiles ``advance``).
+rhs = kernel_rhs
+
+#: The loop, compiled with the quadratic-law kernel.
+advance = njit(cache=True)(_advance)
+
+
+def _interpreted_rhs(y, t, command, simulation):
+    return simulation._rhs_python(y, t, command)
+
+
+#: The same loop as plain Python, calling ``Simulation._rhs_python`` (any hinge law);
+#: pass the Simulation as ``args``.
+advance_interpreted = types.FunctionType(
+    _advance.__code__, {**globals(), "rhs": _interpreted_rhs}, "advance_interpreted")
