@@ -10,6 +10,11 @@ import importlib
 #: Tool modules, in the order their commands appear in ``flexure-sim --help``.
 TOOL_MODULES: tuple[str, ...] = (
     "fit",
+    "info",
+    "analyse",
+    "plot",
+    "export",
+    "replay",
 )
 
 

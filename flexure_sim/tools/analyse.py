@@ -1,0 +1,237 @@
+"""``flexure-sim analyse RUN.mcap``: per step of the drive, the gain, 2 % settling time,
+overshoot, steady-state joint-a compression, peak wrench per hinge and peak drive force.
+
+    flexure-sim analyse runs/stage.mcap [--json] [--recover] [--band 0.02] [--no-static]
+
+The gain of each step is compared with the engine's static solve of the recorded mechanism
+at the same inputs (column ``static gain``). Definitions: `flexure_sim.tools.analysis`.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from typing import Any, Optional
+
+import numpy as np
+
+from . import analysis
+from .runlog import (
+    COMMAND,
+    DRIVE_FORCE,
+    DRIVE_INPUT,
+    EXIT_OK,
+    EXIT_USAGE,
+    OUTPUT,
+    Run,
+    RunError,
+    add_file_arguments,
+    columns,
+    format_si,
+    load_run,
+    report_recovered,
+    require_stage_run,
+    tool_errors,
+    warn,
+)
+
+PROG = "flexure-sim analyse"
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "analyse", aliases=["analyze"],
+        help="gain, settling time, overshoot, hinge loads and drive force per step of a recorded run",
+        description=__doc__.split("\n\n")[0].replace("``", ""))
+    add_file_arguments(p)
+    p.add_argument("--json", action="store_true",
+                   help="print a JSON list of steps (SI units; overshoot as a fraction)")
+    p.add_argument("--band", type=float, default=analysis.DEFAULT_BAND,
+                   help="settling band as a fraction of the change (default 0.02)")
+    p.add_argument("--no-static", action="store_true",
+                   help="do not compare with the engine's static solve of the recorded mechanism")
+    p.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    return tool_errors(PROG, lambda: _run(args), can_recover=not args.recover)
+
+
+def _run(args: argparse.Namespace) -> int:
+    if not (0.0 < args.band < 1.0):
+        raise RunError(f"--band {args.band!r}: must be between 0 and 1 (0.02 is 2 %)", EXIT_USAGE)
+    run_ = load_run(args.run, recover=args.recover, namespace=args.namespace)
+    if args.recover:
+        report_recovered(PROG, run_)
+    result = analyse_run(run_, band=args.band, static=not args.no_static)
+    for note in result["notes"]:
+        warn(PROG, note)
+    if args.json:
+        print(json.dumps([_jsonable(s) for s in result["steps"]], indent=1))
+    else:
+        print(format_result(run_, result))
+    return EXIT_OK
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _signal(run: Run, topic: str) -> Optional[tuple[np.ndarray, np.ndarray]]:
+    s = run.scalar(topic)
+    return None if s is None else (s.t, s.values)
+
+
+def find_steps(run: Run) -> tuple[list[analysis.Step], str]:
+    """The steps of the drive and where they were found (a topic name)."""
+    u = run.scalar(DRIVE_INPUT)
+    cmd = run.scalar(COMMAND)
+    if cmd is not None and not cmd.empty:
+        meta = run.metadata
+        stroke = None
+        try:
+            stroke = (float(meta["stroke_min"]), float(meta["stroke_max"]))
+        except (KeyError, ValueError):
+            pass
+        initial = float(u.values[0]) if u is not None and not u.empty else (
+            min(max(0.0, stroke[0]), stroke[1]) if stroke else 0.0)
+        return analysis.command_steps(cmd.t, cmd.values, initial=initial, stroke=stroke), run.topic(COMMAND)
+    if u is None or u.empty:
+        return [], run.topic(DRIVE_INPUT)
+    return analysis.input_steps(u.t, u.values), run.topic(DRIVE_INPUT)
+
+
+def static_gains(run: Run, steps: list[analysis.StepMetrics]) -> tuple[dict[int, float], str]:
+    """Gain of the engine's static solve between each step's applied inputs (by step index)."""
+    mech = run.mechanism()
+    if mech is None:
+        return {}, f"no static comparison: cannot load the run's mechanism ({run.mechanism_problem})"
+    if mech.drive is None or mech.output is None:
+        return {}, f"no static comparison: mechanism {mech.name} has no drive or no output"
+    from ..solver import Simulation, SolverError
+
+    sim = Simulation(mech)
+    outputs: dict[float, float] = {}
+
+    def out(u: float) -> float:
+        if u not in outputs:
+            outputs[u] = 0.0 if u == 0.0 else float(sim.static(u).snapshot.output)
+        return outputs[u]
+
+    gains = {}
+    try:
+        for s in steps:
+            u0, u1 = s.applied_input_before, s.applied_input
+            if u0 is None or u1 is None or u1 == u0:
+                continue
+            gains[s.index] = (out(u1) - out(u0)) / (u1 - u0)
+    except SolverError as exc:
+        return gains, f"static solve failed: {exc}"
+    return gains, ""
+
+
+def analyse_run(run: Run, band: float = analysis.DEFAULT_BAND, static: bool = True) -> dict:
+    """Steps and their metrics as dicts, with notes for the user."""
+    require_stage_run(run, "analyse")
+    notes: list[str] = []
+    if run.clock_mapped:
+        notes.append(f"the log times of {run.path} are not simulation time (recorded on the wall "
+                     "clock?): simulation time is taken from the recorded /clock, to one tick")
+    steps, source = find_steps(run)
+    if source != run.topic(COMMAND) and steps:
+        notes.append(f"no drive command recorded ({run.topic(COMMAND)}): steps found in {source}")
+    comp_topic = run.compression_topic()
+    wrenches = {h: (s.t, s.values) for h, s in run.wrenches().items()}
+    output = _signal(run, OUTPUT)
+    assert output is not None
+    metrics = analysis.analyse_steps(
+        steps, output,
+        drive_input=_signal(run, DRIVE_INPUT),
+        compression=_signal(run, comp_topic) if comp_topic else None,
+        drive_force=_signal(run, DRIVE_FORCE),
+        wrenches=wrenches,
+        t_end=run.end_ns / 1e9,
+        compression_hinge=run.compression_hinge(),
+        band=band,
+    )
+    gains: dict[int, float] = {}
+    if static and metrics:
+        gains, problem = static_gains(run, metrics)
+        if problem:
+            notes.append(problem)
+    if not run.complete and metrics:
+        metrics[-1].notes.append("the file was cut short: this step may be incomplete")
+    out = []
+    for m in metrics:
+        d = m.as_dict()
+        d["static_gain"] = gains.get(m.index)
+        out.append(d)
+    return {"steps": out, "source": source, "notes": notes, "band": band,
+            "duration": (run.end_ns - run.start_ns) / 1e9}
+
+
+def _fixed(v: Optional[float], scale: float, decimals: int) -> str:
+    """Fixed-point text of v * scale ("-" for None); -0.000 shows as 0.000."""
+    if v is None or not math.isfinite(v):
+        return "-"
+    text = f"{v * scale:.{decimals}f}"
+    return text[1:] if text.startswith("-") and not text.strip("-0.") else text
+
+
+def format_result(run: Run, result: dict) -> str:
+    steps = result["steps"]
+    mech = run.mechanism_name or "unknown mechanism"
+    lines = [f"{run.path}: {mech}, {len(steps)} step(s) in {result['duration']:.6g} s of simulation "
+             f"time (steps of {result['source']})"]
+    if not steps:
+        lines.append("no steps: the drive command never changed")
+        return "\n".join(lines)
+    hinge = steps[0].get("compression_hinge") or "a"
+    header = ["step", "t [ms]", "input [um]", "gain", "static gain", "settling [ms]", "overshoot [%]",
+              "rise [ms]", f"joint-{hinge} compr. [nm]", "drive force [N]", "peak drive force [N]"]
+    rows = []
+    for s in steps:
+        rows.append([
+            str(s["index"]) + ("" if s["settled"] else "*"),
+            _fixed(s["t"], 1e3, 3),
+            f"{_fixed(s['input_before'], 1e6, 3)} -> {_fixed(s['input'], 1e6, 3)}",
+            format_si(s["gain"], "", 1.0, 6),
+            format_si(s["static_gain"], "", 1.0, 6),
+            _fixed(s["settling_time"], 1e3, 3),
+            _fixed(s["overshoot"], 100.0, 3),
+            _fixed(s["rise_time"], 1e3, 3),
+            _fixed(s["joint_a_compression"], 1e9, 3),
+            _fixed(s["drive_force"], 1.0, 4),
+            _fixed(s["peak_drive_force"], 1.0, 4),
+        ])
+    lines.append(columns(rows, header))
+    hinges = sorted({h for s in steps for h in s["peak_wrench"]},
+                    key=lambda h: run.hinge_names().index(h) if h in run.hinge_names() else 99)
+    if hinges:
+        lines.append("")
+        lines.append("peak hinge load per step: in-plane force |f| [N] / moment [mN m] "
+                     "(wrench on body B, in frame b)")
+        rows = []
+        for s in steps:
+            row = [str(s["index"])]
+            for h in hinges:
+                w = s["peak_wrench"].get(h)
+                row.append("-" if w is None else f"{w['force']:.4g} / {w['moment'] * 1e3:.4g}")
+            rows.append(row)
+        lines.append(columns(rows, ["step"] + hinges))
+    notes = [(s["index"], n) for s in steps for n in s["notes"]]
+    lines.append("")
+    if notes:
+        lines += [f"step {i}: {n}" for i, n in notes]
+    if any(not s["settled"] for s in steps):
+        lines.append("* not settled before the next step (or the end): no gain reported")
+    lines.append(f"gain = output change / applied input change between settled values; settling "
+                 f"time to within {result['band'] * 100:g} % of the output change, from the command; "
+                 "static gain: the engine's static solve at the same inputs.")
+    return "\n".join(lines)

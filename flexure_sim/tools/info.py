@@ -1,0 +1,184 @@
+"""``flexure-sim info RUN.mcap``: topics, types, counts, rates, duration, and the mechanism and
+parameters of the run (the ``flexure_sim`` metadata record stage_node writes when recording).
+
+    flexure-sim info runs/stage.mcap [--json] [--yaml] [--recover]
+
+A properly closed file is summarised from its summary section, without reading the chunks.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+from ..recording import LogInfo, log_info
+from .runlog import (
+    EXIT_OK,
+    METADATA_NAME,
+    PARAMETER_CHANGE_NAME,
+    check_path,
+    columns,
+    report_recovered,
+    tool_errors,
+)
+
+PROG = "flexure-sim info"
+
+#: The node's parameters as recorded (node/params.py), with their units.
+PARAMETER_UNITS = {
+    "mechanism": "", "time_mode": "", "publish_rate": "Hz", "sim_step": "s", "stroke_min": "m",
+    "stroke_max": "m", "slew_rate": "m/s", "record": "", "record_dir": "", "record_path": "",
+}
+MECHANISM_KEYS = ("mechanism_name", "mechanism_path", "mechanism_yaml")
+RUN_KEYS = ("node", "flexure_sim_version", "run", "started_utc", "sim_time_start", "steps_per_tick",
+            "relinearize_tol", "root_frame", "bodies", "hinges")
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "info", help="topics, counts, duration, mechanism and parameters of a recorded run",
+        description=__doc__.split("\n\n")[0].replace("``", ""))
+    p.add_argument("run", metavar="RUN.mcap", help="MCAP file recorded by stage_node (or ros2 bag record)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--yaml", action="store_true", help="also print the recorded mechanism YAML")
+    p.add_argument("--recover", action="store_true",
+                   help="summarise the readable part of a truncated or damaged file instead of failing")
+    p.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    return tool_errors(PROG, lambda: _run(args), can_recover=not args.recover)
+
+
+def _run(args: argparse.Namespace) -> int:
+    info = log_info(check_path(args.run), recover=args.recover)
+    if args.recover:
+        report_recovered(PROG, info)
+    summary = summarize(info)
+    if args.json:
+        print(json.dumps(summary, indent=1))
+    else:
+        print(format_summary(summary, show_yaml=args.yaml))
+    return EXIT_OK
+
+
+def summarize(info: LogInfo) -> dict:
+    """The info of a log as a JSON-ready dict (times in s, sizes in bytes)."""
+    duration = info.duration_ns / 1e9
+    topics = []
+    for name, topic in sorted(info.topics.items()):
+        rate = (topic.message_count - 1) / duration if duration > 0 and topic.message_count > 1 else None
+        qos = topic.qos[0] if topic.qos else None
+        topics.append({
+            "name": name, "type": topic.type, "count": topic.message_count, "rate_hz": rate,
+            "qos": None if qos is None else {"reliability": qos.reliability, "durability": qos.durability,
+                                             "history": qos.history, "depth": qos.depth},
+        })
+    meta = info.flexure_sim
+    changes = [dict(d) for name, d in info.metadata_records if name == PARAMETER_CHANGE_NAME]
+    other_records = sorted({name for name, _ in info.metadata_records}
+                           - {METADATA_NAME, PARAMETER_CHANGE_NAME, "rosbag2"})
+    return {
+        "path": str(info.path),
+        "size_bytes": info.size_bytes,
+        "profile": info.profile,
+        "library": info.library,
+        "complete": info.complete,
+        "note": info.note,
+        "chunk_count": info.chunk_count,
+        "message_count": info.message_count,
+        "start": info.start_ns / 1e9 if info.message_count else None,
+        "end": info.end_ns / 1e9 if info.message_count else None,
+        "duration": duration,
+        "topics": topics,
+        "mechanism": {
+            "name": meta.get("mechanism_name") or meta.get("mechanism"),
+            "path": meta.get("mechanism_path"),
+            "yaml": meta.get("mechanism_yaml"),
+            "bodies": [b for b in meta.get("bodies", "").split(",") if b],
+            "hinges": [h for h in meta.get("hinges", "").split(",") if h],
+        } if meta else None,
+        "parameters": {k: meta[k] for k in PARAMETER_UNITS if k in meta},
+        "run": {k: meta[k] for k in RUN_KEYS if k in meta},
+        "other_metadata": {k: v for k, v in sorted(meta.items())
+                           if k not in PARAMETER_UNITS and k not in RUN_KEYS and k not in MECHANISM_KEYS},
+        "parameter_changes": changes,
+        "other_metadata_records": other_records,
+        "dropped_messages": (info.bag_metadata or {}).get("custom_data", {}).get("flexure_sim.dropped_messages"),
+    }
+
+
+def _size(n: int) -> str:
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.3g} {unit}"
+    return f"{n} B"
+
+
+def format_summary(s: dict, show_yaml: bool = False) -> str:
+    state = "complete" if s["complete"] else "INCOMPLETE (recovered part)"
+    lines = [
+        f"File:         {s['path']}  ({_size(s['size_bytes'])}, {state})",
+        f"Format:       MCAP, profile {s['profile']} (rosbag2), written by {s['library'] or 'unknown'}; "
+        f"{s['chunk_count']} chunk(s)",
+    ]
+    if s["message_count"]:
+        lines.append(f"Duration:     {s['duration']:.6f} s of log time (simulation time), "
+                     f"{s['start']:.6f} s to {s['end']:.6f} s")
+    else:
+        lines.append("Duration:     0 s (no messages)")
+    lines.append(f"Messages:     {s['message_count']}")
+    if s["dropped_messages"] not in (None, "0"):
+        lines.append(f"Dropped:      {s['dropped_messages']} message(s) could not be recorded")
+    if not s["complete"] and s["note"]:
+        lines.append(f"Recovered:    {s['note']}")
+    lines.append("")
+    rows = [[t["name"], t["type"], str(t["count"]), f"{t['rate_hz']:.6g}" if t["rate_hz"] else "-",
+             (t["qos"]["reliability"] if t["qos"] else "-")] for t in s["topics"]]
+    lines.append(columns(rows, ["topic", "type", "count", "rate [Hz]", "qos"], "<<>><"))
+    lines.append("")
+    mech = s["mechanism"]
+    if mech is None:
+        lines.append("Mechanism:    not recorded (the file has no flexure_sim metadata record: "
+                     "not written by stage_node)")
+    else:
+        yaml_text = mech["yaml"] or ""
+        stored = f"; YAML recorded, {len(yaml_text.splitlines())} lines" if yaml_text else ""
+        lines.append(f"Mechanism:    {mech['name'] or 'unknown'}  ({mech['path'] or 'path not recorded'}{stored})")
+        if mech["bodies"] or mech["hinges"]:
+            lines.append(f"              bodies {', '.join(mech['bodies'])}; hinges {', '.join(mech['hinges'])}")
+        run = s["run"]
+        if run:
+            parts = [f"node {run['node']}" if "node" in run else "",
+                     f"flexure_sim {run['flexure_sim_version']}" if "flexure_sim_version" in run else "",
+                     f"run {run['run']}" if "run" in run else "",
+                     f"started {run['started_utc']}" if "started_utc" in run else ""]
+            lines.append(f"Recorded by:  {', '.join(p for p in parts if p)}")
+        if s["parameters"]:
+            lines.append("Parameters:")
+            width = max(len(k) for k in s["parameters"])
+            for k, v in s["parameters"].items():
+                unit = PARAMETER_UNITS.get(k, "")
+                extra = ""
+                if k == "sim_step" and "steps_per_tick" in run:
+                    extra = f"  ({run['steps_per_tick']} engine steps per tick)"
+                shown = v if v != "" else "''"
+                lines.append(f"  {k:<{width}}  {shown}{' ' + unit if unit else ''}{extra}")
+        rest = {k: v for k, v in s["run"].items()
+                if k not in ("node", "flexure_sim_version", "run", "started_utc", "bodies", "hinges")}
+        rest.update(s["other_metadata"])
+        if rest:
+            lines.append("Run settings:")
+            width = max(len(k) for k in rest)
+            for k, v in rest.items():
+                lines.append(f"  {k:<{width}}  {v}")
+        if s["parameter_changes"]:
+            lines.append("Parameter changes during the run:")
+            for change in s["parameter_changes"]:
+                t = change.pop("t", "?")
+                lines.append(f"  t = {t} s: " + ", ".join(f"{k} = {v}" for k, v in change.items()))
+        if show_yaml and yaml_text:
+            lines += ["", f"--- recorded mechanism YAML ({mech['name']}) ---", yaml_text.rstrip()]
+    if s["other_metadata_records"]:
+        lines.append(f"Other metadata records: {', '.join(s['other_metadata_records'])}")
+    return "\n".join(lines)

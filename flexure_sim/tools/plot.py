@@ -1,0 +1,272 @@
+"""``flexure-sim plot RUN.mcap -o DIR``: PNG figures of a recorded run.
+
+    flexure-sim plot runs/stage.mcap -o runs/plots [--recover] [--dpi 120]
+
+Figures (those the run's topics allow):
+
+- ``input_output.png``  "Input and output displacement": drive command and applied input,
+  and the output, against time, with the gain of every settled step (cf. Figure 6.3);
+- ``joint_<h>.png``     "Joint <h> displacement on <body A> and <body B>": x-displacement of
+  the compression hinge's frames on its two bodies, and their difference, the compression
+  (cf. Figure 6.4);
+- ``hinge_wrenches.png`` "Hinge wrenches": moment and force components of every hinge;
+- ``drive_force.png``   "Drive force": the force the actuator applies;
+- ``body_poses.png``    "Body poses" (runs without a drive, e.g. the four-bars).
+
+Each PNG carries its title in its metadata (``Title``). Matplotlib runs with the Agg backend.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+
+from .runlog import (
+    COMMAND,
+    DRIVE_FORCE,
+    DRIVE_INPUT,
+    EXIT_OK,
+    OUTPUT,
+    Run,
+    RunError,
+    add_file_arguments,
+    load_run,
+    report_recovered,
+    time_unit,
+    tool_errors,
+)
+
+PROG = "flexure-sim plot"
+TITLES = {
+    "input_output": "Input and output displacement",
+    "hinge_wrenches": "Hinge wrenches",
+    "drive_force": "Drive force",
+    "body_poses": "Body poses",
+}
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser("plot", help="PNG figures of a recorded run",
+                              description=__doc__.split("\n\n")[0].replace("``", ""))
+    add_file_arguments(p)
+    p.add_argument("-o", "--output", metavar="DIR", required=True, help="directory for the PNG files (created)")
+    p.add_argument("--dpi", type=int, default=120, help="resolution (default 120)")
+    p.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    return tool_errors(PROG, lambda: _run(args), can_recover=not args.recover)
+
+
+def _run(args: argparse.Namespace) -> int:
+    if args.dpi <= 0:
+        raise RunError(f"--dpi {args.dpi}: must be positive", 2)
+    run_ = load_run(args.run, recover=args.recover, namespace=args.namespace)
+    if args.recover:
+        report_recovered(PROG, run_)
+    out_dir = Path(args.output)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise RunError(f"-o {out_dir}: exists and is not a directory", 2)
+    written = plot_run(run_, out_dir, dpi=args.dpi)
+    if not written:
+        raise RunError(f"{run_.path}: nothing to plot: none of the stage's topics are in the file "
+                       f"(topics: {', '.join(sorted(run_.log.topics)) or 'none'})")
+    print(f"wrote {len(written)} figure(s) to {out_dir}/:")
+    for path, title in written:
+        print(f"  {path.name:22s} {title}")
+    return EXIT_OK
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_run(run: Run, out_dir: Path, dpi: int = 120) -> list[tuple[Path, str]]:
+    """Write every figure the run allows; returns (path, title) of each."""
+    plt = _pyplot()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    unit, scale = time_unit((run.end_ns - run.start_ns) / 1e9)
+    tlabel = f"simulation time [{unit}]"
+    steps = _step_times(run)
+    written: list[tuple[Path, str]] = []
+
+    def save(fig, name: str, title: str) -> None:
+        fig.suptitle(title)
+        fig.tight_layout()
+        path = out_dir / f"{name}.png"
+        fig.savefig(path, dpi=dpi, metadata={"Title": title, "Software": "flexure_sim"})
+        plt.close(fig)
+        written.append((path, title))
+
+    def mark_steps(ax) -> None:
+        for ts in steps:
+            ax.axvline(ts * scale, color="0.75", linestyle=":", linewidth=0.8, zorder=0)
+
+    def tx(t: np.ndarray) -> np.ndarray:
+        return t * scale
+
+    # ---- input and output (Figure 6.3)
+    out = run.scalar(OUTPUT)
+    u = run.scalar(DRIVE_INPUT)
+    cmd = run.scalar(COMMAND)
+    if out is not None or u is not None:
+        fig, (ax_in, ax_out) = plt.subplots(2, 1, sharex=True, figsize=(8, 6))
+        if u is not None:
+            ax_in.plot(tx(u.t), u.values * 1e6, label="drive input (applied)", color="C0")
+        if cmd is not None and not cmd.empty:
+            ct, cv = cmd.t, cmd.values
+            if u is not None and not u.empty and u.t[0] < ct[0]:
+                ct, cv = np.append(u.t[0], ct), np.append(u.values[0], cv)
+            ct, cv = _staircase(ct, cv, run.end_ns / 1e9)
+            ax_in.plot(tx(ct), cv * 1e6, label="drive command", color="C1", linestyle="--", linewidth=1)
+        ax_in.set_ylabel("input displacement [µm]")
+        ax_in.legend(loc="best", fontsize="small")
+        ax_in.grid(alpha=0.3)
+        mark_steps(ax_in)
+        if out is not None:
+            ax_out.plot(tx(out.t), out.values * 1e6, color="C2", label="output displacement (body x)")
+            for s in _settled_gains(run):
+                ax_out.annotate(f"gain {s['gain']:.4g}", (s["t_end"] * scale, s["output"] * 1e6),
+                                textcoords="offset points", xytext=(-4, 6), ha="right", fontsize="small")
+        ax_out.margins(y=0.12)  # room for the gain labels
+        ax_out.set_ylabel("output displacement [µm]")
+        ax_out.set_xlabel(tlabel)
+        ax_out.grid(alpha=0.3)
+        mark_steps(ax_out)
+        save(fig, "input_output", TITLES["input_output"])
+
+    # ---- joint displacement on its two bodies (Figure 6.4)
+    hinge = run.compression_hinge()
+    comp = run.scalar(run.compression_topic()) if hinge else None
+    if hinge is not None:
+        frames = run.hinge_frame_displacements(hinge)
+        if frames is not None:
+            ft, da, db, body_a, body_b = frames
+            title = f"Joint {hinge} displacement on {body_a} and {body_b}"
+            fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(8, 6))
+            ax1.plot(tx(ft), da[:, 0] * 1e6, label=f"frame of joint {hinge} on {body_a}")
+            ax1.plot(tx(ft), db[:, 0] * 1e6, label=f"frame of joint {hinge} on {body_b}", linestyle="--")
+            ax1.set_ylabel("x-displacement [µm]")
+            ax1.legend(loc="best", fontsize="small")
+            ax1.grid(alpha=0.3)
+            mark_steps(ax1)
+            if comp is not None:
+                ax2.plot(tx(comp.t), comp.values * 1e9, color="C3", label=f"compression ({body_b} - {body_a})")
+            else:
+                ax2.plot(tx(ft), (db[:, 0] - da[:, 0]) * 1e9, color="C3", label=f"{body_b} - {body_a}")
+            ax2.set_ylabel(f"joint {hinge} compression [nm]")
+            ax2.set_xlabel(tlabel)
+            ax2.legend(loc="best", fontsize="small")
+            ax2.grid(alpha=0.3)
+            mark_steps(ax2)
+        elif comp is not None:
+            title = f"Joint {hinge} compression"
+            fig, ax2 = plt.subplots(figsize=(8, 4))
+            ax2.plot(tx(comp.t), comp.values * 1e9, color="C3")
+            ax2.set_ylabel(f"joint {hinge} compression [nm]")
+            ax2.set_xlabel(tlabel)
+            ax2.grid(alpha=0.3)
+            mark_steps(ax2)
+            ax2.set_title(f"(frame displacements need the mechanism: {run.mechanism_problem or 'poses missing'})",
+                          fontsize="small")
+        else:
+            title = ""
+        if title:
+            save(fig, f"joint_{hinge}", title)
+
+    # ---- hinge wrenches
+    wrenches = run.wrenches()
+    if wrenches:
+        fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 8))
+        labels = ("moment [mN·m]", "force $f_x$ [N]", "force $f_y$ [N]")
+        factors = (1e3, 1.0, 1.0)
+        for name, w in wrenches.items():
+            for k, ax in enumerate(axes):
+                ax.plot(tx(w.t), w.values[:, k] * factors[k], label=f"hinge {name}")
+        for ax, label in zip(axes, labels):
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+            mark_steps(ax)
+        axes[0].legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
+        axes[0].set_title("wrench each hinge exerts on its body B, in its frame b", fontsize="small")
+        axes[-1].set_xlabel(tlabel)
+        save(fig, "hinge_wrenches", TITLES["hinge_wrenches"])
+
+    # ---- drive force
+    force = run.scalar(DRIVE_FORCE)
+    if force is not None and not force.empty:
+        fig, ax = plt.subplots(figsize=(8, 4))
+        ax.plot(tx(force.t), force.values, color="C4")
+        ax.set_ylabel("drive force [N]")
+        ax.set_xlabel(tlabel)
+        ax.set_title("force the actuator applies to the driven body, along the drive axis", fontsize="small")
+        ax.grid(alpha=0.3)
+        mark_steps(ax)
+        save(fig, "drive_force", TITLES["drive_force"])
+
+    # ---- body poses (runs without a drive)
+    poses = run.poses()
+    if poses and out is None and u is None:
+        fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 8))
+        for name, p in poses.items():
+            rest = p.values[0]
+            for k, (ax, f) in enumerate(zip(axes, (1e3, 1e3, 1.0))):
+                ax.plot(tx(p.t), (p.values[:, k] - rest[k]) * f, label=name)
+        for ax, label in zip(axes, ("x - x(start) [mm]", "y - y(start) [mm]", "yaw - yaw(start) [rad]")):
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+        axes[0].legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
+        axes[-1].set_xlabel(tlabel)
+        save(fig, "body_poses", TITLES["body_poses"])
+    return written
+
+
+def _staircase(t: np.ndarray, v: np.ndarray, t_end: float) -> tuple[np.ndarray, np.ndarray]:
+    """Step-plot points of a command held until the next one (non-finite ones dropped)."""
+    keep = np.isfinite(v)
+    t, v = t[keep], v[keep]
+    if t.shape[0] == 0:
+        return t, v
+    tt = np.append(t, max(t_end, float(t[-1])))
+    vv = np.append(v, v[-1])
+    return np.repeat(tt, 2)[1:-1], np.repeat(vv, 2)[:-2]
+
+
+def _step_times(run: Run) -> list[float]:
+    from .analyse import find_steps
+
+    try:
+        steps, _ = find_steps(run)
+    except RunError:
+        return []
+    return [s.t for s in steps]
+
+
+def _settled_gains(run: Run) -> list[dict]:
+    """t_end, settled output and gain of every settled step (for the annotations)."""
+    from .analyse import analyse_run
+
+    try:
+        result = analyse_run(run, static=False)
+    except RunError:
+        return []
+    out: list[dict] = []
+    for s in result["steps"]:
+        if s["gain"] is not None and s["output"] is not None:
+            out.append({"t_end": s["t"] + s["duration"], "output": s["output"], "gain": s["gain"]})
+    return out
+
+
+def figure_title(path: Path) -> Optional[str]:
+    """The title stored in a PNG written by `plot_run` (for tests and scripts)."""
+    from PIL import Image
+
+    with Image.open(path) as img:
+        return img.text.get("Title")

@@ -1,0 +1,369 @@
+"""flexure-sim info / analyse / plot / export on recordings written without DDS (tools_fixtures),
+and on bad files: truncated at several offsets, flipped bytes, empty, not MCAP, MCAP of another
+profile, rosbag2 files of other topics. Bad files give a message naming the file and the
+problem, exit code 1 (2 for bad usage), and never a traceback."""
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import pytest
+from mcap.writer import Writer
+from rclpy.serialization import serialize_message
+from std_msgs.msg import Float64, String
+
+from flexure_sim import cli
+from flexure_sim.recording import McapRecorder, read_log
+from flexure_sim.tools.export import csv_name
+from flexure_sim.tools.plot import figure_title
+from flexure_sim.tools.runlog import RunError, find_namespace
+
+from tools_fixtures import DEMO_LEVELS, live_gains, record_stage_run
+
+ROOT = Path(__file__).resolve().parent.parent
+STAGE_GAIN = 27.628
+
+
+def flexure_sim(capsys, *args: str) -> tuple[int, str, str]:
+    """Run ``flexure-sim ARGS`` in-process; (exit code, stdout, stderr)."""
+    code = cli.main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture(scope="module")
+def stage(tmp_path_factory):
+    """A demo-profile run of the stage, in several chunks, and what the 'live' run saw."""
+    path = tmp_path_factory.mktemp("stage") / "stage.mcap"
+    live = record_stage_run(path, chunk_size=32 * 1024)
+    return path, live
+
+
+@pytest.fixture(scope="module")
+def stage_nocmd(tmp_path_factory):
+    path = tmp_path_factory.mktemp("nocmd") / "nocmd.mcap"
+    return path, record_stage_run(path, record_command=False, metadata=False)
+
+
+@pytest.fixture(scope="module")
+def fourbar(tmp_path_factory):
+    path = tmp_path_factory.mktemp("fourbar") / "fourbar.mcap"
+    record_stage_run(path, mechanism="fourbar_mixed", levels=(), rest=0.05)
+    return path
+
+
+# ------------------------------------------------------------------------------ info
+def test_info_shows_topics_counts_duration_mechanism_and_parameters(capsys, stage):
+    path, _ = stage
+    code, out, err = flexure_sim(capsys, "info", path)
+    assert code == 0, err
+    assert "/output/displacement" in out and "std_msgs/msg/Float64" in out
+    assert "/hinges/a/wrench" in out and "geometry_msgs/msg/WrenchStamped" in out
+    assert "Duration:     0.109000 s" in out
+    assert "Mechanism:    microstage" in out
+    for param in ("publish_rate  1000.0 Hz", "sim_step      0.0001 s", "stroke_max    2e-06 m", "time_mode     fast"):
+        assert param in out
+    code, out, _ = flexure_sim(capsys, "info", path, "--json")
+    info = json.loads(out)
+    counts = {t["name"]: t["count"] for t in info["topics"]}
+    assert counts["/output/displacement"] == 110 and counts["/drive/displacement"] == len(DEMO_LEVELS)
+    assert info["mechanism"]["name"] == "microstage" and info["parameters"]["sim_step"] == "0.0001"
+    assert info["duration"] == pytest.approx(0.109)
+    assert info["message_count"] == sum(counts.values())
+
+
+def test_info_of_a_file_without_flexure_sim_metadata_says_so(capsys, stage_nocmd):
+    code, out, _ = flexure_sim(capsys, "info", stage_nocmd[0])
+    assert code == 0 and "not recorded" in out
+
+
+# ------------------------------------------------------------------------------ analyse
+def test_analyse_gives_the_live_gains_and_the_engines_static_gain(capsys, stage):
+    path, live = stage
+    code, out, err = flexure_sim(capsys, "analyse", path, "--json")
+    assert code == 0, err
+    steps = json.loads(out)
+    assert [s["input"] for s in steps] == list(DEMO_LEVELS)
+    for s, g in zip(steps, live_gains(live)):
+        for key in ("input", "gain", "settling_time", "overshoot", "joint_a_compression", "peak_drive_force"):
+            assert key in s
+        assert s["settled"]
+        assert s["gain"] == pytest.approx(g, rel=1e-12)
+        assert s["gain"] == pytest.approx(s["static_gain"], rel=1e-6)
+        assert s["gain"] == pytest.approx(STAGE_GAIN, rel=1e-4)
+        assert 1e-3 < s["settling_time"] < 5e-3 and 0 <= s["overshoot"] < 0.01
+        assert set(s["peak_wrench"]) == set("abcdefg")
+    # Joint-a compression and drive force at 2 um: the engine's statics, scaled (linear stage).
+    assert steps[3]["joint_a_compression"] == pytest.approx(2e-6 / 1.35e-6 * 192.2e-9, rel=2e-3)
+    assert steps[3]["peak_drive_force"] >= steps[3]["drive_force"] > 0
+    code, out, _ = flexure_sim(capsys, "analyse", path)
+    assert code == 0
+    assert "27.628" in out and "joint-a compr. [nm]" in out and "peak hinge load" in out
+
+
+def test_analyse_finds_the_steps_in_the_drive_input_when_the_command_was_not_recorded(capsys, stage, stage_nocmd):
+    code, out, err = flexure_sim(capsys, "analyse", stage_nocmd[0], "--json")
+    assert code == 0
+    assert "steps found in /drive/input" in err
+    assert "no static comparison" in err  # no metadata: the mechanism is unknown
+    steps = json.loads(out)
+    assert len(steps) == len(DEMO_LEVELS)
+    for s, g in zip(steps, live_gains(stage_nocmd[1])):
+        assert s["gain"] == pytest.approx(g, rel=1e-12)
+        assert s["static_gain"] is None
+
+
+def test_plot_without_the_mechanism_draws_the_recorded_compression(capsys, stage_nocmd, tmp_path):
+    code, out, err = flexure_sim(capsys, "plot", stage_nocmd[0], "-o", tmp_path)
+    assert code == 0, err
+    assert figure_title(tmp_path / "joint_a.png") == "Joint a compression"
+    assert figure_title(tmp_path / "input_output.png") == "Input and output displacement"
+
+
+def test_a_bag_recorded_on_the_wall_clock_is_analysed_in_simulation_time_from_clock(capsys, stage, tmp_path):
+    """``ros2 bag record`` (no --use-sim-time) of a fast-mode run: log times are reception times
+    on the wall clock; /clock gives the simulation time back."""
+    path = tmp_path / "wall.mcap"
+    record_stage_run(path, wall_clock=(1_763_000_000_000_000_000, 0.2))
+    code, out, err = flexure_sim(capsys, "analyse", path, "--json")
+    assert code == 0, err
+    assert "simulation time is taken from the recorded /clock" in err
+    wall = json.loads(out)
+    _, out, _ = flexure_sim(capsys, "analyse", stage[0], "--json")
+    for w, s in zip(wall, json.loads(out)):
+        assert w["t"] == pytest.approx(s["t"], abs=1e-12)
+        assert w["gain"] == pytest.approx(s["gain"], rel=1e-12)
+        assert w["settling_time"] == pytest.approx(s["settling_time"], rel=1e-9)
+
+
+def test_analyse_of_a_namespaced_stage(capsys, tmp_path):
+    path = tmp_path / "ns.mcap"
+    live = record_stage_run(path, levels=(1.35e-6,), namespace="/left", clock=False)
+    code, out, err = flexure_sim(capsys, "analyse", path, "--json")
+    assert code == 0, err
+    assert json.loads(out)[0]["gain"] == pytest.approx(live_gains(live)[0], rel=1e-12)
+    code, _, err = flexure_sim(capsys, "analyse", path, "--namespace", "/right")
+    assert code == 2 and "no stage topics under namespace '/right'" in err
+
+
+def test_two_stages_in_one_file_need_a_namespace():
+    log = types.SimpleNamespace(path=Path("two.mcap"), topics={"/a/output/displacement": 0, "/b/output/displacement": 0})
+    with pytest.raises(RunError, match="choose one with --namespace"):
+        find_namespace(log)
+    assert find_namespace(log, "b") == "/b"
+
+
+def test_analyse_refuses_a_run_without_a_drive_and_plot_still_draws_it(capsys, fourbar, tmp_path):
+    code, _, err = flexure_sim(capsys, "analyse", fourbar)
+    assert code == 1 and "/output/displacement" in err and "fourbar_mixed" in err
+    code, out, err = flexure_sim(capsys, "plot", fourbar, "-o", tmp_path / "p")
+    assert code == 0, err
+    assert sorted(p.name for p in (tmp_path / "p").iterdir()) == ["body_poses.png", "hinge_wrenches.png"]
+
+
+def test_bad_usage_exits_2(capsys, stage, tmp_path):
+    assert flexure_sim(capsys, "analyse", stage[0], "--band", "2")[0] == 2
+    code, _, err = flexure_sim(capsys, "analyse", tmp_path / "missing.mcap")
+    assert code == 2 and "no such file" in err
+    code, _, err = flexure_sim(capsys, "info", tmp_path)
+    assert code == 2 and "is a directory" in err
+    code, _, err = flexure_sim(capsys, "export", stage[0], "--csv", tmp_path / "c", "--topics", "/nope")
+    assert code == 2 and "/nope" in err
+
+
+# ------------------------------------------------------------------------------ plot, export
+def test_plot_writes_the_figures_with_their_titles(capsys, stage, tmp_path):
+    code, out, err = flexure_sim(capsys, "plot", stage[0], "-o", tmp_path / "plots")
+    assert code == 0, err
+    expected = {
+        "input_output.png": "Input and output displacement",
+        "joint_a.png": "Joint a displacement on body2 and body6",
+        "hinge_wrenches.png": "Hinge wrenches",
+        "drive_force.png": "Drive force",
+    }
+    for name, title in expected.items():
+        png = tmp_path / "plots" / name
+        assert png.stat().st_size > 10_000
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert figure_title(png) == title
+        assert name in out
+
+
+def test_joint_frame_displacements_differ_by_the_recorded_compression(stage):
+    from flexure_sim.tools.runlog import load_run
+
+    run = load_run(stage[0])
+    t, da, db, body_a, body_b = run.hinge_frame_displacements("a")
+    assert (body_a, body_b) == ("body2", "body6")
+    comp = run.scalar("hinges/a/compression")
+    assert list(t) == list(comp.t)
+    assert (db[:, 0] - da[:, 0]) == pytest.approx(comp.values, abs=1e-15)
+    # body6 is driven along x: its frame moves with the drive input.
+    assert db[:, 0] == pytest.approx(run.scalar("drive/input").values, abs=1e-15)
+
+
+def test_export_writes_one_csv_per_topic_with_a_row_per_message(capsys, stage, tmp_path):
+    path, _ = stage
+    code, out, err = flexure_sim(capsys, "export", path, "--csv", tmp_path / "csv")
+    assert code == 0, err
+    log = read_log(path)
+    files = sorted(p.name for p in (tmp_path / "csv").iterdir())
+    assert files == sorted(csv_name(t) for t in log.topics)
+    for topic, info in log.topics.items():
+        with open(tmp_path / "csv" / csv_name(topic), newline="") as f:
+            rows = list(csv.DictReader(f))
+        assert len(rows) == info.message_count
+        times = [round(float(r["time"]) * 1e9) for r in rows]
+        assert times == [m.log_time_ns for m in log.messages_on(topic)]
+    with open(tmp_path / "csv" / "hinges.a.wrench.csv", newline="") as f:
+        reader = csv.DictReader(f)
+        first = next(reader)
+    assert reader.fieldnames[:4] == ["time", "header/stamp/sec", "header/stamp/nanosec", "header/frame_id"]
+    assert first["header/frame_id"] == "hinge_a"
+    msg = log.messages_on("/hinges/a/wrench")[0].message
+    assert float(first["wrench/force/x"]) == msg.wrench.force.x  # full precision
+    with open(tmp_path / "csv" / "diagnostics.csv", newline="") as f:
+        assert "status[0]/values/sim_time" in next(csv.reader(f))
+    code, out, _ = flexure_sim(capsys, "export", path, "--csv", tmp_path / "one", "--topics", "/drive/force")
+    assert code == 0 and [p.name for p in (tmp_path / "one").iterdir()] == ["drive.force.csv"]
+
+
+# ------------------------------------------------------------------------------ bad files
+TOOLS = (("info",), ("analyse",), ("plot", "-o", "PLOTS"), ("export", "--csv", "CSV"))
+
+
+def run_tool(capsys, tool: tuple, path: Path, tmp_path: Path, *extra: str) -> tuple[int, str, str]:
+    args = [a.replace("PLOTS", str(tmp_path / "plots")).replace("CSV", str(tmp_path / "csv")) for a in tool]
+    return flexure_sim(capsys, args[0], path, *args[1:], *extra)
+
+
+def assert_clean_failure(code: int, out: str, err: str, path: Path, *words: str) -> None:
+    assert code == 1, (code, out, err)
+    assert "Traceback" not in err and "Traceback" not in out
+    assert err.startswith("flexure-sim ") and str(path) in err
+    for w in words:
+        assert w in err, err
+
+
+@pytest.fixture(scope="module")
+def chunk_offsets(stage):
+    from flexure_sim.recording.scan import scan_file
+
+    scan = scan_file(stage[0])
+    assert len(scan.chunk_offsets) > 4
+    return scan.chunk_offsets
+
+
+@pytest.mark.parametrize("where", ["magic", "header", "chunk1", "mid", "summary", "last_byte"])
+def test_a_truncated_file_is_refused_with_what_was_readable(capsys, stage, chunk_offsets, tmp_path, where):
+    src = stage[0]
+    data = src.read_bytes()
+    cut = {"magic": 5, "header": 30, "chunk1": chunk_offsets[1] + 100, "mid": len(data) // 2,
+           "summary": len(data) - 300, "last_byte": len(data) - 1}[where]
+    bad = tmp_path / f"cut_{where}.mcap"
+    bad.write_bytes(data[:cut])
+    for tool in TOOLS:
+        code, out, err = run_tool(capsys, tool, bad, tmp_path)
+        assert_clean_failure(code, out, err, bad, "readable")
+    if where in ("chunk1", "mid", "summary"):
+        _, _, err = run_tool(capsys, ("analyse",), bad, tmp_path)
+        assert "--recover" in err
+
+
+def test_recover_analyses_the_readable_part_of_a_truncated_file(capsys, stage, chunk_offsets, tmp_path):
+    data = stage[0].read_bytes()
+    bad = tmp_path / "killed.mcap"
+    bad.write_bytes(data[: int(len(data) * 0.7)])
+    code, out, err = flexure_sim(capsys, "analyse", bad, "--recover", "--json")
+    assert code == 0, err
+    assert "incomplete file" in err and "recovered" in err and "Traceback" not in err
+    part = json.loads(out)
+    code, out, _ = flexure_sim(capsys, "analyse", stage[0], "--json")
+    full = json.loads(out)
+    assert 0 < len(part) <= len(full)
+    for p, f in zip(part[:-1], full):  # every step but the last is complete in the prefix
+        assert p["gain"] == f["gain"] and p["settling_time"] == f["settling_time"]
+    for tool in (("info",), ("plot", "-o", "PLOTS"), ("export", "--csv", "CSV")):
+        code, _, err = run_tool(capsys, tool, bad, tmp_path, "--recover")
+        assert code == 0, err
+    # Nothing readable at all: still a clean failure.
+    empty_prefix = tmp_path / "head.mcap"
+    empty_prefix.write_bytes(data[:chunk_offsets[0] + 50])
+    code, out, err = flexure_sim(capsys, "analyse", empty_prefix, "--recover")
+    assert_clean_failure(code, out, err, empty_prefix, "nothing readable")
+
+
+def test_flipped_bytes_give_a_clear_error_or_a_correct_answer_never_a_traceback(capsys, stage, chunk_offsets, tmp_path):
+    data = stage[0].read_bytes()
+    positions = sorted(set(range(8, len(data), len(data) // 23)) | {chunk_offsets[2] + 200, 12, len(data) - 20})
+    failures = 0
+    for pos in positions:
+        bad = tmp_path / "flipped.mcap"
+        b = bytearray(data)
+        b[pos] ^= 0xFF
+        bad.write_bytes(bytes(b))
+        code, out, err = flexure_sim(capsys, "analyse", bad, "--json")
+        assert "Traceback" not in err and code in (0, 1), (pos, code, err)
+        if code == 1:
+            failures += 1
+            assert str(bad) in err
+        if pos == chunk_offsets[2] + 200:  # inside a chunk's messages: the CRC catches it
+            assert code == 1 and "crc" in err.lower()
+    assert failures >= len(positions) - 3  # only bytes that carry no checked content may pass
+
+
+def test_an_empty_file_and_a_text_file_are_refused(capsys, tmp_path):
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    text = tmp_path / "notes.mcap"
+    text.write_text("these are not the bytes you are looking for\n")
+    for tool in TOOLS:
+        assert_clean_failure(*run_tool(capsys, tool, empty, tmp_path), empty, "empty")
+        assert_clean_failure(*run_tool(capsys, tool, text, tmp_path), text, "not an MCAP file")
+
+
+def test_an_mcap_of_another_profile_is_refused(capsys, tmp_path):
+    path = tmp_path / "json.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="", library="test")
+        sid = w.register_schema(name="Point", encoding="jsonschema", data=b'{"type": "object"}')
+        cid = w.register_channel(topic="/output/displacement", message_encoding="json", schema_id=sid)
+        for k in range(10):
+            w.add_message(channel_id=cid, log_time=k * 1000, publish_time=k * 1000, data=b'{"x": 1}')
+        w.finish()
+    for tool in TOOLS:
+        assert_clean_failure(*run_tool(capsys, tool, path, tmp_path), path, "not a rosbag2 log")
+
+
+def test_a_rosbag2_file_of_other_topics_is_summarised_but_not_analysed(capsys, tmp_path):
+    path = tmp_path / "chatter.mcap"
+    with McapRecorder(path) as rec:
+        rec.add_topic("/chatter", "std_msgs/msg/String")
+        rec.add_topic("/temperature", "std_msgs/msg/Float64")
+        for k in range(5):
+            rec.write("/chatter", serialize_message(String(data=f"hello {k}")), k * 1_000_000)
+            rec.write("/temperature", serialize_message(Float64(data=20.0 + k)), k * 1_000_000)
+    code, out, _ = flexure_sim(capsys, "info", path)
+    assert code == 0 and "/chatter" in out and "not recorded" in out
+    assert_clean_failure(*run_tool(capsys, ("analyse",), path, tmp_path), path, "/output/displacement", "/chatter")
+    assert_clean_failure(*run_tool(capsys, ("plot", "-o", "PLOTS"), path, tmp_path), path, "nothing to plot")
+    code, out, _ = run_tool(capsys, ("export", "--csv", "CSV"), path, tmp_path)
+    assert code == 0
+    assert (tmp_path / "csv" / "chatter.csv").read_text().splitlines()[1] == "0.000000000,hello 0"
+
+
+def test_the_installed_command_prints_no_traceback_for_a_damaged_file(stage, tmp_path):
+    bad = tmp_path / "cut.mcap"
+    bad.write_bytes(stage[0].read_bytes()[:5000])
+    for tool in (["info"], ["analyse"], ["plot", "-o", str(tmp_path / "p")], ["export", "--csv", str(tmp_path / "c")]):
+        proc = subprocess.run([sys.executable, "-m", "flexure_sim.cli", tool[0], str(bad), *tool[1:]],
+                              capture_output=True, text=True, cwd=ROOT, timeout=120)
+        assert proc.returncode == 1, proc.stderr
+        assert "Traceback" not in proc.stderr and proc.stderr.count("\n") == 1
+        assert "truncated" in proc.stderr and "readable" in proc.stderr
+
