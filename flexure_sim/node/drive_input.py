@@ -1,0 +1,206 @@
+"""Validation of the piezo drive commands the stage node receives (pure Python, no ROS).
+
+A command is a target displacement (m) of the actuator along the mechanism's drive axis.
+Before the simulation sees it, `CommandFilter`
+
+1. **rejects** NaN and +-Inf (the target stays where it was);
+2. **clamps** it into the actuator's stroke ``[stroke_min, stroke_max]``;
+3. **rate-limits** it: the target handed to the engine (`CommandFilter.applied`) moves
+   towards the accepted command at no more than ``slew_rate`` (m/s), engine step by engine
+   step (`CommandFilter.advance`).
+
+Every event is counted (`CommandCounters`) and `WarningThrottle` turns floods of bad
+commands into at most one warning per kind and interval, naming how many were affected.
+
+All decisions depend only on the order of the commands and on simulated time, never on
+the wall clock, so identical command sequences applied at identical ticks give identical
+outputs.
+"""
+from __future__ import annotations
+
+import math
+import struct
+import time
+from dataclasses import dataclass, fields
+from enum import Enum
+from typing import Callable, Optional
+
+
+_LE = struct.Struct("<d")
+_BE = struct.Struct(">d")
+
+
+class CommandStatus(Enum):
+    """What happened to one command."""
+
+    ACCEPTED = "accepted"
+    CLAMPED = "clamped"
+    REJECTED = "rejected"
+
+
+@dataclass(frozen=True)
+class DriveLimits:
+    """Actuator limits: stroke [stroke_min, stroke_max] (m) and slew rate (m/s, > 0)."""
+
+    stroke_min: float
+    stroke_max: float
+    slew_rate: float
+
+    def __post_init__(self) -> None:
+        problem = self.problem()
+        if problem is not None:
+            raise ValueError(problem)
+
+    def problem(self) -> Optional[str]:
+        """Why these limits are invalid, or None. Used by the node's parameter validation."""
+        return limits_problem(self.stroke_min, self.stroke_max, self.slew_rate)
+
+
+def limits_problem(stroke_min: float, stroke_max: float, slew_rate: float) -> Optional[str]:
+    """Reason why (stroke_min, stroke_max, slew_rate) are not valid actuator limits, or None."""
+    for name, value in (("stroke_min", stroke_min), ("stroke_max", stroke_max),
+                        ("slew_rate", slew_rate)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            return f"{name}: expected a number, got {value!r}"
+        if not math.isfinite(value):
+            return f"{name}: must be finite, got {value!r}"
+    if stroke_min > stroke_max:
+        return f"stroke_min ({stroke_min!r} m) must not exceed stroke_max ({stroke_max!r} m)"
+    if not slew_rate > 0:
+        return f"slew_rate: must be > 0 m/s, got {slew_rate!r}"
+    return None
+
+
+@dataclass
+class CommandCounters:
+    """Counts since the filter was created (they survive `CommandFilter.reset`).
+
+    received: every command submitted; accepted: finite ones (clamped included);
+    clamped: finite but outside the stroke; rejected: NaN or +-Inf;
+    rate_limited: accepted commands the actuator could not reach within one publish period
+    at its slew rate (so the engine sees a ramp).
+    """
+
+    received: int = 0
+    accepted: int = 0
+    clamped: int = 0
+    rejected: int = 0
+    rate_limited: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+class CommandFilter:
+    """Turns a stream of raw commands into the actuator target the engine follows.
+
+    Use: `submit` each received command in order (at the start of the tick in which it
+    takes effect), then `begin_tick` once, then `advance` once per engine step and pass the
+    result to ``Simulation.set_command``. Not thread-safe: one thread drives it.
+    """
+
+    def __init__(self, limits: DriveLimits, initial: float = 0.0) -> None:
+        self._limits = limits
+        self.counters = CommandCounters()
+        self._initial = self._clamp(float(initial))
+        self.target = self._initial       # last accepted (clamped) command, m
+        self.applied = self._initial      # rate-limited target handed to the engine, m
+        self._checked = True               # rate limit of `target` already assessed
+
+    # -------------------------------------------------------------- limits
+    @property
+    def limits(self) -> DriveLimits:
+        return self._limits
+
+    def set_limits(self, limits: DriveLimits) -> None:
+        """New stroke / slew rate; the current target is clamped into the new stroke."""
+        self._limits = limits
+        self.target = self._clamp(self.target)
+        self._checked = False
+
+    def _clamp(self, value: float) -> float:
+        return min(max(value, self._limits.stroke_min), self._limits.stroke_max)
+
+    # ------------------------------------------------------------ commands
+    def submit(self, value: float) -> CommandStatus:
+        """Validate one command; on success it becomes the new target."""
+        c = self.counters
+        c.received += 1
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+            c.rejected += 1
+            return CommandStatus.REJECTED
+        value = float(value)
+        clamped = self._clamp(value)
+        c.accepted += 1
+        self.target = clamped
+        self._checked = False
+        if clamped != value:
+            c.clamped += 1
+            return CommandStatus.CLAMPED
+        return CommandStatus.ACCEPTED
+
+    def begin_tick(self, period: float) -> bool:
+        """Start of a publish tick of ``period`` seconds: count the new target as rate-limited
+        if the actuator cannot reach it within the tick. Returns True when it was counted."""
+        if self._checked:
+            return False
+        self._checked = True
+        if abs(self.target - self.applied) > self._limits.slew_rate * period * (1 + 1e-12):
+            self.counters.rate_limited += 1
+            return True
+        return False
+
+    @property
+    def settled(self) -> bool:
+        """True when the engine's target equals the accepted command (no ramp in progress)."""
+        return self.applied == self.target
+
+    def advance(self, dt: float) -> float:
+        """Move the applied target towards the accepted command by at most slew_rate * dt."""
+        delta = self.target - self.applied
+        if delta != 0.0:
+            limit = self._limits.slew_rate * dt
+            if -limit <= delta <= limit:
+                self.applied = self.target
+            else:
+                self.applied += limit if delta > 0 else -limit
+        return self.applied
+
+    def reset(self) -> None:
+        """Back to the initial target (simulation reset); counters are kept."""
+        self.target = self.applied = self._initial
+        self._checked = True
+
+
+class WarningThrottle:
+    """At most one warning per kind every ``interval_s`` (wall clock), with the number of
+    events it stands for. ``clock`` is injectable for tests."""
+
+    def __init__(self, interval_s: float = 1.0, clock: Callable[[], float] = time.monotonic) -> None:
+        self.interval_s = float(interval_s)
+        self._clock = clock
+        self._last: dict[str, float] = {}
+        self._pending: dict[str, int] = {}
+
+    def event(self, kind: str) -> Optional[int]:
+        """Record one event of ``kind``; return how many events the warning to be emitted now
+        stands for (including this one), or None if it is suppressed."""
+        pending = self._pending.get(kind, 0) + 1
+        now = self._clock()
+        last = self._last.get(kind)
+        if last is not None and now - last < self.interval_s:
+            self._pending[kind] = pending
+            return None
+        self._last[kind] = now
+        self._pending[kind] = 0
+        return pending
+
+
+def parse_float64_cdr(data: bytes) -> float:
+    """The value of a CDR-serialized ``std_msgs/msg/Float64`` (4-byte encapsulation header,
+    then the float64 in the byte order the header names). Raises ValueError if malformed."""
+    if len(data) < 12:
+        raise ValueError(f"a serialized Float64 needs 12 bytes, got {len(data)}")
+    if data[0] != 0 or data[1] not in (0, 1):
+        raise ValueError(f"unsupported CDR encapsulation {bytes(data[:2]).hex()}")
+    return _LE.unpack_from(data, 4)[0] if data[1] == 1 else _BE.unpack_from(data, 4)[0]

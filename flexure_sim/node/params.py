@@ -1,0 +1,111 @@
+"""The stage node's parameters as data, and their validation (pure Python, no side effects).
+
+The node declares each `ParamSpec` with a ``ParameterDescriptor`` (description, range,
+read-only), validates every change with `validate` in its on-set callback, and applies
+accepted changes in its post-set callback.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Mapping, Optional
+
+from ..solver import DEFAULT_STEP
+from .drive_input import limits_problem
+from .interface import TIME_MODES
+
+#: Largest relative mismatch between publish period and steps_per_tick * sim_step.
+DIVISION_TOLERANCE = 1e-6
+MAX_PUBLISH_RATE = 10000.0
+MAX_SIM_STEP = 1e-2
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: name, default, Python type (float, int, bool or str), unit, read-only,
+    numeric range [low, high] (None if unbounded) and description."""
+
+    name: str
+    default: Any
+    type: type
+    unit: str
+    read_only: bool
+    low: Optional[float]
+    high: Optional[float]
+    description: str
+
+
+def parameter_specs(drive_defaults: Optional[tuple[float, float, float]] = None) -> list[ParamSpec]:
+    """All parameters. ``drive_defaults`` = (stroke_min, stroke_max, slew_rate) of the
+    mechanism's drive, or None when it has no drive (the limits are then unused)."""
+    smin, smax, slew = drive_defaults if drive_defaults is not None else (0.0, 0.0, 1.0)
+    unused = "" if drive_defaults is not None else " Unused: the mechanism has no drive."
+    return [
+        ParamSpec("mechanism", "microstage", str, "", True, None, None,
+                  "Built-in mechanism name (microstage, fourbar_cantilever, fourbar_mixed) or path "
+                  "of a mechanism YAML file."),
+        ParamSpec("publish_rate", 1000.0, float, "Hz", False, 1.0, MAX_PUBLISH_RATE,
+                  "Ticks per second: each tick advances the simulation by 1/publish_rate s and "
+                  "publishes every topic once (diagnostics at ~10 Hz). 1/publish_rate must be a "
+                  "whole multiple of sim_step."),
+        ParamSpec("sim_step", DEFAULT_STEP, float, "s", True, 0.0, MAX_SIM_STEP,
+                  "Fixed engine step, in (0, 0.01] s; must divide the publish period. Read-only."),
+        ParamSpec("time_mode", "realtime", str, "", True, None, None,
+                  "realtime: ticks paced by a steady clock; fast: as fast as possible, publishes "
+                  "/clock; lockstep: one tick per ~/step call, publishes /clock. Read-only."),
+        ParamSpec("stroke_min", smin, float, "m", False, None, None,
+                  "Lower end of the actuator stroke; commands below it are clamped." + unused),
+        ParamSpec("stroke_max", smax, float, "m", False, None, None,
+                  "Upper end of the actuator stroke; commands above it are clamped." + unused),
+        ParamSpec("slew_rate", slew, float, "m/s", False, 0.0, None,
+                  "Actuator speed limit (> 0): the commanded target moves towards each new "
+                  "command at most this fast." + unused),
+        ParamSpec("record", True, bool, "", False, None, None,
+                  "Record every published topic and the received drive commands to MCAP "
+                  "(same as ~/record)."),
+        ParamSpec("record_dir", "runs", str, "", False, None, None,
+                  "Directory of the recordings (relative to the working directory), created if "
+                  "missing; files are named <mechanism>_<UTC time>.mcap."),
+        ParamSpec("record_path", "", str, "", False, None, None,
+                  "Explicit file for the next recording (later ones get _1, _2, ... before the "
+                  "suffix); empty: a new name in record_dir. Existing files are never overwritten."),
+    ]
+
+
+def steps_per_tick(publish_rate: float, sim_step: float) -> tuple[int, Optional[str]]:
+    """Engine steps per tick, round(1 / (publish_rate * sim_step)), and the reason why the
+    pair is invalid (None when valid)."""
+    if not (isinstance(publish_rate, (int, float)) and math.isfinite(publish_rate)
+            and 1.0 <= publish_rate <= MAX_PUBLISH_RATE):
+        return 0, f"publish_rate: must be in [1, {MAX_PUBLISH_RATE:g}] Hz, got {publish_rate!r}"
+    if not (isinstance(sim_step, (int, float)) and math.isfinite(sim_step)
+            and 0.0 < sim_step <= MAX_SIM_STEP):
+        return 0, f"sim_step: must be in (0, {MAX_SIM_STEP:g}] s, got {sim_step!r}"
+    ratio = 1.0 / (publish_rate * sim_step)
+    n = round(ratio)
+    if n < 1 or abs(ratio - n) > DIVISION_TOLERANCE * max(n, 1):
+        return 0, (
+            f"sim_step {sim_step:g} s does not divide the publish period {1.0 / publish_rate:g} s "
+            f"(publish_rate {publish_rate:g} Hz): the period is {ratio:.6g} steps; choose "
+            f"sim_step = period / n or a publish_rate of 1 / (n * sim_step)"
+        )
+    return n, None
+
+
+def validate(values: Mapping[str, Any]) -> Optional[str]:
+    """Why this complete set of parameter values is invalid, or None."""
+    _, problem = steps_per_tick(values["publish_rate"], values["sim_step"])
+    if problem:
+        return problem
+    if values["time_mode"] not in TIME_MODES:
+        return f"time_mode: expected one of {', '.join(TIME_MODES)}, got {values['time_mode']!r}"
+    problem = limits_problem(values["stroke_min"], values["stroke_max"], values["slew_rate"])
+    if problem:
+        return problem
+    if not isinstance(values["mechanism"], str) or not values["mechanism"].strip():
+        return "mechanism: expected a built-in name or a YAML path, got an empty string"
+    if not isinstance(values["record_dir"], str) or not values["record_dir"].strip():
+        return "record_dir: expected a directory path, got an empty string"
+    if not isinstance(values["record_path"], str):
+        return f"record_path: expected a string, got {values['record_path']!r}"
+    return None

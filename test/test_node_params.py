@@ -1,0 +1,153 @@
+"""Parameter validation, real-time pacing and recording names of the stage node (no ROS)."""
+import datetime as dt
+
+import pytest
+
+from flexure_sim.node.pacing import Pacer
+from flexure_sim.node.params import parameter_specs, steps_per_tick, validate
+from flexure_sim.node.session import recording_path
+
+
+def defaults() -> dict:
+    return {s.name: s.default for s in parameter_specs((0.0, 2e-6, 0.01))}
+
+
+def test_defaults_are_valid_and_give_ten_steps_per_tick():
+    values = defaults()
+    assert validate(values) is None
+    assert values["publish_rate"] == 1000.0 and values["sim_step"] == 1e-4
+    assert values["mechanism"] == "microstage" and values["time_mode"] == "realtime"
+    assert values["record"] is True and values["record_dir"] == "runs" and values["record_path"] == ""
+    assert steps_per_tick(1000.0, 1e-4) == (10, None)
+    read_only = {s.name for s in parameter_specs() if s.read_only}
+    assert read_only == {"mechanism", "sim_step", "time_mode"}
+
+
+@pytest.mark.parametrize("rate, step, n", [
+    (1000.0, 1e-4, 10), (200.0, 1e-4, 50), (10000.0, 1e-4, 1), (1.0, 1e-2, 100), (333.0, 1 / 3330, 10),
+    (100.0, 1e-3, 10), (3.0, 1 / 3000, 1000),
+])
+def test_steps_per_tick(rate, step, n):
+    assert steps_per_tick(rate, step) == (n, None)
+
+
+@pytest.mark.parametrize("changes, word", [
+    (dict(sim_step=3e-4), "does not divide"),
+    (dict(publish_rate=20000.0, sim_step=1e-5), "publish_rate"),
+    (dict(publish_rate=0.5), "publish_rate"),
+    (dict(sim_step=0.0), "sim_step"),
+    (dict(sim_step=0.02), "sim_step"),
+    (dict(sim_step=float("nan")), "sim_step"),
+    (dict(publish_rate=20000.0), "publish_rate"),
+    (dict(publish_rate=1500.0), "does not divide"),
+    (dict(time_mode="slow"), "time_mode"),
+    (dict(stroke_min=3e-6), "stroke_min"),
+    (dict(slew_rate=0.0), "slew_rate"),
+    (dict(stroke_max=float("inf")), "stroke_max"),
+    (dict(record_dir=""), "record_dir"),
+    (dict(mechanism=" "), "mechanism"),
+])
+def test_invalid_values_are_refused_with_the_reason(changes, word):
+    values = {**defaults(), **changes}
+    problem = validate(values)
+    assert problem is not None and word in problem
+
+
+def test_the_division_reason_says_what_to_do():
+    problem = validate({**defaults(), "sim_step": 3e-4})
+    assert "3.33333 steps" in problem and "sim_step = period / n" in problem
+
+
+class FakeClock:
+    def __init__(self):
+        self.t = 100.0
+
+    def __call__(self):
+        return self.t
+
+    def sleep(self, s):
+        self.t += s + 20e-6  # every sleep overshoots by 20 us
+
+
+def test_pacer_uses_absolute_deadlines_so_jitter_does_not_accumulate():
+    clock = FakeClock()
+    pacer = Pacer(1e-3, clock=clock, sleep=clock.sleep)
+    pacer.start()
+    for k in range(1, 1001):
+        deadline = pacer.wait()
+        assert deadline == pytest.approx(100.0 + k * 1e-3)
+        clock.t += 300e-6  # work
+        assert pacer.done() is False
+    assert clock.t == pytest.approx(100.0 + 1.0 + 320e-6, abs=1e-9)
+    assert pacer.stats.missed == 0 and pacer.stats.ticks == 1000
+    assert pacer.stats.max_late_s == pytest.approx(20e-6)
+
+
+def test_pacer_counts_overruns_catches_up_and_slips_when_far_behind():
+    clock = FakeClock()
+    pacer = Pacer(1e-3, max_lag_s=0.01, clock=clock, sleep=clock.sleep)
+    pacer.start()
+    pacer.wait()
+    clock.t += 2.5e-3  # one tick takes 2.5 periods
+    assert pacer.done() is True
+    t_before = clock.t
+    pacer.wait()  # late: no sleep, catch up
+    assert clock.t == t_before
+    clock.t += 1e-4
+    pacer.done()
+    pacer.wait()
+    clock.t += 1e-4
+    assert pacer.done() is False  # back on schedule after catching up
+    # Tick 1 overran; tick 2, started late, also finished after tick 3 was due.
+    assert pacer.stats.missed == 2 and pacer.stats.slips == 0
+    clock.t += 0.05  # a 50 ms stall: more than max_lag
+    pacer.wait()
+    assert pacer.stats.slips == 1 and pacer.stats.skipped >= 45
+    clock.t += 1e-4
+    assert pacer.done() is False  # re-anchored
+
+
+def test_pacer_period_change_and_reanchor():
+    clock = FakeClock()
+    pacer = Pacer(1e-3, clock=clock, sleep=clock.sleep)
+    pacer.start()
+    pacer.wait()
+    pacer.set_period(5e-3)
+    d = pacer.wait()
+    assert d == pytest.approx(100.0 + 1e-3 + 5e-3)
+    clock.t += 1.0  # a pause (e.g. reset)
+    pacer.reanchor()
+    t = clock.t
+    assert pacer.wait() == pytest.approx(t + 5e-3)  # one period after the pause, no catch-up
+    assert pacer.stats.slips == 0
+    with pytest.raises(ValueError):
+        Pacer(0.0)
+
+
+def test_recording_names(tmp_path):
+    now = dt.datetime(2026, 1, 2, 3, 4, 5, tzinfo=dt.timezone.utc)
+    first = recording_path(str(tmp_path), "", "microstage", 0, now)
+    assert first == tmp_path / "microstage_20260102T030405.mcap"
+    first.write_bytes(b"")
+    assert recording_path(str(tmp_path), "", "microstage", 1, now) == tmp_path / "microstage_20260102T030405_1.mcap"
+    assert recording_path("runs", "out/run.mcap", "microstage", 0) .as_posix() == "out/run.mcap"
+    assert recording_path("runs", "out/run.mcap", "microstage", 2).as_posix() == "out/run_2.mcap"
+
+
+def test_pacer_sleeps_then_busy_waits_the_last_part():
+    t = [0.0]
+    slept = []
+
+    def clock():
+        t[0] += 1e-6  # every reading costs a microsecond
+        return t[0]
+
+    def sleep(s):
+        slept.append(s)
+        t[0] += s + 50e-6  # overshoots by 50 us
+
+    pacer = Pacer(1e-3, spin_s=2e-4, clock=clock, sleep=sleep)
+    pacer.start()
+    deadline = pacer.wait()
+    assert slept and slept[0] == pytest.approx(0.8e-3, abs=5e-6)  # woke 0.15 ms early, then spun
+    assert deadline <= t[0] <= deadline + 5e-6
