@@ -1,0 +1,329 @@
+"""The stage node's ROS interface as data: topic table (names, types, units, frames, QoS)
+and the conversion of an engine ``Snapshot`` into messages.
+
+Two equivalent conversions exist: `StageInterface.messages` builds rclpy message objects
+(the reference, readable), `StageInterface.encode` packs the same messages straight to CDR
+bytes (what the node publishes and records; see `cdr`). Tests prove them identical.
+
+Conventions (README "## stage_node"):
+- frames: root ``stage``; one frame per body, named after it; per hinge ``hinge_<name>``
+  (its frame b, on body B) and ``hinge_<name>_a`` (its frame a, on body A). No leading
+  slashes. Planar poses become 3D poses with z = 0 and a yaw-only quaternion.
+- all topic names are relative (namespaces and remapping apply), except ``/clock``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Optional, Sequence
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Pose, PoseArray, PoseStamped, TransformStamped, WrenchStamped
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Float64
+
+from ..mechanism import Mechanism
+from .cdr import ClockPacker, Float64Packer, StampedPacker, split_stamp
+
+ROOT_FRAME = "stage"
+TIME_MODES = ("realtime", "fast", "lockstep")
+#: Modes in which the node publishes /clock (simulated time is not wall time).
+CLOCK_MODES = ("fast", "lockstep")
+DRIVE_COMMAND_TOPIC = "drive/displacement"
+DIAGNOSTICS_TOPIC = "diagnostics"
+CLOCK_TOPIC = "/clock"
+#: Depth of every stream and of the command subscription.
+QUEUE_DEPTH = 100
+
+
+def stream_qos() -> QoSProfile:
+    """QoS of every published topic: reliable, keep last 100, volatile."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=QUEUE_DEPTH,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.VOLATILE,
+    )
+
+
+def command_qos() -> QoSProfile:
+    """QoS of the drive command subscription: reliable, keep last 100, volatile."""
+    return stream_qos()
+
+
+def hinge_frame(hinge: str) -> str:
+    """Frame b of a hinge (on its body B); the hinge's wrench is expressed in it."""
+    return f"hinge_{hinge}"
+
+
+def hinge_frame_a(hinge: str) -> str:
+    """Frame a of a hinge (on its body A)."""
+    return f"hinge_{hinge}_a"
+
+
+def check_names(mechanism: Mechanism) -> None:
+    """Raise ValueError if the mechanism's body and hinge names give clashing frame ids."""
+    seen: dict[str, str] = {ROOT_FRAME: "the root frame"}
+    frames = [(b.name, f"body {b.name!r}") for b in mechanism.bodies]
+    for h in mechanism.hinges:
+        frames.append((hinge_frame(h.name), f"frame b of hinge {h.name!r}"))
+        frames.append((hinge_frame_a(h.name), f"frame a of hinge {h.name!r}"))
+    for frame, owner in frames:
+        if frame in seen:
+            raise ValueError(
+                f"mechanism {mechanism.name!r}: frame id {frame!r} of {owner} clashes with "
+                f"{seen[frame]}; rename the body or hinge"
+            )
+        seen[frame] = owner
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """One topic: ``key`` (internal), relative ``name``, message class and ``pkg/msg/Type``,
+    unit, frame id of its header (``""`` when unstamped) and what it carries."""
+
+    key: str
+    name: str
+    msg_type: type
+    type_name: str
+    unit: str
+    frame_id: str
+    description: str
+
+
+def _spec(key: str, name: str, msg_type: type, unit: str, frame_id: str, description: str) -> TopicSpec:
+    module = msg_type.__module__.split(".")[0]
+    return TopicSpec(key, name, msg_type, f"{module}/msg/{msg_type.__name__}", unit, frame_id, description)
+
+
+def yaw_quaternion(yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation by ``yaw`` about z."""
+    half = 0.5 * yaw
+    return 0.0, 0.0, math.sin(half), math.cos(half)
+
+
+class StageInterface:
+    """Topic table of one mechanism in one time mode, and snapshot -> messages.
+
+    ``tick_topics`` lists, in publishing order, the topics published every tick (``/clock``
+    first in fast and lockstep modes); ``diagnostics`` and ``command`` are the diagnostics
+    topic and the drive command subscription (None if the mechanism has no drive).
+    """
+
+    def __init__(self, mechanism: Mechanism, time_mode: str = "realtime") -> None:
+        if time_mode not in TIME_MODES:
+            raise ValueError(f"time_mode: expected one of {TIME_MODES}, got {time_mode!r}")
+        check_names(mechanism)
+        self.mechanism = mechanism
+        self.time_mode = time_mode
+        self.publishes_clock = time_mode in CLOCK_MODES
+        mech = mechanism
+        bodies = [b.name for b in mech.bodies]
+        hinges = [h.name for h in mech.hinges]
+        self.body_names = bodies
+        self.hinge_names = hinges
+        self.has_drive = mech.drive is not None
+        self.has_output = mech.output is not None
+        self.compression_hinge: Optional[str] = mech.compression_hinge if self.has_drive else None
+
+        topics: list[TopicSpec] = []
+        if self.publishes_clock:
+            topics.append(_spec("clock", CLOCK_TOPIC, Clock, "s", "",
+                                "simulated time (fast and lockstep modes only)"))
+        topics.append(_spec("poses", "bodies/poses", PoseArray, "m, rad", ROOT_FRAME,
+                            "pose of every body frame (at the mass centre) in the root frame, "
+                            f"in body order ({', '.join(bodies)})"))
+        for b in bodies:
+            topics.append(_spec(f"pose:{b}", f"bodies/{b}/pose", PoseStamped, "m, rad", ROOT_FRAME,
+                                f"pose of body {b}'s frame (at its mass centre) in the root frame"))
+        for h in mech.hinges:
+            topics.append(_spec(
+                f"wrench:{h.name}", f"hinges/{h.name}/wrench", WrenchStamped, "N, N m",
+                hinge_frame(h.name),
+                f"wrench hinge {h.name} exerts on its body B ({h.b.body}), in its frame b "
+                f"({hinge_frame(h.name)}), torque about b's origin; the opposite acts on "
+                f"body A ({h.a.body})"))
+            topics.append(_spec(
+                f"deflection:{h.name}", f"hinges/{h.name}/deflection", TransformStamped, "m, rad",
+                hinge_frame_a(h.name),
+                f"deflection of hinge {h.name}: pose of frame b ({hinge_frame(h.name)}) in frame a "
+                f"({hinge_frame_a(h.name)}); translation (p_x, p_y, 0), yaw alpha"))
+        if self.compression_hinge is not None:
+            c = self.compression_hinge
+            topics.append(_spec(
+                "compression", f"hinges/{c}/compression", Float64, "m", "",
+                f"compression of hinge {c}: displacement of its frame on body B minus that on "
+                "body A, along the drive axis"))
+        if self.has_output:
+            topics.append(_spec(
+                "output", "output/displacement", Float64, "m", "",
+                f"displacement of the output body {mech.output.body} from rest along "
+                f"({mech.output.axis[0]:g}, {mech.output.axis[1]:g})"))
+        if self.has_drive:
+            topics.append(_spec(
+                "drive_input", "drive/input", Float64, "m", "",
+                "actuator output actually applied (after validation, slew limiting and the "
+                "actuator lag), along the drive axis"))
+            topics.append(_spec(
+                "drive_force", "drive/force", Float64, "N", "",
+                f"force the actuator applies to the driven body {mech.drive.body} along the drive axis"))
+        self.tick_topics: tuple[TopicSpec, ...] = tuple(topics)
+        self.diagnostics = _spec("diagnostics", DIAGNOSTICS_TOPIC, DiagnosticArray, "", "",
+                                 "real-time factor, step times, solver work, command counters")
+        self.command: Optional[TopicSpec] = None
+        if self.has_drive:
+            self.command = _spec("command", DRIVE_COMMAND_TOPIC, Float64, "m", "",
+                                 "drive command (subscribed): target actuator displacement "
+                                 "along the drive axis")
+        self._build_packers()
+
+    # ---------------------------------------------------------------- packing
+    def _build_packers(self) -> None:
+        nb = len(self.body_names)
+        self._clock = ClockPacker()
+        self._float = Float64Packer()
+        self._pose_array = StampedPacker(ROOT_FRAME, 7 * nb, count=nb)
+        self._poses = [StampedPacker(ROOT_FRAME, 7) for _ in self.body_names]
+        self._wrenches = [StampedPacker(hinge_frame(h), 6) for h in self.hinge_names]
+        self._deflections = [
+            StampedPacker(hinge_frame_a(h), 7, strings=(hinge_frame(h),)) for h in self.hinge_names
+        ]
+
+    def packers(self) -> list[Any]:
+        """The packer of each tick topic, in `tick_topics` order (for the padding test)."""
+        out: list[Any] = []
+        if self.publishes_clock:
+            out.append(self._clock)
+        out.append(self._pose_array)
+        out.extend(self._poses)
+        for w, d in zip(self._wrenches, self._deflections):
+            out.extend((w, d))
+        n_float = (self.compression_hinge is not None) + self.has_output + 2 * self.has_drive
+        out.extend([self._float] * n_float)
+        return out
+
+    def encode(self, snap: Any, stamp_ns: int) -> list[bytes]:
+        """CDR payloads of every tick topic, in `tick_topics` order, stamped ``stamp_ns``."""
+        sec, nsec = split_stamp(stamp_ns)
+        out: list[bytes] = []
+        if self.publishes_clock:
+            out.append(self._clock.pack(sec, nsec))
+        flat: list[float] = []
+        singles: list[bytes] = []
+        sin, cos = math.sin, math.cos
+        for packer, (x, y, th) in zip(self._poses, snap.poses.tolist()):
+            h = 0.5 * th
+            values = (x, y, 0.0, 0.0, 0.0, sin(h), cos(h))
+            flat.extend(values)
+            singles.append(packer.pack(sec, nsec, *values))
+        out.append(self._pose_array.pack(sec, nsec, *flat))
+        out.extend(singles)
+        for wp, dp, (m, fx, fy), (a, px, py) in zip(
+            self._wrenches, self._deflections, snap.wrenches.tolist(), snap.deflections.tolist()
+        ):
+            out.append(wp.pack(sec, nsec, fx, fy, 0.0, 0.0, 0.0, m))
+            h = 0.5 * a
+            out.append(dp.pack(sec, nsec, px, py, 0.0, 0.0, 0.0, sin(h), cos(h)))
+        f = self._float.pack
+        if self.compression_hinge is not None:
+            out.append(f(float(snap.compression)))
+        if self.has_output:
+            out.append(f(float(snap.output)))
+        if self.has_drive:
+            out.append(f(float(snap.drive_input)))
+            out.append(f(float(snap.drive_force)))
+        return out
+
+    # ------------------------------------------------------ reference messages
+    def messages(self, snap: Any, stamp_ns: int) -> list[Any]:
+        """The same messages as `encode`, as rclpy message objects (the reference)."""
+        stamp = stamp_msg(stamp_ns)
+        out: list[Any] = []
+        if self.publishes_clock:
+            out.append(Clock(clock=stamp))
+        array = PoseArray()
+        array.header.stamp = stamp
+        array.header.frame_id = ROOT_FRAME
+        poses = []
+        for (x, y, th) in snap.poses.tolist():
+            pose = Pose()
+            pose.position.x, pose.position.y, pose.position.z = x, y, 0.0
+            q = pose.orientation
+            q.x, q.y, q.z, q.w = yaw_quaternion(th)
+            poses.append(pose)
+        array.poses = poses
+        out.append(array)
+        for pose in poses:
+            msg = PoseStamped()
+            msg.header.stamp = stamp
+            msg.header.frame_id = ROOT_FRAME
+            msg.pose = pose
+            out.append(msg)
+        for name, (m, fx, fy), (a, px, py) in zip(
+            self.hinge_names, snap.wrenches.tolist(), snap.deflections.tolist()
+        ):
+            w = WrenchStamped()
+            w.header.stamp = stamp
+            w.header.frame_id = hinge_frame(name)
+            w.wrench.force.x, w.wrench.force.y, w.wrench.force.z = fx, fy, 0.0
+            w.wrench.torque.x, w.wrench.torque.y, w.wrench.torque.z = 0.0, 0.0, m
+            out.append(w)
+            d = TransformStamped()
+            d.header.stamp = stamp
+            d.header.frame_id = hinge_frame_a(name)
+            d.child_frame_id = hinge_frame(name)
+            t = d.transform.translation
+            t.x, t.y, t.z = px, py, 0.0
+            r = d.transform.rotation
+            r.x, r.y, r.z, r.w = yaw_quaternion(a)
+            out.append(d)
+        if self.compression_hinge is not None:
+            out.append(Float64(data=float(snap.compression)))
+        if self.has_output:
+            out.append(Float64(data=float(snap.output)))
+        if self.has_drive:
+            out.append(Float64(data=float(snap.drive_input)))
+            out.append(Float64(data=float(snap.drive_force)))
+        return out
+
+
+def stamp_msg(stamp_ns: int) -> Time:
+    sec, nsec = split_stamp(stamp_ns)
+    return Time(sec=sec, nanosec=nsec)
+
+
+def diagnostics_message(
+    stamp_ns: int,
+    name: str,
+    hardware_id: str,
+    level: int,
+    message: str,
+    values: Sequence[tuple[str, Any]],
+) -> DiagnosticArray:
+    """One DiagnosticStatus in a DiagnosticArray; values are formatted with str()
+    (floats with repr precision)."""
+    status = DiagnosticStatus()
+    status.level = bytes([level])
+    status.name = name
+    status.message = message
+    status.hardware_id = hardware_id
+    status.values = [KeyValue(key=k, value=_fmt(v)) for k, v in values]
+    array = DiagnosticArray()
+    array.header.stamp = stamp_msg(stamp_ns)
+    array.status = [status]
+    return array
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)
+
+
+OK = 0
+WARN = 1
+ERROR = 2
