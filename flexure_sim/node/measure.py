@@ -1,0 +1,337 @@
+"""Measure the stage node: real-time factor in fast mode and missed ticks in real-time mode.
+
+    python -m flexure_sim.node.measure                      # both modes, 1 kHz, recording on
+    python -m flexure_sim.node.measure --mode realtime --duration 30 --subscribe
+    python -m flexure_sim.node.measure --profile            # where one tick's time goes (no DDS)
+
+Starts ``stage_node`` as a subprocess (this interpreter, its own ROS domain on localhost, a
+temporary working directory), listens to its ``/diagnostics`` with an rclpy node, and after a
+warm-up compares the first and last diagnostics of the measuring window: real-time factor
+(simulated / wall time), missed ticks per paced tick, mean engine / snapshot / publish times
+per tick. ``--subscribe`` also subscribes to every published topic (DDS delivers every
+message to a second process, as with a real consumer). The node is stopped with SIGINT and its
+recording checked (complete, messages, bytes), then deleted unless ``--keep DIR``. ``--json``
+prints one JSON object (a list for both modes).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import shutil
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+from ..solver import DEFAULT_STEP
+
+
+def _diag_values(msg: Any) -> dict[str, str]:
+    return {kv.key: kv.value for kv in msg.status[0].values}
+
+
+def run_node(
+    mode: str,
+    duration: float,
+    rate: float,
+    sim_step: float,
+    record: bool,
+    subscribe: Sequence[str] | bool,
+    warmup: float = 2.0,
+    mechanism: str = "microstage",
+    domain_id: Optional[int] = None,
+    keep_dir: Optional[Path] = None,
+) -> dict[str, Any]:
+    """Run the node in ``mode`` for warm-up + ``duration`` seconds and return the figures.
+
+    The node runs in ``keep_dir`` (kept) or in a temporary directory (removed afterwards)."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile
+
+    from ..config import load_mechanism
+    from .interface import StageInterface
+
+    domain = domain_id if domain_id is not None else random.randint(1, 100)
+    workdir = Path(keep_dir) if keep_dir else Path(tempfile.mkdtemp(prefix="stage_node_measure_"))
+    workdir.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               ROS_LOG_DIR=str(workdir / "ros_log"), PYTHONUNBUFFERED="1")
+    root = str(Path(__file__).resolve().parents[2])
+    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    params = {"mechanism": mechanism, "time_mode": mode, "publish_rate": float(rate),
+              "sim_step": float(sim_step), "record": record, "record_path": "measure.mcap"}
+    args = [sys.executable, "-m", "flexure_sim.node.stage_node", "--ros-args"]
+    for name, value in params.items():
+        text = ("true" if value else "false") if isinstance(value, bool) else str(value)
+        args += ["-p", f"{name}:={text}"]
+    stderr = open(workdir / "node.stderr", "wb")  # noqa: SIM115
+    proc = subprocess.Popen(args, cwd=workdir, env=env, stdout=stderr, stderr=subprocess.STDOUT)
+
+    context = Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node("stage_node_measure", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    samples: list[tuple[float, dict[str, str]]] = []
+    node.create_subscription(DiagnosticArray, "/diagnostics",
+                             lambda m: samples.append((time.monotonic(), _diag_values(m))), QoSProfile(depth=1000))
+    received = {"count": 0}
+    if subscribe:
+        itf = StageInterface(load_mechanism(mechanism), mode)
+
+        def count(_: bytes) -> None:
+            received["count"] += 1
+
+        wanted = None if subscribe is True else {t.lstrip("/") for t in subscribe}
+        for spec in itf.tick_topics:
+            if wanted is None or spec.name.lstrip("/") in wanted:
+                node.create_subscription(spec.msg_type, spec.name, count, QoSProfile(depth=1000), raw=True)
+    try:
+        deadline = time.monotonic() + 60.0
+        while not samples:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"stage_node did not start: see {workdir / 'node.stderr'}")
+            executor.spin_once(timeout_sec=0.1)
+        start_at = time.monotonic() + warmup
+        while time.monotonic() < start_at:
+            executor.spin_once(timeout_sec=0.05)
+        first = len(samples)
+        received_start = received["count"]
+        end_at = time.monotonic() + duration
+        while time.monotonic() < end_at:
+            executor.spin_once(timeout_sec=0.05)
+        window = samples[first - 1:]
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(60)
+        finally:
+            stderr.close()
+            executor.shutdown(timeout_sec=1.0)
+            node.destroy_node()
+            rclpy.try_shutdown(context=context)
+    if len(window) < 2:
+        raise RuntimeError("fewer than two diagnostics in the measuring window")
+    (w0, a), (w1, b) = window[0], window[-1]
+
+    def delta(key: str) -> float:
+        return float(b.get(key, 0)) - float(a.get(key, 0))
+
+    def mean(key: str) -> float:
+        return statistics.fmean(float(v[key]) for _, v in window[1:])
+
+    sim = delta("sim_time")
+    result: dict[str, Any] = {
+        "mode": mode, "mechanism": mechanism, "publish_rate": rate, "sim_step": sim_step,
+        "steps_per_tick": int(b["steps_per_tick"]), "record": record,
+        "subscribed": ("all" if subscribe is True else ",".join(subscribe)) if subscribe else "",
+        "wall_s": w1 - w0, "sim_s": sim,
+        "real_time_factor": sim / (w1 - w0),
+        "ticks": int(delta("ticks")),
+        "step_time_mean_us": mean("step_time_mean_us"),
+        "engine_step_time_mean_us": mean("engine_step_time_mean_us"),
+        "snapshot_time_mean_us": mean("snapshot_time_mean_us"),
+        "publish_time_mean_us": mean("publish_time_mean_us"),
+        "tick_time_mean_us": mean("tick_time_mean_us"),
+        "tick_time_max_us": max(float(v["tick_time_max_us"]) for _, v in window[1:]),
+        "solver_iterations_per_step": delta("solver_iterations") / max(delta("engine_steps"), 1),
+        "linearizations": int(delta("linearizations")),
+        "topics_per_tick": None,
+        "exit_code": proc.returncode,
+    }
+    if "missed_ticks" in b:
+        paced = delta("paced_ticks")
+        result.update(missed_ticks=int(delta("missed_ticks")), paced_ticks=int(paced),
+                      missed_fraction=delta("missed_ticks") / paced if paced else None,
+                      slips=int(delta("slips")), max_late_us=float(b["max_late_us"]))
+    if subscribe:
+        result["messages_received_per_s"] = (received["count"] - received_start) / duration
+    if record:
+        from ..recording import read_log
+
+        path = workdir / "measure.mcap"
+        log = read_log(path)
+        result.update(recording_complete=log.complete, recorded_messages=log.message_count,
+                      recording_bytes=path.stat().st_size,
+                      recording_dropped=int((log.bag_metadata or {}).get("custom_data", {})
+                                            .get("flexure_sim.dropped_messages", 0)))
+        result["topics_per_tick"] = sum(1 for t in log.topics if t not in ("/diagnostics", "/drive/displacement"))
+    if keep_dir:
+        result["workdir"] = str(workdir)
+    else:
+        shutil.rmtree(workdir, ignore_errors=True)
+    return result
+
+
+def profile(rate: float, sim_step: float, ticks: int = 300, mechanism: str = "microstage") -> dict[str, float]:
+    """Where one tick's time goes, in this process and without DDS traffic: engine steps,
+    snapshot, CDR packing vs rclpy message building + serialize_message, publish, record."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.serialization import serialize_message
+
+    from ..config import load_mechanism
+    from ..recording import McapRecorder
+    from ..solver import Simulation
+    from .interface import StageInterface, stream_qos
+    from .params import steps_per_tick
+    from .record_process import ProcessRecording, RecorderProcess
+    from .stage_node import RELINEARIZE_TOL
+
+    n, problem = steps_per_tick(rate, sim_step)
+    if problem:
+        raise ValueError(problem)
+    mech = load_mechanism(mechanism)
+    sim = Simulation(mech, dt=sim_step, relinearize_tol=RELINEARIZE_TOL)
+    if sim.drive is not None:
+        sim.set_command(1.35e-6)
+    itf = StageInterface(mech, "fast")
+    perf = time.perf_counter
+    out: dict[str, float] = {"steps_per_tick": n, "topics_per_tick": len(itf.tick_topics)}
+    sim.step(n)
+    t = perf()
+    for _ in range(ticks):
+        sim.step(n)
+    out["engine_us"] = (perf() - t) / ticks * 1e6
+    t = perf()
+    for _ in range(ticks):
+        snap = sim.snapshot()
+    out["snapshot_us"] = (perf() - t) / ticks * 1e6
+    t = perf()
+    for k in range(ticks):
+        payloads = itf.encode(snap, k)
+    out["cdr_pack_us"] = (perf() - t) / ticks * 1e6
+    t = perf()
+    for k in range(ticks // 10):
+        msgs = itf.messages(snap, k)
+    out["rclpy_build_us"] = (perf() - t) / (ticks // 10) * 1e6
+    t = perf()
+    for k in range(ticks // 10):
+        for m in msgs:
+            serialize_message(m)
+    out["rclpy_serialize_us"] = (perf() - t) / (ticks // 10) * 1e6
+    context = Context()
+    rclpy.init(context=context, domain_id=random.randint(1, 100))
+    node = rclpy.create_node("stage_node_profile", context=context)
+    try:
+        pubs = [node.create_publisher(s.msg_type, f"/profile{i}", stream_qos()) for i, s in enumerate(itf.tick_topics)]
+        t = perf()
+        for _ in range(ticks):
+            for p, data in zip(pubs, payloads):
+                p.publish(data)
+        out["publish_bytes_us"] = (perf() - t) / ticks * 1e6
+        t = perf()
+        for _ in range(ticks // 10):
+            for p, m in zip(pubs, msgs):
+                p.publish(m)
+        out["publish_msg_objects_us"] = (perf() - t) / (ticks // 10) * 1e6
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    with tempfile.TemporaryDirectory() as tmp:
+        # In-process recorder (its writer thread shares the GIL) vs the node's recorder process.
+        recorder = McapRecorder(Path(tmp) / "p.mcap")
+        names = [f"/t{i}" for i in range(len(payloads))]
+        for name, spec in zip(names, itf.tick_topics):
+            recorder.add_topic(name, spec.type_name)
+        t = perf()
+        for k in range(ticks):
+            for name, data in zip(names, payloads):
+                recorder.write(name, data, k)
+        out["record_in_process_write_us"] = (perf() - t) / ticks * 1e6
+        t = perf()
+        recorder.close()
+        out["record_in_process_drain_us"] = (perf() - t) / ticks * 1e6
+        process = RecorderProcess()
+        try:
+            topics = [(name, spec.type_name, stream_qos()) for name, spec in zip(names, itf.tick_topics)]
+            recording = ProcessRecording(process, Path(tmp) / "q.mcap", topics, {}, "flexure_sim")
+            t = perf()
+            for k in range(ticks):
+                recording.write_batch(list(enumerate(payloads)), k)
+            out["record_batch_to_process_us"] = (perf() - t) / ticks * 1e6
+            recording.close()
+        finally:
+            process.quit()
+    out["tick_total_us"] = (out["engine_us"] + out["snapshot_us"] + out["cdr_pack_us"]
+                            + out["publish_bytes_us"] + out["record_batch_to_process_us"])
+    out["tick_budget_us"] = 1e6 / rate
+    return out
+
+
+def _print_run(r: dict[str, Any]) -> None:
+    print(f"== {r['mode']} mode: {r['mechanism']}, {r['publish_rate']:g} Hz x {r['steps_per_tick']} steps of "
+          f"{r['sim_step']:g} s, recording {'on' if r['record'] else 'off'}"
+          + (f", subscribed: {r['subscribed']}" if r["subscribed"] else ""))
+    print(f"   window {r['wall_s']:.1f} s wall, {r['sim_s']:.3f} s simulated, {r['ticks']} ticks")
+    print(f"   real-time factor {r['real_time_factor']:.3f}")
+    if r.get("paced_ticks"):
+        print(f"   missed ticks {r['missed_ticks']} of {r['paced_ticks']} ({100 * r['missed_fraction']:.2f} %), "
+              f"slips {r['slips']}, worst wake-up lateness {r['max_late_us']:.0f} us")
+    print(f"   per tick: engine {r['step_time_mean_us']:.0f} us ({r['engine_step_time_mean_us']:.1f} us/step, "
+          f"{r['solver_iterations_per_step']:.2f} iterations/step), snapshot {r['snapshot_time_mean_us']:.0f} us, "
+          f"pack+publish+record {r['publish_time_mean_us']:.0f} us; mean {r['tick_time_mean_us']:.0f} us, "
+          f"max {r['tick_time_max_us']:.0f} us")
+    if r.get("messages_received_per_s") is not None:
+        print(f"   subscriber received {r['messages_received_per_s']:.0f} messages/s")
+    if r["record"]:
+        print(f"   recording complete={r['recording_complete']}: {r['recorded_messages']} messages, "
+              f"{r['recording_bytes'] / 1e6:.1f} MB, dropped {r['recording_dropped']}, "
+              f"{r['topics_per_tick']} topics per tick")
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m flexure_sim.node.measure",
+                                     description=__doc__.split("\n\n")[0])
+    parser.add_argument("--mode", choices=("fast", "realtime", "both"), default="both")
+    parser.add_argument("--duration", type=float, default=10.0, help="measuring window, s (default 10)")
+    parser.add_argument("--warmup", type=float, default=2.0, help="ignored start, s (default 2)")
+    parser.add_argument("--rate", type=float, default=1000.0, help="publish_rate, Hz (default 1000)")
+    parser.add_argument("--sim-step", type=float, default=DEFAULT_STEP, help=f"sim_step, s (default {DEFAULT_STEP:g})")
+    parser.add_argument("--mechanism", default="microstage")
+    parser.add_argument("--no-record", action="store_true", help="recording off (default on)")
+    parser.add_argument("--subscribe", nargs="?", const="all", default="",
+                        help="also subscribe (in this process) to every topic, or to a comma list "
+                             "such as output/displacement,drive/force")
+    parser.add_argument("--domain-id", type=int, default=None)
+    parser.add_argument("--keep", type=Path, default=None, metavar="DIR",
+                        help="run the node in DIR and keep its recording and logs there")
+    parser.add_argument("--profile", action="store_true", help="break one tick's cost down (no node)")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args(argv)
+    if args.profile:
+        out = profile(args.rate, args.sim_step, mechanism=args.mechanism)
+        if args.json:
+            print(json.dumps(out))
+        else:
+            for key, value in out.items():
+                print(f"{key:28s} {value:10.1f}")
+        return 0
+    modes = ("fast", "realtime") if args.mode == "both" else (args.mode,)
+    results = []
+    for mode in modes:
+        subscribe: Sequence[str] | bool = (True if args.subscribe == "all"
+                                           else [t for t in args.subscribe.split(",") if t])
+        r = run_node(mode, args.duration, args.rate, args.sim_step, not args.no_record, subscribe,
+                     warmup=args.warmup, mechanism=args.mechanism, domain_id=args.domain_id,
+                     keep_dir=args.keep / mode if args.keep else None)
+        results.append(r)
+        if not args.json:
+            _print_run(r)
+    if args.json:
+        print(json.dumps(results if len(results) > 1 else results[0]))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,222 @@
+"""Helpers of the stage_node tests: the node as a real subprocess, and a real rclpy peer node
+(its own context and DDS domain) that publishes commands, subscribes and calls services.
+
+DDS stays on this machine (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST). Every node test gets
+its own domain id, derived from the run's ROS_DOMAIN_ID (scripts/run_tests.sh picks a random
+one), so tests and concurrent runs do not hear each other.
+"""
+from __future__ import annotations
+
+import itertools
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any, Callable, Iterable, Optional, Sequence
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+
+ROOT = Path(__file__).resolve().parent.parent
+_BASE_DOMAIN = int(os.environ.get("ROS_DOMAIN_ID") or random.randint(1, 100))
+_offsets = itertools.count(1)
+
+
+def next_domain_id() -> int:
+    """A fresh domain id in 1..100 for one test (cycles through the range from the base)."""
+    return (_BASE_DOMAIN - 1 + 37 * next(_offsets)) % 100 + 1
+
+
+def node_env(domain_id: int, **extra: str) -> dict[str, str]:
+    env = dict(os.environ)
+    env.update(
+        ROS_DOMAIN_ID=str(domain_id),
+        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+        PYTHONUNBUFFERED="1",
+        RCUTILS_COLORIZED_OUTPUT="0",
+    )
+    env.update(extra)
+    return env
+
+
+class NodeProcess:
+    """``stage_node`` run as a subprocess in ``cwd`` (output captured to files there).
+
+    By default it runs the source tree (``python -m flexure_sim.node.stage_node`` with the
+    repository on PYTHONPATH); ``command`` runs something else (console script, launcher).
+    """
+
+    def __init__(
+        self,
+        cwd: Path,
+        domain_id: int,
+        params: Optional[dict[str, Any]] = None,
+        command: Optional[Sequence[str]] = None,
+        env: Optional[dict[str, str]] = None,
+        extra_args: Sequence[str] = (),
+    ) -> None:
+        self.cwd = Path(cwd)
+        self.cwd.mkdir(parents=True, exist_ok=True)
+        args = list(command or [sys.executable, "-m", "flexure_sim.node.stage_node"])
+        args += list(extra_args)
+        if params:
+            args.append("--ros-args")
+            for name, value in params.items():
+                args += ["-p", f"{name}:={_param_text(value)}"]
+        if env is None:
+            env = node_env(domain_id, PYTHONPATH=str(ROOT), ROS_LOG_DIR=str(self.cwd / "ros_log"))
+        self.args = args
+        self._out = open(self.cwd / "node.stdout", "wb")  # noqa: SIM115
+        self._err = open(self.cwd / "node.stderr", "wb")  # noqa: SIM115
+        self.proc = subprocess.Popen(args, cwd=self.cwd, env=env, stdout=self._out, stderr=self._err,
+                                     stdin=subprocess.DEVNULL)
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def send(self, sig: int) -> None:
+        self.proc.send_signal(sig)
+
+    def wait(self, timeout: float = 30.0) -> int:
+        try:
+            return self.proc.wait(timeout=timeout)
+        finally:
+            self._out.flush()
+            self._err.flush()
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 30.0) -> int:
+        if self.alive():
+            self.send(sig)
+        return self.wait(timeout)
+
+    def kill(self) -> None:
+        if self.alive():
+            self.proc.kill()
+            self.proc.wait(10)
+
+    @property
+    def stderr(self) -> str:
+        return (self.cwd / "node.stderr").read_text(errors="replace")
+
+    @property
+    def stdout(self) -> str:
+        return (self.cwd / "node.stdout").read_text(errors="replace")
+
+    def children(self) -> list[int]:
+        """Process ids of the node's child processes (its MCAP recorder)."""
+        kids = []
+        for stat in Path("/proc").glob("[0-9]*/stat"):
+            try:
+                fields = stat.read_text().rsplit(")", 1)[1].split()
+            except (OSError, IndexError):
+                continue
+            if int(fields[1]) == self.proc.pid:
+                kids.append(int(stat.parent.name))
+        return kids
+
+    def recordings(self) -> list[Path]:
+        return sorted(self.cwd.rglob("*.mcap"))
+
+
+def _param_text(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)
+
+
+def reliable(depth: int = 1000) -> QoSProfile:
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+
+
+class Peer:
+    """A real rclpy node in the test process, in its own context and domain."""
+
+    def __init__(self, domain_id: int, name: str = "test_peer", use_sim_time: bool = False) -> None:
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        overrides = [Parameter("use_sim_time", Parameter.Type.BOOL, True)] if use_sim_time else []
+        self.node = rclpy.create_node(name, context=self.context, parameter_overrides=overrides)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.received: dict[str, list[tuple[Any, bytes]]] = defaultdict(list)
+        self._types: dict[str, type] = {}
+        #: A node process whose death ends every wait at once (with its output).
+        self.watch: Optional[NodeProcess] = None
+
+    # ---------------------------------------------------------------- topics
+    def subscribe(self, topic: str, msg_type: type, depth: int = 1000) -> None:
+        """Keep every message (decoded, raw bytes) received on ``topic``."""
+        self._types[topic] = msg_type
+        store = self.received[topic]
+
+        def callback(data: bytes) -> None:
+            store.append((deserialize_message(data, msg_type), data))
+
+        self.node.create_subscription(msg_type, topic, callback, reliable(depth), raw=True)
+
+    def messages(self, topic: str) -> list[Any]:
+        return [m for m, _ in self.received[topic]]
+
+    def last(self, topic: str) -> Any:
+        items = self.received[topic]
+        return items[-1][0] if items else None
+
+    def publisher(self, topic: str, msg_type: type, depth: int = 1000):
+        return self.node.create_publisher(msg_type, topic, reliable(depth))
+
+    # ---------------------------------------------------------------- spinning
+    def spin_for(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
+
+    def spin_until(self, predicate: Callable[[], bool], timeout: float, what: str = "condition") -> None:
+        end = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > end:
+                raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+            if self.watch is not None and not self.watch.alive():
+                raise AssertionError(f"stage_node exited ({self.watch.proc.returncode}) while waiting for "
+                                     f"{what}:\n{self.watch.stderr}")
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def wait_for_publishers(self, topics: Iterable[str], timeout: float = 20.0) -> None:
+        topics = list(topics)
+        self.spin_until(lambda: all(self.node.count_publishers(t) > 0 for t in topics), timeout,
+                        f"publishers of {topics}")
+
+    def wait_for_subscribers(self, publisher, timeout: float = 20.0) -> None:
+        self.spin_until(lambda: publisher.get_subscription_count() > 0, timeout,
+                        f"a subscriber of {publisher.topic_name}")
+
+    # ---------------------------------------------------------------- services
+    def call(self, srv_type: type, name: str, request: Any = None, timeout: float = 30.0) -> Any:
+        client = self.node.create_client(srv_type, name)
+        try:
+            self.spin_until(lambda: client.service_is_ready(), timeout, f"service {name}")
+            future = client.call_async(request if request is not None else srv_type.Request())
+            self.spin_until(future.done, timeout, f"the answer of {name}")
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+def diagnostics_values(msg: Any) -> dict[str, str]:
+    """Key/value pairs of the first status of a DiagnosticArray."""
+    return {kv.key: kv.value for kv in msg.status[0].values}

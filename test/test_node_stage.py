@@ -1,0 +1,587 @@
+"""stage_node as a real subprocess, talked to over DDS on loopback by real rclpy test nodes.
+
+Each test gets its own ROS domain (node_harness.next_domain_id). The node runs the source
+tree; test_node_launch.py covers the installed console script and the ros2-run launcher.
+"""
+from __future__ import annotations
+
+import math
+import os
+import signal
+import time
+from pathlib import Path
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseArray, PoseStamped, TransformStamped, WrenchStamped
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import GetParameters, SetParameters
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Float64
+from std_srvs.srv import SetBool, Trigger
+
+from flexure_sim.config import ConfigError, load_mechanism
+from flexure_sim.recording import CorruptLogError, read_log
+from flexure_sim.solver import Simulation
+
+from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id
+
+STEP = 1.35e-6
+STAGE_TOPICS = (
+    ["/bodies/poses"] + [f"/bodies/body{i}/pose" for i in range(1, 7)]
+    + [f"/hinges/{h}/{kind}" for h in "abcdefg" for kind in ("wrench", "deflection")]
+    + ["/hinges/a/compression", "/output/displacement", "/drive/input", "/drive/force"]
+)
+TYPES = {
+    "/bodies/poses": PoseArray, "/hinges/a/compression": Float64, "/output/displacement": Float64,
+    "/drive/input": Float64, "/drive/force": Float64, "/diagnostics": DiagnosticArray, "/clock": Clock,
+    **{f"/bodies/body{i}/pose": PoseStamped for i in range(1, 7)},
+    **{f"/hinges/{h}/wrench": WrenchStamped for h in "abcdefg"},
+    **{f"/hinges/{h}/deflection": TransformStamped for h in "abcdefg"},
+}
+
+
+@pytest.fixture(scope="module")
+def engine_static():
+    """The engine's static answer at 1.35 um (no ROS)."""
+    sim = Simulation(load_mechanism("microstage"))
+    return sim.static(STEP).snapshot
+
+
+@pytest.fixture
+def domain() -> int:
+    return next_domain_id()
+
+
+@pytest.fixture
+def peer(domain):
+    p = Peer(domain)
+    yield p
+    p.close()
+
+
+def start(tmp_path: Path, domain: int, peer: Peer | None = None, **params) -> NodeProcess:
+    node = NodeProcess(tmp_path / "node", domain, params)
+    if peer is not None:
+        peer.watch = node
+    return node
+
+
+def stamp_ns(msg) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+def latest_diagnostics(peer: Peer) -> dict[str, str]:
+    return diagnostics_values(peer.last("/diagnostics"))
+
+
+def stop_cleanly(node: NodeProcess, sig: int = signal.SIGINT) -> None:
+    rc = node.stop(sig)
+    assert rc == 0, f"exit code {rc}\n{node.stderr}"
+
+
+# ------------------------------------------------------------------------------ acceptance
+def test_step_response_settles_to_the_engines_static_gain_and_compression(tmp_path, domain, peer,
+                                                                        engine_static):
+    node = start(tmp_path, domain, peer, time_mode="fast", sim_step=1e-4, publish_rate=200.0, record=False)
+    try:
+        for topic in ("/output/displacement", "/hinges/a/compression", "/drive/input", "/drive/force",
+                      "/bodies/body4/pose", "/hinges/a/wrench", "/hinges/a/deflection", "/diagnostics"):
+            peer.subscribe(topic, TYPES[topic])
+        drive = peer.publisher("/drive/displacement", Float64)
+        peer.wait_for_publishers(["/output/displacement"])
+        peer.wait_for_subscribers(drive)
+        peer.spin_until(lambda: len(peer.received["/output/displacement"]) > 5, 20, "outputs")
+        assert abs(peer.last("/output/displacement").data) < 1e-15  # at rest
+        drive.publish(Float64(data=STEP))
+        # Settled: the actuator lag is 1 ms, the hinge modes are faster still; wait for
+        # 0.2 s of simulated time after the input reached the command.
+        peer.spin_until(lambda: peer.last("/drive/input").data == pytest.approx(STEP, rel=1e-12), 30,
+                        "the actuator to reach the command")
+        count = len(peer.received["/output/displacement"])
+        peer.spin_until(lambda: len(peer.received["/output/displacement"]) > count + 40, 30, "settling")
+        gain = peer.last("/output/displacement").data / STEP
+        engine_gain = engine_static.output / STEP
+        assert gain == pytest.approx(engine_gain, rel=1e-4)
+        assert gain == pytest.approx(27.628, rel=1e-4)
+        assert peer.last("/hinges/a/compression").data == pytest.approx(engine_static.compression, rel=1e-4)
+        assert peer.last("/drive/force").data == pytest.approx(engine_static.drive_force, rel=1e-4)
+        # Frames and units as documented.
+        pose = peer.last("/bodies/body4/pose")
+        assert pose.header.frame_id == "stage"
+        assert pose.pose.position.x == pytest.approx(engine_static.poses[3, 0], rel=1e-6)
+        assert pose.pose.position.z == 0.0 and pose.pose.orientation.x == 0.0
+        yaw = 2 * math.atan2(pose.pose.orientation.z, pose.pose.orientation.w)
+        assert yaw == pytest.approx(engine_static.poses[3, 2], rel=1e-4, abs=1e-12)
+        wrench = peer.last("/hinges/a/wrench")
+        assert wrench.header.frame_id == "hinge_a"
+        m, fx, fy = engine_static.wrenches[0]
+        assert wrench.wrench.torque.z == pytest.approx(m, rel=1e-4)
+        assert wrench.wrench.force.x == pytest.approx(fx, rel=1e-4)
+        assert wrench.wrench.force.y == pytest.approx(fy, rel=1e-4)
+        deflection = peer.last("/hinges/a/deflection")
+        assert (deflection.header.frame_id, deflection.child_frame_id) == ("hinge_a_a", "hinge_a")
+        assert deflection.transform.translation.x == pytest.approx(engine_static.deflections[0, 1], rel=1e-4)
+        # Stamps are simulated time, on the tick grid (5 ms).
+        stamps = [stamp_ns(m) for m in peer.messages("/bodies/body4/pose")]
+        assert all(s % 5_000_000 == 0 for s in stamps)
+        assert all(b - a == 5_000_000 for a, b in zip(stamps, stamps[1:]))
+        diag = latest_diagnostics(peer)
+        assert diag["commands_received"] == "1" and diag["commands_accepted"] == "1"
+        assert diag["time_mode"] == "fast" and float(diag["real_time_factor"]) > 0
+    finally:
+        stop_cleanly(node)
+
+
+# ------------------------------------------------------------------------------ bad input
+def test_bad_commands_are_rejected_clamped_rate_limited_and_counted_and_a_flood_does_not_stall(
+        tmp_path, domain, peer):
+    node = start(tmp_path, domain, peer, time_mode="realtime", sim_step=5e-4, publish_rate=200.0,
+                 slew_rate=1e-4, record=True, record_path="bad.mcap")
+    try:
+        for topic in ("/drive/input", "/output/displacement", "/hinges/a/wrench", "/diagnostics"):
+            peer.subscribe(topic, TYPES[topic], depth=10000)
+        drive = peer.publisher("/drive/displacement", Float64, depth=1000)
+        peer.wait_for_publishers(["/diagnostics"])
+        peer.wait_for_subscribers(drive)
+        peer.spin_for(0.3)
+
+        def diag_after(settle: float = 0.3) -> dict[str, str]:
+            n = len(peer.received["/diagnostics"])
+            peer.spin_for(settle)
+            peer.spin_until(lambda: len(peer.received["/diagnostics"]) > n + 1, 10, "diagnostics")
+            return latest_diagnostics(peer)
+
+        for bad in (math.nan, math.inf, -math.inf):
+            drive.publish(Float64(data=bad))
+        d = diag_after()
+        assert (d["commands_received"], d["commands_rejected"], d["commands_accepted"]) == ("3", "3", "0")
+        assert d["drive_target"] == "0.0"
+        drive.publish(Float64(data=5e-6))      # above the 2 um stroke
+        d = diag_after()
+        assert d["commands_clamped"] == "1" and float(d["drive_target"]) == 2e-6
+        assert d["commands_rate_limited"] == "1"    # 2 um at 1e-4 m/s takes 20 ms > 5 ms tick
+        drive.publish(Float64(data=-1e-6))     # below
+        d = diag_after()
+        assert d["commands_clamped"] == "2" and float(d["drive_target"]) == 0.0
+        assert d["commands_rate_limited"] == "2"
+        drive.publish(Float64(data=1.0e-6))
+        d = diag_after(0.5)
+        assert float(d["drive_applied"]) == 1.0e-6 and d["commands_rate_limited"] == "3"
+        # The engine followed the ramp: the actuator output approached 1 um without overshoot.
+        inputs = [m.data for m in peer.messages("/drive/input")]
+        assert max(inputs) <= 2e-6 * (1 + 1e-9) and min(inputs) >= -1e-15
+        assert inputs[-1] == pytest.approx(1.0e-6, rel=1e-3)
+        before = latest_diagnostics(peer)
+
+        # Flood: 10 kHz for 1 s, every 100th command NaN, the others valid.
+        sent = nan_sent = 0
+        t0 = time.perf_counter()
+        while (now := time.perf_counter()) - t0 < 1.0:
+            while sent * 1e-4 <= now - t0:  # catch up with the 10 kHz schedule, then sleep
+                if sent % 100 == 99:
+                    drive.publish(Float64(data=math.nan))
+                    nan_sent += 1
+                else:
+                    drive.publish(Float64(data=1e-6 + 1e-8 * (sent % 50)))
+                sent += 1
+            time.sleep(0.0005)
+        wall = time.perf_counter() - t0
+        drive.publish(Float64(data=1.5e-6))
+        sent += 1
+        d = diag_after(1.0)
+        assert node.alive()
+        received = int(d["commands_received"]) - int(before["commands_received"])
+        rejected = int(d["commands_rejected"]) - int(before["commands_rejected"])
+        dropped = int(d["commands_dropped"])
+        assert sent >= 9000
+        # The reader keeps the last 100 commands (10 ms of flood); what a busy machine's executor
+        # cannot take in time is lost there (newest commands win), never queued without bound.
+        assert 0.75 * sent <= received <= sent, (received, sent)
+        assert 0.5 * nan_sent <= rejected <= nan_sent
+        assert dropped == 0
+        # Stepping went on during the flood: every diagnostics window (20 ticks) advanced, and
+        # simulated time stayed close to the wall clock (missed ticks are caught up).
+        n_before = next(i for i, m in enumerate(peer.messages("/diagnostics"))
+                        if diagnostics_values(m)["sim_time"] == before["sim_time"])
+        flood = [diagnostics_values(m) for m in peer.messages("/diagnostics")[n_before + 1:]]
+        sim_times = [float(v["sim_time"]) for v in flood]
+        assert min(float(v["real_time_factor"]) for v in flood) > 0.2
+        assert sim_times[-1] - float(before["sim_time"]) >= 0.6 * (wall + 1.0)
+        assert float(d["drive_target"]) == pytest.approx(1.5e-6, rel=1e-12)
+        # Outputs stayed finite throughout.
+        for topic in ("/drive/input", "/output/displacement"):
+            assert all(math.isfinite(m.data) for m in peer.messages(topic))
+        assert all(math.isfinite(m.wrench.force.x) and math.isfinite(m.wrench.torque.z)
+                   for m in peer.messages("/hinges/a/wrench"))
+        print(f"flood: {sent} sent in {wall:.2f} s, {received} received, sim time advanced "
+              f"{sim_times[-1] - float(before['sim_time']):.2f} s, missed ticks {d.get('missed_ticks')}")
+    finally:
+        stop_cleanly(node)
+    # Every received command is in the recording, NaN included, in order.
+    log = read_log(node.cwd / "bad.mcap")
+    assert log.complete
+    commands = [m.message.data for m in log.messages_on("/drive/displacement")]
+    assert len(commands) == int(d["commands_received"])
+    assert sum(1 for c in commands if math.isnan(c)) == int(d["commands_rejected"]) - 2  # inf, -inf
+    assert math.isnan(commands[0]) and commands[1] == math.inf and commands[2] == -math.inf
+    assert commands[3:6] == [5e-6, -1e-6, 1e-6] and commands[-1] == 1.5e-6
+
+
+# ------------------------------------------------------------------------------ signals
+def read_with_mcap(path: Path) -> tuple[dict[str, int], int, dict]:
+    """Counts per topic from mcap + mcap-ros2-support, decoding every message."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    counts: dict[str, int] = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics is not None
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            assert schema.encoding == "ros2msg" and channel.message_encoding == "cdr"
+            assert "offered_qos_profiles" in channel.metadata and \
+                channel.metadata["topic_type_hash"].startswith("RIHS01_")
+            assert message.log_time == message.publish_time
+            assert decoded is not None
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+        total = summary.statistics.message_count
+    return counts, total, metadata
+
+
+def read_with_rosbags(path: Path) -> dict[str, int]:
+    from rosbags.highlevel import AnyReader
+
+    counts: dict[str, int] = {}
+    with AnyReader([path]) as reader:
+        for connection, _, raw in reader.messages():
+            reader.deserialize(raw, connection.msgtype)
+            counts[connection.topic] = counts.get(connection.topic, 0) + 1
+    return counts
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_signal_leaves_a_complete_recording_matching_what_was_received(tmp_path, domain, peer, sig):
+    ticks = 25
+    node = start(tmp_path, domain, peer, time_mode="lockstep", sim_step=1e-4, publish_rate=100.0,
+                 record=True, record_path="run.mcap")
+    try:
+        topics = ["/clock"] + STAGE_TOPICS + ["/diagnostics"]
+        for topic in topics:
+            peer.subscribe(topic, TYPES[topic])
+        drive = peer.publisher("/drive/displacement", Float64)
+        peer.wait_for_publishers(topics)
+        peer.wait_for_subscribers(drive)
+        peer.spin_for(0.5)
+        drive.publish(Float64(data=STEP))
+        drive.publish(Float64(data=math.nan))
+        peer.spin_for(0.3)
+        for k in range(ticks):
+            answer = peer.call(Trigger, "/stage_node/step")
+            assert answer.success, answer.message
+        peer.spin_until(lambda: all(len(peer.received[t]) >= ticks for t in ["/clock"] + STAGE_TOPICS)
+                        and len(peer.received["/diagnostics"]) >= 2, 20, "every tick's messages")
+        peer.spin_for(0.3)
+    finally:
+        stop_cleanly(node, sig)
+    received = {t: len(peer.received[t]) for t in topics}
+    assert received["/bodies/poses"] == ticks and received["/diagnostics"] == ticks // 10  # 10 Hz
+    received["/drive/displacement"] = 2
+    path = node.cwd / "run.mcap"
+    counts, total, metadata = read_with_mcap(path)
+    assert counts == received
+    assert total == sum(received.values())
+    assert read_with_rosbags(path) == received
+    meta = metadata["flexure_sim"]
+    assert meta["mechanism"] == "microstage" and meta["mechanism_name"] == "microstage"
+    assert meta["time_mode"] == "lockstep" and meta["publish_rate"] == "100.0"
+    assert meta["sim_step"] == "0.0001" and meta["record"] == "true" and meta["steps_per_tick"] == "100"
+    assert "bodies:" in meta["mechanism_yaml"]
+    assert "rosbag2" in metadata
+    # The bytes received are the bytes recorded; log time = header stamp.
+    log = read_log(path)
+    recorded = log.messages_on("/hinges/c/wrench")
+    assert [m.data for m in recorded] == [raw for _, raw in peer.received["/hinges/c/wrench"]]
+    assert all(m.log_time_ns == stamp_ns(m.message) for m in recorded)
+    clocks = [m.message.clock.sec * 10**9 + m.message.clock.nanosec for m in log.messages_on("/clock")]
+    assert clocks == [k * 10_000_000 for k in range(1, ticks + 1)]
+    commands = log.messages_on("/drive/displacement")
+    assert commands[0].message.data == STEP and math.isnan(commands[1].message.data)
+    assert [c.log_time_ns for c in commands] == [0, 0]  # applied at the first tick, t = 0
+
+
+# ------------------------------------------------------------------------------ time
+def test_fast_mode_publishes_clock_and_a_use_sim_time_node_follows_it(tmp_path, domain):
+    follower = Peer(domain, name="sim_time_follower", use_sim_time=True)
+    node = start(tmp_path, domain, follower, time_mode="fast", sim_step=1e-4, publish_rate=1000.0,
+                 record=False)
+    try:
+        follower.subscribe("/clock", Clock, depth=100000)
+        follower.subscribe("/bodies/body4/pose", PoseStamped, depth=100000)
+        follower.wait_for_publishers(["/clock", "/bodies/body4/pose"])
+        follower.spin_until(lambda: len(follower.received["/bodies/body4/pose"]) > 300, 30, "poses")
+        during = follower.node.get_clock().now().nanoseconds
+        follower.watch = None
+        stop_cleanly(node)
+        follower.spin_for(0.5)  # everything published has arrived
+        now = follower.node.get_clock().now().nanoseconds
+        active = follower.node.get_clock().ros_time_is_active
+        clocks = [m.clock.sec * 10**9 + m.clock.nanosec for m in follower.messages("/clock")]
+        stamps = [stamp_ns(m) for m in follower.messages("/bodies/body4/pose")]
+    finally:
+        follower.close()
+        if node.alive():
+            stop_cleanly(node)
+    assert all(b - a == 1_000_000 for a, b in zip(clocks, clocks[1:])), "/clock advances tick by tick"
+    # Every pose carries the simulated time of a /clock tick.
+    assert set(stamps) <= set(clocks)
+    # The follower's ROS clock is simulated time: it followed /clock, ending at its last value.
+    assert active and now == clocks[-1]
+    assert stamps[-1] in clocks[-2:]  # the interrupted last tick may lack its pose
+    assert clocks[0] <= during <= now and during % 1_000_000 == 0
+
+
+def test_lockstep_runs_are_deterministic_and_reset_restarts_time(tmp_path, domain, peer):
+    node = start(tmp_path, domain, peer, time_mode="lockstep", sim_step=1e-4, publish_rate=1000.0,
+                 record=True, record_path="det.mcap")
+    try:
+        peer.subscribe("/output/displacement", Float64)
+        peer.subscribe("/hinges/b/wrench", WrenchStamped)
+        drive = peer.publisher("/drive/displacement", Float64)
+        peer.wait_for_publishers(["/output/displacement", "/hinges/b/wrench"])
+        peer.wait_for_subscribers(drive)
+        peer.spin_for(0.5)
+
+        def run() -> tuple[list[float], list[tuple[int, float, float, float]]]:
+            start_out = len(peer.received["/output/displacement"])
+            start_w = len(peer.received["/hinges/b/wrench"])
+            for command, steps in ((1.0e-6, 4), (1.8e-6, 3), (0.3e-6, 3)):
+                drive.publish(Float64(data=command))
+                peer.spin_for(0.3)
+                for _ in range(steps):
+                    assert peer.call(Trigger, "/stage_node/step").success
+            peer.spin_until(lambda: len(peer.received["/output/displacement"]) == start_out + 10, 10, "outputs")
+            peer.spin_until(lambda: len(peer.received["/hinges/b/wrench"]) == start_w + 10, 10, "wrenches")
+            outs = [m.data for m in peer.messages("/output/displacement")[start_out:]]
+            wrenches = [(stamp_ns(m), m.wrench.torque.z, m.wrench.force.x, m.wrench.force.y)
+                        for m in peer.messages("/hinges/b/wrench")[start_w:]]
+            return outs, wrenches
+
+        first = run()
+        answer = peer.call(Trigger, "/stage_node/reset")
+        assert answer.success and "det_1.mcap" in answer.message, answer.message
+        second = run()
+    finally:
+        stop_cleanly(node)
+    assert first == second  # bit for bit, stamps included (time restarts at 0 after reset)
+    assert first[1][0][0] == 1_000_000 and first[0][-1] != 0.0
+    # Both files complete; each holds its run's commands at the ticks they were applied.
+    logs = [read_log(node.cwd / name) for name in ("det.mcap", "det_1.mcap")]
+    times = [[(m.log_time_ns, m.message.data) for m in log.messages_on("/drive/displacement")] for log in logs]
+    assert times[0] == times[1] == [(0, 1.0e-6), (4_000_000, 1.8e-6), (7_000_000, 0.3e-6)]
+
+
+# ------------------------------------------------------------------------------ recording
+def test_realtime_run_records_what_it_publishes_and_kill_9_leaves_readable_chunks(tmp_path, domain, peer):
+    custom = tmp_path / "my_stage.yaml"
+    custom.write_text(Path(load_mechanism.__code__.co_filename).parent.parent.joinpath(
+        "config", "microstage.yaml").read_text())
+    node = start(tmp_path, domain, peer, mechanism=str(custom), time_mode="realtime", sim_step=5e-4,
+                 publish_rate=200.0, record=True, record_path="rt.mcap")
+    try:
+        peer.subscribe("/bodies/poses", PoseArray, depth=10000)
+        peer.subscribe("/diagnostics", DiagnosticArray)
+        peer.wait_for_publishers(["/bodies/poses"])
+        t0 = time.monotonic()
+        peer.spin_until(lambda: len(peer.received["/diagnostics"]) >= 25, 20, "2.5 s of diagnostics")
+        wall = time.monotonic() - t0
+        d = latest_diagnostics(peer)
+    finally:
+        stop_cleanly(node)
+    # Real time: simulated time keeps pace with the wall clock.
+    assert float(d["real_time_factor"]) == pytest.approx(1.0, abs=0.1)
+    assert 0.8 * wall <= float(d["sim_time"])
+    assert int(d["missed_ticks"]) <= 0.05 * int(d["paced_ticks"])
+    log = read_log(node.cwd / "rt.mcap")
+    assert log.complete and log.metadata["flexure_sim"]["mechanism_path"] == str(custom.resolve())
+    recorded = {m.log_time_ns for m in log.messages_on("/bodies/poses")}
+    got = [stamp_ns(m) for m in peer.messages("/bodies/poses")]
+    # Everything received was recorded; the recording has nothing the subscriber missed between
+    # its first and last message (it may hold more before matching and in flight at the end).
+    assert set(got) <= recorded
+    assert sorted(t for t in recorded if got[0] <= t <= got[-1]) == got
+
+    # kill -9 of the node: its recorder process sees the pipe close and finishes the file.
+    node = NodeProcess(tmp_path / "killed", domain, dict(time_mode="realtime", sim_step=5e-4,
+                                                         publish_rate=200.0, record_path="k.mcap"))
+    peer.watch = node
+    path = node.cwd / "k.mcap"
+    peer.spin_until(lambda: path.exists() and path.stat().st_size > 200_000, 30, "a few chunks on disk")
+    (recorder,) = node.children()
+    peer.watch = None
+    node.kill()
+    peer.spin_until(lambda: not Path(f"/proc/{recorder}").exists(), 30, "the recorder to finish")
+    log = read_log(path)
+    assert log.complete and log.message_count > 1000
+
+    # kill -9 of node and recorder alike: the chunks already written are readable.
+    node = NodeProcess(tmp_path / "crashed", domain, dict(time_mode="realtime", sim_step=5e-4,
+                                                          publish_rate=200.0, record_path="c.mcap"))
+    peer.watch = node
+    path = node.cwd / "c.mcap"
+    peer.spin_until(lambda: path.exists() and path.stat().st_size > 200_000, 30, "a few chunks on disk")
+    peer.watch = None
+    for pid in node.children():
+        os.kill(pid, signal.SIGKILL)
+    node.kill()
+    with pytest.raises(CorruptLogError, match="recover=True"):
+        read_log(path)  # no summary: not complete
+    recovered = read_log(path, recover=True)
+    assert not recovered.complete and recovered.message_count > 1000
+    assert all(m.message is not None for m in recovered.messages)
+    # Independently: mcap's streaming reader decodes every message of the complete chunks.
+    from mcap.reader import NonSeekingReader
+    from mcap_ros2.decoder import DecoderFactory
+
+    decoded = 0
+    with open(path, "rb") as f:
+        reader = NonSeekingReader(f, decoder_factories=[DecoderFactory()])
+        try:
+            for _, _, _, msg in reader.iter_decoded_messages(log_time_order=False):
+                decoded += 1
+        except Exception:  # noqa: BLE001 - the file ends mid-chunk
+            pass
+    assert decoded == recovered.message_count
+    print(f"kill -9: {path.stat().st_size} bytes on disk, {decoded} messages recovered")
+
+
+def test_record_and_reset_services_close_complete_files(tmp_path, domain, peer):
+    node = start(tmp_path, domain, peer, time_mode="realtime", sim_step=5e-4, publish_rate=200.0,
+                 record=True, record_path="svc.mcap")
+    try:
+        peer.subscribe("/bodies/poses", PoseArray, depth=10000)
+        peer.wait_for_publishers(["/bodies/poses"])
+        peer.spin_until(lambda: len(peer.received["/bodies/poses"]) > 40, 10, "poses")
+        answer = peer.call(SetBool, "/stage_node/record", SetBool.Request(data=False))
+        assert answer.success and "svc.mcap" in answer.message
+        assert read_log(node.cwd / "svc.mcap").complete  # complete as soon as the service answers
+        answer = peer.call(SetBool, "/stage_node/record", SetBool.Request(data=False))
+        assert answer.success and answer.message == "not recording"
+        values = peer.call(GetParameters, "/stage_node/get_parameters",
+                           GetParameters.Request(names=["record"])).values
+        assert values[0].bool_value is False  # the parameter follows the service
+        answer = peer.call(SetBool, "/stage_node/record", SetBool.Request(data=True))
+        assert answer.success and "svc_1.mcap" in answer.message
+        peer.spin_for(0.5)
+        t_before = stamp_ns(peer.last("/bodies/poses"))
+        answer = peer.call(Trigger, "/stage_node/reset")
+        assert answer.success and "closed svc_1.mcap" in answer.message and "svc_2.mcap" in answer.message
+        assert read_log(node.cwd / "svc_1.mcap").complete
+        n = len(peer.received["/bodies/poses"])
+        peer.spin_until(lambda: len(peer.received["/bodies/poses"]) > n + 20, 10, "poses after reset")
+        after = [stamp_ns(m) for m in peer.messages("/bodies/poses")[n:]]
+        assert min(after) < t_before and min(after) <= 200_000_000  # time restarted at 0
+        answer = peer.call(Trigger, "/stage_node/step")
+        assert not answer.success and "lockstep" in answer.message
+    finally:
+        stop_cleanly(node)
+    log = read_log(node.cwd / "svc_2.mcap")
+    assert log.complete and log.metadata["flexure_sim"]["run"] == "1"
+    assert min(m.log_time_ns for m in log.messages_on("/bodies/poses")) == 5_000_000
+
+
+# ------------------------------------------------------------------------------ parameters
+def _set(peer: Peer, name: str, value) -> tuple[bool, str]:
+    msg = ParameterMsg(name=name)
+    if isinstance(value, bool):
+        msg.value = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=value)
+    elif isinstance(value, float):
+        msg.value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+    else:
+        msg.value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
+    answer = peer.call(SetParameters, "/stage_node/set_parameters", SetParameters.Request(parameters=[msg]))
+    result = answer.results[0]
+    return result.successful, result.reason
+
+
+def test_parameters_are_validated_with_reasons_and_applied_live(tmp_path, domain, peer):
+    node = start(tmp_path, domain, peer, time_mode="realtime", sim_step=5e-4, publish_rate=200.0, record=False)
+    try:
+        peer.subscribe("/diagnostics", DiagnosticArray)
+        peer.subscribe("/bodies/poses", PoseArray, depth=10000)
+        peer.wait_for_publishers(["/diagnostics"])
+        ok, reason = _set(peer, "publish_rate", 150.0)
+        assert not ok and "does not divide" in reason
+        ok, reason = _set(peer, "publish_rate", 20000.0)
+        assert not ok
+        ok, reason = _set(peer, "stroke_max", -1e-6)
+        assert not ok and "stroke_min" in reason
+        ok, reason = _set(peer, "slew_rate", 0.0)
+        assert not ok and "slew_rate" in reason
+        ok, reason = _set(peer, "time_mode", "fast")
+        assert not ok and "read-only" in reason.lower() or "read only" in reason.lower()
+        ok, reason = _set(peer, "publish_rate", 100.0)
+        assert ok, reason
+        ok, reason = _set(peer, "stroke_max", 1e-6)
+        assert ok, reason
+        n = len(peer.received["/bodies/poses"])
+        peer.spin_for(1.0)
+        stamps = [stamp_ns(m) for m in peer.messages("/bodies/poses")[n + 2:]]
+        assert {b - a for a, b in zip(stamps, stamps[1:])} == {10_000_000}  # 100 Hz now
+        drive = peer.publisher("/drive/displacement", Float64)
+        peer.wait_for_subscribers(drive)
+        drive.publish(Float64(data=1.5e-6))
+        peer.spin_for(0.5)
+        d = latest_diagnostics(peer)
+        assert d["publish_rate"] == "100.0" and d["steps_per_tick"] == "20"
+        assert d["commands_clamped"] == "1" and float(d["drive_target"]) == 1e-6
+    finally:
+        stop_cleanly(node)
+
+
+def test_invalid_startup_parameters_and_bad_mechanisms_stop_with_the_reason(tmp_path, domain):
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("name: broken\nbodies: [{name: body1, mass: -1, inertia: 1, pose: [0, 0, 0]}]\n"
+                      "hinges: []\nconstraints: []\n")
+    with pytest.raises(ConfigError) as loader:
+        load_mechanism(str(broken))
+    cases = {
+        "bad_file": (dict(mechanism=str(broken)), str(loader.value)),
+        "missing_file": (dict(mechanism=str(tmp_path / "nope.yaml")), "no such mechanism file"),
+        "unknown_builtin": (dict(mechanism="no_such_stage"), "no such built-in mechanism"),
+        "step": (dict(sim_step=3e-4), "does not divide"),
+        "zero_step": (dict(sim_step=0.0), "sim_step"),
+        "mode": (dict(time_mode="slow"), "time_mode"),
+        "range": (dict(publish_rate=20000.0), "publish_rate"),
+        "stroke": (dict(stroke_min=3e-6), "stroke_min"),
+    }
+    nodes = {name: NodeProcess(tmp_path / name, domain, params) for name, (params, _) in cases.items()}
+    for name, node in nodes.items():
+        rc = node.wait(60)
+        assert rc != 0, name
+        assert cases[name][1] in node.stderr, (name, node.stderr)
+        assert "Traceback" not in node.stderr, node.stderr
+        assert not node.recordings()
+
+
+def test_fourbar_runs_without_drive_topics(tmp_path, domain, peer):
+    node = start(tmp_path, domain, peer, mechanism="fourbar_mixed", time_mode="fast", sim_step=1e-4,
+                 publish_rate=1000.0, record=True, record_path="fb.mcap")
+    try:
+        peer.subscribe("/hinges/B/deflection", TransformStamped)
+        peer.subscribe("/bodies/poses", PoseArray)
+        peer.wait_for_publishers(["/hinges/B/deflection"])
+        peer.spin_until(lambda: len(peer.received["/hinges/B/deflection"]) > 50, 30, "deflections")
+        names = {name for name, _ in peer.node.get_topic_names_and_types()}
+        assert "/drive/input" not in names and "/output/displacement" not in names
+        assert peer.node.count_subscribers("/drive/displacement") == 0
+        d = peer.last("/hinges/B/deflection")
+        assert (d.header.frame_id, d.child_frame_id) == ("hinge_B_a", "hinge_B")
+        assert len(peer.last("/bodies/poses").poses) == 4
+    finally:
+        stop_cleanly(node)
+    log = read_log(node.cwd / "fb.mcap")
+    assert log.complete and "/bodies/link2/pose" in log.topics and "/drive/displacement" not in log.topics
