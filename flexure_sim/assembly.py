@@ -166,13 +166,21 @@ class Assembly:
 
         Uses the compiled kernel when every law is quadratic, else ``forces``.
         """
+        Q, _, _, energy, dissipation = self.report(z, v)
+        return Q, energy, dissipation
+
+    def report(self, z: np.ndarray, v: np.ndarray):
+        """Q, deflections r (n, 3), wrenches on body B (n, 3), total energy and dissipated
+        power (as in ``forces``), by the compiled kernel when every law is quadratic."""
         if self.compiled:
-            Q = np.empty(3 * self.n_bodies)
+            n = len(self.ia)
+            Q, r, wrench = np.empty(3 * self.n_bodies), np.empty((n, 3)), np.empty((n, 3))
             energy, dissipation = kernels.quadratic_forces(
-                z, v, self._ia, self._ib, self._ca, self._cb, self.phia, self.phib, self._kind, self._W, self._C, Q)
-            return Q, energy, dissipation
+                np.asarray(z, dtype=float), np.asarray(v, dtype=float), self._ia, self._ib, self._ca, self._cb,
+                self.phia, self.phib, self._kind, self._W, self._C, Q, r, wrench)
+            return Q, r, wrench, float(energy), float(dissipation)
         hf = self.forces(z, v)
-        return hf.Q, float(hf.energy.sum()), float(hf.dissipation.sum())
+        return hf.Q, hf.r, hf.wrench_b, float(hf.energy.sum()), float(hf.dissipation.sum())
 
     def forces(self, z: np.ndarray, v: np.ndarray, jacobian: bool = False) -> HingeForces:
         """Hinge forces at coordinates z and velocities v (both length 3 n_bodies)."""

@@ -45,8 +45,13 @@ def _half_cot(a):
 
 
 @njit(cache=True)
-def quadratic_forces(z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q):
-    """Fill Q (3 n_bodies) with the hinge forces at (z, v); return (energy, dissipation)."""
+def quadratic_forces(z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q, r_out, wrench_out):
+    """Fill Q (3 n_bodies) with the hinge forces at (z, v); return (energy, dissipation).
+
+    Also fills r_out (n, 3) with each hinge's deflection (alpha, p1, p2) and wrench_out (n, 3)
+    with the wrench it exerts on body B in frame b (-m_b, eqs. 3.53/4.35), as in
+    Assembly.forces.
+    """
     Q[:] = 0.0
     energy = 0.0
     dissipation = 0.0
@@ -133,6 +138,11 @@ def quadratic_forces(z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q):
         r0 = dv[0, 0] * t0 + dv[1, 0] * t1 + dv[2, 0] * t2
         r1 = dv[0, 1] * t0 + dv[1, 1] * t1 + dv[2, 1] * t2
         r2 = dv[0, 2] * t0 + dv[1, 2] * t1 + dv[2, 2] * t2
+        r_out[h, 0], r_out[h, 1], r_out[h, 2] = alpha, p1, p2
+        ca_, sa_ = math.cos(alpha), math.sin(alpha)
+        wrench_out[h, 0] = -r0
+        wrench_out[h, 1] = -(ca_ * r1 + sa_ * r2)
+        wrench_out[h, 2] = -(-sa_ * r1 + ca_ * r2)
         for j in range(3):
             Q[A + j] -= dr[0, j] * r0 + dr[1, j] * r1 + dr[2, j] * r2
             Q[B + j] -= dr[0, 3 + j] * r0 + dr[1, 3 + j] * r1 + dr[2, 3 + j] * r2

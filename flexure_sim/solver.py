@@ -501,17 +501,15 @@ class Simulation:
     def snapshot(self, state: Optional[State] = None) -> Snapshot:
         """Everything the simulation reports, at ``state`` (default: the current state)."""
         s = state or self.state
-        hf = self.assembly.forces(s.z, s.v)
+        Q, deflections, wrenches, energy, _ = self.assembly.report(s.z, s.v)
         _, _, aP = self._prescribed(s.t, s.u, s.command)
-        lam = self.mass[self.part.prescribed] * aP - hf.Q[self.part.prescribed]  # constraint forces
+        lam = self.mass[self.part.prescribed] * aP - Q[self.part.prescribed]  # constraint forces
         mech = self.mechanism
         nb = len(mech.bodies)
         drive_force = 0.0
         compression = None
         if self.drive:
-            i = mech.body_index(self.drive.body)
-            idx = {k: j for j, k in enumerate(self.part.prescribed)}
-            drive_force = float(lam[idx[3 * i]] * self.drive.axis[0] + lam[idx[3 * i + 1]] * self.drive.axis[1])
+            drive_force = float(lam @ self.part.du)  # along the drive axis
             if mech.compression_hinge is not None:
                 compression = self.frame_displacement_difference(mech.compression_hinge, s.z) @ np.array(self.drive.axis)
         output = None
@@ -522,15 +520,15 @@ class Simulation:
             t=s.t,
             poses=s.z.reshape(nb, 3).copy(),
             velocities=s.v.reshape(nb, 3).copy(),
-            deflections=hf.r.copy(),
-            wrenches=hf.wrench_b.copy(),
+            deflections=deflections,
+            wrenches=wrenches,
             drive_input=s.u,
             drive_command=s.command,
             drive_force=drive_force,
             output=output,
             compression=compression,
             kinetic_energy=float(0.5 * np.sum(self.mass * s.v**2)),
-            potential_energy=float(hf.energy.sum()),
+            potential_energy=energy,
             dissipated=s.dissipated,
             drive_work=s.drive_work,
         )

@@ -66,7 +66,9 @@ def kernel_rhs(y, t, command, args):
         z[prescribed[i]] = zP[i]
         v[prescribed[i]] = vP[i]
     Q = np.empty(N)
-    _, dissipation = quadratic_forces(z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q)
+    n = ia.shape[0]
+    _, dissipation = quadratic_forces(z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q, np.empty((n, 3)),
+                                      np.empty((n, 3)))
     F = np.empty_like(y)
     for i in range(nF):
         F[i] = y[nF + i]

@@ -220,3 +220,16 @@ def test_static_sweep_agrees_with_single_solves(stage):
     # Nearly linear: the gain varies by less than 1e-3 over the stroke.
     gains = sweep.outputs[1:] / levels[1:]
     assert np.ptp(gains) / gains.mean() < 1e-3
+
+
+@pytest.mark.parametrize("name", ["microstage", "fourbar_mixed"])
+def test_compiled_report_equals_the_reference_path(name):
+    """Deflections and wrenches the snapshot reports come from the compiled kernel."""
+    sim = Simulation(load_mechanism(name))
+    rng = np.random.default_rng(8)
+    z = sim.z0 + rng.normal(size=len(sim.z0)) * 1e-3
+    v = rng.normal(size=len(sim.z0)) * 1e-2
+    ref = sim.assembly.forces(z, v)
+    Q, r, wrench, energy, dissipation = sim.assembly.report(z, v)
+    assert r == pytest.approx(ref.r, rel=1e-12, abs=1e-15)
+    assert wrench == pytest.approx(ref.wrench_b, rel=1e-10, abs=1e-12 * np.abs(ref.wrench_b).max())
