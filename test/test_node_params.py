@@ -81,6 +81,10 @@ def test_pacer_uses_absolute_deadlines_so_jitter_does_not_accumulate():
     assert clock.t == pytest.approx(100.0 + 1.0 + 320e-6, abs=1e-9)
     assert pacer.stats.missed == 0 and pacer.stats.ticks == 1000
     assert pacer.stats.max_late_s == pytest.approx(20e-6)
+    # Every tick started 20 us late (the fake sleep's overshoot): p50 = p99 = the 21 us bin edge.
+    assert pacer.stats.late_percentile(0.5) == pytest.approx(21e-6)
+    assert pacer.stats.late_percentile(0.99) == pytest.approx(21e-6)
+    assert sum(pacer.stats.late_histogram) == 1000
 
 
 def test_pacer_counts_overruns_catches_up_and_slips_when_far_behind():

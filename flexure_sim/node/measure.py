@@ -153,14 +153,16 @@ def run_node(
         paced = delta("paced_ticks")
         result.update(missed_ticks=int(delta("missed_ticks")), paced_ticks=int(paced),
                       missed_fraction=delta("missed_ticks") / paced if paced else None,
-                      slips=int(delta("slips")), max_late_us=float(b["max_late_us"]))
+                      slips=int(delta("slips")), max_late_us=float(b["max_late_us"]),
+                      jitter_p50_s=1e-6 * float(b.get("jitter_p50_us", "nan")),
+                      jitter_p99_s=1e-6 * float(b.get("jitter_p99_us", "nan")))
     if subscribe:
         result["messages_received_per_s"] = (received["count"] - received_start) / duration
     if record:
         from ..recording import read_log
 
         path = workdir / "measure.mcap"
-        log = read_log(path)
+        log = read_log(path, decode=False)  # ~1e6 messages: check them, keep no decoded objects
         result.update(recording_complete=log.complete, recorded_messages=log.message_count,
                       recording_bytes=path.stat().st_size,
                       recording_dropped=int((log.bag_metadata or {}).get("custom_data", {})

@@ -13,8 +13,12 @@ are counted (simulated time then runs behind wall time by that much).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
+
+#: Lateness histogram: 1 us bins up to 20 ms, the last bin collects anything later.
+_BIN_S = 1e-6
+_BINS = 20_000
 
 
 @dataclass
@@ -27,6 +31,25 @@ class PacingStats:
     slips: int = 0
     skipped: int = 0
     max_late_s: float = 0.0
+    late_histogram: list[int] = field(default_factory=lambda: [0] * (_BINS + 1))
+
+    def observe(self, late: float) -> None:
+        """Count one tick's start lateness (s) in the histogram."""
+        self.late_histogram[min(int(max(late, 0.0) / _BIN_S), _BINS)] += 1
+        if late > self.max_late_s:
+            self.max_late_s = late
+
+    def late_percentile(self, q: float) -> float:
+        """Start lateness (s) below which a fraction q of the ticks started (bin upper edge)."""
+        total = sum(self.late_histogram)
+        if total == 0:
+            return 0.0
+        target, seen = q * total, 0
+        for i, count in enumerate(self.late_histogram):
+            seen += count
+            if seen >= target:
+                return (i + 1) * _BIN_S
+        return (_BINS + 1) * _BIN_S
 
 
 class Pacer:
@@ -86,9 +109,7 @@ class Pacer:
                 clock = self._clock
                 while clock() < deadline:
                     pass
-            late = self._clock() - deadline  # the sleep's overshoot
-            if late > self.stats.max_late_s:
-                self.stats.max_late_s = late
+            self.stats.observe(self._clock() - deadline)  # the sleep's overshoot
             return deadline
         late = now - deadline
         if late > self.max_lag_s:
@@ -96,9 +117,9 @@ class Pacer:
             self.stats.slips += 1
             self.stats.skipped += skipped
             self._t0 = now - self._k * self.period
+            self.stats.observe(late)
             return now
-        if late > self.stats.max_late_s:
-            self.stats.max_late_s = late
+        self.stats.observe(late)
         return deadline
 
     def done(self) -> bool:

@@ -688,6 +688,8 @@ class StageNode(Node):
                 ("slips", pacer.stats.slips),
                 ("skipped_ticks", pacer.stats.skipped),
                 ("max_late_us", 1e6 * pacer.stats.max_late_s),
+                ("jitter_p50_us", 1e6 * pacer.stats.late_percentile(0.5)),
+                ("jitter_p99_us", 1e6 * pacer.stats.late_percentile(0.99)),
             ]
         values += [(f"commands_{k}", v) for k, v in counters.items()]
         if self.filter is not None:

@@ -1,6 +1,6 @@
 """Registry of the ``flexure-sim`` subcommands that live in the tools package.
 
-Each tool module defines ``register(subparsers)``, which adds its subparser and sets
+Each module (named relative to the flexure_sim package) defines ``register(subparsers)``, which adds its subparser and sets
 ``handler=<function(args) -> exit code>`` with ``set_defaults``. Add one line per module.
 """
 from __future__ import annotations
@@ -9,16 +9,17 @@ import importlib
 
 #: Tool modules, in the order their commands appear in ``flexure-sim --help``.
 TOOL_MODULES: tuple[str, ...] = (
-    "fit",
-    "info",
-    "analyse",
-    "plot",
-    "export",
-    "replay",
+    "tools.fit",
+    "tools.info",
+    "tools.analyse",
+    "tools.plot",
+    "tools.export",
+    "tools.replay",
+    "bench",
 )
 
 
 def register(subparsers) -> None:
     """Add every tool's subcommand to the ``flexure-sim`` parser."""
     for name in TOOL_MODULES:
-        importlib.import_module(f"flexure_sim.tools.{name}").register(subparsers)
+        importlib.import_module(f"flexure_sim.{name}").register(subparsers)
