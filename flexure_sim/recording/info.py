@@ -14,14 +14,14 @@ from typing import Any
 
 from .bag_metadata import METADATA_RECORD_KEY, METADATA_RECORD_NAME, parse_serialized_metadata
 from .errors import CorruptLogError
-from .reader import TopicInfo, check_profile, corrupt, metadata_records, read_log, topic_infos
+from .reader import TopicInfo, TopicTable, check_profile, corrupt, metadata_records, read_log, topic_infos
 from .scan import read_summary, scan_file
 
 RECORD_NAME = "flexure_sim"
 
 
 @dataclass(frozen=True)
-class LogInfo:
+class LogInfo(TopicTable):
     """Summary of a log; times in ns (``start_ns``/``end_ns`` are first/last log times).
 
     ``metadata``: last Metadata record of each name; ``metadata_records``: all, in file order.
@@ -45,14 +45,6 @@ class LogInfo:
     @property
     def duration_ns(self) -> int:
         return self.end_ns - self.start_ns if self.message_count else 0
-
-    @property
-    def types(self) -> dict[str, str]:
-        return {name: t.type for name, t in self.topics.items()}
-
-    @property
-    def counts(self) -> dict[str, int]:
-        return {name: t.message_count for name, t in self.topics.items()}
 
     @property
     def flexure_sim(self) -> dict[str, str]:

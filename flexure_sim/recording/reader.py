@@ -50,8 +50,22 @@ class LogMessage:
     message: Any = None
 
 
+class TopicTable:
+    """Per-topic views of a ``topics`` mapping of TopicInfo (shared by McapLog and LogInfo)."""
+
+    topics: dict[str, TopicInfo]
+
+    @property
+    def types(self) -> dict[str, str]:
+        return {name: t.type for name, t in self.topics.items()}
+
+    @property
+    def counts(self) -> dict[str, int]:
+        return {name: t.message_count for name, t in self.topics.items()}
+
+
 @dataclass(frozen=True)
-class McapLog:
+class McapLog(TopicTable):
     """Contents of a log; ``complete`` is False for a recovered prefix, explained in ``note``.
 
     ``metadata`` maps each Metadata record name to its last record; ``metadata_records`` holds
@@ -69,14 +83,6 @@ class McapLog:
     note: str = ""
     chunk_count: int = 0
     metadata_records: tuple[tuple[str, dict[str, str]], ...] = ()
-
-    @property
-    def types(self) -> dict[str, str]:
-        return {name: t.type for name, t in self.topics.items()}
-
-    @property
-    def counts(self) -> dict[str, int]:
-        return {name: t.message_count for name, t in self.topics.items()}
 
     @property
     def message_count(self) -> int:
