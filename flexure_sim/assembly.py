@@ -21,7 +21,7 @@ import numpy as np
 
 from . import kernels
 from .hinge_laws import LawBatch, QuadraticLaw, wrench_on_element
-from .kinematics import J, rot
+from .kinematics import J
 from .mechanism import Mechanism
 
 
@@ -202,7 +202,6 @@ class Assembly:
                 hess[idx], Cr[idx], fdamp_dr[idx] = ev.hess, ev.damping, ev.damping_force_dr
         total = grad + fdamp
         q_local = -np.einsum("nki,nk->ni", dr, total)  # (n, 6)
-        N = 3 * self.n_bodies
         Q = self._scatter_flat @ q_local.ravel()
         dQ_dz = dQ_dv = None
         if jacobian:

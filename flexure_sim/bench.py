@@ -107,7 +107,6 @@ def _radau_baseline(mech, dt: float, n: int, ref: np.ndarray) -> dict:
     sim = Simulation(mech, dt=dt)
     sim.set_command(U_STEP)
     y0 = sim._pack(sim.state)
-    nF = len(sim.part.free)
     # atol: 1e-8 of each component's scale of motion in this run.
     scale = np.concatenate([np.where(sim.part.free % 3 == 2, 1e-3, 1e-5), np.where(sim.part.free % 3 == 2, 1.0, 1e-2)])
     if sim.drive is not None:
