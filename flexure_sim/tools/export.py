@@ -20,7 +20,7 @@ import csv
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
-from .runlog import EXIT_OK, RunError, check_path, open_log, report_recovered, tool_errors
+from .runlog import EXIT_OK, RunError, add_file_arguments, check_path, open_log, report_recovered, tool_errors
 
 PROG = "flexure-sim export"
 
@@ -28,11 +28,9 @@ PROG = "flexure-sim export"
 def register(subparsers: Any) -> None:
     p = subparsers.add_parser("export", help="one CSV per topic (time column in seconds, flattened fields)",
                               description=__doc__.split("\n\n")[0].replace("``", ""))
-    p.add_argument("run", metavar="RUN.mcap", help="MCAP file recorded by stage_node (or ros2 bag record)")
+    add_file_arguments(p, namespace=False)
     p.add_argument("--csv", metavar="DIR", required=True, help="directory for the CSV files (created)")
     p.add_argument("--topics", nargs="+", metavar="TOPIC", help="export only these topics")
-    p.add_argument("--recover", action="store_true",
-                   help="export the readable part of a truncated or damaged file instead of failing")
     p.set_defaults(handler=run)
 
 

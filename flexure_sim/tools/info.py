@@ -16,6 +16,7 @@ from .runlog import (
     EXIT_OK,
     METADATA_NAME,
     PARAMETER_CHANGE_NAME,
+    add_file_arguments,
     check_path,
     columns,
     report_recovered,
@@ -38,11 +39,9 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "info", help="topics, counts, duration, mechanism and parameters of a recorded run",
         description=__doc__.split("\n\n")[0].replace("``", ""))
-    p.add_argument("run", metavar="RUN.mcap", help="MCAP file recorded by stage_node (or ros2 bag record)")
+    add_file_arguments(p, namespace=False)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--yaml", action="store_true", help="also print the recorded mechanism YAML")
-    p.add_argument("--recover", action="store_true",
-                   help="summarise the readable part of a truncated or damaged file instead of failing")
     p.set_defaults(handler=run)
 
 
