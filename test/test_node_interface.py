@@ -8,14 +8,21 @@ import math
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseStamped, TransformStamped, WrenchStamped
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from flexure_sim.config import load_mechanism, mechanism_from_dict
-from flexure_sim.node.cdr import StampedPacker, split_stamp
-from flexure_sim.node.interface import StageInterface, check_names, yaw_quaternion
+from flexure_sim.node.cdr import StampedPacker, pack_diagnostics, split_stamp
+from flexure_sim.node.interface import (
+    StageInterface,
+    check_names,
+    diagnostics_message,
+    encode_diagnostics,
+    yaw_quaternion,
+)
 from flexure_sim.solver import Simulation
 
 STAMPS = [0, 1, 999_999_999, 1_000_000_000, 1_234_567_891_011, 2**31 * 1_000_000_000 - 1]
@@ -143,3 +150,26 @@ def test_clashing_frame_names_are_refused():
     with pytest.raises(ValueError, match="clashes with the root frame"):
         check_names(clash)
     check_names(mech)
+
+
+@pytest.mark.parametrize("level", [0, 1, 2, 3])
+def test_packed_diagnostics_equal_serialize_message_outside_padding(level):
+    # Names and values of 0..5 bytes (and a 2-byte UTF-8 character) walk every alignment.
+    for shift in range(6):
+        values = [(f"k{'x' * ((shift + i) % 5)}", 1.5 * i if i % 2 else "é" * (i % 3)) for i in range(9)]
+        values += [("flag", True), ("count", 7), ("empty", "")]
+        args = (1_234_567_891_011 + shift, "n" * shift, "hw" * shift, level, "m" * (5 - shift), values)
+        msg = diagnostics_message(*args)
+        expected = serialize_message(msg)
+        data = encode_diagnostics(*args)
+        padding: list[int] = []
+        sec, nsec = split_stamp(args[0])
+        again = pack_diagnostics(sec, nsec, level, args[1], args[4], args[2],
+                                 [(kv.key, kv.value) for kv in msg.status[0].values], padding=padding)
+        assert again == data
+        mask = set(padding)
+        assert len(data) == len(expected)
+        assert all(data[i] == 0 for i in mask)
+        assert [b for i, b in enumerate(data) if i not in mask] == \
+            [b for i, b in enumerate(expected) if i not in mask]
+        assert deserialize_message(data, DiagnosticArray) == msg

@@ -3,7 +3,7 @@ import datetime as dt
 
 import pytest
 
-from flexure_sim.node.pacing import Pacer
+from flexure_sim.node.pacing import Pacer, PacingStats
 from flexure_sim.node.params import parameter_specs, steps_per_tick, validate
 from flexure_sim.node.session import recording_path
 
@@ -85,6 +85,22 @@ def test_pacer_uses_absolute_deadlines_so_jitter_does_not_accumulate():
     assert pacer.stats.late_percentile(0.5) == pytest.approx(21e-6)
     assert pacer.stats.late_percentile(0.99) == pytest.approx(21e-6)
     assert sum(pacer.stats.late_histogram) == 1000
+
+
+def test_lateness_percentiles_split_a_mixed_distribution_at_the_right_bins():
+    stats = PacingStats()
+    for _ in range(97):
+        stats.observe(5.5e-6)
+    stats.observe(3.0005e-3)
+    stats.observe(-1e-6)  # early counts as on time
+    stats.observe(1.0)  # beyond the histogram: the last bin
+    assert stats.observed == 100 and stats.late_histogram.sum() == 100
+    assert stats.late_percentile(0.5) == pytest.approx(6e-6)
+    assert stats.late_percentile(0.98) == pytest.approx(6e-6)
+    assert stats.late_percentile(0.99) == pytest.approx(3.001e-3)
+    assert stats.late_percentile(1.0) == pytest.approx(20.001e-3)
+    assert stats.max_late_s == 1.0
+    assert PacingStats().late_percentile(0.99) == 0.0
 
 
 def test_pacer_counts_overruns_catches_up_and_slips_when_far_behind():

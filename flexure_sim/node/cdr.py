@@ -129,6 +129,62 @@ class ClockPacker:
         return self._pack(CDR_LE, sec, nanosec)
 
 
+_U32 = struct.Struct("<I")
+_TIME = struct.Struct("<iI")
+
+
+def _align4(out: bytearray, padding: list[int] | None) -> None:
+    """Pad ``out`` (whose first 4 bytes are the encapsulation header, so alignment modulo 4
+    is unchanged by it) to a multiple of 4 bytes with zeros."""
+    pad = (-len(out)) % 4
+    if pad:
+        if padding is not None:
+            padding.extend(range(len(out), len(out) + pad))
+        out += bytes(pad)
+
+
+def _put_string(out: bytearray, text: str, padding: list[int] | None) -> None:
+    """Append a CDR string: aligned uint32 length (NUL included), the bytes, the NUL."""
+    _align4(out, padding)
+    data = text.encode("utf-8")
+    out += _U32.pack(len(data) + 1)
+    out += data
+    out += b"\x00"
+
+
+def pack_diagnostics(
+    sec: int,
+    nanosec: int,
+    level: int,
+    name: str,
+    message: str,
+    hardware_id: str,
+    values: Sequence[tuple[str, str]],
+    *,
+    frame_id: str = "",
+    padding: list[int] | None = None,
+) -> bytes:
+    """diagnostic_msgs/DiagnosticArray holding one DiagnosticStatus with ``values`` as its
+    KeyValue pairs (strings). serialize_message needs ~300 us for the node's ~50 values, a
+    third of a 1 kHz tick; this takes ~30 us. ``padding``, if given, receives the offsets
+    of the padding bytes written (for comparison with serialize_message)."""
+    out = bytearray(CDR_LE)
+    out += _TIME.pack(sec, nanosec)
+    _put_string(out, frame_id, padding)
+    _align4(out, padding)
+    out += _U32.pack(1)  # status: one element
+    out.append(level)  # byte
+    _put_string(out, name, padding)
+    _put_string(out, message, padding)
+    _put_string(out, hardware_id, padding)
+    _align4(out, padding)
+    out += _U32.pack(len(values))
+    for key, value in values:
+        _put_string(out, key, padding)
+        _put_string(out, value, padding)
+    return bytes(out)
+
+
 def split_stamp(stamp_ns: int) -> tuple[int, int]:
     """Nanoseconds -> (sec, nanosec) as in builtin_interfaces/Time (stamp_ns >= 0)."""
     return divmod(stamp_ns, 1_000_000_000)

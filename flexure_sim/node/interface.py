@@ -25,7 +25,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from ..mechanism import Mechanism
-from .cdr import ClockPacker, Float64Packer, StampedPacker, split_stamp
+from .cdr import ClockPacker, Float64Packer, StampedPacker, pack_diagnostics, split_stamp
 
 ROOT_FRAME = "stage"
 TIME_MODES = ("realtime", "fast", "lockstep")
@@ -294,6 +294,20 @@ def stamp_msg(stamp_ns: int) -> Time:
     return Time(sec=sec, nanosec=nsec)
 
 
+def encode_diagnostics(
+    stamp_ns: int,
+    name: str,
+    hardware_id: str,
+    level: int,
+    message: str,
+    values: Sequence[tuple[str, Any]],
+) -> bytes:
+    """CDR of `diagnostics_message` with the same arguments, packed by `cdr.pack_diagnostics`."""
+    sec, nsec = split_stamp(stamp_ns)
+    return pack_diagnostics(sec, nsec, level, name, message, hardware_id,
+                            [(k, _fmt(v)) for k, v in values])
+
+
 def diagnostics_message(
     stamp_ns: int,
     name: str,
@@ -303,7 +317,7 @@ def diagnostics_message(
     values: Sequence[tuple[str, Any]],
 ) -> DiagnosticArray:
     """One DiagnosticStatus in a DiagnosticArray; values are formatted with str()
-    (floats with repr precision)."""
+    (floats with repr precision). The reference for `encode_diagnostics`."""
     status = DiagnosticStatus()
     status.level = bytes([level])
     status.name = name

@@ -34,7 +34,6 @@ from rclpy.exceptions import InvalidHandle, ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.serialization import serialize_message
 from rclpy.signals import SignalHandlerOptions
 from std_srvs.srv import SetBool, Trigger
 
@@ -681,6 +680,7 @@ class StageNode(Node):
             ("engine_steps", stats.steps),
         ]
         if pacer is not None:
+            p50, p99 = pacer.stats.late_percentiles(0.5, 0.99)
             values += [
                 ("missed_ticks", pacer.stats.missed),
                 ("missed_ticks_window", missed_window),
@@ -688,8 +688,8 @@ class StageNode(Node):
                 ("slips", pacer.stats.slips),
                 ("skipped_ticks", pacer.stats.skipped),
                 ("max_late_us", 1e6 * pacer.stats.max_late_s),
-                ("jitter_p50_us", 1e6 * pacer.stats.late_percentile(0.5)),
-                ("jitter_p99_us", 1e6 * pacer.stats.late_percentile(0.99)),
+                ("jitter_p50_us", 1e6 * p50),
+                ("jitter_p99_us", 1e6 * p99),
             ]
         values += [(f"commands_{k}", v) for k, v in counters.items()]
         if self.filter is not None:
@@ -700,10 +700,9 @@ class StageNode(Node):
             ("recorded_messages", rec.accepted_count if rec is not None else 0),
             ("recording_dropped", rec.dropped_count if rec is not None else 0),
         ]
-        msg = itf.diagnostics_message(
+        payload = itf.encode_diagnostics(
             stamp, f"{self.get_name()}: simulation", self.mechanism.name, level,
             "; ".join(notes) if notes else "running", values)
-        payload = serialize_message(msg)
         if rec is not None:
             try:
                 rec.write_batch(((self._diag_channel, payload),), stamp)
