@@ -53,6 +53,8 @@ MAX_BACKLOG = 64 << 20
 #: How long open/close wait for the child's answer.
 ANSWER_TIMEOUT_S = 60.0
 _F_SETPIPE_SZ = 1031
+#: Niceness the recorder process adds to its own (lower priority than the node's).
+RECORDER_NICE = 10
 
 
 class RecorderProcess:
@@ -219,9 +221,21 @@ class ProcessRecording:
 
 
 # ============================================================================ child
+def _lower_priority() -> None:
+    """Let the node's paced thread take a shared core from the recorder as soon as it wakes.
+    The recorder works in bursts (a compressed chunk every few hundred ms) that, at equal
+    priority, the scheduler may let finish first: a late tick. The pipe and the backlog
+    absorb the recorder's delay instead."""
+    try:
+        os.nice(RECORDER_NICE)
+    except OSError:
+        pass
+
+
 def _child(stdin: BinaryIO, stdout: BinaryIO) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, signal.SIG_IGN)
+    _lower_priority()
     recorder: Optional[McapRecorder] = None
     names: list[str] = []
 
