@@ -46,6 +46,8 @@ def test_steps_per_tick(rate, step, n):
     (dict(stroke_max=float("inf")), "stroke_max"),
     (dict(record_dir=""), "record_dir"),
     (dict(mechanism=" "), "mechanism"),
+    (dict(wake_spin=-1e-4), "wake_spin"),
+    (dict(wake_spin=float("nan")), "wake_spin"),
 ])
 def test_invalid_values_are_refused_with_the_reason(changes, word):
     values = {**defaults(), **changes}

@@ -195,13 +195,11 @@ def test_bad_commands_are_rejected_clamped_rate_limited_and_counted_and_a_flood_
         assert node.alive()
         received = int(d["commands_received"]) - int(before["commands_received"])
         rejected = int(d["commands_rejected"]) - int(before["commands_rejected"])
-        dropped = int(d["commands_dropped"])
         assert sent >= 9000
-        # The reader keeps the last 100 commands (10 ms of flood); what a busy machine's executor
-        # cannot take in time is lost there (newest commands win), never queued without bound.
-        assert 0.75 * sent <= received <= sent, (received, sent)
-        assert 0.5 * nan_sent <= rejected <= nan_sent
-        assert dropped == 0
+        # The stepping thread empties the reader (1000 deep: 100 ms of flood) every 5 ms tick:
+        # every command arrives, none is lost to the reader's history.
+        assert received == sent, (received, sent)
+        assert rejected == nan_sent
         # Stepping went on during the flood: every diagnostics window (20 ticks) advanced, and
         # simulated time stayed close to the wall clock (missed ticks are caught up).
         n_before = next(i for i, m in enumerate(peer.messages("/diagnostics"))
@@ -524,9 +522,13 @@ def test_parameters_are_validated_with_reasons_and_applied_live(tmp_path, domain
         assert not ok and "slew_rate" in reason
         ok, reason = _set(peer, "time_mode", "fast")
         assert not ok and "read-only" in reason.lower() or "read only" in reason.lower()
+        ok, reason = _set(peer, "wake_spin", -1e-3)
+        assert not ok and "wake_spin" in reason
         ok, reason = _set(peer, "publish_rate", 100.0)
         assert ok, reason
         ok, reason = _set(peer, "stroke_max", 1e-6)
+        assert ok, reason
+        ok, reason = _set(peer, "wake_spin", 2e-3)
         assert ok, reason
         n = len(peer.received["/bodies/poses"])
         peer.spin_for(1.0)
@@ -538,6 +540,7 @@ def test_parameters_are_validated_with_reasons_and_applied_live(tmp_path, domain
         peer.spin_for(0.5)
         d = latest_diagnostics(peer)
         assert d["publish_rate"] == "100.0" and d["steps_per_tick"] == "20"
+        assert float(d["wake_spin_us"]) == pytest.approx(2000.0)
         assert d["commands_clamped"] == "1" and float(d["drive_target"]) == 1e-6
     finally:
         stop_cleanly(node)

@@ -34,23 +34,28 @@ CLOCK_MODES = ("fast", "lockstep")
 DRIVE_COMMAND_TOPIC = "drive/displacement"
 DIAGNOSTICS_TOPIC = "diagnostics"
 CLOCK_TOPIC = "/clock"
-#: Depth of every stream and of the command subscription.
+#: Depth of every published stream.
 QUEUE_DEPTH = 100
+#: Depth of the drive command subscription (commands waiting for the next tick).
+COMMAND_DEPTH = 1000
+
+
+def _reliable_volatile(depth: int) -> QoSProfile:
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
 
 def stream_qos() -> QoSProfile:
-    """QoS of every published topic: reliable, keep last 100, volatile."""
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=QUEUE_DEPTH,
-        reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.VOLATILE,
-    )
+    """QoS of every published topic: reliable, keep last `QUEUE_DEPTH`, volatile."""
+    return _reliable_volatile(QUEUE_DEPTH)
 
 
 def command_qos() -> QoSProfile:
-    """QoS of the drive command subscription: reliable, keep last 100, volatile."""
-    return stream_qos()
+    """QoS of the drive command subscription: reliable, keep last `COMMAND_DEPTH`, volatile.
+
+    The reader is emptied once per tick (`polled`), so it must hold a tick's worth of
+    commands: 1000 is a 1 MHz stream at 1 kHz ticks, or 200 ms of a 5 kHz stream at 5 Hz."""
+    return _reliable_volatile(COMMAND_DEPTH)
 
 
 def hinge_frame(hinge: str) -> str:

@@ -36,6 +36,15 @@ def _diag_values(msg: Any) -> dict[str, str]:
     return {kv.key: kv.value for kv in msg.status[0].values}
 
 
+def _cpu_seconds(pid: int) -> Optional[float]:
+    """CPU time (user + system, s) of a running process, from /proc (None without /proc)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def run_node(
     mode: str,
     duration: float,
@@ -47,10 +56,12 @@ def run_node(
     mechanism: str = "microstage",
     domain_id: Optional[int] = None,
     keep_dir: Optional[Path] = None,
+    params: Optional[dict[str, str]] = None,
 ) -> dict[str, Any]:
     """Run the node in ``mode`` for warm-up + ``duration`` seconds and return the figures.
 
-    The node runs in ``keep_dir`` (kept) or in a temporary directory (removed afterwards)."""
+    ``params``: further node parameters (name -> value as on the command line). The node
+    runs in ``keep_dir`` (kept) or in a temporary directory (removed afterwards)."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.context import Context
@@ -67,10 +78,11 @@ def run_node(
                ROS_LOG_DIR=str(workdir / "ros_log"), PYTHONUNBUFFERED="1")
     root = str(Path(__file__).resolve().parents[2])
     env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    params = {"mechanism": mechanism, "time_mode": mode, "publish_rate": float(rate),
-              "sim_step": float(sim_step), "record": record, "record_path": "measure.mcap"}
+    node_params: dict[str, Any] = {
+        "mechanism": mechanism, "time_mode": mode, "publish_rate": float(rate),
+        "sim_step": float(sim_step), "record": record, "record_path": "measure.mcap", **(params or {})}
     args = [sys.executable, "-m", "flexure_sim.node.stage_node", "--ros-args"]
-    for name, value in params.items():
+    for name, value in node_params.items():
         text = ("true" if value else "false") if isinstance(value, bool) else str(value)
         args += ["-p", f"{name}:={text}"]
     stderr = open(workdir / "node.stderr", "wb")  # noqa: SIM115
@@ -106,10 +118,12 @@ def run_node(
             executor.spin_once(timeout_sec=0.05)
         first = len(samples)
         received_start = received["count"]
+        cpu_start, cpu_wall_start = _cpu_seconds(proc.pid), time.monotonic()
         end_at = time.monotonic() + duration
         while time.monotonic() < end_at:
             executor.spin_once(timeout_sec=0.05)
         window = samples[first - 1:]
+        cpu_end, cpu_wall_end = _cpu_seconds(proc.pid), time.monotonic()
     finally:
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
@@ -135,6 +149,7 @@ def run_node(
         "mode": mode, "mechanism": mechanism, "publish_rate": rate, "sim_step": sim_step,
         "steps_per_tick": int(b["steps_per_tick"]), "record": record,
         "subscribed": ("all" if subscribe is True else ",".join(subscribe)) if subscribe else "",
+        "params": dict(params or {}),
         "wall_s": w1 - w0, "sim_s": sim,
         "real_time_factor": sim / (w1 - w0),
         "ticks": int(delta("ticks")),
@@ -147,6 +162,9 @@ def run_node(
         "solver_iterations_per_step": delta("solver_iterations") / max(delta("engine_steps"), 1),
         "linearizations": int(delta("linearizations")),
         "topics_per_tick": None,
+        # CPU time of the node process (all its threads, not the recorder) per wall second.
+        "node_cpu_cores": ((cpu_end - cpu_start) / (cpu_wall_end - cpu_wall_start)
+                           if cpu_start is not None and cpu_end is not None else None),
         "exit_code": proc.returncode,
     }
     if "missed_ticks" in b:
@@ -155,7 +173,8 @@ def run_node(
                       missed_fraction=delta("missed_ticks") / paced if paced else None,
                       slips=int(delta("slips")), max_late_us=float(b["max_late_us"]),
                       jitter_p50_s=1e-6 * float(b.get("jitter_p50_us", "nan")),
-                      jitter_p99_s=1e-6 * float(b.get("jitter_p99_us", "nan")))
+                      jitter_p99_s=1e-6 * float(b.get("jitter_p99_us", "nan")),
+                      wake_spin_s=1e-6 * float(b.get("wake_spin_us", "nan")))
     if subscribe:
         result["messages_received_per_s"] = (received["count"] - received_start) / duration
     if record:
@@ -274,7 +293,8 @@ def profile(rate: float, sim_step: float, ticks: int = 300, mechanism: str = "mi
 def _print_run(r: dict[str, Any]) -> None:
     print(f"== {r['mode']} mode: {r['mechanism']}, {r['publish_rate']:g} Hz x {r['steps_per_tick']} steps of "
           f"{r['sim_step']:g} s, recording {'on' if r['record'] else 'off'}"
-          + (f", subscribed: {r['subscribed']}" if r["subscribed"] else ""))
+          + (f", subscribed: {r['subscribed']}" if r["subscribed"] else "")
+          + "".join(f", {k}:={v}" for k, v in r["params"].items()))
     print(f"   window {r['wall_s']:.1f} s wall, {r['sim_s']:.3f} s simulated, {r['ticks']} ticks")
     print(f"   real-time factor {r['real_time_factor']:.3f}")
     if r.get("paced_ticks"):
@@ -284,6 +304,8 @@ def _print_run(r: dict[str, Any]) -> None:
           f"{r['solver_iterations_per_step']:.2f} iterations/step), snapshot {r['snapshot_time_mean_us']:.0f} us, "
           f"pack+publish+record {r['publish_time_mean_us']:.0f} us; mean {r['tick_time_mean_us']:.0f} us, "
           f"max {r['tick_time_max_us']:.0f} us")
+    if r.get("node_cpu_cores") is not None:
+        print(f"   node process CPU: {r['node_cpu_cores']:.2f} cores")
     if r.get("messages_received_per_s") is not None:
         print(f"   subscriber received {r['messages_received_per_s']:.0f} messages/s")
     if r["record"]:
@@ -305,12 +327,20 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--subscribe", nargs="?", const="all", default="",
                         help="also subscribe (in this process) to every topic, or to a comma list "
                              "such as output/displacement,drive/force")
+    parser.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="a further node parameter, e.g. wake_spin:=0.001 (repeatable)")
     parser.add_argument("--domain-id", type=int, default=None)
     parser.add_argument("--keep", type=Path, default=None, metavar="DIR",
                         help="run the node in DIR and keep its recording and logs there")
     parser.add_argument("--profile", action="store_true", help="break one tick's cost down (no node)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
+    params: dict[str, str] = {}
+    for item in args.param:
+        name, sep, value = item.partition(":=")
+        if not sep or not name:
+            parser.error(f"--param: expected NAME:=VALUE, got {item!r}")
+        params[name] = value
     if args.profile:
         out = profile(args.rate, args.sim_step, mechanism=args.mechanism)
         if args.json:
@@ -326,7 +356,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                            else [t for t in args.subscribe.split(",") if t])
         r = run_node(mode, args.duration, args.rate, args.sim_step, not args.no_record, subscribe,
                      warmup=args.warmup, mechanism=args.mechanism, domain_id=args.domain_id,
-                     keep_dir=args.keep / mode if args.keep else None)
+                     keep_dir=args.keep / mode if args.keep else None, params=params)
         results.append(r)
         if not args.json:
             _print_run(r)

@@ -18,6 +18,8 @@ from .interface import TIME_MODES
 DIVISION_TOLERANCE = 1e-6
 MAX_PUBLISH_RATE = 10000.0
 MAX_SIM_STEP = 1e-2
+#: Default of ``wake_spin``: see its description (measured in BENCHMARKS.md).
+WAKE_SPIN_S = 1e-3
 
 
 @dataclass(frozen=True)
@@ -60,6 +62,11 @@ def parameter_specs(drive_defaults: Optional[tuple[float, float, float]] = None)
         ParamSpec("slew_rate", slew, float, "m/s", False, 0.0, None,
                   "Actuator speed limit (> 0): the commanded target moves towards each new "
                   "command at most this fast." + unused),
+        ParamSpec("wake_spin", WAKE_SPIN_S, float, "s", False, 0.0, 1.0,
+                  "Real-time mode: the last part of the wait for each tick that is busy-waited "
+                  "instead of slept (at most the publish period: then the stepping thread never "
+                  "sleeps). A sleeping core can take milliseconds to wake, above all on virtual "
+                  "machines, and the tick then starts late; spinning costs CPU time."),
         ParamSpec("record", True, bool, "", False, None, None,
                   "Record every published topic and the received drive commands to MCAP "
                   "(same as ~/record)."),
@@ -102,6 +109,9 @@ def validate(values: Mapping[str, Any]) -> Optional[str]:
     problem = limits_problem(values["stroke_min"], values["stroke_max"], values["slew_rate"])
     if problem:
         return problem
+    spin = values["wake_spin"]
+    if not (isinstance(spin, (int, float)) and math.isfinite(spin) and 0.0 <= spin <= 1.0):
+        return f"wake_spin: must be in [0, 1] s, got {spin!r}"
     if not isinstance(values["mechanism"], str) or not values["mechanism"].strip():
         return "mechanism: expected a built-in name or a YAML path, got an empty string"
     if not isinstance(values["record_dir"], str) or not values["record_dir"].strip():

@@ -10,9 +10,9 @@ each message to CDR once and publishing and recording the same bytes. Real-time 
 ticks with absolute deadlines of a steady clock (`pacing.Pacer`); fast mode runs flat out and
 publishes /clock; lockstep mode runs one tick per ``~/step`` call and publishes /clock.
 
-The executor (main thread) runs only cheap callbacks: the command subscription appends the
-raw message to a queue, services and parameter changes hand work to the stepping thread and
-wait for it. Topics, parameters and services are documented in README.md, "## stage_node".
+The stepping thread also reads the drive commands: the command subscription is polled once
+per tick (`polled`), so commands never wake the executor. The executor (main thread) serves
+only services and parameter changes, which hand work to the stepping thread and wait for it. Topics, parameters and services are documented in README.md, "## stage_node".
 """
 from __future__ import annotations
 
@@ -30,11 +30,12 @@ from typing import Any, Callable, Optional
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType, SetParametersResult
-from rclpy.exceptions import InvalidHandle, ParameterException
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
 from std_srvs.srv import SetBool, Trigger
 
 from .. import __version__
@@ -44,6 +45,7 @@ from ..solver import Simulation, SolverError
 from . import interface as itf
 from .drive_input import CommandFilter, CommandStatus, DriveLimits, WarningThrottle, parse_float64_cdr
 from .pacing import Pacer
+from .polled import PolledGroup, never_called, take_raw
 from .params import ParamSpec, parameter_specs, steps_per_tick, validate
 from .record_process import ProcessRecording, RecorderProcess
 from .session import METADATA_NAME, PARAMETER_CHANGE_NAME, recording_path
@@ -53,19 +55,12 @@ NODE_NAME = "stage_node"
 #: stops contracting (the answer does not depend on where the Jacobian was taken), which lets
 #: Simulation.step(n) run all n steps in one compiled loop.
 RELINEARIZE_TOL = None
-#: Commands kept between two ticks; older ones are dropped (and counted) beyond this.
-COMMAND_QUEUE = 10_000
-#: Most commands taken from the reader in one subscription callback.
-COMMAND_DRAIN = 1000
+#: Most commands taken from the reader per tick (more wait for the next tick).
+COMMAND_TAKE_LIMIT = itf.COMMAND_DEPTH
 #: Diagnostics rate (Hz of simulated time), or every tick if the publish rate is lower.
 DIAGNOSTICS_RATE = 10.0
 #: How long a service waits for the stepping thread.
 REQUEST_TIMEOUT_S = 30.0
-#: Real-time mode busy-waits this long before each deadline instead of sleeping: time.sleep
-#: overshoots by ~0.1 ms and an idle core wakes slowly (at 1 kHz this cut missed ticks ~3x).
-WAKE_SPIN_S = 2e-4
-#: Longest the main loop waits for callbacks before checking that the node still runs.
-SPIN_TIMEOUT_S = 0.5
 #: GIL switch interval: keeps the stepping thread's latency low while callbacks run.
 SWITCH_INTERVAL_S = 0.0005
 
@@ -154,14 +149,12 @@ class StageNode(Node):
         # Recording channels: the tick topics in publishing order, diagnostics, commands.
         self._diag_channel = len(self._tick_pubs)
         self._command_channel = len(self._tick_pubs) + 1
-        self._commands: collections.deque[bytes] = collections.deque(maxlen=COMMAND_QUEUE)
-        self._commands_dropped = 0
         self._command_sub = None
         self._command_topic = ""
         if self.interface.command is not None:
             self._command_sub = self.create_subscription(
-                self.interface.command.msg_type, self.interface.command.name, self._on_command,
-                itf.command_qos(), raw=True)
+                self.interface.command.msg_type, self.interface.command.name, never_called,
+                itf.command_qos(), raw=True, callback_group=PolledGroup())
             self._command_topic = self._command_sub.topic_name
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/record", self._on_record)
@@ -172,11 +165,14 @@ class StageNode(Node):
             collections.deque()
         self._wake = threading.Event()
         self._stop = threading.Event()
+        #: Done when the stepping thread has ended (main() spins until then).
+        self.stopped = Future()
         self._failure: Optional[BaseException] = None
         self._throttle = WarningThrottle(1.0)
         self._ticks = 0
+        self._wake_spin = float(values["wake_spin"])
         self._pacer: Optional[Pacer] = (
-            Pacer(1.0 / self._rate, spin_s=min(WAKE_SPIN_S, 0.25 / self._rate))
+            Pacer(1.0 / self._rate, spin_s=min(self._wake_spin, 1.0 / self._rate))
             if self.time_mode == "realtime" else None)
         self._diag_every = max(1, round(self._rate / DIAGNOSTICS_RATE))
         self._recording: Optional[ProcessRecording] = None
@@ -267,9 +263,9 @@ class StageNode(Node):
         if names & {"stroke_min", "stroke_max", "slew_rate"} and self.filter is not None:
             limits = self._limits(values)
             self._call(lambda: self.filter.set_limits(limits))
-        if "publish_rate" in names:
-            rate = float(values["publish_rate"])
-            self._call(lambda: self._set_rate(rate))
+        if names & {"publish_rate", "wake_spin"}:
+            rate, spin = float(values["publish_rate"]), float(values["wake_spin"])
+            self._call(lambda: self._set_pacing(rate, spin))
         if "record" in names and not self._sync_record_param:
             ok, message = self._set_recording(bool(values["record"]))
             (self._log.info if ok else self._log.error)(message)
@@ -281,7 +277,12 @@ class StageNode(Node):
             self._recording.add_metadata(PARAMETER_CHANGE_NAME, {
                 "t": repr(self.sim.state.t), **changed})
 
-    def _set_rate(self, rate: float) -> None:
+    def _set_pacing(self, rate: float, wake_spin: float) -> None:
+        self._wake_spin = wake_spin
+        if self._pacer is not None:
+            self._pacer.spin_s = min(wake_spin, 1.0 / rate)
+        if rate == self._rate:
+            return
         self._rate = rate
         self._n_steps, _ = steps_per_tick(rate, self._dt)
         self._diag_every = max(1, round(rate / DIAGNOSTICS_RATE))
@@ -290,31 +291,6 @@ class StageNode(Node):
         self._log.info(f"publish_rate {rate:g} Hz: {self._n_steps} engine steps per tick")
 
     # ================================================================ callbacks
-    def _on_command(self, data: bytes) -> None:
-        """Drive command (raw CDR): queue it for the next tick; nothing else, so floods are cheap.
-
-        rclpy's executor costs ~150 us per callback (it would lose commands beyond ~6 kHz),
-        so the callback also takes every further message already waiting in the reader, as
-        the executor itself does (``handle.take_message``): one executor wake-up per burst.
-        """
-        commands = self._commands
-        if len(commands) == COMMAND_QUEUE:
-            self._commands_dropped += 1
-        commands.append(data)
-        sub = self._command_sub
-        try:
-            with sub.handle:
-                take = sub.handle.take_message
-                for _ in range(COMMAND_DRAIN):
-                    taken = take(sub.msg_type, True)
-                    if taken is None:
-                        break
-                    if len(commands) == COMMAND_QUEUE:
-                        self._commands_dropped += 1
-                    commands.append(taken[0])
-        except InvalidHandle:  # shutting down
-            pass
-
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         ok, message = self._wait(self._call(self._reset))
         response.success, response.message = ok, message
@@ -425,6 +401,7 @@ class StageNode(Node):
                 _, future = self._requests.popleft()
                 if not future.done():
                     future.set_exception(RuntimeError("the node is shutting down"))
+            self.stopped.set_result(self._failure is None)
 
     def _step_once(self) -> str:
         self._tick()
@@ -437,7 +414,7 @@ class StageNode(Node):
         sim = self.sim
         filt = self.filter
         period = self._n_steps * self._dt
-        if self._commands:
+        if self._command_sub is not None:
             self._apply_commands(round(sim.state.t * 1e9))
         if filt is not None:
             if filt.begin_tick(period):
@@ -488,13 +465,14 @@ class StageNode(Node):
             self._publish_diagnostics(stamp)
 
     def _apply_commands(self, stamp: int) -> None:
-        """Validate the commands received since the last tick, in order; record each."""
+        """Take the commands received since the last tick; validate them in order; record each."""
+        commands = take_raw(self._command_sub, COMMAND_TAKE_LIMIT)
+        if not commands:
+            return
         filt = self.filter
-        commands = self._commands
         received: list[tuple[int, bytes]] = []
         channel = self._command_channel
-        while commands:
-            data = commands.popleft()
+        for data in commands:
             received.append((channel, data))
             try:
                 value = parse_float64_cdr(data)
@@ -603,7 +581,8 @@ class StageNode(Node):
             self.filter.reset()
             if self.filter.applied != 0.0:
                 self.sim.set_command(self.filter.applied)
-        self._commands.clear()
+        if self._command_sub is not None:
+            take_raw(self._command_sub, COMMAND_TAKE_LIMIT)  # sent before the reset: discarded
         self._runs += 1
         self._ticks = 0
         self._window = self._new_window()
@@ -619,9 +598,7 @@ class StageNode(Node):
 
     # ================================================================ diagnostics
     def _counters(self) -> dict[str, int]:
-        counters = self.filter.counters.as_dict() if self.filter else {}
-        counters["dropped"] = self._commands_dropped
-        return counters
+        return self.filter.counters.as_dict() if self.filter else {}
 
     def _new_window(self) -> _Window:
         pacer = self._pacer
@@ -650,8 +627,6 @@ class StageNode(Node):
             level, notes = itf.WARN, notes + [f"{new['clamped']} commands clamped"]
         if new.get("rate_limited"):
             notes.append(f"{new['rate_limited']} commands rate-limited")
-        if new.get("dropped"):
-            level, notes = itf.WARN, notes + [f"{new['dropped']} commands dropped"]
         rec = self._recording
         if self._recording_error:
             level, notes = itf.ERROR, notes + [f"recording failed: {self._recording_error}"]
@@ -688,6 +663,7 @@ class StageNode(Node):
                 ("slips", pacer.stats.slips),
                 ("skipped_ticks", pacer.stats.skipped),
                 ("max_late_us", 1e6 * pacer.stats.max_late_s),
+                ("wake_spin_us", 1e6 * pacer.spin_s),
                 ("jitter_p50_us", 1e6 * p50),
                 ("jitter_p99_us", 1e6 * p99),
             ]
@@ -807,11 +783,11 @@ def main(args: Optional[list[str]] = None) -> int:
             if rclpy.ok():
                 raise
             return 0  # SIGINT/SIGTERM during start-up: nothing to finish
-        # rclpy.spin(node), except that it also ends if the stepping thread does.
+        # rclpy.spin(node), except that it also ends if the stepping thread does. Nothing
+        # wakes the executor but services, parameters and that end (no timeouts).
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        while rclpy.ok() and node.stepping:
-            executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+        executor.spin_until_future_complete(node.stopped)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except StartupError as exc:

@@ -1,0 +1,55 @@
+"""Subscriptions read by the stepping thread at each tick instead of by the executor.
+
+Every executor wake-up costs the node ~0.4 ms of GIL time: rclpy rebuilds its wait set in
+Python from every entity of the node, and the node's ~26 publishers each bring QoS event
+handlers. A controller publishing drive commands at 1 kHz would wake the executor every
+millisecond, and that GIL time would land on the paced stepping thread as late ticks.
+
+A subscription created in a `PolledGroup` is never put in the executor's wait set (rclpy's
+executors only wait on entities whose callback group ``can_execute`` them), so commands do
+not wake the executor at all. It stays an ordinary subscription of the node: same name
+resolution and remapping, listed by ``ros2 node info``, matched with the same QoS. The
+stepping thread takes what the reader holds with `take_raw` once per tick.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from rclpy.callback_groups import CallbackGroup
+from rclpy.exceptions import InvalidHandle
+from rclpy.subscription import Subscription
+
+
+class PolledGroup(CallbackGroup):
+    """A callback group whose entities the executor never waits on nor runs."""
+
+    def can_execute(self, entity: Any) -> bool:
+        return False
+
+    def beginning_execution(self, entity: Any) -> bool:
+        return False
+
+    def ending_execution(self, entity: Any) -> None:
+        pass
+
+
+def never_called(_message: Any) -> None:
+    """The callback of a polled subscription (rclpy requires one; the executor never runs it)."""
+
+
+def take_raw(subscription: Subscription, limit: int) -> list[bytes]:
+    """Up to ``limit`` serialized messages waiting in ``subscription``'s reader, oldest first
+    (the rest stay for the next call). Empty once the node is being destroyed."""
+    taken: list[bytes] = []
+    try:
+        with subscription.handle:
+            take = subscription.handle.take_message
+            msg_type = subscription.msg_type
+            for _ in range(limit):
+                item = take(msg_type, True)
+                if item is None:
+                    break
+                taken.append(item[0])
+    except InvalidHandle:
+        pass
+    return taken

@@ -1,0 +1,28 @@
+"""The node measuring harness behind `python -m flexure_sim.bench --node`, on a short real run
+(a real stage_node subprocess, Fast DDS on loopback, a real recording read back)."""
+import pytest
+
+from flexure_sim.node import measure
+
+from node_harness import next_domain_id
+
+
+def test_measure_reports_pacing_cpu_and_a_complete_recording(tmp_path):
+    r = measure.run_node("realtime", 2.0, 200.0, 1e-4, True, False, warmup=1.0,
+                         domain_id=next_domain_id(), keep_dir=tmp_path,
+                         params={"wake_spin": "0.0005"})
+    assert r["exit_code"] == 0
+    assert r["params"] == {"wake_spin": "0.0005"}
+    assert r["wake_spin_s"] == pytest.approx(5e-4)  # the parameter reached the node's pacer
+    assert r["steps_per_tick"] == 50 and r["topics_per_tick"] == 25
+    assert r["real_time_factor"] == pytest.approx(1.0, abs=0.05)
+    assert 0 <= r["missed_ticks"] <= r["paced_ticks"] and r["paced_ticks"] >= 300
+    assert 0 < r["node_cpu_cores"] < 2.5
+    assert r["recording_complete"] and r["recording_dropped"] == 0
+    assert r["recorded_messages"] >= 25 * 3.0 * 200  # warm-up + window, 25 topics per tick
+    assert (tmp_path / "measure.mcap").is_file()
+
+
+def test_measure_refuses_a_malformed_param():
+    with pytest.raises(SystemExit):
+        measure.main(["--param", "wake_spin=0.001"])
