@@ -191,27 +191,38 @@ def bench_static_sweep(levels: int = 1000) -> dict:
 
 #: wake_spin of the second real-time run: the CPU / punctuality trade-off of a short spin.
 LOW_WAKE_SPIN_S = 2e-4
+#: Topics a controller would subscribe to, for the real-time runs next to a subscriber.
+CONTROLLER_TOPICS = ("output/displacement", "drive/force", "hinges/a/compression")
 
 
 def bench_node(duration: float = 30.0) -> dict:
     """stage_node on the stage at 1 kHz, all topics, recording on (node/measure.py): fast
-    mode, real-time mode with the default wake_spin, and real-time mode with a short one."""
+    mode; real-time mode with the defaults; with a short wake_spin; and next to a controller
+    process (an rclpy node subscribed to three topics at 1 kHz each), with the default
+    stepping-thread niceness and with none."""
     from .node import measure  # needs ROS 2
 
+    def realtime(subscribe=False, **params) -> dict:
+        return measure.run_node("realtime", duration, 1000.0, DEFAULT_STEP, True, subscribe,
+                                params={k: repr(v) for k, v in params.items()})
+
     fast = measure.run_node("fast", min(duration, 10.0), 1000.0, DEFAULT_STEP, True, False)
-    realtime = measure.run_node("realtime", duration, 1000.0, DEFAULT_STEP, True, False)
-    low_spin = measure.run_node("realtime", duration, 1000.0, DEFAULT_STEP, True, False,
-                                params={"wake_spin": repr(LOW_WAKE_SPIN_S)})
+    default = realtime()
+    runs = {
+        "realtime": default,
+        "realtime_low_spin": realtime(wake_spin=LOW_WAKE_SPIN_S),
+        "realtime_controller": realtime(list(CONTROLLER_TOPICS)),
+        "realtime_controller_nice0": realtime(list(CONTROLLER_TOPICS), stepping_nice=0),
+    }
     return {
         "fast_rtf": fast["real_time_factor"],
-        "missed_tick_fraction": realtime["missed_fraction"],
-        "jitter_p50_s": realtime["jitter_p50_s"],
-        "jitter_p99_s": realtime["jitter_p99_s"],
-        "max_late_s": 1e-6 * realtime["max_late_us"],
-        "realtime_rtf": realtime["real_time_factor"],
+        "missed_tick_fraction": default["missed_fraction"],
+        "jitter_p50_s": default["jitter_p50_s"],
+        "jitter_p99_s": default["jitter_p99_s"],
+        "max_late_s": 1e-6 * default["max_late_us"],
+        "realtime_rtf": default["real_time_factor"],
         "fast": fast,
-        "realtime": realtime,
-        "realtime_low_spin": low_spin,
+        **runs,
     }
 
 
@@ -256,12 +267,14 @@ def print_table(res: dict) -> None:
               f"real-time missed ticks {nd.get('missed_tick_fraction', float('nan')):.4%}, "
               f"jitter p50 {nd.get('jitter_p50_s', float('nan')) * 1e6:.0f} us, "
               f"p99 {nd.get('jitter_p99_s', float('nan')) * 1e6:.0f} us")
-        for key in ("realtime", "realtime_low_spin"):
+        for key in ("realtime", "realtime_low_spin", "realtime_controller", "realtime_controller_nice0"):
             r = nd.get(key)
             if r:
-                print(f"  real-time, wake_spin {r['wake_spin_s'] * 1e3:.2f} ms: missed {r['missed_ticks']} of "
-                      f"{r['paced_ticks']} ticks ({r['missed_fraction']:.3%}), node CPU "
-                      f"{r['node_cpu_cores'] or float('nan'):.2f} cores, worst lateness {r['max_late_us'] / 1e3:.1f} ms")
+                print(f"  real-time, wake_spin {r['wake_spin_s'] * 1e3:.2f} ms, stepping nice {r['stepping_nice']}"
+                      + (f", subscriber on {r['subscribed']}" if r["subscribed"] else "")
+                      + f": missed {r['missed_ticks']} of {r['paced_ticks']} ticks ({r['missed_fraction']:.3%}), "
+                      f"node CPU {r['node_cpu_cores'] or float('nan'):.2f} cores, "
+                      f"worst lateness {r['max_late_us'] / 1e3:.1f} ms")
 
 
 def run(args: argparse.Namespace) -> dict:

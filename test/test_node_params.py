@@ -20,7 +20,7 @@ def test_defaults_are_valid_and_give_ten_steps_per_tick():
     assert values["record"] is True and values["record_dir"] == "runs" and values["record_path"] == ""
     assert steps_per_tick(1000.0, 1e-4) == (10, None)
     read_only = {s.name for s in parameter_specs() if s.read_only}
-    assert read_only == {"mechanism", "sim_step", "time_mode"}
+    assert read_only == {"mechanism", "sim_step", "time_mode", "stepping_nice"}
 
 
 @pytest.mark.parametrize("rate, step, n", [
@@ -48,6 +48,8 @@ def test_steps_per_tick(rate, step, n):
     (dict(mechanism=" "), "mechanism"),
     (dict(wake_spin=-1e-4), "wake_spin"),
     (dict(wake_spin=float("nan")), "wake_spin"),
+    (dict(stepping_nice=-21), "stepping_nice"),
+    (dict(stepping_nice=2.5), "stepping_nice"),
 ])
 def test_invalid_values_are_refused_with_the_reason(changes, word):
     values = {**defaults(), **changes}

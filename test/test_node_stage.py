@@ -499,6 +499,8 @@ def _set(peer: Peer, name: str, value) -> tuple[bool, str]:
         msg.value = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=value)
     elif isinstance(value, float):
         msg.value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+    elif isinstance(value, int):
+        msg.value = ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=value)
     else:
         msg.value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
     answer = peer.call(SetParameters, "/stage_node/set_parameters", SetParameters.Request(parameters=[msg]))
@@ -507,7 +509,9 @@ def _set(peer: Peer, name: str, value) -> tuple[bool, str]:
 
 
 def test_parameters_are_validated_with_reasons_and_applied_live(tmp_path, domain, peer):
-    node = start(tmp_path, domain, peer, time_mode="realtime", sim_step=5e-4, publish_rate=200.0, record=False)
+    # stepping_nice 5: raising niceness is always permitted, so the request is granted.
+    node = start(tmp_path, domain, peer, time_mode="realtime", sim_step=5e-4, publish_rate=200.0, record=False,
+                 stepping_nice=5)
     try:
         peer.subscribe("/diagnostics", DiagnosticArray)
         peer.subscribe("/bodies/poses", PoseArray, depth=10000)
@@ -521,6 +525,8 @@ def test_parameters_are_validated_with_reasons_and_applied_live(tmp_path, domain
         ok, reason = _set(peer, "slew_rate", 0.0)
         assert not ok and "slew_rate" in reason
         ok, reason = _set(peer, "time_mode", "fast")
+        assert not ok and "read-only" in reason.lower() or "read only" in reason.lower()
+        ok, reason = _set(peer, "stepping_nice", 0)
         assert not ok and "read-only" in reason.lower() or "read only" in reason.lower()
         ok, reason = _set(peer, "wake_spin", -1e-3)
         assert not ok and "wake_spin" in reason
@@ -541,6 +547,7 @@ def test_parameters_are_validated_with_reasons_and_applied_live(tmp_path, domain
         d = latest_diagnostics(peer)
         assert d["publish_rate"] == "100.0" and d["steps_per_tick"] == "20"
         assert float(d["wake_spin_us"]) == pytest.approx(2000.0)
+        assert d["stepping_nice"] == "5"
         assert d["commands_clamped"] == "1" and float(d["drive_target"]) == 1e-6
     finally:
         stop_cleanly(node)

@@ -165,6 +165,7 @@ def run_node(
         # CPU time of the node process (all its threads, not the recorder) per wall second.
         "node_cpu_cores": ((cpu_end - cpu_start) / (cpu_wall_end - cpu_wall_start)
                            if cpu_start is not None and cpu_end is not None else None),
+        "stepping_nice": int(b["stepping_nice"]) if "stepping_nice" in b else None,
         "exit_code": proc.returncode,
     }
     if "missed_ticks" in b:
@@ -305,7 +306,8 @@ def _print_run(r: dict[str, Any]) -> None:
           f"pack+publish+record {r['publish_time_mean_us']:.0f} us; mean {r['tick_time_mean_us']:.0f} us, "
           f"max {r['tick_time_max_us']:.0f} us")
     if r.get("node_cpu_cores") is not None:
-        print(f"   node process CPU: {r['node_cpu_cores']:.2f} cores")
+        print(f"   node process CPU: {r['node_cpu_cores']:.2f} cores; stepping thread niceness "
+              f"{r['stepping_nice']}")
     if r.get("messages_received_per_s") is not None:
         print(f"   subscriber received {r['messages_received_per_s']:.0f} messages/s")
     if r["record"]:

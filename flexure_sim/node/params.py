@@ -20,6 +20,8 @@ MAX_PUBLISH_RATE = 10000.0
 MAX_SIM_STEP = 1e-2
 #: Default of ``wake_spin``: see its description (measured in BENCHMARKS.md).
 WAKE_SPIN_S = 1e-3
+#: Default of ``stepping_nice``: see its description (measured in BENCHMARKS.md).
+STEPPING_NICE = -10
 
 
 @dataclass(frozen=True)
@@ -67,6 +69,11 @@ def parameter_specs(drive_defaults: Optional[tuple[float, float, float]] = None)
                   "instead of slept (at most the publish period: then the stepping thread never "
                   "sleeps). A sleeping core can take milliseconds to wake, above all on virtual "
                   "machines, and the tick then starts late; spinning costs CPU time."),
+        ParamSpec("stepping_nice", STEPPING_NICE, int, "", True, -20, 19,
+                  "Niceness asked for the stepping thread at start-up (Linux). Below the other "
+                  "processes' it gets a shared core first, which keeps real-time ticks on time "
+                  "next to busy nodes. Needs CAP_SYS_NICE or an RLIMIT_NICE allowing it; if "
+                  "refused, the node says so once and runs unchanged. Read-only."),
         ParamSpec("record", True, bool, "", False, None, None,
                   "Record every published topic and the received drive commands to MCAP "
                   "(same as ~/record)."),
@@ -112,6 +119,9 @@ def validate(values: Mapping[str, Any]) -> Optional[str]:
     spin = values["wake_spin"]
     if not (isinstance(spin, (int, float)) and math.isfinite(spin) and 0.0 <= spin <= 1.0):
         return f"wake_spin: must be in [0, 1] s, got {spin!r}"
+    nice = values["stepping_nice"]
+    if not (isinstance(nice, int) and not isinstance(nice, bool) and -20 <= nice <= 19):
+        return f"stepping_nice: must be an integer in [-20, 19], got {nice!r}"
     if not isinstance(values["mechanism"], str) or not values["mechanism"].strip():
         return "mechanism: expected a built-in name or a YAML path, got an empty string"
     if not isinstance(values["record_dir"], str) or not values["record_dir"].strip():

@@ -29,7 +29,13 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 import rclpy
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType, SetParametersResult
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -44,7 +50,7 @@ from ..recording import RecordingError
 from ..solver import Simulation, SolverError
 from . import interface as itf
 from .drive_input import CommandFilter, CommandStatus, DriveLimits, WarningThrottle, parse_float64_cdr
-from .pacing import Pacer
+from .pacing import Pacer, set_thread_nice
 from .polled import PolledGroup, never_called, take_raw
 from .params import ParamSpec, parameter_specs, steps_per_tick, validate
 from .record_process import ProcessRecording, RecorderProcess
@@ -171,6 +177,8 @@ class StageNode(Node):
         self._throttle = WarningThrottle(1.0)
         self._ticks = 0
         self._wake_spin = float(values["wake_spin"])
+        self._nice_request = int(values["stepping_nice"])
+        self._nice = 0
         self._pacer: Optional[Pacer] = (
             Pacer(1.0 / self._rate, spin_s=min(self._wake_spin, 1.0 / self._rate))
             if self.time_mode == "realtime" else None)
@@ -228,6 +236,8 @@ class StageNode(Node):
         if spec.type is float and spec.low is not None and spec.high is not None:
             descriptor.floating_point_range = [
                 FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)]
+        if spec.type is int and spec.low is not None and spec.high is not None:
+            descriptor.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)]
         constraints = []
         if spec.name == "time_mode":
             constraints.append(f"one of {', '.join(itf.TIME_MODES)}")
@@ -371,6 +381,9 @@ class StageNode(Node):
     # ================================================================ stepping
     def _run(self) -> None:
         try:
+            self._nice, refused = set_thread_nice(self._nice_request)
+            if refused:
+                self._log.info(f"stepping thread: {refused}")
             if self._pacer is not None:
                 self._pacer.start()
             self._window = self._new_window()
@@ -640,6 +653,7 @@ class StageNode(Node):
             ("publish_rate", self._rate),
             ("sim_step", self._dt),
             ("steps_per_tick", self._n_steps),
+            ("stepping_nice", self._nice),
             ("ticks", self._ticks),
             ("step_time_mean_us", 1e6 * w.step_sum / n),
             ("step_time_max_us", 1e6 * w.step_max),
