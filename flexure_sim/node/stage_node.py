@@ -36,7 +36,7 @@ from rcl_interfaces.msg import (
     ParameterType,
     SetParametersResult,
 )
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import InvalidHandle, ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -67,6 +67,9 @@ COMMAND_TAKE_LIMIT = itf.COMMAND_DEPTH
 DIAGNOSTICS_RATE = 10.0
 #: How long a service waits for the stepping thread.
 REQUEST_TIMEOUT_S = 30.0
+#: Longest the main loop waits before checking that the node still runs. Each executor
+#: wake-up holds the GIL ~0.4 ms, so it is rare.
+SPIN_TIMEOUT_S = 1.0
 #: GIL switch interval: keeps the stepping thread's latency low while callbacks run.
 SWITCH_INTERVAL_S = 0.0005
 
@@ -414,7 +417,10 @@ class StageNode(Node):
                 _, future = self._requests.popleft()
                 if not future.done():
                     future.set_exception(RuntimeError("the node is shutting down"))
-            self.stopped.set_result(self._failure is None)
+            try:
+                self.stopped.set_result(self._failure is None)  # wakes the executor
+            except (InvalidHandle, RuntimeError):
+                pass  # the executor is already gone (shutdown): nobody to wake
 
     def _step_once(self) -> str:
         self._tick()
@@ -797,11 +803,13 @@ def main(args: Optional[list[str]] = None) -> int:
             if rclpy.ok():
                 raise
             return 0  # SIGINT/SIGTERM during start-up: nothing to finish
-        # rclpy.spin(node), except that it also ends if the stepping thread does. Nothing
-        # wakes the executor but services, parameters and that end (no timeouts).
+        # rclpy.spin(node), except that it also ends when the stepping thread does. Only
+        # services, parameters and that end wake the executor, and a timeout once per
+        # SPIN_TIMEOUT_S: a safety net should a shutdown ever fail to wake it.
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        executor.spin_until_future_complete(node.stopped)
+        while rclpy.ok() and not node.stopped.done():
+            executor.spin_until_future_complete(node.stopped, timeout_sec=SPIN_TIMEOUT_S)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except StartupError as exc:
