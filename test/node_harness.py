@@ -25,6 +25,8 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
+from flexure_sim.node.interface import value_text
+
 ROOT = Path(__file__).resolve().parent.parent
 _BASE_DOMAIN = int(os.environ.get("ROS_DOMAIN_ID") or random.randint(1, 100))
 _offsets = itertools.count(1)
@@ -70,7 +72,7 @@ class NodeProcess:
         if params:
             args.append("--ros-args")
             for name, value in params.items():
-                args += ["-p", f"{name}:={_param_text(value)}"]
+                args += ["-p", f"{name}:={value_text(value)}"]
         if env is None:
             env = node_env(domain_id, PYTHONPATH=str(ROOT), ROS_LOG_DIR=str(self.cwd / "ros_log"))
         self.args = args
@@ -124,14 +126,6 @@ class NodeProcess:
 
     def recordings(self) -> list[Path]:
         return sorted(self.cwd.rglob("*.mcap"))
-
-
-def _param_text(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return repr(value)
-    return str(value)
 
 
 def reliable(depth: int = 1000) -> QoSProfile:

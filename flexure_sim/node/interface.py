@@ -310,7 +310,7 @@ def encode_diagnostics(
     """CDR of `diagnostics_message` with the same arguments, packed by `cdr.pack_diagnostics`."""
     sec, nsec = split_stamp(stamp_ns)
     return pack_diagnostics(sec, nsec, level, name, message, hardware_id,
-                            [(k, _fmt(v)) for k, v in values])
+                            [(k, value_text(v)) for k, v in values])
 
 
 def diagnostics_message(
@@ -328,14 +328,16 @@ def diagnostics_message(
     status.name = name
     status.message = message
     status.hardware_id = hardware_id
-    status.values = [KeyValue(key=k, value=_fmt(v)) for k, v in values]
+    status.values = [KeyValue(key=k, value=value_text(v)) for k, v in values]
     array = DiagnosticArray()
     array.header.stamp = stamp_msg(stamp_ns)
     array.status = [status]
     return array
 
 
-def _fmt(value: Any) -> str:
+def value_text(value: Any) -> str:
+    """A parameter or diagnostics value as text, as ROS writes it on the command line:
+    true/false, floats with repr precision, everything else with str()."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, float):

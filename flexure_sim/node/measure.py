@@ -69,7 +69,7 @@ def run_node(
     from rclpy.qos import QoSProfile
 
     from ..config import load_mechanism
-    from .interface import StageInterface
+    from .interface import StageInterface, value_text
 
     domain = domain_id if domain_id is not None else random.randint(1, 100)
     workdir = Path(keep_dir) if keep_dir else Path(tempfile.mkdtemp(prefix="stage_node_measure_"))
@@ -83,8 +83,7 @@ def run_node(
         "sim_step": float(sim_step), "record": record, "record_path": "measure.mcap", **(params or {})}
     args = [sys.executable, "-m", "flexure_sim.node.stage_node", "--ros-args"]
     for name, value in node_params.items():
-        text = ("true" if value else "false") if isinstance(value, bool) else str(value)
-        args += ["-p", f"{name}:={text}"]
+        args += ["-p", f"{name}:={value_text(value)}"]
     stderr = open(workdir / "node.stderr", "wb")  # noqa: SIM115
     proc = subprocess.Popen(args, cwd=workdir, env=env, stdout=stderr, stderr=subprocess.STDOUT)
 

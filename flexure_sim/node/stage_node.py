@@ -282,7 +282,7 @@ class StageNode(Node):
         if "record" in names and not self._sync_record_param:
             ok, message = self._set_recording(bool(values["record"]))
             (self._log.info if ok else self._log.error)(message)
-        changed = {p.name: _param_str(p.value) for p in params}
+        changed = {p.name: itf.value_text(p.value) for p in params}
         self._call(lambda: self._note_parameters(changed))
 
     def _note_parameters(self, changed: dict[str, str]) -> None:
@@ -573,7 +573,7 @@ class StageNode(Node):
             yaml_text = self.mechanism_path.read_text()
         except OSError:
             yaml_text = ""
-        meta = {name: _param_str(value) for name, value in values.items()}
+        meta = {name: itf.value_text(value) for name, value in values.items()}
         meta.update({
             "mechanism_name": mech.name,
             "mechanism_path": str(self.mechanism_path),
@@ -746,14 +746,6 @@ def _run_into(fn: Callable[[], Any], future: concurrent.futures.Future) -> None:
         future.set_result(fn())
     except BaseException as exc:  # noqa: BLE001 - handed to the waiting caller
         future.set_exception(exc)
-
-
-def _param_str(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return repr(value)
-    return str(value)
 
 
 USAGE = """usage: stage_node [--ros-args -p NAME:=VALUE ...]
