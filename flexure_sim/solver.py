@@ -192,6 +192,7 @@ class Simulation:
         self.stats = StepStats()
         self._lin: Optional[_Linearization] = None
         self._cache: Optional[tuple] = None  # (state, command, F, drive power, dissipation)
+        self._clock: Optional[tuple] = None  # (state, origin t, steps since origin): see step()
         self._mass_free = self.mass[self.part.free]
         self.state = self.initial_state()
         self._atol = self._iteration_atol()
@@ -251,6 +252,7 @@ class Simulation:
         self.stats = StepStats()
         self._lin = None
         self._cache = None
+        self._clock = None
 
     # ------------------------------------------------------- prescribed motion
     def _prescribed(self, t: float, u: float, command: float):
@@ -361,9 +363,18 @@ class Simulation:
 
     def step(self, n: int = 1) -> None:
         """Advance n fixed steps of the exponential trapezoidal rule (module docstring) with
-        the actuator command held at state.command."""
+        the actuator command held at state.command.
+
+        Time is origin + k dt, k the steps taken since the origin (the t of a state this
+        simulation did not step itself), not a running sum: t stays on the step grid however
+        long the run, so stamps derived from it stay on the tick grid."""
         s = self.state
         command = s.command
+        clock = self._clock
+        if clock is None or clock[0] is not s:
+            clock = (s, s.t, 0)
+        _, origin, k = clock
+        dt = self.dt
         y, t = self._pack(s), s.t
         cache = self._cache
         if cache is not None and cache[0] is s and cache[1] == command:
@@ -378,28 +389,31 @@ class Simulation:
                 self._linearize(y, t, command)
                 fresh = True
             chunk = 1 if self.relinearize_tol is not None else remaining
-            y, t, F0, p0, d0, dd, dw, steps, iterations, status = self._advance(chunk, y, t, command, F0, p0, d0)
+            y, _, F0, p0, d0, dd, dw, steps, iterations, status = self._advance(chunk, y, t, command, F0, p0, d0)
             dissipated += dd
             work += dw
             remaining -= steps
+            k += steps
+            t = origin + k * dt
             self.stats.steps += steps
             self.stats.iterations += iterations
             if status == stepping.NOT_CONTRACTING:
                 if steps == 0 and fresh:
                     raise SolverError(
-                        f"step to t = {t + self.dt:.6g} s did not converge even with a fresh Jacobian; "
-                        f"reduce the step ({self.dt:g} s)")
+                        f"step to t = {t + dt:.6g} s did not converge even with a fresh Jacobian; "
+                        f"reduce the step ({dt:g} s)")
                 self._lin = None
             elif status == stepping.SLOW:
                 self._lin = None
             if steps:
                 fresh = False
         if not np.all(np.isfinite(y)):
-            raise SolverError(f"non-finite state at t = {t:.6g} s (step {self.dt:g} s)")
+            raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
         nF = len(self.part.free)
         u = float(y[2 * nF]) if self.drive else 0.0
         z, v, _ = self._full(y[:nF], y[nF:2 * nF], t, u, command)
         self.state = State(t, z, v, u, command, dissipated, work)
+        self._clock = (self.state, origin, k)
         # F at the new state seeds the next call while the command is unchanged.
         self._cache = (self.state, command, F0, p0, d0)
 

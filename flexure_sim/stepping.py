@@ -96,8 +96,9 @@ def _advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_aft
     steps = 0
     iterations = 0
     status = CONVERGED
-    for _ in range(n):
-        t1 = t + dt
+    t_start = t
+    for i in range(n):
+        t1 = t_start + (i + 1) * dt  # on the step grid, not a running sum
         U = y + phi1 @ F0
         weight = rtol * np.abs(U) + atol
         y1 = U.copy()

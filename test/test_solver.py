@@ -233,3 +233,25 @@ def test_compiled_report_equals_the_reference_path(name):
     Q, r, wrench, energy, dissipation = sim.assembly.report(z, v)
     assert r == pytest.approx(ref.r, rel=1e-12, abs=1e-15)
     assert wrench == pytest.approx(ref.wrench_b, rel=1e-10, abs=1e-12 * np.abs(ref.wrench_b).max())
+
+
+def test_time_is_the_step_count_times_the_step_not_a_running_sum(stage):
+    """Simulated time stays on the step grid however long the run: stamps derived from it
+    (round(t * 1e9) ns) land on the tick grid. A running sum t += dt drifts by ~1 ns per
+    5e5 steps of 1e-4 s, enough to put a 5 ms tick's stamp at ...000001 ns after ~50 s."""
+    sim = Simulation(stage, dt=1e-4)
+    per_tick = 50
+    off_grid = []
+    for tick in range(1, 2 * 10**4 + 1):
+        sim.step(per_tick)
+        stamp = round(sim.state.t * 1e9)
+        if stamp != tick * 5_000_000:
+            off_grid.append((tick, stamp))
+    assert not off_grid, f"stamps off the 5 ms grid: {off_grid[:5]} ({len(off_grid)} ticks)"
+    assert sim.stats.steps == 10**6
+    # A state that did not come from this simulation's stepping starts its own grid.
+    state = sim.state.copy()
+    state.t = 0.25
+    sim.state = state
+    sim.step(3)
+    assert sim.state.t == 0.25 + 3 * 1e-4
