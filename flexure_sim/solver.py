@@ -389,7 +389,7 @@ class Simulation:
                 self._linearize(y, t, command)
                 fresh = True
             chunk = 1 if self.relinearize_tol is not None else remaining
-            y, _, F0, p0, d0, dd, dw, steps, iterations, status = self._advance(chunk, y, t, command, F0, p0, d0)
+            y, F0, p0, d0, dd, dw, steps, iterations, status = self._advance(chunk, y, t, command, F0, p0, d0)
             dissipated += dd
             work += dw
             remaining -= steps

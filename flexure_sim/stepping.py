@@ -85,9 +85,9 @@ def kernel_rhs(y, t, command, args):
 def _advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_after, F0, p0, d0, args):
     """Up to n steps from (y, t) with F0 = F(y, t), p0, d0 the powers there.
 
-    Returns (y, t, F, p, d, dissipated, work, steps, iterations, status): the state and its
-    F and powers after the steps taken, the trapezoidal integrals of the dissipated and
-    drive powers over them, and why it stopped. ``rhs`` is a global of the function (see
+    Returns (y, F, p, d, dissipated, work, steps, iterations, status): the state and its
+    F and powers after the steps taken (at t + steps dt; the caller keeps time), the
+    trapezoidal integrals of the dissipated and drive powers over them, and why it stopped. ``rhs`` is a global of the function (see
     the end of this module), not an argument: Numba cannot cache functions that take
     compiled functions as arguments.
     """
@@ -96,9 +96,8 @@ def _advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_aft
     steps = 0
     iterations = 0
     status = CONVERGED
-    t_start = t
     for i in range(n):
-        t1 = t_start + (i + 1) * dt  # on the step grid, not a running sum
+        t1 = t + (i + 1) * dt  # on the step grid, not a running sum
         U = y + phi1 @ F0
         weight = rtol * np.abs(U) + atol
         y1 = U.copy()
@@ -127,14 +126,14 @@ def _advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_aft
             break
         dissipated += 0.5 * dt * (d0 + d1)
         work += 0.5 * dt * (p0 + p1)
-        y, t = y1, t1
+        y = y1
         F0, p0, d0 = F1, p1, d1
         steps += 1
         iterations += k
         if k > slow_after:
             status = SLOW
             break
-    return y, t, F0, p0, d0, dissipated, work, steps, iterations, status
+    return y, F0, p0, d0, dissipated, work, steps, iterations, status
 
 
 #: The right-hand side the compiled loop calls (resolved when Numba compiles ``advance``).
