@@ -37,7 +37,9 @@ from rcl_interfaces.msg import (
     SetParametersResult,
 )
 from rclpy.exceptions import InvalidHandle, ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.context import Context
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
@@ -781,8 +783,8 @@ def main(args: Optional[list[str]] = None) -> int:
               "--ros-args as -p NAME:=VALUE (see --help)", file=sys.stderr)
         return 2
     sys.setswitchinterval(SWITCH_INTERVAL_S)
-    # rclpy's handlers turn SIGINT and SIGTERM into a context shutdown, which ends the spin
-    # loop (ExternalShutdownException or rclpy.ok() false); `finally` then finishes the MCAP file.
+    # SIGINT raises KeyboardInterrupt; rclpy's handler turns SIGTERM into a context shutdown,
+    # which ends spin_until_stopped. Either way `finally` then finishes the MCAP file.
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.ALL)
     node: Optional[StageNode] = None
     code = 0
@@ -795,14 +797,10 @@ def main(args: Optional[list[str]] = None) -> int:
             if rclpy.ok():
                 raise
             return 0  # SIGINT/SIGTERM during start-up: nothing to finish
-        # rclpy.spin(node), except that it also ends when the stepping thread does. Only
-        # services, parameters and that end wake the executor, and a timeout once per
-        # SPIN_TIMEOUT_S: a safety net should a shutdown ever fail to wake it.
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        while rclpy.ok() and not node.stopped.done():
-            executor.spin_until_future_complete(node.stopped, timeout_sec=SPIN_TIMEOUT_S)
-    except (KeyboardInterrupt, ExternalShutdownException):
+        spin_until_stopped(executor, node.stopped, node.context)
+    except KeyboardInterrupt:
         pass
     except StartupError as exc:
         print(f"stage_node: error: {exc}", file=sys.stderr)
@@ -816,6 +814,25 @@ def main(args: Optional[list[str]] = None) -> int:
             node.destroy_node()
         rclpy.try_shutdown()
     return code
+
+
+def spin_until_stopped(executor: Executor, stopped: Future, context: Context) -> None:
+    """rclpy.spin, except that it also ends when `stopped` is done (the stepping thread ended).
+
+    Only services, parameters and that end wake the executor, and a timeout once per
+    SPIN_TIMEOUT_S: a safety net should a shutdown ever fail to wake it. A shutdown ends it
+    wherever it lands. rclpy's signal thread (SIGTERM; SIGINT raises KeyboardInterrupt
+    instead) shuts the context down concurrently with the executor, and when that lands
+    while the executor builds its wait set, rclpy raises RCLError ("the given context is
+    not valid") rather than ExternalShutdownException: the same shutdown, not a failure."""
+    try:
+        while context.ok() and not stopped.done():
+            executor.spin_until_future_complete(stopped, timeout_sec=SPIN_TIMEOUT_S)
+    except ExternalShutdownException:
+        pass
+    except _rclpy.RCLError:
+        if context.ok():
+            raise
 
 
 def _ignore_further_signals() -> None:
