@@ -2,25 +2,13 @@
 runs or waits on them; the stepping thread's `take_raw` gets every message, in order."""
 import time
 
-import pytest
 import rclpy
-from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64
 
 from flexure_sim.node.interface import command_qos
 from flexure_sim.node.polled import PolledGroup, take_raw
-
-from node_harness import next_domain_id
-
-
-@pytest.fixture
-def context():
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=next_domain_id())
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
 
 
 def test_polled_subscription_never_wakes_the_executor_and_loses_nothing(context):

@@ -14,8 +14,6 @@ from std_msgs.msg import Float64
 
 from flexure_sim.node.stage_node import spin_until_stopped
 
-from node_harness import next_domain_id
-
 
 class ShutdownWhileCollecting(CallbackGroup):
     """Shuts its context down when the executor asks about its entity: that is
@@ -36,14 +34,6 @@ class ShutdownWhileCollecting(CallbackGroup):
 
     def ending_execution(self, entity) -> None:
         pass
-
-
-@pytest.fixture
-def context():
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=next_domain_id())
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
 
 
 def _node_and_executor(context, group):
