@@ -12,7 +12,7 @@ from setuptools import find_packages, setup
 PACKAGE = "flexure_sim"
 EXECUTABLES = {
     "stage_node": "flexure_sim.node.stage_node:main",
-    "replay": "flexure_sim.tools.replay:main",
+    "replay": "flexure_sim.node.replay:main",
 }
 
 setup(

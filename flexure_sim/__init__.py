@@ -1,9 +1,11 @@
 """flexure_sim: planar flexure mechanisms with the twistor-based potential energy method.
 
-Layers, top-down (each imports only the ones above it):
-  kinematics  -> hinge_laws (+ stiffness, polynomial) -> mechanism (+ config) -> assembly
-  (+ kernels) -> solver (+ stepping); recording, node, tools and cli build on the engine,
-  and the engine never imports ROS.
+Layers, visible in the folder listing (each imports only the ones above it):
+  engine/     the physics, no ROS (kinematics -> hinge laws -> mechanism -> solver)
+  recording/  rosbag2-format MCAP writing and reading
+  node/       the ROS 2 nodes: stage_node, replay
+  tools/      the flexure-sim command-line tools (analyse, plot, export, fit, bench, measure)
+  cli.py      the flexure-sim entry point
 """
 import os as _os
 

@@ -15,8 +15,8 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from .config import ConfigError, load_mechanism
-from .solver import DEFAULT_STEP, Simulation, SolverError, Snapshot
+from .engine.config import ConfigError, load_mechanism
+from .engine.solver import DEFAULT_STEP, Simulation, SolverError, Snapshot
 
 #: Times (s) at which the step response is reported, as in the acceptance figures.
 REPORT_TIMES = (1e-3, 2e-3, 5e-3)

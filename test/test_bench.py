@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from flexure_sim import bench
-from flexure_sim.config import load_mechanism
-from flexure_sim.solver import DEFAULT_STEP
+from flexure_sim.tools import bench
+from flexure_sim.engine.config import load_mechanism
+from flexure_sim.engine.solver import DEFAULT_STEP
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +30,7 @@ def test_error_grows_with_the_step_as_second_order():
     ref, _ = bench.reference_trajectory(mech, 4e-4, 0.01)
     errors = []
     for dt in (4e-4, 2e-4):
-        from flexure_sim.solver import Simulation
+        from flexure_sim.engine.solver import Simulation
         sim = Simulation(mech, dt=dt)
         sim.set_command(bench.U_STEP)
         traj = bench._output_trajectory(sim, int(round(4e-4 / dt)), len(ref))

@@ -4,7 +4,7 @@ import copy
 import pytest
 import yaml
 
-from flexure_sim.config import ConfigError, builtin_names, load_mechanism, resolve_mechanism_path
+from flexure_sim.engine.config import ConfigError, builtin_names, load_mechanism, resolve_mechanism_path
 
 
 def test_builtins_load():

@@ -12,8 +12,8 @@ import pytest
 import yaml
 
 from conftest import ROOT
-from flexure_sim.config import ConfigError, load_mechanism
-from flexure_sim.datasets import (
+from flexure_sim.engine.config import ConfigError, load_mechanism
+from flexure_sim.engine.datasets import (
     NOTCH_K,
     Leaf,
     cantilever_data,
@@ -23,7 +23,7 @@ from flexure_sim.datasets import (
     randomtest_report,
     sample_box,
 )
-from flexure_sim.fitting import (
+from flexure_sim.engine.fitting import (
     DataError,
     FitError,
     WrenchData,
@@ -33,10 +33,10 @@ from flexure_sim.fitting import (
     read_wrench_csv,
     write_wrench_csv,
 )
-from flexure_sim.hinge_laws import QuadraticLaw, evaluate, wrench_on_element
-from flexure_sim.kinematics import rot
-from flexure_sim.polynomial import PolynomialLaw, load_law, monomial_exponents
-from flexure_sim.solver import Simulation
+from flexure_sim.engine.hinge_laws import QuadraticLaw, evaluate, wrench_on_element
+from flexure_sim.engine.kinematics import rot
+from flexure_sim.engine.polynomial import PolynomialLaw, load_law, monomial_exponents
+from flexure_sim.engine.solver import Simulation
 
 EXAMPLES = ROOT / "config" / "examples"
 K_LEAF = Leaf().small_displacement_stiffness()
@@ -448,7 +448,7 @@ def test_mechanism_errors_for_polynomial_laws(tmp_path):
 
 
 def test_builtins_are_unchanged_and_examples_are_not_builtins():
-    from flexure_sim.config import builtin_names
+    from flexure_sim.engine.config import builtin_names
 
     assert "microstage_polynomial_a" not in builtin_names()
     stage = load_mechanism("microstage")

@@ -1,8 +1,8 @@
-"""The node measuring harness behind `python -m flexure_sim.bench --node`, on a short real run
+"""The node measuring harness behind `python -m flexure_sim.tools.bench --node`, on a short real run
 (a real stage_node subprocess, Fast DDS on loopback, a real recording read back)."""
 import pytest
 
-from flexure_sim.node import measure
+from flexure_sim.tools import measure
 
 from node_harness import next_domain_id
 

@@ -21,9 +21,9 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
-from flexure_sim.config import ConfigError, load_mechanism
+from flexure_sim.engine.config import ConfigError, load_mechanism
 from flexure_sim.recording import CorruptLogError, read_log
-from flexure_sim.solver import Simulation
+from flexure_sim.engine.solver import Simulation
 
 from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id
 

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import yaml
 
-from flexure_sim import kinematics as kin
-from flexure_sim.hinge_laws import QuadraticLaw, evaluate
-from flexure_sim.polynomial import (
+from flexure_sim.engine import kinematics as kin
+from flexure_sim.engine.hinge_laws import QuadraticLaw, evaluate
+from flexure_sim.engine.polynomial import (
     PolynomialFileError,
     PolynomialLaw,
     derivative_coefficients,

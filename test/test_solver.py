@@ -5,10 +5,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from flexure_sim import kinematics as kin
-from flexure_sim.config import load_mechanism
-from flexure_sim.hinge_laws import QuadraticLaw
-from flexure_sim.solver import Simulation
+from flexure_sim.engine import kinematics as kin
+from flexure_sim.engine.config import load_mechanism
+from flexure_sim.engine.hinge_laws import QuadraticLaw
+from flexure_sim.engine.solver import Simulation
 
 U_IN = 1.35e-6
 

@@ -24,7 +24,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
-from ..mechanism import Mechanism
+from ..engine.mechanism import Mechanism
 from .cdr import ClockPacker, Float64Packer, StampedPacker, pack_diagnostics, split_stamp
 
 ROOT_FRAME = "stage"

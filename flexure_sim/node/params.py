@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Optional
 
-from ..solver import DEFAULT_STEP
+from ..engine.solver import DEFAULT_STEP
 from .drive_input import limits_problem
 from .interface import TIME_MODES
 

@@ -47,9 +47,9 @@ from rclpy.task import Future
 from std_srvs.srv import SetBool, Trigger
 
 from .. import __version__
-from ..config import ConfigError, load_mechanism, resolve_mechanism_path
+from ..engine.config import ConfigError, load_mechanism, resolve_mechanism_path
 from ..recording import RecordingError
-from ..solver import Simulation, SolverError
+from ..engine.solver import Simulation, SolverError
 from . import interface as itf
 from .drive_input import CommandFilter, CommandStatus, DriveLimits, WarningThrottle, parse_float64_cdr
 from .pacing import Pacer, set_thread_nice

@@ -114,7 +114,7 @@ def static_gains(run: Run, steps: list[analysis.StepMetrics]) -> tuple[dict[int,
         return {}, f"no static comparison: cannot load the run's mechanism ({run.mechanism_problem})"
     if mech.drive is None or mech.output is None:
         return {}, f"no static comparison: mechanism {mech.name} has no drive or no output"
-    from ..solver import Simulation, SolverError
+    from ..engine.solver import Simulation, SolverError
 
     sim = Simulation(mech)
     outputs: dict[float, float] = {}

@@ -14,8 +14,8 @@ TOOL_MODULES: tuple[str, ...] = (
     "tools.analyse",
     "tools.plot",
     "tools.export",
-    "tools.replay",
-    "bench",
+    "node.replay",
+    "tools.bench",
 )
 
 

@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
-from ..fitting import DataError, FitError, fit_polynomial, read_wrench_csv, summarize_errors
-from ..polynomial import MAX_ORDER, save_law
+from ..engine.fitting import DataError, FitError, fit_polynomial, read_wrench_csv, summarize_errors
+from ..engine.polynomial import MAX_ORDER, save_law
 
 
 def register(subparsers) -> None:

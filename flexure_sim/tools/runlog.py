@@ -285,7 +285,7 @@ class Run:
 
     # ------------------------------------------------------------------ mechanism
     def mechanism(self):
-        """The mechanism the run simulated (flexure_sim.mechanism.Mechanism), or None.
+        """The mechanism the run simulated (flexure_sim.engine.mechanism.Mechanism), or None.
 
         Tried in order: the YAML text stored in the metadata (what actually ran), the file
         at the recorded path, the built-in of the recorded name. `mechanism_problem` says why
@@ -310,7 +310,7 @@ class Run:
         """
         from dataclasses import replace
 
-        from ..config import frame_pose_at_rest
+        from ..engine.config import frame_pose_at_rest
 
         mech = self.mechanism()
         if mech is None:
@@ -352,7 +352,7 @@ def _pose(p: Any) -> tuple[float, float, float]:
 
 
 def _load_mechanism(meta: dict[str, str]):
-    from ..config import ConfigError, load_mechanism, mechanism_from_dict
+    from ..engine.config import ConfigError, load_mechanism, mechanism_from_dict
 
     problems = []
     path = meta.get("mechanism_path", "")

@@ -1,8 +1,8 @@
 """Measure the stage node: real-time factor in fast mode and missed ticks in real-time mode.
 
-    python -m flexure_sim.node.measure                      # both modes, 1 kHz, recording on
-    python -m flexure_sim.node.measure --mode realtime --duration 30 --subscribe
-    python -m flexure_sim.node.measure --profile            # where one tick's time goes (no DDS)
+    python -m flexure_sim.tools.measure                      # both modes, 1 kHz, recording on
+    python -m flexure_sim.tools.measure --mode realtime --duration 30 --subscribe
+    python -m flexure_sim.tools.measure --profile            # where one tick's time goes (no DDS)
 
 Starts ``stage_node`` as a subprocess (this interpreter, its own ROS domain on localhost, a
 temporary working directory), listens to its ``/diagnostics`` with an rclpy node, and after a
@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
-from ..solver import DEFAULT_STEP
+from ..engine.solver import DEFAULT_STEP
 
 
 def _diag_values(msg: Any) -> dict[str, str]:
@@ -68,8 +68,8 @@ def run_node(
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile
 
-    from ..config import load_mechanism
-    from .interface import StageInterface, value_text
+    from ..engine.config import load_mechanism
+    from ..node.interface import StageInterface, value_text
 
     domain = domain_id if domain_id is not None else random.randint(1, 100)
     workdir = Path(keep_dir) if keep_dir else Path(tempfile.mkdtemp(prefix="stage_node_measure_"))
@@ -201,13 +201,13 @@ def profile(rate: float, sim_step: float, ticks: int = 300, mechanism: str = "mi
     from rclpy.context import Context
     from rclpy.serialization import serialize_message
 
-    from ..config import load_mechanism
+    from ..engine.config import load_mechanism
     from ..recording import McapRecorder
-    from ..solver import Simulation
-    from .interface import StageInterface, stream_qos
-    from .params import steps_per_tick
-    from .record_process import ProcessRecording, RecorderProcess
-    from .stage_node import RELINEARIZE_TOL
+    from ..engine.solver import Simulation
+    from ..node.interface import StageInterface, stream_qos
+    from ..node.params import steps_per_tick
+    from ..node.record_process import ProcessRecording, RecorderProcess
+    from ..node.stage_node import RELINEARIZE_TOL
 
     n, problem = steps_per_tick(rate, sim_step)
     if problem:
@@ -316,7 +316,7 @@ def _print_run(r: dict[str, Any]) -> None:
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m flexure_sim.node.measure",
+    parser = argparse.ArgumentParser(prog="python -m flexure_sim.tools.measure",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--mode", choices=("fast", "realtime", "both"), default="both")
     parser.add_argument("--duration", type=float, default=10.0, help="measuring window, s (default 10)")

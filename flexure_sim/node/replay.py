@@ -27,7 +27,7 @@ import time
 from typing import Any, Optional, Sequence
 
 from ..recording import LogMessage
-from .runlog import EXIT_OK, EXIT_USAGE, RunError, check_path, open_log, report_recovered, tool_errors, warn
+from ..tools.runlog import EXIT_OK, EXIT_USAGE, RunError, check_path, open_log, report_recovered, tool_errors, warn
 
 PROG = "flexure-sim replay"
 NODE_NAME = "flexure_sim_replay"

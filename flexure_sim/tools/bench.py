@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m flexure_sim.bench`` (or ``flexure-sim bench``) prints a table and
+"""Benchmarks: ``python -m flexure_sim.tools.bench`` (or ``flexure-sim bench``) prints a table and
 writes JSON. Every figure is measured in the same run as its baseline.
 
 Wall times are medians of several runs (7 for flexure_sim, 3 for the baseline).
@@ -25,8 +25,8 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from .config import load_mechanism
-from .solver import DEFAULT_STEP, Simulation
+from ..engine.config import load_mechanism
+from ..engine.solver import DEFAULT_STEP, Simulation
 
 U_STEP = 1.35e-6
 DURATION = 0.05
@@ -196,11 +196,11 @@ CONTROLLER_TOPICS = ("output/displacement", "drive/force", "hinges/a/compression
 
 
 def bench_node(duration: float = 30.0) -> dict:
-    """stage_node on the stage at 1 kHz, all topics, recording on (node/measure.py): fast
+    """stage_node on the stage at 1 kHz, all topics, recording on (tools/measure.py): fast
     mode; real-time mode with the defaults; with a short wake_spin; and next to a controller
     process (an rclpy node subscribed to three topics at 1 kHz each), with the default
     stepping-thread niceness and with none."""
-    from .node import measure  # needs ROS 2
+    from . import measure  # needs ROS 2
 
     def realtime(subscribe=False, **params) -> dict:
         return measure.run_node("realtime", duration, 1000.0, DEFAULT_STEP, True, subscribe,
@@ -278,7 +278,7 @@ def print_table(res: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> dict:
-    res: dict = {"machine": machine(), "command": " ".join(["python -m flexure_sim.bench", *sys.argv[1:]])}
+    res: dict = {"machine": machine(), "command": " ".join(["python -m flexure_sim.tools.bench", *sys.argv[1:]])}
     res["stage_step"] = bench_stage_step(args.dt, radau=not args.no_baseline)
     res["step_cost"] = bench_step_cost(args.dt)
     res["steps_per_s"] = res["step_cost"]["steps_per_s"]
@@ -289,7 +289,7 @@ def run(args: argparse.Namespace) -> dict:
 
 
 def build_parser(parser: Optional[argparse.ArgumentParser] = None) -> argparse.ArgumentParser:
-    parser = parser or argparse.ArgumentParser(prog="python -m flexure_sim.bench", description=__doc__.split("\n\n")[0])
+    parser = parser or argparse.ArgumentParser(prog="python -m flexure_sim.tools.bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--dt", type=float, default=DEFAULT_STEP, help=f"step (s), default {DEFAULT_STEP:g}")
     parser.add_argument("--json", type=Path, default=Path("bench.json"), help="where to write the JSON (default bench.json)")
     parser.add_argument("--no-baseline", action="store_true", help="skip the scipy Radau baseline")

@@ -10,7 +10,7 @@ docs/polynomial_hinges.md.
   (Appendix B) do it: 17 random configurations, random wrenches, order 4.
 - ``error_table``: held-out error against order N and data size.
 
-Run ``python -m flexure_sim.datasets --help`` for the command-line front end (generate a CSV,
+Run ``python -m flexure_sim.engine.datasets --help`` for the command-line front end (generate a CSV,
 print the held-out error table, reproduce Chapter 7.1).
 """
 from __future__ import annotations
@@ -361,7 +361,7 @@ def _ints(text: str) -> list[int]:
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m flexure_sim.datasets", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m flexure_sim.engine.datasets", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     gen = sub.add_parser("generate", help="write a CSV of synthetic measurements")
     gen.add_argument("model", choices=sorted(MODELS))

@@ -57,7 +57,7 @@ from .polynomial import load_law as load_polynomial_law
 
 #: Directory of the built-in mechanisms (installed to share/flexure_sim/config too).
 BUILTIN_DIRS = (
-    Path(__file__).resolve().parent.parent / "config",
+    Path(__file__).resolve().parents[2] / "config",
 )
 
 #: Largest mismatch (m) allowed between a hinge's two frames in the unstressed pose.

@@ -1,0 +1,13 @@
+"""The engine: planar flexure mechanics with the twistor-based potential energy method.
+
+No ROS here. Layers, each importing only the ones above it:
+
+- ``kinematics``: rotations, (R, p) <-> twist <-> twistor, adjoint maps;
+- ``stiffness``: hinge stiffness from geometry (notch, cantilever);
+- ``hinge_laws``, ``polynomial``: potentials, wrenches and damping of the hinge laws;
+- ``mechanism``: bodies, hinges, constraints and drives as plain data; ``config`` loads and
+  validates them from YAML (``yaml_files`` reads the files);
+- ``assembly`` (+ the compiled ``kernels``): hinge forces on the bodies with exact Jacobians;
+- ``solver`` (+ the compiled ``stepping`` loop): constrained dynamics, statics, snapshots;
+- ``fitting``, ``datasets``: polynomial laws fitted to measured wrenches, and the data sets.
+"""
