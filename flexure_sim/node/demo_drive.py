@@ -30,6 +30,8 @@ import sys
 import time
 from typing import Any, Optional, Sequence
 
+from .. import topics
+
 PROG = "demo_drive"
 NODE_NAME = "flexure_sim_demo_drive"
 DEFAULT_FRACTIONS = (0.25, 0.5, 0.75, 1.0, 0.0)
@@ -122,12 +124,12 @@ class DemoDriver:
         self.node = rclpy.create_node(NODE_NAME)
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
-        self.pub = self.node.create_publisher(Float64, "drive/displacement", _qos())
+        self.pub = self.node.create_publisher(Float64, topics.COMMAND, _qos())
         self.clock_ns: Optional[int] = None
         self.output: Optional[float] = None
         self.input: Optional[float] = None
         self.node.create_subscription(Clock, "/clock", self._on_clock, _qos(10))
-        self.node.create_subscription(Float64, "output/displacement", self._on_output, _qos())
+        self.node.create_subscription(Float64, topics.OUTPUT, self._on_output, _qos())
         self.node.create_subscription(Float64, "drive/input", self._on_input, _qos())
         self._Float64 = Float64
         self._counter = {"output": 0, "input": 0}

@@ -25,15 +25,13 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from ..engine.mechanism import Mechanism
+from .. import topics
+from ..topics import ROOT_FRAME, hinge_frame, hinge_frame_a
 from .cdr import ClockPacker, Float64Packer, StampedPacker, pack_diagnostics, split_stamp
 
-ROOT_FRAME = "stage"
 TIME_MODES = ("realtime", "fast", "lockstep")
 #: Modes in which the node publishes /clock (simulated time is not wall time).
 CLOCK_MODES = ("fast", "lockstep")
-DRIVE_COMMAND_TOPIC = "drive/displacement"
-DIAGNOSTICS_TOPIC = "diagnostics"
-CLOCK_TOPIC = "/clock"
 #: Depth of every published stream.
 QUEUE_DEPTH = 100
 #: Depth of the drive command subscription (commands waiting for the next tick).
@@ -56,16 +54,6 @@ def command_qos() -> QoSProfile:
     The reader is emptied once per tick (`polled`), so it must hold a tick's worth of
     commands: 1000 is a 1 MHz stream at 1 kHz ticks, or 200 ms of a 5 kHz stream at 5 Hz."""
     return _reliable_volatile(COMMAND_DEPTH)
-
-
-def hinge_frame(hinge: str) -> str:
-    """Frame b of a hinge (on its body B); the hinge's wrench is expressed in it."""
-    return f"hinge_{hinge}"
-
-
-def hinge_frame_a(hinge: str) -> str:
-    """Frame a of a hinge (on its body A)."""
-    return f"hinge_{hinge}_a"
 
 
 def check_names(mechanism: Mechanism) -> None:
@@ -135,51 +123,51 @@ class StageInterface:
 
         topics: list[TopicSpec] = []
         if self.publishes_clock:
-            topics.append(_spec("clock", CLOCK_TOPIC, Clock, "s", "",
+            topics.append(_spec("clock", topics.CLOCK, Clock, "s", "",
                                 "simulated time (fast and lockstep modes only)"))
-        topics.append(_spec("poses", "bodies/poses", PoseArray, "m, rad", ROOT_FRAME,
+        topics.append(_spec("poses", topics.POSE_ARRAY, PoseArray, "m, rad", ROOT_FRAME,
                             "pose of every body frame (at the mass centre) in the root frame, "
                             f"in body order ({', '.join(bodies)})"))
         for b in bodies:
-            topics.append(_spec(f"pose:{b}", f"bodies/{b}/pose", PoseStamped, "m, rad", ROOT_FRAME,
+            topics.append(_spec(f"pose:{b}", topics.body_pose(b), PoseStamped, "m, rad", ROOT_FRAME,
                                 f"pose of body {b}'s frame (at its mass centre) in the root frame"))
         for h in mech.hinges:
             topics.append(_spec(
-                f"wrench:{h.name}", f"hinges/{h.name}/wrench", WrenchStamped, "N, N m",
+                f"wrench:{h.name}", topics.hinge_wrench(h.name), WrenchStamped, "N, N m",
                 hinge_frame(h.name),
                 f"wrench hinge {h.name} exerts on its body B ({h.b.body}), in its frame b "
                 f"({hinge_frame(h.name)}), torque about b's origin; the opposite acts on "
                 f"body A ({h.a.body})"))
             topics.append(_spec(
-                f"deflection:{h.name}", f"hinges/{h.name}/deflection", TransformStamped, "m, rad",
+                f"deflection:{h.name}", topics.hinge_deflection(h.name), TransformStamped, "m, rad",
                 hinge_frame_a(h.name),
                 f"deflection of hinge {h.name}: pose of frame b ({hinge_frame(h.name)}) in frame a "
                 f"({hinge_frame_a(h.name)}); translation (p_x, p_y, 0), yaw alpha"))
         if self.compression_hinge is not None:
             c = self.compression_hinge
             topics.append(_spec(
-                "compression", f"hinges/{c}/compression", Float64, "m", "",
+                "compression", topics.hinge_compression(c), Float64, "m", "",
                 f"compression of hinge {c}: displacement of its frame on body B minus that on "
                 "body A, along the drive axis"))
         if self.has_output:
             topics.append(_spec(
-                "output", "output/displacement", Float64, "m", "",
+                "output", topics.OUTPUT, Float64, "m", "",
                 f"displacement of the output body {mech.output.body} from rest along "
                 f"({mech.output.axis[0]:g}, {mech.output.axis[1]:g})"))
         if self.has_drive:
             topics.append(_spec(
-                "drive_input", "drive/input", Float64, "m", "",
+                "drive_input", topics.DRIVE_INPUT, Float64, "m", "",
                 "actuator output actually applied (after validation, slew limiting and the "
                 "actuator lag), along the drive axis"))
             topics.append(_spec(
-                "drive_force", "drive/force", Float64, "N", "",
+                "drive_force", topics.DRIVE_FORCE, Float64, "N", "",
                 f"force the actuator applies to the driven body {mech.drive.body} along the drive axis"))
         self.tick_topics: tuple[TopicSpec, ...] = tuple(topics)
-        self.diagnostics = _spec("diagnostics", DIAGNOSTICS_TOPIC, DiagnosticArray, "", "",
+        self.diagnostics = _spec("diagnostics", topics.DIAGNOSTICS, DiagnosticArray, "", "",
                                  "real-time factor, step times, solver work, command counters")
         self.command: Optional[TopicSpec] = None
         if self.has_drive:
-            self.command = _spec("command", DRIVE_COMMAND_TOPIC, Float64, "m", "",
+            self.command = _spec("command", topics.COMMAND, Float64, "m", "",
                                  "drive command (subscribed): target actuator displacement "
                                  "along the drive axis")
         self._build_packers()

@@ -31,7 +31,7 @@ from ..tools.runlog import EXIT_OK, EXIT_USAGE, RunError, check_path, open_log, 
 
 PROG = "flexure-sim replay"
 NODE_NAME = "flexure_sim_replay"
-CLOCK_TOPIC = "/clock"
+from ..topics import CLOCK as CLOCK_TOPIC
 #: Longest sleep between checks for Ctrl-C and /clock fill-in (s).
 MAX_SLEEP_S = 0.05
 #: How long the end of a replay waits for reliable subscribers to acknowledge (s).

@@ -10,10 +10,7 @@ import datetime as _dt
 from pathlib import Path
 from typing import Optional
 
-#: Name of the metadata record holding the mechanism and the node's parameters.
-METADATA_NAME = "flexure_sim"
-#: Name of the metadata records written when parameters change during a recording.
-PARAMETER_CHANGE_NAME = "flexure_sim.parameters"
+from ..topics import METADATA_NAME, PARAMETER_CHANGE_NAME  # noqa: F401  (the node's names)
 
 
 def recording_path(

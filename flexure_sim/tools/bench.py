@@ -25,6 +25,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from .. import topics
 from ..engine.config import load_mechanism
 from ..engine.solver import DEFAULT_STEP, Simulation
 
@@ -192,7 +193,7 @@ def bench_static_sweep(levels: int = 1000) -> dict:
 #: wake_spin of the second real-time run: the CPU / punctuality trade-off of a short spin.
 LOW_WAKE_SPIN_S = 2e-4
 #: Topics a controller would subscribe to, for the real-time runs next to a subscriber.
-CONTROLLER_TOPICS = ("output/displacement", "drive/force", "hinges/a/compression")
+CONTROLLER_TOPICS = (topics.OUTPUT, topics.DRIVE_FORCE, topics.hinge_compression("a"))
 
 
 def bench_node(duration: float = 30.0) -> dict:

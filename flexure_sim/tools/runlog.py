@@ -36,6 +36,12 @@ from typing import Any, Optional
 import numpy as np
 
 from ..recording import CorruptLogError, McapLog, read_log
+# Topic names of a stage run, relative to its namespace, and the metadata record names
+# (re-exported for the tools).
+from ..topics import (  # noqa: F401
+    CLOCK, COMMAND, DRIVE_FORCE, DRIVE_INPUT, METADATA_NAME, OUTPUT, PARAMETER_CHANGE_NAME, POSE_ARRAY,
+    body_pose, hinge_compression, hinge_deflection, hinge_wrench,
+)
 from ..recording.errors import RecordingError
 
 #: Exit codes of every tool.
@@ -43,19 +49,6 @@ EXIT_OK = 0
 EXIT_BAD_FILE = 1
 EXIT_USAGE = 2
 
-#: Name of the metadata record in which stage_node stores the mechanism and its parameters
-#: (flexure_sim.node.session.METADATA_NAME; repeated here so the tools need no rclpy).
-METADATA_NAME = "flexure_sim"
-#: Records written when parameters change during a recording (session.PARAMETER_CHANGE_NAME).
-PARAMETER_CHANGE_NAME = "flexure_sim.parameters"
-
-#: Topics of a stage run, relative to the run's namespace (README "## stage_node").
-COMMAND = "drive/displacement"
-DRIVE_INPUT = "drive/input"
-DRIVE_FORCE = "drive/force"
-OUTPUT = "output/displacement"
-POSE_ARRAY = "bodies/poses"
-CLOCK = "/clock"
 #: Log times further than this from the /clock values they carry are not simulation time.
 CLOCK_MISMATCH_NS = 500_000_000
 #: Topics whose presence marks the namespace of a stage run.
@@ -223,7 +216,7 @@ class Run:
             if name.startswith(prefix) and name.endswith("/compression"):
                 rest = name[len(prefix):].split("/")
                 if len(rest) == 2:
-                    return f"hinges/{rest[0]}/compression"
+                    return hinge_compression(rest[0])
         return None
 
     def compression_hinge(self) -> Optional[str]:
@@ -233,7 +226,7 @@ class Run:
     def wrenches(self) -> dict[str, Series]:
         out = {}
         for h in self.hinge_names():
-            rel = f"hinges/{h}/wrench"
+            rel = hinge_wrench(h)
             if self.has(rel):
                 out[h] = self._series(rel, lambda m: (m.wrench.torque.z, m.wrench.force.x, m.wrench.force.y), (3,))
         return out
@@ -241,7 +234,7 @@ class Run:
     def deflections(self) -> dict[str, Series]:
         out = {}
         for h in self.hinge_names():
-            rel = f"hinges/{h}/deflection"
+            rel = hinge_deflection(h)
             if self.has(rel):
                 out[h] = self._series(rel, lambda m: (_yaw(m.transform.rotation), m.transform.translation.x,
                                                       m.transform.translation.y), (3,))
@@ -254,7 +247,7 @@ class Run:
         out: dict[str, Series] = {}
         bodies = self.body_names()
         for b in bodies:
-            rel = f"bodies/{b}/pose"
+            rel = body_pose(b)
             if self.has(rel):
                 out[b] = self._series(rel, lambda m: _pose(m.pose), (3,))
         if not out and self.has(POSE_ARRAY) and bodies:
