@@ -121,48 +121,48 @@ class StageInterface:
         self.has_output = mech.output is not None
         self.compression_hinge: Optional[str] = mech.compression_hinge if self.has_drive else None
 
-        topics: list[TopicSpec] = []
+        specs: list[TopicSpec] = []
         if self.publishes_clock:
-            topics.append(_spec("clock", topics.CLOCK, Clock, "s", "",
+            specs.append(_spec("clock", topics.CLOCK, Clock, "s", "",
                                 "simulated time (fast and lockstep modes only)"))
-        topics.append(_spec("poses", topics.POSE_ARRAY, PoseArray, "m, rad", ROOT_FRAME,
+        specs.append(_spec("poses", topics.POSE_ARRAY, PoseArray, "m, rad", ROOT_FRAME,
                             "pose of every body frame (at the mass centre) in the root frame, "
                             f"in body order ({', '.join(bodies)})"))
         for b in bodies:
-            topics.append(_spec(f"pose:{b}", topics.body_pose(b), PoseStamped, "m, rad", ROOT_FRAME,
+            specs.append(_spec(f"pose:{b}", topics.body_pose(b), PoseStamped, "m, rad", ROOT_FRAME,
                                 f"pose of body {b}'s frame (at its mass centre) in the root frame"))
         for h in mech.hinges:
-            topics.append(_spec(
+            specs.append(_spec(
                 f"wrench:{h.name}", topics.hinge_wrench(h.name), WrenchStamped, "N, N m",
                 hinge_frame(h.name),
                 f"wrench hinge {h.name} exerts on its body B ({h.b.body}), in its frame b "
                 f"({hinge_frame(h.name)}), torque about b's origin; the opposite acts on "
                 f"body A ({h.a.body})"))
-            topics.append(_spec(
+            specs.append(_spec(
                 f"deflection:{h.name}", topics.hinge_deflection(h.name), TransformStamped, "m, rad",
                 hinge_frame_a(h.name),
                 f"deflection of hinge {h.name}: pose of frame b ({hinge_frame(h.name)}) in frame a "
                 f"({hinge_frame_a(h.name)}); translation (p_x, p_y, 0), yaw alpha"))
         if self.compression_hinge is not None:
             c = self.compression_hinge
-            topics.append(_spec(
+            specs.append(_spec(
                 "compression", topics.hinge_compression(c), Float64, "m", "",
                 f"compression of hinge {c}: displacement of its frame on body B minus that on "
                 "body A, along the drive axis"))
         if self.has_output:
-            topics.append(_spec(
+            specs.append(_spec(
                 "output", topics.OUTPUT, Float64, "m", "",
                 f"displacement of the output body {mech.output.body} from rest along "
                 f"({mech.output.axis[0]:g}, {mech.output.axis[1]:g})"))
         if self.has_drive:
-            topics.append(_spec(
+            specs.append(_spec(
                 "drive_input", topics.DRIVE_INPUT, Float64, "m", "",
                 "actuator output actually applied (after validation, slew limiting and the "
                 "actuator lag), along the drive axis"))
-            topics.append(_spec(
+            specs.append(_spec(
                 "drive_force", topics.DRIVE_FORCE, Float64, "N", "",
                 f"force the actuator applies to the driven body {mech.drive.body} along the drive axis"))
-        self.tick_topics: tuple[TopicSpec, ...] = tuple(topics)
+        self.tick_topics: tuple[TopicSpec, ...] = tuple(specs)
         self.diagnostics = _spec("diagnostics", topics.DIAGNOSTICS, DiagnosticArray, "", "",
                                  "real-time factor, step times, solver work, command counters")
         self.command: Optional[TopicSpec] = None
