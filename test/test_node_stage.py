@@ -21,7 +21,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
-from flexure_sim.engine.config import ConfigError, load_mechanism
+from flexure_sim.engine.config import ConfigError, load_mechanism, resolve_mechanism_path
 from flexure_sim.recording import CorruptLogError, read_log
 from flexure_sim.engine.solver import Simulation
 
@@ -386,8 +386,7 @@ def test_lockstep_runs_are_deterministic_and_reset_restarts_time(tmp_path, domai
 # ------------------------------------------------------------------------------ recording
 def test_realtime_run_records_what_it_publishes_and_kill_9_leaves_readable_chunks(tmp_path, domain, peer):
     custom = tmp_path / "my_stage.yaml"
-    custom.write_text(Path(load_mechanism.__code__.co_filename).parent.parent.joinpath(
-        "config", "microstage.yaml").read_text())
+    custom.write_text(resolve_mechanism_path("microstage").read_text())
     node = start(tmp_path, domain, peer, mechanism=str(custom), time_mode="realtime", sim_step=5e-4,
                  publish_rate=200.0, record=True, record_path="rt.mcap")
     try:

@@ -542,7 +542,7 @@ def test_read_log_and_log_info_report_topics_counts_times_and_metadata(
     assert info.metadata_records == log.metadata_records
     text = info.format()
     assert "/stage/body_poses" in text and "geometry_msgs/msg/PoseArray" in text
-    assert "flexure_sim.engine.mechanism: micropositioning_stage" in text
+    assert "flexure_sim.mechanism: micropositioning_stage" in text
 
 
 # -- writer behaviour --------------------------------------------------------------------------
