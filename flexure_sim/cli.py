@@ -15,6 +15,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from .errors import FlexureSimError
 from .engine.config import ConfigError, load_mechanism
 from .engine.solver import DEFAULT_STEP, Simulation, SolverError, Snapshot
 
@@ -22,7 +23,7 @@ from .engine.solver import DEFAULT_STEP, Simulation, SolverError, Snapshot
 REPORT_TIMES = (1e-3, 2e-3, 5e-3)
 
 
-class UsageError(ValueError):
+class UsageError(FlexureSimError, ValueError):
     """A command-line argument is invalid (the message names it)."""
 
 

@@ -38,6 +38,7 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
+from ..errors import FlexureSimError
 from . import stiffness as stiffness_models
 from .yaml_files import read_yaml
 from .hinge_laws import COORDINATES, QuadraticLaw
@@ -64,7 +65,7 @@ BUILTIN_DIRS = (
 COINCIDENCE_TOLERANCE = 1e-9
 
 
-class ConfigError(ValueError):
+class ConfigError(FlexureSimError, ValueError):
     """A mechanism file is invalid; the message names the file, the key and the problem."""
 
 

@@ -42,6 +42,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ..errors import FlexureSimError
 from .hinge_laws import COORDINATES, wrench_on_element
 from .kinematics import rot
 from .polynomial import (
@@ -65,11 +66,11 @@ RANK_TOLERANCE = 1e-10
 COMPONENTS = ("m", "fx", "fy")
 
 
-class DataError(ValueError):
+class DataError(FlexureSimError, ValueError):
     """A data file is invalid; the message names the file, the line or column and the problem."""
 
 
-class FitError(ValueError):
+class FitError(FlexureSimError, ValueError):
     """The data cannot determine the requested polynomial; the message says why."""
 
 

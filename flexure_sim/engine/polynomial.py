@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from ..errors import FlexureSimError
 from .hinge_laws import QuadraticLaw, evaluate
 from .yaml_files import read_yaml
 from .kinematics import adjoint, transform_stiffness
@@ -69,7 +70,7 @@ FILE_VERSION = 1
 MAX_ORDER = 12
 
 
-class PolynomialFileError(ValueError):
+class PolynomialFileError(FlexureSimError, ValueError):
     """A polynomial hinge file is invalid; the message names the file, the key and the problem."""
 
 

@@ -40,6 +40,7 @@ from typing import Optional
 import numpy as np
 import scipy.linalg
 
+from ..errors import FlexureSimError
 from . import stepping
 
 from .assembly import Assembly
@@ -49,7 +50,7 @@ from .mechanism import COORDINATE_NAMES, Drive, Fixed, Mechanism, SineRate
 DEFAULT_STEP = 1e-4
 
 
-class SolverError(RuntimeError):
+class SolverError(FlexureSimError, RuntimeError):
     """The solver could not produce a finite answer (names the cause)."""
 
 

@@ -30,6 +30,7 @@ import sys
 import time
 from typing import Any, Optional, Sequence
 
+from ..errors import FlexureSimError
 from .. import topics
 
 PROG = "demo_drive"
@@ -37,7 +38,7 @@ NODE_NAME = "flexure_sim_demo_drive"
 DEFAULT_FRACTIONS = (0.25, 0.5, 0.75, 1.0, 0.0)
 
 
-class DriveError(RuntimeError):
+class DriveError(FlexureSimError, RuntimeError):
     """The demo cannot run (no stage node, no clock progress...); the message says why."""
 
 

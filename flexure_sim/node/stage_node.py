@@ -47,6 +47,7 @@ from rclpy.task import Future
 from std_srvs.srv import SetBool, Trigger
 
 from .. import __version__
+from ..errors import FlexureSimError
 from ..engine.config import ConfigError, load_mechanism, resolve_mechanism_path
 from ..recording import RecordingError
 from ..engine.solver import Simulation, SolverError
@@ -83,7 +84,7 @@ _TYPE_CODES = {
 }
 
 
-class StartupError(RuntimeError):
+class StartupError(FlexureSimError, RuntimeError):
     """The node cannot start (bad mechanism, invalid parameters, recording impossible)."""
 
 

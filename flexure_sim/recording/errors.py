@@ -3,8 +3,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..errors import FlexureSimError
 
-class RecordingError(Exception):
+
+class RecordingError(FlexureSimError):
     """Base class of every error raised on purpose by `flexure_sim.recording`."""
 
 

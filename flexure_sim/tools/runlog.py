@@ -35,6 +35,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ..errors import FlexureSimError
 from ..recording import CorruptLogError, McapLog, read_log
 # Topic names of a stage run, relative to its namespace, and the metadata record names
 # (re-exported for the tools).
@@ -55,7 +56,7 @@ CLOCK_MISMATCH_NS = 500_000_000
 _MARKERS = (OUTPUT, DRIVE_INPUT, POSE_ARRAY, DRIVE_FORCE)
 
 
-class RunError(Exception):
+class RunError(FlexureSimError):
     """A file that reads but cannot be used as asked (missing topics...), or bad usage.
 
     ``exit_code`` is `EXIT_BAD_FILE` or `EXIT_USAGE`.

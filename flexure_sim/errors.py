@@ -1,0 +1,46 @@
+"""The root of the package's exceptions: catch `FlexureSimError` to catch them all.
+
+Every error flexure_sim raises on purpose derives from `FlexureSimError`. Each keeps the
+built-in base it had before (``ValueError`` for bad input, ``RuntimeError`` for failures at
+run time, ``Exception`` for the recording layer), so ``except ValueError`` callers still work::
+
+    from flexure_sim.errors import FlexureSimError
+    try:
+        sim = Simulation(load_mechanism(path))
+    except FlexureSimError as exc:    # ConfigError, SolverError, RecordingError, ...
+        print(f"error: {exc}")
+
+The classes live with the code that raises them (``engine.config.ConfigError``,
+``engine.solver.SolverError``, ``recording.errors.RecordingError``, ...). This module imports
+nothing from the package, so any layer (the engine included) may import it.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+
+class FlexureSimError(Exception):
+    """Base class of every error raised on purpose by flexure_sim."""
+
+
+def as_array(name: str, value, shape: Sequence[int | None], dtype=float) -> np.ndarray:
+    """``value`` as an array of ``shape`` (None: any length), or a ValueError naming ``name``.
+
+    Public functions check their arguments with this instead of letting NumPy's reshape or
+    broadcasting errors (which name neither the argument nor the expected shape) escape.
+    """
+    try:
+        array = np.asarray(value, dtype=dtype)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected numbers of shape {_shape_text(shape)}, got {value!r}") from None
+    if array.ndim != len(shape) or any(want is not None and have != want
+                                       for have, want in zip(array.shape, shape)):
+        raise ValueError(f"{name}: expected shape {_shape_text(shape)}, got {array.shape}")
+    return array
+
+
+def _shape_text(shape: Sequence[int | None]) -> str:
+    dims = ["n" if d is None else str(d) for d in shape]
+    return "(" + ", ".join(dims) + ("," if len(dims) == 1 else "") + ")"
