@@ -16,8 +16,8 @@ from typing import Optional, Sequence
 import numpy as np
 
 from .errors import FlexureSimError
-from .engine.config import ConfigError, load_mechanism
-from .engine.solver import DEFAULT_STEP, Simulation, SolverError, Snapshot
+from .engine.config import load_mechanism
+from .engine.solver import DEFAULT_STEP, Simulation, Snapshot
 
 #: Times (s) at which the step response is reported, as in the acceptance figures.
 REPORT_TIMES = (1e-3, 2e-3, 5e-3)
@@ -168,7 +168,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return args.handler(args)
     try:
         out = run_simulate(args)
-    except (ConfigError, UsageError, SolverError) as exc:
+    except FlexureSimError as exc:  # ConfigError, UsageError, SolverError, ...: one line
         print(f"flexure-sim: error: {exc}", file=sys.stderr)
         return 2
     if args.json:

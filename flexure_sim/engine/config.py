@@ -89,10 +89,13 @@ def _number(ctx: _Ctx, key: str, value: Any, *, positive=False, nonnegative=Fals
         except ValueError:
             pass
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ctx.fail(key, f"expected a number, got {value!r}")
-    v = float(value)
+        raise ctx.fail(key, f"expected a number, got {_shown(value)}")
+    try:
+        v = float(value)
+    except OverflowError:  # an integer beyond the double range
+        raise ctx.fail(key, f"must be finite, got {_shown(value)}") from None
     if not math.isfinite(v):
-        raise ctx.fail(key, f"must be finite, got {value!r}")
+        raise ctx.fail(key, f"must be finite, got {_shown(value)}")
     if positive and v <= 0:
         raise ctx.fail(key, f"must be positive, got {value!r}")
     if nonnegative and v < 0:
@@ -103,7 +106,7 @@ def _number(ctx: _Ctx, key: str, value: Any, *, positive=False, nonnegative=Fals
 def _vector(ctx: _Ctx, key: str, value: Any, lengths: tuple[int, ...]) -> list[float]:
     if not isinstance(value, (list, tuple)) or len(value) not in lengths:
         want = " or ".join(str(n) for n in lengths)
-        raise ctx.fail(key, f"expected a list of {want} numbers, got {value!r}")
+        raise ctx.fail(key, f"expected a list of {want} numbers, got {_shown(value)}")
     return [_number(ctx, f"{key}[{i}]", v) for i, v in enumerate(value)]
 
 
@@ -120,18 +123,29 @@ def _require(ctx: _Ctx, key: str, data: dict, name: str) -> Any:
 
 
 def _no_unknown(ctx: _Ctx, key: str, data: dict, allowed: set[str]) -> None:
-    unknown = sorted(set(data) - allowed)
+    unknown = sorted(set(data) - allowed, key=str)  # YAML keys need not be strings
     if unknown:
-        where = f"{key}.{unknown[0]}" if key else unknown[0]
+        where = f"{key}.{_key_text(unknown[0])}" if key else _key_text(unknown[0])
         raise ctx.fail(where, f"unknown key (allowed: {', '.join(sorted(allowed))})")
+
+
+def _shown(value: Any, limit: int = 60) -> str:
+    """repr of a value from the file, shortened so that a message stays one readable line."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _key_text(key: Any) -> str:
+    """A mapping key of the file as it appears in a key path (quoted unless a plain word)."""
+    return key if isinstance(key, str) and key.isidentifier() else _shown(key, 30)
 
 
 def _name(ctx: _Ctx, key: str, value: Any) -> str:
     if not isinstance(value, str) or not value:
-        raise ctx.fail(key, f"expected a non-empty name, got {value!r}")
-    if not (value[0].isalpha() and all(ch.isalnum() or ch == "_" for ch in value)):
+        raise ctx.fail(key, f"expected a non-empty name, got {_shown(value)}")
+    if not (value.isascii() and value[0].isalpha() and all(ch.isalnum() or ch == "_" for ch in value)):
         raise ctx.fail(
-            key, f"{value!r} is not a valid name (letters, digits, '_', starting with a letter;"
+            key, f"{_shown(value)} is not a valid name (ASCII letters, digits, '_', starting with a letter;"
             " names become ROS topic and frame names)"
         )
     return value
@@ -148,6 +162,8 @@ _STIFFNESS_KEYS: dict[str, tuple[Callable[..., np.ndarray], tuple[str, ...]]] = 
 def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
     spec = _mapping(ctx, key, spec)
     model = _require(ctx, key, spec, "model")
+    if not isinstance(model, str):
+        raise ctx.fail(f"{key}.model", f"expected a model name (notch, cantilever, matrix), got {_shown(model)}")
     if model in _STIFFNESS_KEYS:
         fn, names = _STIFFNESS_KEYS[model]
         _no_unknown(ctx, key, spec, {"model", *names})
@@ -156,7 +172,12 @@ def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
             nu = args[-1]
             if not 0 <= nu < 0.5:
                 raise ctx.fail(f"{key}.nu", f"Poisson's ratio must be in [0, 0.5), got {nu}")
-        return fn(*args), model
+        with np.errstate(all="ignore"):
+            K = fn(*(np.float64(a) for a in args))  # overflow gives inf, checked below
+        if not np.all(np.isfinite(K)):
+            raise ctx.fail(key, f"the {model} formula gives a non-finite stiffness for these values "
+                           f"({', '.join(f'{n}={a:g}' for n, a in zip(names, args))}): check the units")
+        return K, model
     if model == "matrix":
         _no_unknown(ctx, key, spec, {"model", "K", "Ko", "Kt", "Kc"})
         if "K" in spec:
@@ -170,13 +191,17 @@ def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
             kc = _vector(ctx, f"{key}.Kc", spec.get("Kc", [0.0, 0.0]), (2,))
             K = np.array([[Ko, kc[0], kc[1]], [kc[0], kt[0], 0.0], [kc[1], 0.0, kt[1]]])
         return K, "matrix"
-    raise ctx.fail(f"{key}.model", f"unknown stiffness model {model!r} (notch, cantilever, matrix)")
+    raise ctx.fail(f"{key}.model", f"unknown stiffness model {_shown(model)} (notch, cantilever, matrix)")
 
 
 def _check_spd(ctx: _Ctx, key: str, M: np.ndarray, what: str) -> None:
+    if not np.all(np.isfinite(M)):
+        raise ctx.fail(key, f"{what} matrix is not finite: {M.tolist()}")
     if not np.allclose(M, M.T, rtol=1e-12, atol=0.0):
         raise ctx.fail(key, f"{what} matrix is not symmetric: {M.tolist()}")
-    if np.any(np.linalg.eigvalsh(M) <= 0):
+    with np.errstate(all="ignore"):
+        eig = np.linalg.eigvalsh(M)
+    if not np.all(eig > 0):  # also false for NaN eigenvalues (entries near the double range)
         raise ctx.fail(key, f"{what} matrix is not positive definite: {M.tolist()}")
 
 
@@ -236,7 +261,7 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
     _no_unknown(ctx, "defaults", defaults, {"law", "damping"})
 
     named_stiffness = {
-        _name(ctx, f"stiffness_models.{k}", k): _stiffness(ctx, f"stiffness_models.{k}", v)
+        _name(ctx, f"stiffness_models.{_key_text(k)}", k): _stiffness(ctx, f"stiffness_models.{k}", v)
         for k, v in _mapping(ctx, "stiffness_models", data.get("stiffness_models", {})).items()
     }
 
@@ -251,8 +276,11 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
         _no_unknown(ctx, "output", spec, {"body", "axis"})
         output = Output(_body_ref(ctx, "output.body", spec, by_name), _axis(ctx, "output.axis", spec.get("axis", [1, 0])))
     compression = data.get("compression_hinge")
+    if compression is not None and not isinstance(compression, str):
+        raise ctx.fail("compression_hinge", f"expected a hinge name, got {_shown(compression)}")
     if compression is not None and compression not in {h.name for h in hinges}:
-        raise ctx.fail("compression_hinge", f"unknown hinge {compression!r}")
+        raise ctx.fail("compression_hinge", f"unknown hinge {_shown(compression)} (hinges: "
+                       f"{', '.join(h.name for h in hinges)})")
     if compression is not None and not any(isinstance(c, Drive) for c in constraints):
         raise ctx.fail("compression_hinge", "needs a drive constraint (measured along the drive axis)")
     metadata = _mapping(ctx, "metadata", data.get("metadata", {}))
@@ -294,17 +322,20 @@ def _body_ref(ctx: _Ctx, key: str, spec: dict, by_name: dict[str, Body]) -> str:
     name = spec.get("body")
     if name is None:
         raise ctx.fail(key, "missing required key")
+    if not isinstance(name, str):
+        raise ctx.fail(key, f"expected a body name, got {_shown(name)}")
     if name not in by_name:
-        raise ctx.fail(key, f"unknown body {name!r} (bodies: {', '.join(by_name)})")
+        raise ctx.fail(key, f"unknown body {_shown(name)} (bodies: {', '.join(by_name)})")
     return name
 
 
 def _axis(ctx: _Ctx, key: str, value: Any) -> tuple[float, float]:
     v = np.array(_vector(ctx, key, value, (2,)))
-    n = np.linalg.norm(v)
-    if n == 0:
+    largest = np.max(np.abs(v))
+    if largest == 0:
         raise ctx.fail(key, "axis must not be zero")
-    v = v / n
+    v = v / largest  # first, so that the norm of components near the double range is finite
+    v = v / np.linalg.norm(v)
     return float(v[0]), float(v[1])
 
 
@@ -341,9 +372,13 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
         fb = _frame(ctx, f"{key}.b", _require(ctx, key, spec, "b"), by_name)
         if fa.body == fb.body:
             raise ctx.fail(f"{key}.b.body", f"hinge joins body {fa.body!r} to itself")
-        pa, tha = frame_pose_at_rest(fa, by_name[fa.body])
-        pb, thb = frame_pose_at_rest(fb, by_name[fb.body])
-        gap = float(np.linalg.norm(pa - pb))
+        with np.errstate(all="ignore"):
+            pa, tha = frame_pose_at_rest(fa, by_name[fa.body])
+            pb, thb = frame_pose_at_rest(fb, by_name[fb.body])
+            gap = float(np.linalg.norm(pa - pb))
+        if not np.all(np.isfinite([*pa, *pb, tha - thb])):
+            raise ctx.fail(key, "the frames' poses at rest are not finite (body poses or frame "
+                           "positions too large: check the units)")
         turn = abs(math.remainder(tha - thb, 2 * math.pi))
         if gap > COINCIDENCE_TOLERANCE or turn > 1e-9:
             raise ctx.fail(
@@ -363,14 +398,14 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
             sspec = _require(ctx, key, spec, "stiffness")
             if isinstance(sspec, str):
                 if sspec not in named_stiffness:
-                    raise ctx.fail(f"{key}.stiffness", f"unknown stiffness model name {sspec!r}")
+                    raise ctx.fail(f"{key}.stiffness", f"unknown stiffness model name {_shown(sspec)}")
                 K, source = named_stiffness[sspec]
             else:
                 K, source = _stiffness(ctx, f"{key}.stiffness", sspec)
             _check_spd(ctx, f"{key}.stiffness", K, "stiffness")
             if not isinstance(law_name, str) or law_name not in COORDINATES:
                 raise ctx.fail(law_key,
-                               f"unknown law {law_name!r} ({', '.join(COORDINATES)}, or {{polynomial: FILE}})")
+                               f"unknown law {_shown(law_name)} ({', '.join(COORDINATES)}, or {{polynomial: FILE}})")
         B = _damping(ctx, f"{key}.damping", spec.get("damping", defaults.get("damping")), K)
         law = poly.with_damping(B) if poly is not None else QuadraticLaw(law_name, K, B)
         hinges.append(Hinge(name, fa, fb, K, B, law, source))
@@ -382,8 +417,8 @@ def _polynomial_law(ctx: _Ctx, key: str, spec: dict, cache: dict) -> PolynomialL
     to the mechanism file (to the working directory for documents without a file)."""
     _no_unknown(ctx, key, spec, {"polynomial"})
     ref = _require(ctx, key, spec, "polynomial")
-    if not isinstance(ref, str) or not ref:
-        raise ctx.fail(f"{key}.polynomial", f"expected the path of a polynomial hinge file, got {ref!r}")
+    if not isinstance(ref, str) or not ref or "\0" in ref:
+        raise ctx.fail(f"{key}.polynomial", f"expected the path of a polynomial hinge file, got {_shown(ref)}")
     origin = Path(ctx.source)
     path = (origin.parent if origin.is_file() else Path.cwd()) / ref
     if path not in cache:
@@ -400,13 +435,19 @@ def _damping(ctx: _Ctx, key: str, spec: Any, K: np.ndarray) -> np.ndarray:
     spec = _mapping(ctx, key, spec)
     _no_unknown(ctx, key, spec, {"t_char", "B"})
     if "t_char" in spec:
-        return _number(ctx, f"{key}.t_char", spec["t_char"], nonnegative=True) * K
+        with np.errstate(all="ignore"):
+            B = _number(ctx, f"{key}.t_char", spec["t_char"], nonnegative=True) * K
+        if not np.all(np.isfinite(B)):
+            raise ctx.fail(f"{key}.t_char", "t_char times the stiffness is not finite: check the units")
+        return B
     if "B" in spec:
         rows = spec["B"]
         if not isinstance(rows, list) or len(rows) != 3:
             raise ctx.fail(f"{key}.B", "expected a 3x3 matrix")
         B = np.array([_vector(ctx, f"{key}.B[{i}]", r, (3,)) for i, r in enumerate(rows)])
-        if not np.allclose(B, B.T) or np.any(np.linalg.eigvalsh(B) < 0):
+        with np.errstate(all="ignore"):
+            psd = np.allclose(B, B.T) and np.all(np.linalg.eigvalsh(B) >= 0)
+        if not psd:
             raise ctx.fail(f"{key}.B", "damping matrix must be symmetric positive semi-definite")
         return B
     raise ctx.fail(key, "give t_char or B")
@@ -445,7 +486,7 @@ def _constraints(ctx, raw, by_name) -> list:
             _no_unknown(ctx, key, spec, {"type", "body", "coordinate", "amplitude", "frequency", "phase"})
             coord = _require(ctx, key, spec, "coordinate")
             if coord not in COORDINATE_NAMES:
-                raise ctx.fail(f"{key}.coordinate", f"expected one of {COORDINATE_NAMES}, got {coord!r}")
+                raise ctx.fail(f"{key}.coordinate", f"expected one of {COORDINATE_NAMES}, got {_shown(coord)}")
             c = SineRate(
                 body, coord,
                 _number(ctx, f"{key}.amplitude", _require(ctx, key, spec, "amplitude")),
@@ -454,7 +495,7 @@ def _constraints(ctx, raw, by_name) -> list:
             )
             coords = (COORDINATE_NAMES.index(coord),)
         else:
-            raise ctx.fail(f"{key}.type", f"unknown constraint type {kind!r} (fixed, drive, sine_rate)")
+            raise ctx.fail(f"{key}.type", f"unknown constraint type {_shown(kind)} (fixed, drive, sine_rate)")
         for k in coords:
             if (body, k) in held:
                 raise ctx.fail(key, f"coordinate {COORDINATE_NAMES[k]} of body {body!r} is already "
