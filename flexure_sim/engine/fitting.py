@@ -42,9 +42,10 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ..errors import FlexureSimError
+from ..errors import FlexureSimError, as_array
 from .hinge_laws import COORDINATES, wrench_on_element
 from .kinematics import rot
+from .yaml_files import read_text
 from .polynomial import (
     MAX_ORDER,
     REST,
@@ -85,10 +86,10 @@ class WrenchData:
     source: str = "<data>"
 
     def __post_init__(self) -> None:
-        alpha = np.asarray(self.alpha, dtype=float).reshape(-1)
+        alpha = as_array("alpha", self.alpha, (None,))
         n = len(alpha)
-        p = np.asarray(self.p, dtype=float).reshape(n, 2)
-        w = np.asarray(self.wrench, dtype=float).reshape(n, 3)
+        p = as_array("p", self.p, (n, 2))
+        w = as_array("wrench", self.wrench, (n, 3))
         object.__setattr__(self, "alpha", alpha)
         object.__setattr__(self, "p", p)
         object.__setattr__(self, "wrench", w)
@@ -103,31 +104,42 @@ class WrenchData:
 
 # --------------------------------------------------------------------------- CSV
 
+#: Largest magnitude accepted in a data file: the fit squares and multiplies the values
+#: (RMS weights, energy scale), which must stay finite in double precision (max ~1.8e308).
+MAX_ABS_VALUE = 1e150
+
+
 def read_wrench_csv(path: str | Path) -> WrenchData:
     """Read a data CSV: a header naming at least the columns alpha, px, py, m, fx, fy (any
     order; other columns are ignored), then one row per measurement. Lines starting with '#'
-    are comments. Every value must be a finite number and |alpha| < pi."""
+    are comments. The file must be UTF-8 text; every value must be a finite number of
+    magnitude at most MAX_ABS_VALUE, and |alpha| < pi. Errors name the file, line and column."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise DataError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    text = read_text(path, DataError)
     lines = [
         (i + 1, line) for i, line in enumerate(text.splitlines())
         if line.strip() and not line.lstrip().startswith("#")
     ]
+    for lineno, line in lines:
+        if "\0" in line:
+            raise DataError(f"{path}: line {lineno}: contains a NUL byte (a binary file, not a CSV?)")
     if not lines:
         raise DataError(f"{path}: no header and no data (need columns {', '.join(COLUMNS)})")
-    rows = list(csv.reader([line for _, line in lines], skipinitialspace=True))
+    reader = csv.reader([line for _, line in lines], skipinitialspace=True)
+    try:
+        rows = list(reader)
+    except csv.Error as exc:
+        raise DataError(f"{path}: line {lines[reader.line_num - 1][0]}: not valid CSV: {exc}") from None
     header = [h.strip() for h in rows[0]]
     dup = sorted({h for h in header if header.count(h) > 1})
     if dup:
         raise DataError(f"{path}: line {lines[0][0]}: column {dup[0]!r} appears more than once")
     missing = [c for c in COLUMNS if c not in header]
     if missing:
+        found = ", ".join(h if h.isprintable() else repr(h) for h in header)
         raise DataError(
             f"{path}: missing column{'s' if len(missing) > 1 else ''} {', '.join(missing)} "
-            f"(the header must name {', '.join(COLUMNS)}; found {', '.join(header) or 'nothing'})"
+            f"(the header must name {', '.join(COLUMNS)}; found {found or 'nothing'})"
         )
     if len(rows) == 1:
         raise DataError(f"{path}: the header has no data rows")
@@ -137,20 +149,29 @@ def read_wrench_csv(path: str | Path) -> WrenchData:
         if len(row) != len(header):
             raise DataError(f"{path}: line {lineno}: expected {len(header)} fields, got {len(row)}")
         for c, (name, col) in enumerate(zip(COLUMNS, where)):
-            cell = row[col].strip()
-            try:
-                v = float(cell)
-            except ValueError:
-                raise DataError(f"{path}: line {lineno}, column {name!r}: {cell!r} is not a number") from None
-            if not math.isfinite(v):
-                raise DataError(f"{path}: line {lineno}, column {name!r}: {cell} (every value must be finite)")
-            values[r, c] = v
+            values[r, c] = _cell(path, lineno, name, row[col].strip())
     bad = np.nonzero(np.abs(values[:, 0]) >= math.pi)[0]
     if len(bad):
         raise DataError(
             f"{path}: line {lines[1 + bad[0]][0]}, column 'alpha': {values[bad[0], 0]!r} rad is outside (-pi, pi)"
         )
     return WrenchData(values[:, 0], values[:, 1:3], values[:, 3:6], str(path))
+
+
+def _cell(path: Path, lineno: int, name: str, cell: str) -> float:
+    """One CSV value: a finite number no larger in magnitude than MAX_ABS_VALUE."""
+    where = f"{path}: line {lineno}, column {name!r}"
+    shown = repr(cell) if len(cell) <= 40 else repr(cell[:37]) + "..."
+    try:
+        v = float(cell)
+    except ValueError:
+        raise DataError(f"{where}: {shown} is not a number") from None
+    if not math.isfinite(v):
+        raise DataError(f"{where}: {shown} (every value must be finite)")
+    if abs(v) > MAX_ABS_VALUE:
+        raise DataError(f"{where}: {v:g} is out of range (|value| <= {MAX_ABS_VALUE:g}, "
+                        "so that the fit's sums of squares stay finite; check the units: SI)")
+    return v
 
 
 def write_wrench_csv(path: str | Path, data: WrenchData, comment: str = "") -> None:
@@ -272,6 +293,9 @@ def fit_polynomial(
         raise FitError(f"coordinates must be twistor or twist, got {coordinates!r}")
     if not (np.isfinite(regularization) and regularization >= 0):
         raise FitError(f"regularization must be a non-negative number, got {regularization!r}")
+    table = np.column_stack([data.alpha, data.p, data.wrench])
+    if not np.all(np.isfinite(table)) or np.max(np.abs(table), initial=0.0) > MAX_ABS_VALUE:
+        raise FitError(_overflow(data))
     exps = basis_exponents(coordinates, order, sigma_degree)
     names = VARIABLES[coordinates]
     n, M = len(data), len(exps)
@@ -308,7 +332,12 @@ def fit_polynomial(
         )
     norms = np.where(norms > 0, norms, 1.0)
     An = A / norms
-    U, s, Vt = np.linalg.svd(An, full_matrices=False)
+    if not (np.all(np.isfinite(An)) and np.all(np.isfinite(b))):
+        raise FitError(_overflow(data))
+    try:
+        U, s, Vt = np.linalg.svd(An, full_matrices=False)
+    except np.linalg.LinAlgError:
+        raise FitError(_overflow(data)) from None
     cond = float(s[0] / s[-1]) if s[-1] > 0 else math.inf
     rank = int(np.sum(s > RANK_TOLERANCE * s[0]))
     if rank < M and regularization == 0:
@@ -357,6 +386,16 @@ def fit_polynomial(
     report["stiffness_at_rest"] = [[float(v) for v in row] for row in K]
     report["stable_at_rest"] = bool(np.all(np.linalg.eigvalsh(K) > 0))
     return FitResult(law, report)
+
+
+def _overflow(data: WrenchData) -> str:
+    """Why the fit's arithmetic would leave the double range: the worst value and its row."""
+    table = np.column_stack([data.alpha, data.p, data.wrench])
+    size = np.where(np.isfinite(table), np.abs(table), np.inf)
+    row, col = np.unravel_index(np.argmax(size), table.shape)
+    return (f"{data.source}: row {row + 1}, column {COLUMNS[col]!r}: {table[row, col]:g} is too large "
+            f"to fit (values must be finite with |value| <= {MAX_ABS_VALUE:g}, or the least-squares "
+            "system overflows): check the units (SI)")
 
 
 def _unmoved(c: np.ndarray, coordinates: str, exps: np.ndarray) -> str:

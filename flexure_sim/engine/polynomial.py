@@ -402,23 +402,23 @@ def law_from_dict(doc: Any, source: str = "<dict>") -> PolynomialLaw:
     if not isinstance(doc, dict):
         raise PolynomialFileError(f"{source}: the document must be a mapping, got {type(doc).__name__}")
     if doc.get("format") != FILE_FORMAT:
-        raise fail("format", f"expected {FILE_FORMAT!r} (a file written by flexure-sim fit), got {doc.get('format')!r}")
+        raise fail("format", f"expected {FILE_FORMAT!r} (a file written by flexure-sim fit), got {_shown(doc.get('format'))}")
     if doc.get("version") != FILE_VERSION:
-        raise fail("version", f"unsupported version {doc.get('version')!r} (this flexure_sim reads {FILE_VERSION})")
+        raise fail("version", f"unsupported version {_shown(doc.get('version'))} (this flexure_sim reads {FILE_VERSION})")
     coords = doc.get("coordinates")
-    if coords not in VARIABLES:
-        raise fail("coordinates", f"expected one of {', '.join(VARIABLES)}, got {coords!r}")
+    if not isinstance(coords, str) or coords not in VARIABLES:
+        raise fail("coordinates", f"expected one of {', '.join(VARIABLES)}, got {_shown(coords)}")
     names = VARIABLES[coords]
     k = len(names)
-    if "variables" in doc and list(doc["variables"]) != list(names):
-        raise fail("variables", f"expected {list(names)} for {coords} coordinates, got {doc['variables']!r}")
+    if "variables" in doc and doc["variables"] != list(names):
+        raise fail("variables", f"expected {list(names)} for {coords} coordinates, got {_shown(doc['variables'])}")
     order = doc.get("order")
     if isinstance(order, bool) or not isinstance(order, int) or not 1 <= order <= MAX_ORDER:
-        raise fail("order", f"expected an integer in 1..{MAX_ORDER}, got {order!r}")
+        raise fail("order", f"expected an integer in 1..{MAX_ORDER}, got {_shown(order)}")
 
     def numbers(key: str, value: Any, n: int) -> list[float]:
         if not isinstance(value, list) or len(value) != n:
-            raise fail(key, f"expected a list of {n} numbers, got {value!r}")
+            raise fail(key, f"expected a list of {n} numbers, got {_shown(value)}")
         out = []
         for i, v in enumerate(value):
             out.append(_finite(fail, f"{key}[{i}]", v))
@@ -440,11 +440,11 @@ def law_from_dict(doc: Any, source: str = "<dict>") -> PolynomialLaw:
     for i, term in enumerate(terms):
         key = f"terms[{i}]"
         if not isinstance(term, dict) or set(term) != {"exponents", "coefficient"}:
-            raise fail(key, f"expected a mapping with keys exponents and coefficient, got {term!r}")
+            raise fail(key, f"expected a mapping with keys exponents and coefficient, got {_shown(term)}")
         e = term["exponents"]
         naturals = isinstance(e, list) and all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in e)
         if not naturals or len(e) != k:
-            raise fail(f"{key}.exponents", f"expected {k} non-negative integers ({', '.join(names)}), got {e!r}")
+            raise fail(f"{key}.exponents", f"expected {k} non-negative integers ({', '.join(names)}), got {_shown(e)}")
         if sum(e) > order:
             raise fail(f"{key}.exponents", f"total degree {sum(e)} exceeds the order {order}")
         exps.append(e)
@@ -462,9 +462,21 @@ def _finite(fail, key: str, value: Any) -> float:
             value = float(value)
         except ValueError:
             pass
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
-        raise fail(key, f"expected a finite number, got {value!r}")
-    return float(value)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise fail(key, f"expected a finite number, got {_shown(value)}")
+    try:
+        number = float(value)
+    except OverflowError:  # an integer beyond the double range
+        number = math.inf
+    if not math.isfinite(number):
+        raise fail(key, f"expected a finite number, got {_shown(value)}")
+    return number
+
+
+def _shown(value: Any, limit: int = 60) -> str:
+    """repr of a value from the file, shortened so that a message stays one line."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def load_law(path: str | Path) -> PolynomialLaw:

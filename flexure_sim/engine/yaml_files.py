@@ -1,4 +1,4 @@
-"""Reading YAML data files with one-line errors that name the file and the problem."""
+"""Reading text and YAML data files, with one-line errors that name the file and the problem."""
 from __future__ import annotations
 
 from pathlib import Path
