@@ -60,11 +60,6 @@ def hat(v: np.ndarray) -> np.ndarray:
     return v @ J.T
 
 
-def cross2(a: np.ndarray, b: np.ndarray):
-    """Scalar planar cross product a x b (works on (..., 2) arrays)."""
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
 # ----------------------------------------------------------------------------- twist
 
 def twist_from_displacement(R: np.ndarray, p: np.ndarray) -> np.ndarray:
