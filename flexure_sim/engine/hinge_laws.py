@@ -19,7 +19,15 @@ dW = m_b . (delta tau, delta t_b): with delta r = (delta tau, R(alpha) delta t_b
 m_b = (dU/dalpha, R(alpha)^T dU/dp). The element exerts -m_b on body B and the opposite
 wrench on body A (the potential depends on the relative displacement only).
 
-Everything is vectorised over hinges: alpha has shape (n,), p shape (n, 2).
+*Energy and power* (``LawBatch.power``, and ``potential_energy``, ``conservative_power``,
+``dissipated_power`` on every law): U(r); the conservative power P_c = -dU/dt =
+-(dU/dr) . r_dot, the power the element's elastic wrenches deliver to the two bodies (the
+wrench -m_b on B dotted with the twist of b relative to a, in frame b: (alpha_dot,
+R(alpha)^T p_dot)); the dissipated power P_d = r_dot^T C_r r_dot = 2 D >= 0, the power the
+damping wrenches take from the bodies.
+
+Everything is vectorised over hinges: alpha has shape (n,), p shape (n, 2), r_dot (n, 3);
+arguments of another shape raise a ValueError naming the argument.
 """
 from __future__ import annotations
 
@@ -28,9 +36,20 @@ from typing import Protocol, Sequence
 
 import numpy as np
 
+from ..errors import as_array
 from .kinematics import J, half_cot, rot
 
 # ------------------------------------------------------------------ law coordinates
+
+def deflections(alpha, p, rdot=None):
+    """alpha (n,), p (n, 2) (and rdot (n, 3)) as float arrays, checked: a ValueError names
+    the argument of a wrong shape."""
+    alpha = as_array("alpha", alpha, (None,))
+    p = as_array("p", p, (alpha.shape[0], 2))
+    if rdot is None:
+        return alpha, p
+    return alpha, p, as_array("rdot", rdot, (alpha.shape[0], 3))
+
 
 
 @dataclass(frozen=True)
@@ -53,8 +72,7 @@ def twistor_coordinates(alpha: np.ndarray, p: np.ndarray, second: bool = True) -
     dx/dalpha = -1/2 J x, dx/dp = 1/2 R(-alpha/2) -- the virtual displacement map of eq.
     4.27 written in r. ``second=False`` skips the second derivatives (d2c is then None).
     """
-    alpha = np.asarray(alpha, dtype=float)
-    p = np.asarray(p, dtype=float)
+    alpha, p = deflections(alpha, p)
     n = alpha.shape[0]
     sigma, xi = np.cos(0.5 * alpha), np.sin(0.5 * alpha)
     p1, p2 = p[:, 0], p[:, 1]
@@ -89,8 +107,7 @@ def twist_coordinates(alpha: np.ndarray, p: np.ndarray, second: bool = True) -> 
 
     tau = alpha, t = f(alpha) p - (alpha/2) J p with f = (alpha/2) cot(alpha/2).
     """
-    alpha = np.asarray(alpha, dtype=float)
-    p = np.asarray(p, dtype=float)
+    alpha, p = deflections(alpha, p)
     n = alpha.shape[0]
     f, f1, f2 = _half_cot_derivatives(alpha)
     Jp = p @ J.T
@@ -150,6 +167,17 @@ class LawEvaluation:
     damping_force_dr: np.ndarray
 
 
+@dataclass(frozen=True)
+class HingePower:
+    """Energy and power of n hinges (each (n,)): energy U (J); conservative = P_c = -dU/dt
+    (W), the power the elastic wrenches deliver to the bodies; dissipated = P_d =
+    r_dot^T C_r r_dot = 2 D >= 0 (W), the power the damping wrenches take from them."""
+
+    energy: np.ndarray
+    conservative: np.ndarray
+    dissipated: np.ndarray
+
+
 class HingeLaw(Protocol):
     """What the solver needs of a hinge law."""
 
@@ -162,19 +190,45 @@ class HingeLaw(Protocol):
         """C (k, k) of D = 1/2 c_dot^T C c_dot."""
 
 
-@dataclass(frozen=True)
-class QuadraticLaw:
-    """U = 1/2 c^T W c, the quadratic laws of eqs. 3.4 and 4.7.
+class LawPower:
+    """Energy and power of one law at m states r = (alpha (m,), p (m, 2)) with rates r_dot
+    (m, 3) (module docstring): the methods every law offers, through `LawBatch.power`."""
 
-    For ``twistor`` coordinates c = (sigma, xi, x1, x2) the metric acts on (xi, x1, x2)
-    with W = 4 K (so U = 2 [xi; x]^T K [xi; x], eq. 4.7) and damping metric 4 B (eq. 4.40);
-    for ``twist`` coordinates W = K (eq. 3.4) and damping metric B.
-    K, B: 3x3, moment first, forces second, in the hinge frame.
+    def potential_energy(self: HingeLaw, alpha, p) -> np.ndarray:
+        """Potential energy U(r) (J), shape (m,)."""
+        alpha, p = deflections(alpha, p)
+        return LawBatch([self] * len(alpha)).power(alpha, p, np.zeros((len(alpha), 3))).energy
+
+    def conservative_power(self: HingeLaw, alpha, p, rdot) -> np.ndarray:
+        """P_c = -dU/dt = -(dU/dr) . r_dot (W), shape (m,)."""
+        return LawBatch([self] * len(np.atleast_1d(alpha))).power(alpha, p, rdot).conservative
+
+    def dissipated_power(self: HingeLaw, alpha, p, rdot) -> np.ndarray:
+        """P_d = r_dot^T C_r r_dot = 2 D >= 0 (W), shape (m,)."""
+        return LawBatch([self] * len(np.atleast_1d(alpha))).power(alpha, p, rdot).dissipated
+
+
+@dataclass(frozen=True)
+class QuadraticLaw(LawPower):
+    """Potential U = 1/2 c^T W c and dissipation D = 1/2 c_dot^T C c_dot in the law
+    coordinates c(r) -- the quadratic laws of eqs. 3.4 and 4.7 with the damping of 4.40.
+
+    ``twistor`` (c = sigma, xi, x1, x2): U = 2 [xi; x]^T K [xi; x] (4.7, W = 4 K on
+    (xi, x1, x2)) and D = 2 [xi_dot; x_dot]^T B [xi_dot; x_dot] (C = 4 B);
+    ``twist`` (c = tau, t1, t2): U = 1/2 d^T K d (3.4) and D = 1/2 d_dot^T B d_dot.
+    K, B: 3x3, moment first, forces second, in the hinge frame. Power: `LawPower`.
     """
 
     coordinates: str
     K: np.ndarray
     B: np.ndarray
+
+    def __post_init__(self) -> None:
+        if self.coordinates not in COORDINATES:
+            raise ValueError(f"coordinates: expected one of {', '.join(COORDINATES)}, "
+                             f"got {self.coordinates!r}")
+        object.__setattr__(self, "K", as_array("K", self.K, (3, 3)))
+        object.__setattr__(self, "B", as_array("B", self.B, (3, 3)))
 
     def _embed(self, M: np.ndarray) -> np.ndarray:
         if self.coordinates == "twistor":
@@ -211,6 +265,8 @@ class LawBatch:
         self.coordinates = coords.pop()
         self._map = COORDINATES[self.coordinates]
         self.quadratic = all(isinstance(law, QuadraticLaw) for law in laws)
+        # One law at many states (LawPower) evaluates its potential once, on every row.
+        self.single = bool(laws) and all(law is laws[0] for law in laws)
         self.W = np.stack([law.metric() for law in laws]) if self.quadratic else None
         self.C = np.stack([law.dissipation_matrix() for law in laws])
 
@@ -221,12 +277,17 @@ class LawBatch:
         grad_r = dc^T U_c; hess_r = dc^T U_cc dc + sum_k U_c,k d2c_k; C_r = dc^T C dc;
         d(C_r r_dot)/dr = sum_k (C dc r_dot)_k d2c_k + dc^T C (d2c . r_dot).
         """
+        alpha, p, rdot = deflections(alpha, p, rdot)
+        if len(alpha) != len(self.laws):
+            raise ValueError(f"alpha: expected {len(self.laws)} deflections (one per law), got {len(alpha)}")
         cmap = self._map(alpha, p, second=jacobian)
         c, dc = cmap.c, cmap.dc
         if self.quadratic:
             Uc = np.einsum("nij,nj->ni", self.W, c)
             energy = 0.5 * np.einsum("ni,ni->n", c, Uc)
             Ucc = self.W
+        elif self.single:
+            energy, Uc, Ucc = self.laws[0].potential(c)
         else:
             n, k = c.shape
             energy, Uc, Ucc = np.empty(n), np.empty((n, k)), np.empty((n, k, k))
@@ -248,6 +309,15 @@ class LawBatch:
         return LawEvaluation(energy, grad, hess, damping, damping_force, damping_force_dr)
 
 
+    def power(self, alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray) -> HingePower:
+        """U, P_c = -(dU/dr) . r_dot and P_d = (C_r r_dot) . r_dot of each hinge (module
+        docstring; the wrench identities are in test_hinge_power.py)."""
+        ev = self.evaluate(alpha, p, rdot, jacobian=False)
+        rdot = np.asarray(rdot, dtype=float)
+        return HingePower(ev.energy, -np.einsum("ni,ni->n", ev.grad, rdot),
+                          np.einsum("ni,ni->n", ev.damping_force, rdot))
+
+
 def evaluate(laws: Sequence[HingeLaw], alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray) -> LawEvaluation:
     """Evaluate n hinges sharing one coordinate type, with all derivatives (see LawBatch)."""
     return LawBatch(laws).evaluate(alpha, p, rdot, jacobian=True)
@@ -261,7 +331,9 @@ def wrench_on_element(alpha: np.ndarray, grad_r: np.ndarray) -> np.ndarray:
     law this equals 2 Lambda^T K [xi; x], a test checks it against comply_quat2.sci).
     Works for the dissipative part too with grad_r replaced by C_r r_dot.
     """
-    R = rot(np.asarray(alpha, dtype=float))
+    alpha = as_array("alpha", alpha, (None,))
+    grad_r = as_array("grad_r", grad_r, (alpha.shape[0], 3))
+    R = rot(alpha)
     m = np.empty_like(grad_r)
     m[:, 0] = grad_r[:, 0]
     m[:, 1:] = np.einsum("nji,nj->ni", R, grad_r[:, 1:])

@@ -48,8 +48,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ..errors import FlexureSimError
-from .hinge_laws import QuadraticLaw, evaluate
+from ..errors import FlexureSimError, as_array
+from .hinge_laws import LawPower, QuadraticLaw, evaluate
 from .yaml_files import read_yaml
 from .kinematics import adjoint, transform_stiffness
 
@@ -190,8 +190,11 @@ def describe_monomial(exponents, names: tuple[str, ...]) -> str:
 # ------------------------------------------------------------------------- the law
 
 @dataclass(frozen=True)
-class PolynomialLaw:
-    """U(c) = energy * sum_j coefficients[j] * prod_k ((c_k - rest_k) / scale_k)^exponents[j, k].
+class PolynomialLaw(LawPower):
+    """Potential U(c) = E sum_j a_j prod_k ((c_k - rest_k) / s_k)^(e_jk) and dissipation
+    D = 1/2 c_dot^T C c_dot, C the damping B embedded as the quadratic laws embed it (4 B on
+    (xi, x) for twistors, B for twists); E = energy, a = coefficients, s = scale,
+    e = exponents. Energy and power: `hinge_laws.LawPower`.
 
     coordinates: "twistor" (c = sigma, xi, x1, x2) or "twist" (c = tau, t1, t2);
     order: N, the largest total degree allowed; exponents (M, k) and coefficients (M,) the
@@ -285,8 +288,8 @@ class PolynomialLaw:
 
     def potential(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """U (m,), dU/dc (m, k), d2U/dc2 (m, k, k) for rows c (m, k) -- exact (4.69-4.78)."""
-        c = np.atleast_2d(np.asarray(c, dtype=float))
         k = len(self.scale)
+        c = as_array("c", np.atleast_2d(c), (None, k))
         u = (c - self.rest) / self.scale
         vals = monomials(u, monomial_exponents(k, self.order)) @ self._table
         U = self.energy * vals[:, 0]
