@@ -31,16 +31,23 @@ def as_array(name: str, value, shape: Sequence[int | None], dtype=float) -> np.n
     Public functions check their arguments with this instead of letting NumPy's reshape or
     broadcasting errors (which name neither the argument nor the expected shape) escape.
     """
+    want = _shape_text(shape)
     try:
         array = np.asarray(value, dtype=dtype)
     except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected numbers of shape {_shape_text(shape)}, got {value!r}") from None
-    if array.ndim != len(shape) or any(want is not None and have != want
-                                       for have, want in zip(array.shape, shape)):
-        raise ValueError(f"{name}: expected shape {_shape_text(shape)}, got {array.shape}")
+        raise ValueError(f"{name}: expected {want}, got {_shown(value)}") from None
+    if array.ndim != len(shape) or any(n is not None and have != n for have, n in zip(array.shape, shape)):
+        raise ValueError(f"{name}: expected {want}, got shape {array.shape}")
     return array
 
 
 def _shape_text(shape: Sequence[int | None]) -> str:
+    if not shape:
+        return "a single number"
     dims = ["n" if d is None else str(d) for d in shape]
-    return "(" + ", ".join(dims) + ("," if len(dims) == 1 else "") + ")"
+    return "shape (" + ", ".join(dims) + ("," if len(dims) == 1 else "") + ")"
+
+
+def _shown(value, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."

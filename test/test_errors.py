@@ -4,9 +4,12 @@ import importlib
 import inspect
 import pkgutil
 
+import numpy as np
 import pytest
 
 import flexure_sim
+from flexure_sim.engine import kinematics as kin
+from flexure_sim.engine import stiffness
 from flexure_sim.errors import FlexureSimError
 
 
@@ -53,3 +56,26 @@ def test_errors_keep_their_builtin_base(name, builtin):
     assert issubclass(error, builtin) and issubclass(error, FlexureSimError)
     with pytest.raises(FlexureSimError):
         raise error("x")
+
+
+# ------------------------------------------------ argument checks name the argument
+
+@pytest.mark.parametrize("call,fragment", [
+    (lambda: kin.twist_from_displacement(np.eye(3), [0.0, 0.0]), "R: expected shape (2, 2), got shape (3, 3)"),
+    (lambda: kin.twist_from_displacement(np.eye(2), [1.0, 2.0, 3.0]), "p: expected shape (2,), got shape (3,)"),
+    (lambda: kin.displacement_from_twist([0.1, 0.2]), "d: expected shape (3,), got shape (2,)"),
+    (lambda: kin.twistor_from_displacement(np.eye(2), np.zeros((2, 1))), "p: expected shape (2,)"),
+    (lambda: kin.twistor_from_twist(np.zeros(4)), "d: expected shape (3,)"),
+    (lambda: kin.adjoint(np.eye(2), [0.0, 0.0, 0.0]), "p: expected shape (2,)"),
+    (lambda: kin.transform_stiffness(np.eye(2), np.eye(2), [0.0, 0.0]), "K: expected shape (3, 3)"),
+    (lambda: kin.adjoint(np.eye(2), ["a", "b"]), "p: expected shape (2,), got ['a', 'b']"),
+    (lambda: stiffness.notch_stiffness(np.array([0.003, 0.004]), 2.5e-4, 0.02, 69e9, 0.33),
+     "D: expected a single number, got shape (2,)"),
+    (lambda: stiffness.cantilever_stiffness(0.01, 0.001, "wide", 69e9, 0.3), "width: expected a single number"),
+])
+def test_argument_checks_name_the_argument(call, fragment):
+    """Public functions that used to fail in NumPy's matmul/broadcasting (or, for a 3x3 R,
+    silently returned a wrong twist) name the argument and the expected shape."""
+    with pytest.raises(ValueError) as err:
+        call()
+    assert str(err.value).startswith(fragment), str(err.value)

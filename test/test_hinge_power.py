@@ -251,5 +251,5 @@ def test_arguments_of_the_wrong_shape_are_named(call, name):
 
 
 def test_a_polynomial_law_names_coordinates_of_the_wrong_width():
-    with pytest.raises(ValueError, match=r"^c: expected shape \(n, 4\), got \(2, 3\)"):
+    with pytest.raises(ValueError, match=r"^c: expected shape \(n, 4\), got shape \(2, 3\)"):
         LAWS["poly_twistor"].potential(np.zeros((2, 3)))

@@ -19,6 +19,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..errors import as_array
+
 #: sk(1), the 2x2 generator of planar rotations (eq. 2.93): J @ [x, y] = [-y, x].
 J = np.array([[0.0, -1.0], [1.0, 0.0]])
 
@@ -68,13 +70,13 @@ def twist_from_displacement(R: np.ndarray, p: np.ndarray) -> np.ndarray:
     tau = alpha, t = alpha * J^-1 (I - R)^-1 p = (alpha/2) (cot(alpha/2) I - J) p; the pure
     translation branch (alpha -> 0) gives t = p, and a series is used for small alpha.
     """
-    alpha = angle_of(np.asarray(R, dtype=float))
-    return np.concatenate(([alpha], log_translation_matrix(alpha) @ np.asarray(p, dtype=float)))
+    alpha = angle_of(as_array("R", R, (2, 2)))
+    return np.concatenate(([alpha], log_translation_matrix(alpha) @ as_array("p", p, (2,))))
 
 
 def displacement_from_twist(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(R, p) of a twist d = (tau, t1, t2) (eqs. 2.91-2.92): p = (I - R) J t / tau."""
-    d = np.asarray(d, dtype=float)
+    d = as_array("d", d, (3,))
     alpha = float(d[0])
     return rot(alpha), exp_translation_matrix(alpha) @ d[1:]
 
@@ -116,8 +118,7 @@ def twistor_from_displacement(R: np.ndarray, p: np.ndarray) -> Twistor:
     / (4 xi) (the numerically careful branches of Section 2.8, with sigma recomputed so it
     keeps full precision near alpha = pi); x = (sigma I - sk(xi)) p / 2.
     """
-    R = np.asarray(R, dtype=float)
-    p = np.asarray(p, dtype=float)
+    R, p = as_array("R", R, (2, 2)), as_array("p", p, (2,))
     tr = R[0, 0] + R[1, 1]
     sigma = 0.5 * np.sqrt(max(tr + 2.0, 0.0))
     m21 = 0.5 * (R[1, 0] - R[0, 1])
@@ -147,7 +148,7 @@ def displacement_from_twistor(q: Twistor) -> tuple[np.ndarray, np.ndarray]:
 
 def twistor_from_twist(d: np.ndarray) -> Twistor:
     """Twistor of a twist: (cos(tau/2), sin(tau/2)/tau * (tau, t1, t2)) (eqs. 2.132-2.135)."""
-    d = np.asarray(d, dtype=float)
+    d = as_array("d", d, (3,))
     k = half_sine_ratio(d[0])
     return Twistor(float(np.cos(0.5 * d[0])), float(k * d[0]), float(k * d[1]), float(k * d[2]))
 
@@ -170,8 +171,7 @@ def adjoint(R: np.ndarray, p: np.ndarray) -> np.ndarray:
     same twist expressed in c (velocity of c's origin in c coordinates). Wrenches map the
     other way with Ad^-T = [[1, hat(p)^T R], [0, R]] (eq. 4.37).
     """
-    R = np.asarray(R, dtype=float)
-    p = np.asarray(p, dtype=float)
+    R, p = as_array("R", R, (2, 2)), as_array("p", p, (2,))
     A = np.zeros((3, 3))
     A[0, 0] = 1.0
     A[1:, 0] = -J @ p
@@ -188,7 +188,7 @@ def transform_stiffness(K: np.ndarray, R: np.ndarray, p: np.ndarray) -> np.ndarr
     K' = Ad^T K Ad.
     """
     Ad = adjoint(R, p)
-    return Ad.T @ np.asarray(K, dtype=float) @ Ad
+    return Ad.T @ as_array("K", K, (3, 3)) @ Ad
 
 
 def compose(pose_a: tuple[np.ndarray, np.ndarray], pose_b: tuple[np.ndarray, np.ndarray]):

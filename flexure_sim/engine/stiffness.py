@@ -7,6 +7,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import as_array
+
+
+def _numbers(**named):
+    """The named arguments as NumPy scalars (arithmetic overflows to inf, which callers
+    check, instead of raising); arrays or non-numbers raise a ValueError naming the argument."""
+    return [as_array(name, value, ())[()] for name, value in named.items()]
+
 
 def shear_modulus(E: float, nu: float) -> float:
     """G = E / (2 (1 + nu)) for an isotropic material."""
@@ -22,6 +30,7 @@ def notch_stiffness(D: float, h: float, t: float, E: float, nu: float) -> np.nda
     first along the hinge frame's x axis, the second along its y axis, as microstage.sci
     assigns them (Kt = diag(K(4,4), K(6,6)) of the 6x6 result).
     """
+    D, h, t, E, nu = _numbers(D=D, h=h, t=t, E=E, nu=nu)
     hd = h / D
     s = np.sqrt(hd)
     kappa_1t = 0.1452 * hd + 0.3568 * s
@@ -39,6 +48,7 @@ def cantilever_stiffness(length: float, thickness: float, width: float, E: float
     along y is A E / L, with I = width * thickness^3 / 12 and A = width * thickness.
     nu is accepted for symmetry with notch_stiffness (torsion is out of plane).
     """
+    length, thickness, width, E, nu = _numbers(length=length, thickness=thickness, width=width, E=E, nu=nu)
     del nu  # the in-plane terms do not depend on it
     inertia = width * thickness**3 / 12.0
     area = width * thickness
