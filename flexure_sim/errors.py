@@ -14,6 +14,7 @@ The classes live with the code that raises them (``engine.config.ConfigError``,
 ``engine.solver.SolverError``, ``recording.errors.RecordingError``, ...). This module imports
 nothing from the package, so any layer (the engine included) may import it.
 """
+
 from __future__ import annotations
 
 from typing import Sequence
@@ -36,7 +37,9 @@ def as_array(name: str, value, shape: Sequence[int | None], dtype=float) -> np.n
         array = np.asarray(value, dtype=dtype)
     except (TypeError, ValueError):
         raise ValueError(f"{name}: expected {want}, got {_shown(value)}") from None
-    if array.ndim != len(shape) or any(n is not None and have != n for have, n in zip(array.shape, shape)):
+    if array.ndim != len(shape) or any(
+        n is not None and have != n for have, n in zip(array.shape, shape)
+    ):
         raise ValueError(f"{name}: expected {want}, got shape {array.shape}")
     return array
 
@@ -50,4 +53,4 @@ def _shape_text(shape: Sequence[int | None]) -> str:
 
 def _shown(value, limit: int = 60) -> str:
     text = repr(value)
-    return text if len(text) <= limit else text[:limit - 3] + "..."
+    return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -8,6 +8,7 @@ strings, lists, mappings) or removed, and random bytes. The examples are derando
 bounded, so the suite stays deterministic and quick. Whatever loads must be physically
 meaningful (finite positive masses, finite positive-definite stiffness...).
 """
+
 from __future__ import annotations
 
 import math
@@ -30,18 +31,29 @@ from conftest import ROOT
 STAGE_TEXT = resolve_mechanism_path("microstage").read_text()
 STAGE = yaml.safe_load(STAGE_TEXT)
 
-#: The four files of the issue: (name, content, key the message must name).
+#: The files of the issue: name -> (content, a fragment the message must hold).
 ISSUE_FILES = {
     "garbage": (bytes(range(256)) * 8, "binary file"),
-    "latin1": ("# réglage du moteur\n".encode("latin-1") + STAGE_TEXT.encode(), "byte 0xe9 at line 1, column 4"),
-    "compression": (STAGE_TEXT.replace("compression_hinge: a", "compression_hinge: [a]").encode(),
-                    "compression_hinge: expected a hinge name, got ['a']"),
-    "output_body": (STAGE_TEXT.replace("output: {body: body4,", "output: {body: [body4],").encode(),
-                    "output.body: expected a body name"),
-    "stiffness_model": (STAGE_TEXT.replace("{model: notch,", "{model: [notch],").encode(),
-                        "stiffness_models.notch.model: expected a model name"),
-    "constraint_body": (STAGE_TEXT.replace("{type: fixed, body: body1}", "{type: fixed, body: [body1]}").encode(),
-                        "constraints[0].body: expected a body name"),
+    "latin1": (
+        "# réglage du moteur\n".encode("latin-1") + STAGE_TEXT.encode(),
+        "byte 0xe9 at line 1, column 4",
+    ),
+    "compression": (
+        STAGE_TEXT.replace("compression_hinge: a", "compression_hinge: [a]").encode(),
+        "compression_hinge: expected a hinge name, got ['a']",
+    ),
+    "output_body": (
+        STAGE_TEXT.replace("output: {body: body4,", "output: {body: [body4],").encode(),
+        "output.body: expected a body name",
+    ),
+    "stiffness_model": (
+        STAGE_TEXT.replace("{model: notch,", "{model: [notch],").encode(),
+        "stiffness_models.notch.model: expected a model name",
+    ),
+    "constraint_body": (
+        STAGE_TEXT.replace("{type: fixed, body: body1}", "{type: fixed, body: [body1]}").encode(),
+        "constraints[0].body: expected a body name",
+    ),
 }
 
 
@@ -78,28 +90,74 @@ def _mutated(*changes) -> dict:
     return doc
 
 
-@pytest.mark.parametrize("changes,fragments", [
-    ([(("bodies", 2, "mass"), float("nan"))], ("bodies[2].mass", "must be finite")),
-    ([(("bodies", 2, "inertia"), float("inf"))], ("bodies[2].inertia", "must be finite")),
-    ([(("bodies", 1, "mass"), 10**400)], ("bodies[1].mass", "must be finite")),
-    ([(("stiffness_models", "notch", "t"), -0.02)], ("stiffness_models.notch.t", "must be positive")),
-    ([(("stiffness_models", "notch", "E"), float("inf"))], ("stiffness_models.notch.E", "must be finite")),
-    # Each number is finite, but the formula overflows: E t h^2 with E = t = 1e300.
-    ([(("stiffness_models", "notch"), {"model": "notch", "D": 0.003, "h": 0.00025, "t": 1e300, "E": 1e300,
-                                       "nu": 0.3})], ("stiffness_models.notch", "non-finite stiffness")),
-    ([(("hinges", 0, "stiffness"), {"model": "matrix", "Ko": 1e308, "Kt": [1e308, 1e308],
-                                    "Kc": [1e308, 1e308]})], ("hinges[0].stiffness", "not positive definite")),
-    ([(("hinges", 0, "damping"), {"t_char": 1e305})], ("hinges[0].damping.t_char", "not finite")),
-    # Body pose plus frame position overflow: the coincidence test must not pass on NaN.
-    ([(("bodies", 0, "pose"), [1e308, 0.0, 0.0]), (("hinges", 1, "a", "at"), [1e308, 0.044])],
-     ("hinges[1]", "not finite")),
-    ([(("hinges", 1, "law"), [1, 2])], ("hinges[1].law", "unknown law [1, 2]")),
-    ([(("hinges", 1, "law"), {"polynomial": "a\0b"})], ("hinges[1].law.polynomial", "expected the path")),
-    ([(("bodies", 0, "name"), "bödy")], ("bodies[0].name", "not a valid name")),
-    ([(("bodies", 0), {"name": "body1", 1: 2, "x": 3, "mass": 1.0, "inertia": 1.0})],
-     ("bodies[0].1", "unknown key")),
-    ([(("constraints", 0, "type"), {"a": [1]})], ("constraints[0].type", "unknown constraint type {'a': [1]}")),
-])
+@pytest.mark.parametrize(
+    "changes,fragments",
+    [
+        ([(("bodies", 2, "mass"), float("nan"))], ("bodies[2].mass", "must be finite")),
+        ([(("bodies", 2, "inertia"), float("inf"))], ("bodies[2].inertia", "must be finite")),
+        ([(("bodies", 1, "mass"), 10**400)], ("bodies[1].mass", "must be finite")),
+        (
+            [(("stiffness_models", "notch", "t"), -0.02)],
+            ("stiffness_models.notch.t", "must be positive"),
+        ),
+        (
+            [(("stiffness_models", "notch", "E"), float("inf"))],
+            ("stiffness_models.notch.E", "must be finite"),
+        ),
+        # Each number is finite, but the formula overflows: E t h^2 with E = t = 1e300.
+        (
+            [
+                (
+                    ("stiffness_models", "notch"),
+                    {
+                        "model": "notch",
+                        "D": 0.003,
+                        "h": 0.00025,
+                        "t": 1e300,
+                        "E": 1e300,
+                        "nu": 0.3,
+                    },
+                )
+            ],
+            ("stiffness_models.notch", "non-finite stiffness"),
+        ),
+        (
+            [
+                (
+                    ("hinges", 0, "stiffness"),
+                    {"model": "matrix", "Ko": 1e308, "Kt": [1e308, 1e308], "Kc": [1e308, 1e308]},
+                )
+            ],
+            ("hinges[0].stiffness", "not positive definite"),
+        ),
+        (
+            [(("hinges", 0, "damping"), {"t_char": 1e305})],
+            ("hinges[0].damping.t_char", "not finite"),
+        ),
+        # Body pose plus frame position overflow: the coincidence test must not pass on NaN.
+        (
+            [
+                (("bodies", 0, "pose"), [1e308, 0.0, 0.0]),
+                (("hinges", 1, "a", "at"), [1e308, 0.044]),
+            ],
+            ("hinges[1]", "not finite"),
+        ),
+        ([(("hinges", 1, "law"), [1, 2])], ("hinges[1].law", "unknown law [1, 2]")),
+        (
+            [(("hinges", 1, "law"), {"polynomial": "a\0b"})],
+            ("hinges[1].law.polynomial", "expected the path"),
+        ),
+        ([(("bodies", 0, "name"), "bödy")], ("bodies[0].name", "not a valid name")),
+        (
+            [(("bodies", 0), {"name": "body1", 1: 2, "x": 3, "mass": 1.0, "inertia": 1.0})],
+            ("bodies[0].1", "unknown key"),
+        ),
+        (
+            [(("constraints", 0, "type"), {"a": [1]})],
+            ("constraints[0].type", "unknown constraint type {'a': [1]}"),
+        ),
+    ],
+)
 def test_semantic_problems_name_the_key(tmp_path, changes, fragments):
     file = _write(tmp_path, "bad", yaml.safe_dump(_mutated(*changes), sort_keys=False).encode())
     _expect_one_line(file, *fragments)
@@ -111,22 +169,30 @@ def test_an_axis_near_the_double_range_is_normalised(tmp_path):
     assert mech.drive.axis == pytest.approx((math.sqrt(0.5), math.sqrt(0.5)), rel=1e-15)
 
 
-@pytest.mark.parametrize("text,fragment", [
-    ("a: 2024-13-01\n", "a value cannot be read: month must be in 1..12"),
-    ("a: [\n  b: 1\n", "line 3, column 1"),
-    ("name: x\x01\n", "line 1, column 8: character #x0001"),
-    ("a: " + "[" * 1000 + "]" * 1000 + "\n", "nested too deeply"),
-])
+@pytest.mark.parametrize(
+    "text,fragment",
+    [
+        ("a: 2024-13-01\n", "a value cannot be read: month must be in 1..12"),
+        ("a: [\n  b: 1\n", "line 3, column 1"),
+        ("name: x\x01\n", "line 1, column 8: character #x0001"),
+        ("a: " + "[" * 1000 + "]" * 1000 + "\n", "nested too deeply"),
+    ],
+)
 def test_yaml_errors_are_one_line(tmp_path, text, fragment):
     _expect_one_line(_write(tmp_path, "bad", text.encode()), "not valid YAML", fragment)
 
 
 # ------------------------------------------------------------------------- fuzzing
 
+
 def _paths(node, prefix=()):
     """Every path (keys and indices) into the document, the document itself first."""
     yield prefix
-    items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
+    items = (
+        node.items()
+        if isinstance(node, dict)
+        else enumerate(node) if isinstance(node, list) else ()
+    )
     for key, child in items:
         yield from _paths(child, prefix + (key,))
 
@@ -134,22 +200,59 @@ def _paths(node, prefix=()):
 PATHS = list(_paths(STAGE))[1:]
 
 #: Values that mean something to the loader, so that mutations also reach its deeper checks.
-MEANINGFUL = st.sampled_from([
-    "body1", "body4", "a", "notch", "twistor", "twist", "fixed", "drive", "sine_rate", "theta",
-    "matrix", "69.0e9", "nan", "-inf", "", 0, -1, 1e-300, 5e-324, 1e308, -1e308, 10**400,
-    [0.0, 0.0], [1.0, 0.0, 0.0], [[1, 0, 0], [0, 1, 0], [0, 0, 1]], {"model": "matrix"},
-    {"t_char": 1e-3}, {"polynomial": "absent.yaml"},
-])
-SCALARS = (st.none() | st.booleans() | st.integers() | st.floats(allow_nan=True, allow_infinity=True)
-           | st.text(max_size=12) | MEANINGFUL)
+MEANINGFUL = st.sampled_from(
+    [
+        "body1",
+        "body4",
+        "a",
+        "notch",
+        "twistor",
+        "twist",
+        "fixed",
+        "drive",
+        "sine_rate",
+        "theta",
+        "matrix",
+        "69.0e9",
+        "nan",
+        "-inf",
+        "",
+        0,
+        -1,
+        1e-300,
+        5e-324,
+        1e308,
+        -1e308,
+        10**400,
+        [0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+        {"model": "matrix"},
+        {"t_char": 1e-3},
+        {"polynomial": "absent.yaml"},
+    ]
+)
+SCALARS = (
+    st.none()
+    | st.booleans()
+    | st.integers()
+    | st.floats(allow_nan=True, allow_infinity=True)
+    | st.text(max_size=12)
+    | MEANINGFUL
+)
 VALUES = st.recursive(
     SCALARS,
     lambda children: st.lists(children, max_size=4)
     | st.dictionaries(st.text(max_size=8) | st.integers(), children, max_size=4),
     max_leaves=12,
 )
-FUZZ = settings(max_examples=150, derandomize=True, deadline=None, database=None,
-                suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+FUZZ = settings(
+    max_examples=150,
+    derandomize=True,
+    deadline=None,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
 
 
 @pytest.fixture(scope="module")
@@ -171,11 +274,18 @@ def _load_or_config_error(path: Path):
 
 def _check_meaningful(mech: Mechanism) -> None:
     for body in mech.bodies:
-        assert math.isfinite(body.mass) and body.mass > 0 and math.isfinite(body.inertia) and body.inertia > 0
+        assert (
+            math.isfinite(body.mass)
+            and body.mass > 0
+            and math.isfinite(body.inertia)
+            and body.inertia > 0
+        )
         assert all(math.isfinite(v) for v in body.pose)
     for hinge in mech.hinges:
         assert np.all(np.isfinite(hinge.K)) and np.all(np.linalg.eigvalsh(hinge.K) > 0), hinge.name
-        assert np.all(np.isfinite(hinge.B)) and np.all(np.linalg.eigvalsh(hinge.B) >= -1e-12 * np.abs(hinge.B).max())
+        assert np.all(np.isfinite(hinge.B)) and np.all(
+            np.linalg.eigvalsh(hinge.B) >= -1e-12 * np.abs(hinge.B).max()
+        )
     if mech.drive is not None:
         assert math.hypot(*mech.drive.axis) == pytest.approx(1.0, rel=1e-12)
         assert mech.drive.stroke[0] < mech.drive.stroke[1]
@@ -216,17 +326,33 @@ def test_fuzz_bytes_spliced_into_the_stage(fuzz_dir, at, junk):
 
 # ------------------------------------------------------------------ the two programs
 
+
 @pytest.fixture(scope="module")
 def issue_files(tmp_path_factory):
     directory = tmp_path_factory.mktemp("issue16")
-    return {name: (_write(directory, name, content), fragment)
-            for name, (content, fragment) in ISSUE_FILES.items()}
+    return {
+        name: (_write(directory, name, content), fragment)
+        for name, (content, fragment) in ISSUE_FILES.items()
+    }
 
 
 def test_simulate_reports_bad_files_in_one_line_with_exit_2(issue_files):
     for name, (path, fragment) in issue_files.items():
-        p = subprocess.run([sys.executable, "-m", "flexure_sim.cli", "simulate", str(path), "--duration", "0.001"],
-                           cwd=ROOT, capture_output=True, text=True, timeout=120)
+        p = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "flexure_sim.cli",
+                "simulate",
+                str(path),
+                "--duration",
+                "0.001",
+            ],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert p.returncode == 2, (name, p.stderr)
         assert "Traceback" not in p.stderr and p.stdout == ""
         lines = p.stderr.strip().splitlines()
@@ -237,11 +363,21 @@ def test_simulate_reports_bad_files_in_one_line_with_exit_2(issue_files):
 def test_stage_node_reports_bad_files_with_exit_1(issue_files, tmp_path):
     """The installed console script, as a user starts it (scripts/venv.sh installs it)."""
     exe = Path(sys.prefix) / "bin" / "stage_node"
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOG_DIR=str(tmp_path / "ros_log"),
-               ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "0"))
+    env = dict(
+        os.environ,
+        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+        ROS_LOG_DIR=str(tmp_path / "ros_log"),
+        ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "0"),
+    )
     for name, (path, fragment) in issue_files.items():
-        p = subprocess.run([str(exe), "--ros-args", "-p", f"mechanism:={path}"], env=env, cwd=tmp_path,
-                           capture_output=True, text=True, timeout=120)
+        p = subprocess.run(
+            [str(exe), "--ros-args", "-p", f"mechanism:={path}"],
+            env=env,
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert p.returncode == 1, (name, p.stderr)
         assert "Traceback" not in p.stderr
         assert f"stage_node: error: {path}: " in p.stderr and fragment in p.stderr, p.stderr

@@ -1,5 +1,6 @@
 """One exception root: every error class of the package derives from FlexureSimError, and
 keeps its built-in base (ValueError / RuntimeError) so existing handlers still catch it."""
+
 import importlib
 import inspect
 import pkgutil
@@ -29,27 +30,35 @@ def test_every_package_error_derives_from_the_root():
     # The walk must see the errors the package is known to raise (a guard against a walk
     # that silently imports nothing).
     expected = {
-        "flexure_sim.engine.config.ConfigError", "flexure_sim.engine.solver.SolverError",
-        "flexure_sim.recording.errors.RecordingError", "flexure_sim.engine.fitting.DataError",
-        "flexure_sim.engine.fitting.FitError", "flexure_sim.engine.polynomial.PolynomialFileError",
-        "flexure_sim.tools.runlog.RunError", "flexure_sim.cli.UsageError",
-        "flexure_sim.node.demo_drive.DriveError", "flexure_sim.node.stage_node.StartupError",
+        "flexure_sim.engine.config.ConfigError",
+        "flexure_sim.engine.solver.SolverError",
+        "flexure_sim.recording.errors.RecordingError",
+        "flexure_sim.engine.fitting.DataError",
+        "flexure_sim.engine.fitting.FitError",
+        "flexure_sim.engine.polynomial.PolynomialFileError",
+        "flexure_sim.tools.runlog.RunError",
+        "flexure_sim.cli.UsageError",
+        "flexure_sim.node.demo_drive.DriveError",
+        "flexure_sim.node.stage_node.StartupError",
     }
     assert expected <= set(classes), sorted(expected - set(classes))
     outside = sorted(name for name, cls in classes.items() if not issubclass(cls, FlexureSimError))
     assert not outside, f"error classes outside the FlexureSimError hierarchy: {outside}"
 
 
-@pytest.mark.parametrize("name,builtin", [
-    ("flexure_sim.engine.config.ConfigError", ValueError),
-    ("flexure_sim.engine.polynomial.PolynomialFileError", ValueError),
-    ("flexure_sim.engine.fitting.DataError", ValueError),
-    ("flexure_sim.engine.fitting.FitError", ValueError),
-    ("flexure_sim.cli.UsageError", ValueError),
-    ("flexure_sim.engine.solver.SolverError", RuntimeError),
-    ("flexure_sim.node.demo_drive.DriveError", RuntimeError),
-    ("flexure_sim.node.stage_node.StartupError", RuntimeError),
-])
+@pytest.mark.parametrize(
+    "name,builtin",
+    [
+        ("flexure_sim.engine.config.ConfigError", ValueError),
+        ("flexure_sim.engine.polynomial.PolynomialFileError", ValueError),
+        ("flexure_sim.engine.fitting.DataError", ValueError),
+        ("flexure_sim.engine.fitting.FitError", ValueError),
+        ("flexure_sim.cli.UsageError", ValueError),
+        ("flexure_sim.engine.solver.SolverError", RuntimeError),
+        ("flexure_sim.node.demo_drive.DriveError", RuntimeError),
+        ("flexure_sim.node.stage_node.StartupError", RuntimeError),
+    ],
+)
 def test_errors_keep_their_builtin_base(name, builtin):
     module, _, cls = name.rpartition(".")
     error = getattr(importlib.import_module(module), cls)
@@ -60,19 +69,43 @@ def test_errors_keep_their_builtin_base(name, builtin):
 
 # ------------------------------------------------ argument checks name the argument
 
-@pytest.mark.parametrize("call,fragment", [
-    (lambda: kin.twist_from_displacement(np.eye(3), [0.0, 0.0]), "R: expected shape (2, 2), got shape (3, 3)"),
-    (lambda: kin.twist_from_displacement(np.eye(2), [1.0, 2.0, 3.0]), "p: expected shape (2,), got shape (3,)"),
-    (lambda: kin.displacement_from_twist([0.1, 0.2]), "d: expected shape (3,), got shape (2,)"),
-    (lambda: kin.twistor_from_displacement(np.eye(2), np.zeros((2, 1))), "p: expected shape (2,)"),
-    (lambda: kin.twistor_from_twist(np.zeros(4)), "d: expected shape (3,)"),
-    (lambda: kin.adjoint(np.eye(2), [0.0, 0.0, 0.0]), "p: expected shape (2,)"),
-    (lambda: kin.transform_stiffness(np.eye(2), np.eye(2), [0.0, 0.0]), "K: expected shape (3, 3)"),
-    (lambda: kin.adjoint(np.eye(2), ["a", "b"]), "p: expected shape (2,), got ['a', 'b']"),
-    (lambda: stiffness.notch_stiffness(np.array([0.003, 0.004]), 2.5e-4, 0.02, 69e9, 0.33),
-     "D: expected a single number, got shape (2,)"),
-    (lambda: stiffness.cantilever_stiffness(0.01, 0.001, "wide", 69e9, 0.3), "width: expected a single number"),
-])
+
+@pytest.mark.parametrize(
+    "call,fragment",
+    [
+        (
+            lambda: kin.twist_from_displacement(np.eye(3), [0.0, 0.0]),
+            "R: expected shape (2, 2), got shape (3, 3)",
+        ),
+        (
+            lambda: kin.twist_from_displacement(np.eye(2), [1.0, 2.0, 3.0]),
+            "p: expected shape (2,), got shape (3,)",
+        ),
+        (
+            lambda: kin.displacement_from_twist([0.1, 0.2]),
+            "d: expected shape (3,), got shape (2,)",
+        ),
+        (
+            lambda: kin.twistor_from_displacement(np.eye(2), np.zeros((2, 1))),
+            "p: expected shape (2,)",
+        ),
+        (lambda: kin.twistor_from_twist(np.zeros(4)), "d: expected shape (3,)"),
+        (lambda: kin.adjoint(np.eye(2), [0.0, 0.0, 0.0]), "p: expected shape (2,)"),
+        (
+            lambda: kin.transform_stiffness(np.eye(2), np.eye(2), [0.0, 0.0]),
+            "K: expected shape (3, 3)",
+        ),
+        (lambda: kin.adjoint(np.eye(2), ["a", "b"]), "p: expected shape (2,), got ['a', 'b']"),
+        (
+            lambda: stiffness.notch_stiffness(np.array([0.003, 0.004]), 2.5e-4, 0.02, 69e9, 0.33),
+            "D: expected a single number, got shape (2,)",
+        ),
+        (
+            lambda: stiffness.cantilever_stiffness(0.01, 0.001, "wide", 69e9, 0.3),
+            "width: expected a single number",
+        ),
+    ],
+)
 def test_argument_checks_name_the_argument(call, fragment):
     """Public functions that used to fail in NumPy's matmul/broadcasting (or, for a 3x3 R,
     silently returned a wrong twist) name the argument and the expected shape."""

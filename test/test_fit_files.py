@@ -4,6 +4,7 @@ Issue 16 item 12: ``flexure-sim fit`` on a CSV holding 1e300 values, binary garb
 Latin-1 comment line. Also fuzzed (hypothesis, derandomized and bounded): the CSV reader and
 the polynomial hinge file loader raise only their own errors (DataError, PolynomialFileError).
 """
+
 from __future__ import annotations
 
 import os
@@ -56,9 +57,14 @@ def _bad_files(directory):
     lineno = huge.splitlines().index(",".join(fields)) + 1
     files = {
         "huge.csv": (huge.encode(), [f"line {lineno}, column 'fx'", "1e+300 is out of range"]),
-        "garbage.csv": (bytes(range(255, -1, -1)) * 8, ["a binary file, not text", "line 1, column 1"]),
-        "latin1.csv": ("# mesuré au banc\n".encode("latin-1") + TRAIN.encode(),
-                       ["not UTF-8 text", "byte 0xe9 at line 1, column 8"]),
+        "garbage.csv": (
+            bytes(range(255, -1, -1)) * 8,
+            ["a binary file, not text", "line 1, column 1"],
+        ),
+        "latin1.csv": (
+            "# mesuré au banc\n".encode("latin-1") + TRAIN.encode(),
+            ["not UTF-8 text", "byte 0xe9 at line 1, column 8"],
+        ),
         "nul.csv": (TRAIN.replace("\n", "\n\0", 3).encode(), ["contains a NUL byte"]),
     }
     out = {}
@@ -82,12 +88,20 @@ def test_the_reader_names_file_line_and_column(tmp_path):
 def test_fit_command_exits_2_with_one_line(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     for name, (path, fragments) in _bad_files(tmp_path).items():
-        p = subprocess.run([sys.executable, "-m", "flexure_sim.cli", "fit", str(path), "--order", "2"],
-                           cwd=tmp_path, capture_output=True, text=True, timeout=120, env=env)
+        p = subprocess.run(
+            [sys.executable, "-m", "flexure_sim.cli", "fit", str(path), "--order", "2"],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env=env,
+        )
         assert p.returncode == 2, (name, p.stderr)
         assert "Traceback" not in p.stderr and p.stdout == ""
         lines = p.stderr.strip().splitlines()
-        assert len(lines) == 1 and lines[0].startswith(f"flexure-sim fit: error: {path}: "), p.stderr
+        assert len(lines) == 1 and lines[0].startswith(
+            f"flexure-sim fit: error: {path}: "
+        ), p.stderr
         for fragment in fragments:
             assert fragment in lines[0], lines[0]
 
@@ -102,15 +116,20 @@ def test_fit_refuses_values_that_overflow_its_arithmetic():
     data = WrenchData(rng.uniform(-0.01, 0.01, n), rng.normal(size=(n, 2)) * 1e-5, wrench, "bench")
     with pytest.raises(FitError, match=r"^bench: row 8, column 'fy': 1e\+300 is too large to fit"):
         fit_polynomial(data, 2)
-    assert MAX_ABS_VALUE ** 2 * 3 < np.finfo(float).max  # sums of squares of accepted values stay finite
+    assert (
+        MAX_ABS_VALUE**2 * 3 < np.finfo(float).max
+    )  # sums of squares of accepted values stay finite
 
 
-@pytest.mark.parametrize("alpha,p,wrench,name", [
-    (np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3)), "p"),
-    (np.zeros(3), np.zeros((3, 2)), np.zeros(9), "wrench"),
-    (np.zeros((3, 1)), np.zeros((3, 2)), np.zeros((3, 3)), "alpha"),
-    (np.zeros(3), [["a", "b"]] * 3, np.zeros((3, 3)), "p"),
-])
+@pytest.mark.parametrize(
+    "alpha,p,wrench,name",
+    [
+        (np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3)), "p"),
+        (np.zeros(3), np.zeros((3, 2)), np.zeros(9), "wrench"),
+        (np.zeros((3, 1)), np.zeros((3, 2)), np.zeros((3, 3)), "alpha"),
+        (np.zeros(3), [["a", "b"]] * 3, np.zeros((3, 3)), "p"),
+    ],
+)
 def test_wrench_data_names_the_argument_of_the_wrong_shape(alpha, p, wrench, name):
     with pytest.raises(ValueError, match=rf"^{name}: expected"):
         WrenchData(alpha, p, wrench)
@@ -118,10 +137,16 @@ def test_wrench_data_names_the_argument_of_the_wrong_shape(alpha, p, wrench, nam
 
 # ------------------------------------------------------------------------- fuzzing
 
-FUZZ = settings(max_examples=100, derandomize=True, deadline=None, database=None,
-                suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+FUZZ = settings(
+    max_examples=100,
+    derandomize=True,
+    deadline=None,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
 CELLS = st.one_of(
-    st.text(max_size=8), st.sampled_from(["1e300", "-1e300", "nan", "inf", "1e151", "3.2", "", '"', "1,2"]),
+    st.text(max_size=8),
+    st.sampled_from(["1e300", "-1e300", "nan", "inf", "1e151", "3.2", "", '"', "1,2"]),
     st.floats(allow_nan=True, allow_infinity=True).map(repr),
 )
 
@@ -162,11 +187,26 @@ def test_fuzz_csv_bytes(fuzz_dir, at, junk):
 
 LAW = yaml.safe_load(LAW_TEXT)
 DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
-LAW_KEYS = ["format", "version", "coordinates", "variables", "order", "rest", "scale", "energy", "terms"]
+LAW_KEYS = [
+    "format",
+    "version",
+    "coordinates",
+    "variables",
+    "order",
+    "rest",
+    "scale",
+    "energy",
+    "terms",
+]
 VALUES = st.recursive(
-    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=True, allow_infinity=True)
-    | st.text(max_size=8) | st.sampled_from([10**400, "twist", "twistor", [1.0, 0.0, 0.0, 0.0], 1e-300]),
-    lambda children: st.lists(children, max_size=4) | st.dictionaries(st.text(max_size=6), children, max_size=3),
+    st.none()
+    | st.booleans()
+    | st.integers()
+    | st.floats(allow_nan=True, allow_infinity=True)
+    | st.text(max_size=8)
+    | st.sampled_from([10**400, "twist", "twistor", [1.0, 0.0, 0.0, 0.0], 1e-300]),
+    lambda children: st.lists(children, max_size=4)
+    | st.dictionaries(st.text(max_size=6), children, max_size=3),
     max_leaves=8,
 )
 
@@ -180,19 +220,25 @@ def test_fuzz_polynomial_files(fuzz_dir, key, value, term, in_term):
     else:
         doc[key] = value
     path = fuzz_dir / "law.yaml"
-    path.write_text(yaml.dump(doc, Dumper=DUMPER, sort_keys=False, allow_unicode=True), encoding="utf-8")
+    path.write_text(
+        yaml.dump(doc, Dumper=DUMPER, sort_keys=False, allow_unicode=True), encoding="utf-8"
+    )
     try:
         load_law(path)
     except PolynomialFileError as exc:
         assert str(exc).startswith(f"{path}: ") and "\n" not in str(exc), str(exc)
 
 
-@pytest.mark.parametrize("key,value,fragment", [
-    ("coordinates", ["twist"], "coordinates: expected one of twistor, twist, got ['twist']"),
-    ("variables", 3, "variables: expected"),
-    ("energy", 10**400, "energy: expected a finite number, got 1000"),
-    ("scale", [1, 1, 10**400, 1], "scale[2]: expected a finite number"),
-], ids=["coordinates", "variables", "energy", "scale"])
+@pytest.mark.parametrize(
+    "key,value,fragment",
+    [
+        ("coordinates", ["twist"], "coordinates: expected one of twistor, twist, got ['twist']"),
+        ("variables", 3, "variables: expected"),
+        ("energy", 10**400, "energy: expected a finite number, got 1000"),
+        ("scale", [1, 1, 10**400, 1], "scale[2]: expected a finite number"),
+    ],
+    ids=["coordinates", "variables", "energy", "scale"],
+)
 def test_polynomial_file_problems_name_the_key(tmp_path, key, value, fragment):
     doc = dict(LAW, **{key: value})
     path = tmp_path / "law.yaml"

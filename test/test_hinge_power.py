@@ -14,6 +14,7 @@ At random states of every law (twistor and twist quadratic, twistor and twist po
 - dissipated power >= 0 and = c_dot^T C c_dot, c_dot the rate of kinematics' independent
   coordinates (difference quotient), and = r_dot^T B r_dot at the unstressed pose.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -46,8 +47,12 @@ def _laws():
     return {
         "twistor": QuadraticLaw("twistor", K, B),
         "twist": QuadraticLaw("twist", K, B),
-        "poly_twistor": PolynomialLaw("twistor", 4, tw, rng.normal(size=len(tw)), [0.5, 0.5, 1e-3, 1e-3], 2.0, B),
-        "poly_twist": PolynomialLaw("twist", 3, t3, rng.normal(size=len(t3)), [1.0, 2e-3, 2e-3], 2.0, B),
+        "poly_twistor": PolynomialLaw(
+            "twistor", 4, tw, rng.normal(size=len(tw)), [0.5, 0.5, 1e-3, 1e-3], 2.0, B
+        ),
+        "poly_twist": PolynomialLaw(
+            "twist", 3, t3, rng.normal(size=len(t3)), [1.0, 2e-3, 2e-3], 2.0, B
+        ),
     }
 
 
@@ -57,8 +62,10 @@ LAWS = _laws()
 def _states(seed):
     """r0, a rate v and an acceleration a per state: r(t) = r0 + v t + a t^2 / 2."""
     rng = np.random.default_rng(seed)
+
     def triple():
         return np.column_stack([rng.uniform(-2.5, 2.5, M), rng.normal(size=(M, 2)) * 1e-3])
+
     return triple(), triple(), triple()
 
 
@@ -111,11 +118,15 @@ def test_potential_energy_matches_an_independent_formula(name):
         terms = weight * vec[:, :, None] * law.K[None] * vec[:, None, :]
     else:
         u = (c - law.rest) / law.scale
-        terms = law.energy * law.coefficients * np.prod(u[:, None, :] ** law.exponents[None], axis=2)
+        terms = (
+            law.energy * law.coefficients * np.prod(u[:, None, :] ** law.exponents[None], axis=2)
+        )
     expected = terms.reshape(len(c), -1).sum(axis=1)
     size = np.abs(terms).reshape(len(c), -1).sum(axis=1)
     U = law.potential_energy(r0[:, 0], r0[:, 1:])
-    assert np.all(np.abs(U - expected) <= 64 * EPS * size), np.max(np.abs(U - expected) / (EPS * size))
+    assert np.all(np.abs(U - expected) <= 64 * EPS * size), np.max(
+        np.abs(U - expected) / (EPS * size)
+    )
 
 
 @pytest.mark.parametrize("name", LAWS)
@@ -123,9 +134,11 @@ def test_dissipated_power_is_the_rate_quadratic_form_and_never_negative(name):
     law = LAWS[name]
     r0, v, a = _states(3)
     k = 4 if law.coordinates == "twistor" else 3
-    cdot, rounding = _rate(lambda al, p: _independent_coordinates(law.coordinates, al, p), r0, v, a)
+    cdot, rounding = _rate(
+        lambda al, p: _independent_coordinates(law.coordinates, al, p), r0, v, a
+    )
     C = np.zeros((k, k))
-    C[k - 3:, k - 3:] = (4.0 if law.coordinates == "twistor" else 1.0) * law.B  # eqs. 4.40, 3.62
+    C[-3:, -3:] = (4.0 if law.coordinates == "twistor" else 1.0) * law.B  # eqs. 4.40, 3.62
     expected = np.einsum("ni,ij,nj->n", cdot, C, cdot)
     bound = 2 * np.einsum("ni,ij,nj->n", np.abs(cdot), np.abs(C), 10 * EPS * rounding)
     got = law.dissipated_power(r0[:, 0], r0[:, 1:], v)
@@ -134,7 +147,10 @@ def test_dissipated_power_is_the_rate_quadratic_form_and_never_negative(name):
     # = r_dot^T B_eff r_dot with the engine's effective damping matrix C_r
     B_eff = evaluate([law] * M, r0[:, 0], r0[:, 1:], v).damping
     quad = np.einsum("ni,nij,nj->n", v, B_eff, v)
-    assert np.all(np.abs(got - quad) <= 16 * EPS * np.einsum("ni,nij,nj->n", np.abs(v), np.abs(B_eff), np.abs(v)))
+    assert np.all(
+        np.abs(got - quad)
+        <= 16 * EPS * np.einsum("ni,nij,nj->n", np.abs(v), np.abs(B_eff), np.abs(v))
+    )
     # at the unstressed pose B_eff = B: P_d = r_dot^T B r_dot exactly (eq. 4.52's damping twin)
     at_rest = law.dissipated_power(np.zeros(M), np.zeros((M, 2)), v)
     assert at_rest == pytest.approx(np.einsum("ni,ij,nj->n", v, law.B, v), rel=1e-13)
@@ -153,13 +169,18 @@ def test_dissipated_power_is_never_negative_for_a_singular_damping():
 
 # ----------------------------------------------- wrench . velocity on two moving bodies
 
+
 def _two_bodies(seed):
     """Random poses and twists of bodies A and B and hinge frames fixed on them."""
     rng = np.random.default_rng(seed)
     g = {key: rng.normal(size=(M, 2)) * 1e-2 for key in ("xA", "xB", "pa", "pb")}
     g.update({key: rng.uniform(-np.pi, np.pi, M) for key in ("thA", "thB", "phia", "phib")})
-    g.update(vA=rng.normal(size=(M, 2)) * 1e-2, vB=rng.normal(size=(M, 2)) * 1e-2,
-             wA=rng.normal(size=M), wB=rng.normal(size=M))
+    g.update(
+        vA=rng.normal(size=(M, 2)) * 1e-2,
+        vB=rng.normal(size=(M, 2)) * 1e-2,
+        wA=rng.normal(size=M),
+        wB=rng.normal(size=M),
+    )
     return g
 
 
@@ -188,8 +209,14 @@ def _power_on_bodies(g, alpha, m_b, xb):
     m = -m_b[:, 0]  # moment on B about b's origin
     point_on_B = g["vB"] + g["wB"][:, None] * (xb - g["xB"]) @ kin.J.T
     point_on_A = g["vA"] + g["wA"][:, None] * (xb - g["xA"]) @ kin.J.T
-    terms = np.column_stack([m * g["wB"], np.sum(F * point_on_B, axis=1), -m * g["wA"],
-                             -np.sum(F * point_on_A, axis=1)])
+    terms = np.column_stack(
+        [
+            m * g["wB"],
+            np.sum(F * point_on_B, axis=1),
+            -m * g["wA"],
+            -np.sum(F * point_on_A, axis=1),
+        ]
+    )
     return terms.sum(axis=1), np.abs(terms).sum(axis=1)
 
 
@@ -231,18 +258,32 @@ def test_a_batch_of_different_laws_reports_each_hinge_as_its_law_does():
             law = laws[i]
             args = (r0[rows, 0], r0[rows, 1:])
             assert batch.energy[rows] == pytest.approx(law.potential_energy(*args), rel=1e-14)
-            assert batch.conservative[rows] == pytest.approx(law.conservative_power(*args, v[rows]), rel=1e-14)
-            assert batch.dissipated[rows] == pytest.approx(law.dissipated_power(*args, v[rows]), rel=1e-14)
+            assert batch.conservative[rows] == pytest.approx(
+                law.conservative_power(*args, v[rows]), rel=1e-14
+            )
+            assert batch.dissipated[rows] == pytest.approx(
+                law.dissipated_power(*args, v[rows]), rel=1e-14
+            )
 
 
-@pytest.mark.parametrize("call,name", [
-    (lambda law: law.potential_energy(np.zeros(3), np.zeros((3, 3))), "p"),
-    (lambda law: law.conservative_power(np.zeros(3), np.zeros((3, 2)), np.zeros((2, 3))), "rdot"),
-    (lambda law: law.dissipated_power(0.1, np.zeros((1, 2)), np.zeros((1, 3))), "alpha"),
-    (lambda law: wrench_on_element(np.zeros(2), np.zeros((2, 2))), "grad_r"),
-    (lambda law: QuadraticLaw("twist", np.eye(2), np.eye(3)), "K"),
-    (lambda law: LawBatch([law]).power(np.zeros(2), np.zeros((2, 2)), np.zeros((2, 3))), "alpha"),
-], ids=["p", "rdot", "alpha", "grad_r", "K", "one law per deflection"])
+@pytest.mark.parametrize(
+    "call,name",
+    [
+        (lambda law: law.potential_energy(np.zeros(3), np.zeros((3, 3))), "p"),
+        (
+            lambda law: law.conservative_power(np.zeros(3), np.zeros((3, 2)), np.zeros((2, 3))),
+            "rdot",
+        ),
+        (lambda law: law.dissipated_power(0.1, np.zeros((1, 2)), np.zeros((1, 3))), "alpha"),
+        (lambda law: wrench_on_element(np.zeros(2), np.zeros((2, 2))), "grad_r"),
+        (lambda law: QuadraticLaw("twist", np.eye(2), np.eye(3)), "K"),
+        (
+            lambda law: LawBatch([law]).power(np.zeros(2), np.zeros((2, 2)), np.zeros((2, 3))),
+            "alpha",
+        ),
+    ],
+    ids=["p", "rdot", "alpha", "grad_r", "K", "one law per deflection"],
+)
 def test_arguments_of_the_wrong_shape_are_named(call, name):
     for law in LAWS.values():
         with pytest.raises(ValueError) as err:

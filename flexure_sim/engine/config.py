@@ -143,9 +143,11 @@ def _key_text(key: Any) -> str:
 def _name(ctx: _Ctx, key: str, value: Any) -> str:
     if not isinstance(value, str) or not value:
         raise ctx.fail(key, f"expected a non-empty name, got {_shown(value)}")
-    if not (value.isascii() and value[0].isalpha() and all(ch.isalnum() or ch == "_" for ch in value)):
+    word = all(ch.isalnum() or ch == "_" for ch in value)
+    if not (value.isascii() and value[0].isalpha() and word):
         raise ctx.fail(
-            key, f"{_shown(value)} is not a valid name (ASCII letters, digits, '_', starting with a letter;"
+            key, f"{_shown(value)} is not a valid name (ASCII letters, digits, '_', starting "
+            "with a letter;"
             " names become ROS topic and frame names)"
         )
     return value
@@ -163,7 +165,8 @@ def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
     spec = _mapping(ctx, key, spec)
     model = _require(ctx, key, spec, "model")
     if not isinstance(model, str):
-        raise ctx.fail(f"{key}.model", f"expected a model name (notch, cantilever, matrix), got {_shown(model)}")
+        raise ctx.fail(f"{key}.model",
+                       f"expected a model name (notch, cantilever, matrix), got {_shown(model)}")
     if model in _STIFFNESS_KEYS:
         fn, names = _STIFFNESS_KEYS[model]
         _no_unknown(ctx, key, spec, {"model", *names})
@@ -175,8 +178,9 @@ def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
         with np.errstate(all="ignore"):
             K = fn(*(np.float64(a) for a in args))  # overflow gives inf, checked below
         if not np.all(np.isfinite(K)):
-            raise ctx.fail(key, f"the {model} formula gives a non-finite stiffness for these values "
-                           f"({', '.join(f'{n}={a:g}' for n, a in zip(names, args))}): check the units")
+            values = ", ".join(f"{n}={a:g}" for n, a in zip(names, args))
+            raise ctx.fail(key, f"the {model} formula gives a non-finite stiffness for these "
+                           f"values ({values}): check the units")
         return K, model
     if model == "matrix":
         _no_unknown(ctx, key, spec, {"model", "K", "Ko", "Kt", "Kc"})
@@ -191,7 +195,8 @@ def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
             kc = _vector(ctx, f"{key}.Kc", spec.get("Kc", [0.0, 0.0]), (2,))
             K = np.array([[Ko, kc[0], kc[1]], [kc[0], kt[0], 0.0], [kc[1], 0.0, kt[1]]])
         return K, "matrix"
-    raise ctx.fail(f"{key}.model", f"unknown stiffness model {_shown(model)} (notch, cantilever, matrix)")
+    raise ctx.fail(f"{key}.model",
+                   f"unknown stiffness model {_shown(model)} (notch, cantilever, matrix)")
 
 
 def _check_spd(ctx: _Ctx, key: str, M: np.ndarray, what: str) -> None:
@@ -261,7 +266,8 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
     _no_unknown(ctx, "defaults", defaults, {"law", "damping"})
 
     named_stiffness = {
-        _name(ctx, f"stiffness_models.{_key_text(k)}", k): _stiffness(ctx, f"stiffness_models.{k}", v)
+        _name(ctx, f"stiffness_models.{_key_text(k)}", k):
+            _stiffness(ctx, f"stiffness_models.{_key_text(k)}", v)
         for k, v in _mapping(ctx, "stiffness_models", data.get("stiffness_models", {})).items()
     }
 
@@ -398,14 +404,16 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
             sspec = _require(ctx, key, spec, "stiffness")
             if isinstance(sspec, str):
                 if sspec not in named_stiffness:
-                    raise ctx.fail(f"{key}.stiffness", f"unknown stiffness model name {_shown(sspec)}")
+                    raise ctx.fail(f"{key}.stiffness",
+                                   f"unknown stiffness model name {_shown(sspec)}")
                 K, source = named_stiffness[sspec]
             else:
                 K, source = _stiffness(ctx, f"{key}.stiffness", sspec)
             _check_spd(ctx, f"{key}.stiffness", K, "stiffness")
             if not isinstance(law_name, str) or law_name not in COORDINATES:
                 raise ctx.fail(law_key,
-                               f"unknown law {_shown(law_name)} ({', '.join(COORDINATES)}, or {{polynomial: FILE}})")
+                               f"unknown law {_shown(law_name)} ({', '.join(COORDINATES)}, "
+                               "or {polynomial: FILE})")
         B = _damping(ctx, f"{key}.damping", spec.get("damping", defaults.get("damping")), K)
         law = poly.with_damping(B) if poly is not None else QuadraticLaw(law_name, K, B)
         hinges.append(Hinge(name, fa, fb, K, B, law, source))
@@ -418,7 +426,8 @@ def _polynomial_law(ctx: _Ctx, key: str, spec: dict, cache: dict) -> PolynomialL
     _no_unknown(ctx, key, spec, {"polynomial"})
     ref = _require(ctx, key, spec, "polynomial")
     if not isinstance(ref, str) or not ref or "\0" in ref:
-        raise ctx.fail(f"{key}.polynomial", f"expected the path of a polynomial hinge file, got {_shown(ref)}")
+        raise ctx.fail(f"{key}.polynomial",
+                       f"expected the path of a polynomial hinge file, got {_shown(ref)}")
     origin = Path(ctx.source)
     path = (origin.parent if origin.is_file() else Path.cwd()) / ref
     if path not in cache:
@@ -438,7 +447,8 @@ def _damping(ctx: _Ctx, key: str, spec: Any, K: np.ndarray) -> np.ndarray:
         with np.errstate(all="ignore"):
             B = _number(ctx, f"{key}.t_char", spec["t_char"], nonnegative=True) * K
         if not np.all(np.isfinite(B)):
-            raise ctx.fail(f"{key}.t_char", "t_char times the stiffness is not finite: check the units")
+            raise ctx.fail(f"{key}.t_char",
+                           "t_char times the stiffness is not finite: check the units")
         return B
     if "B" in spec:
         rows = spec["B"]
@@ -486,7 +496,8 @@ def _constraints(ctx, raw, by_name) -> list:
             _no_unknown(ctx, key, spec, {"type", "body", "coordinate", "amplitude", "frequency", "phase"})
             coord = _require(ctx, key, spec, "coordinate")
             if coord not in COORDINATE_NAMES:
-                raise ctx.fail(f"{key}.coordinate", f"expected one of {COORDINATE_NAMES}, got {_shown(coord)}")
+                raise ctx.fail(f"{key}.coordinate",
+                               f"expected one of {COORDINATE_NAMES}, got {_shown(coord)}")
             c = SineRate(
                 body, coord,
                 _number(ctx, f"{key}.amplitude", _require(ctx, key, spec, "amplitude")),
@@ -495,7 +506,8 @@ def _constraints(ctx, raw, by_name) -> list:
             )
             coords = (COORDINATE_NAMES.index(coord),)
         else:
-            raise ctx.fail(f"{key}.type", f"unknown constraint type {_shown(kind)} (fixed, drive, sine_rate)")
+            raise ctx.fail(f"{key}.type",
+                           f"unknown constraint type {_shown(kind)} (fixed, drive, sine_rate)")
         for k in coords:
             if (body, k) in held:
                 raise ctx.fail(key, f"coordinate {COORDINATE_NAMES[k]} of body {body!r} is already "

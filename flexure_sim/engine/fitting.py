@@ -122,14 +122,16 @@ def read_wrench_csv(path: str | Path) -> WrenchData:
     ]
     for lineno, line in lines:
         if "\0" in line:
-            raise DataError(f"{path}: line {lineno}: contains a NUL byte (a binary file, not a CSV?)")
+            raise DataError(f"{path}: line {lineno}: contains a NUL byte "
+                            "(a binary file, not a CSV?)")
     if not lines:
         raise DataError(f"{path}: no header and no data (need columns {', '.join(COLUMNS)})")
     reader = csv.reader([line for _, line in lines], skipinitialspace=True)
     try:
         rows = list(reader)
     except csv.Error as exc:
-        raise DataError(f"{path}: line {lines[reader.line_num - 1][0]}: not valid CSV: {exc}") from None
+        lineno = lines[reader.line_num - 1][0]
+        raise DataError(f"{path}: line {lineno}: not valid CSV: {exc}") from None
     header = [h.strip() for h in rows[0]]
     dup = sorted({h for h in header if header.count(h) > 1})
     if dup:
@@ -393,9 +395,9 @@ def _overflow(data: WrenchData) -> str:
     table = np.column_stack([data.alpha, data.p, data.wrench])
     size = np.where(np.isfinite(table), np.abs(table), np.inf)
     row, col = np.unravel_index(np.argmax(size), table.shape)
-    return (f"{data.source}: row {row + 1}, column {COLUMNS[col]!r}: {table[row, col]:g} is too large "
-            f"to fit (values must be finite with |value| <= {MAX_ABS_VALUE:g}, or the least-squares "
-            "system overflows): check the units (SI)")
+    return (f"{data.source}: row {row + 1}, column {COLUMNS[col]!r}: {table[row, col]:g} is too "
+            f"large to fit (values must be finite with |value| <= {MAX_ABS_VALUE:g}, or the "
+            "least-squares system overflows): check the units (SI)")
 
 
 def _unmoved(c: np.ndarray, coordinates: str, exps: np.ndarray) -> str:

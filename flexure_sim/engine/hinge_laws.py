@@ -279,7 +279,8 @@ class LawBatch:
         """
         alpha, p, rdot = deflections(alpha, p, rdot)
         if len(alpha) != len(self.laws):
-            raise ValueError(f"alpha: expected {len(self.laws)} deflections (one per law), got {len(alpha)}")
+            raise ValueError(f"alpha: expected {len(self.laws)} deflections (one per law), "
+                             f"got {len(alpha)}")
         cmap = self._map(alpha, p, second=jacobian)
         c, dc = cmap.c, cmap.dc
         if self.quadratic:

@@ -405,16 +405,19 @@ def law_from_dict(doc: Any, source: str = "<dict>") -> PolynomialLaw:
     if not isinstance(doc, dict):
         raise PolynomialFileError(f"{source}: the document must be a mapping, got {type(doc).__name__}")
     if doc.get("format") != FILE_FORMAT:
-        raise fail("format", f"expected {FILE_FORMAT!r} (a file written by flexure-sim fit), got {_shown(doc.get('format'))}")
+        raise fail("format", f"expected {FILE_FORMAT!r} (a file written by flexure-sim fit), "
+                   f"got {_shown(doc.get('format'))}")
     if doc.get("version") != FILE_VERSION:
-        raise fail("version", f"unsupported version {_shown(doc.get('version'))} (this flexure_sim reads {FILE_VERSION})")
+        raise fail("version", f"unsupported version {_shown(doc.get('version'))} "
+                   f"(this flexure_sim reads {FILE_VERSION})")
     coords = doc.get("coordinates")
     if not isinstance(coords, str) or coords not in VARIABLES:
         raise fail("coordinates", f"expected one of {', '.join(VARIABLES)}, got {_shown(coords)}")
     names = VARIABLES[coords]
     k = len(names)
     if "variables" in doc and doc["variables"] != list(names):
-        raise fail("variables", f"expected {list(names)} for {coords} coordinates, got {_shown(doc['variables'])}")
+        raise fail("variables", f"expected {list(names)} for {coords} coordinates, "
+                   f"got {_shown(doc['variables'])}")
     order = doc.get("order")
     if isinstance(order, bool) or not isinstance(order, int) or not 1 <= order <= MAX_ORDER:
         raise fail("order", f"expected an integer in 1..{MAX_ORDER}, got {_shown(order)}")
@@ -443,11 +446,13 @@ def law_from_dict(doc: Any, source: str = "<dict>") -> PolynomialLaw:
     for i, term in enumerate(terms):
         key = f"terms[{i}]"
         if not isinstance(term, dict) or set(term) != {"exponents", "coefficient"}:
-            raise fail(key, f"expected a mapping with keys exponents and coefficient, got {_shown(term)}")
+            raise fail(key, "expected a mapping with keys exponents and coefficient, "
+                       f"got {_shown(term)}")
         e = term["exponents"]
         naturals = isinstance(e, list) and all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in e)
         if not naturals or len(e) != k:
-            raise fail(f"{key}.exponents", f"expected {k} non-negative integers ({', '.join(names)}), got {_shown(e)}")
+            raise fail(f"{key}.exponents",
+                       f"expected {k} non-negative integers ({', '.join(names)}), got {_shown(e)}")
         if sum(e) > order:
             raise fail(f"{key}.exponents", f"total degree {sum(e)} exceeds the order {order}")
         exps.append(e)

@@ -185,7 +185,7 @@ class Simulation:
         self.relinearize_tol = relinearize_tol
         self.drive: Optional[Drive] = mechanism.drive
         nb = len(mechanism.bodies)
-        self.mass = np.array([[b.mass, b.mass, b.inertia] for b in mechanism.bodies], dtype=float).ravel()
+        self.mass = np.array([[b.mass, b.mass, b.inertia] for b in mechanism.bodies]).ravel()
         self.z0 = np.array([b.pose for b in mechanism.bodies], dtype=float).ravel()
         self.part = self._partition(mechanism, nb)
         self._motion = self._motion_arrays()

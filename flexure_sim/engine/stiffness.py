@@ -48,7 +48,8 @@ def cantilever_stiffness(length: float, thickness: float, width: float, E: float
     along y is A E / L, with I = width * thickness^3 / 12 and A = width * thickness.
     nu is accepted for symmetry with notch_stiffness (torsion is out of plane).
     """
-    length, thickness, width, E, nu = _numbers(length=length, thickness=thickness, width=width, E=E, nu=nu)
+    length, thickness, width, E, nu = _numbers(
+        length=length, thickness=thickness, width=width, E=E, nu=nu)
     del nu  # the in-plane terms do not depend on it
     inertia = width * thickness**3 / 12.0
     area = width * thickness

@@ -1,4 +1,5 @@
 """Reading text and YAML data files, with one-line errors that name the file and the problem."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -25,7 +26,9 @@ def read_text(path: str | Path, error: type[Exception]) -> str:
         where = f"byte 0x{data[exc.start]:02x} at line {line}, column {column}"
         if _looks_binary(data):
             raise error(f"{path}: a binary file, not text ({where} is not UTF-8)") from None
-        raise error(f"{path}: not UTF-8 text: {where} is not UTF-8 (re-save the file as UTF-8)") from None
+        raise error(
+            f"{path}: not UTF-8 text: {where} is not UTF-8 (re-save the file as UTF-8)"
+        ) from None
 
 
 def _looks_binary(data: bytes) -> bool:
@@ -51,8 +54,10 @@ def read_yaml(path: str | Path, error: type[Exception]) -> Any:
     except yaml.reader.ReaderError as exc:
         line = text.count("\n", 0, exc.position) + 1
         column = exc.position - (text.rfind("\n", 0, exc.position) + 1) + 1
-        raise error(f"{path}: not valid YAML: line {line}, column {column}: character "
-                    f"#x{exc.character:04x} is not allowed in YAML (a binary file?)") from None
+        raise error(
+            f"{path}: not valid YAML: line {line}, column {column}: character "
+            f"#x{exc.character:04x} is not allowed in YAML (a binary file?)"
+        ) from None
     except yaml.YAMLError as exc:
         raise error(f"{path}: not valid YAML: {_one_line(exc)}") from None
     except (ValueError, OverflowError) as exc:
