@@ -10,7 +10,7 @@ import pytest
 
 import flexure_sim
 from flexure_sim.engine import kinematics as kin
-from flexure_sim.engine import stiffness
+from flexure_sim.engine import datasets, polynomial, stiffness
 from flexure_sim.errors import FlexureSimError
 
 
@@ -109,6 +109,54 @@ def test_errors_keep_their_builtin_base(name, builtin):
 def test_argument_checks_name_the_argument(call, fragment):
     """Public functions that used to fail in NumPy's matmul/broadcasting (or, for a 3x3 R,
     silently returned a wrong twist) name the argument and the expected shape."""
+    with pytest.raises(ValueError) as err:
+        call()
+    assert str(err.value).startswith(fragment), str(err.value)
+
+
+@pytest.mark.parametrize(
+    "call,fragment",
+    [
+        (
+            lambda: polynomial.monomials(np.zeros((2, 3)), np.zeros((5, 4))),
+            "exponents: expected shape (n, 3)",
+        ),
+        (
+            lambda: polynomial.monomial_gradients(np.zeros(3), np.zeros((5, 3))),
+            "u: expected shape (n, n)",
+        ),
+        (
+            lambda: polynomial.compose_linear(np.zeros(15), 4, 2, np.eye(3)),
+            "M: expected shape (4, 4)",
+        ),
+        (
+            lambda: polynomial.compose_linear(np.zeros(14), 4, 2, np.eye(4)),
+            "coefficients: expected shape (15,)",
+        ),
+        (
+            lambda: polynomial.derivative_coefficients(np.zeros(3), 4, 2, 0),
+            "coefficients: expected shape (15,)",
+        ),
+        (
+            lambda: datasets.sample_box(3, 0.1, [1e-6, 1e-6, 1e-6], np.random.default_rng(0)),
+            "p_max: expected shape (2,)",
+        ),
+        (
+            lambda: datasets.leaf_tip(datasets.Leaf(), np.zeros((2, 3)), np.zeros(2)),
+            "force: expected shape (n, 2)",
+        ),
+    ],
+    ids=[
+        "monomials",
+        "monomial_gradients",
+        "compose_linear M",
+        "compose_linear coefficients",
+        "derivative_coefficients",
+        "sample_box",
+        "leaf_tip",
+    ],
+)
+def test_polynomial_and_data_set_helpers_name_the_argument(call, fragment):
     with pytest.raises(ValueError) as err:
         call()
     assert str(err.value).startswith(fragment), str(err.value)

@@ -24,6 +24,7 @@ from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
+from ..errors import as_array
 from .fitting import FitError, WrenchData, fit_polynomial, predict_wrench, write_wrench_csv
 from .hinge_laws import QuadraticLaw, twistor_coordinates
 from .kinematics import rot
@@ -40,7 +41,7 @@ def sample_box(n: int, alpha_max: float, p_max: Sequence[float],
                rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """n displacements uniform in |alpha| <= alpha_max, |p_i| <= p_max[i]."""
     alpha = rng.uniform(-alpha_max, alpha_max, n)
-    p = rng.uniform(-1.0, 1.0, (n, 2)) * np.asarray(p_max, dtype=float)
+    p = rng.uniform(-1.0, 1.0, (n, 2)) * as_array("p_max", p_max, (2,))
     return alpha, p
 
 
@@ -102,7 +103,8 @@ def leaf_tip(leaf: Leaf, force: np.ndarray, base_moment: np.ndarray, steps: int 
     d_shear = R(theta) e_x. Classical RK4 with ``steps`` steps.
     Returns r = (alpha, px, py) of frame b in frame a, and m_b (moment, fx, fy) in frame b.
     """
-    force = np.asarray(force, dtype=float)
+    force = as_array("force", force, (None, 2))
+    base_moment = as_array("base_moment", base_moment, (len(force),))
     L = leaf.length
     h = L / steps
     n = len(force)

@@ -113,8 +113,8 @@ def monomial_index(exponents, order: int) -> int:
 
 def monomials(u: np.ndarray, exponents: np.ndarray) -> np.ndarray:
     """Values of the monomials prod_k u_k^e_jk: u (n, k), exponents (M, k) -> (n, M)."""
-    u = np.asarray(u, dtype=float)
-    exponents = np.asarray(exponents, dtype=int)
+    u = as_array("u", u, (None, None))
+    exponents = as_array("exponents", exponents, (None, u.shape[1]), dtype=int)
     top = int(exponents.max()) if exponents.size else 0
     powers = u[:, :, None] ** np.arange(top + 1)  # (n, k, top + 1); 0.0 ** 0 == 1
     return np.prod(powers[:, np.arange(u.shape[1])[None, :], exponents], axis=-1)
@@ -122,7 +122,8 @@ def monomials(u: np.ndarray, exponents: np.ndarray) -> np.ndarray:
 
 def monomial_gradients(u: np.ndarray, exponents: np.ndarray) -> np.ndarray:
     """d/du_k of the monomials: u (n, k), exponents (M, k) -> (n, M, k)."""
-    exponents = np.asarray(exponents, dtype=int)
+    u = as_array("u", u, (None, None))
+    exponents = as_array("exponents", exponents, (None, u.shape[1]), dtype=int)
     k = exponents.shape[1]
     out = np.empty((np.shape(u)[0], exponents.shape[0], k))
     for i in range(k):
@@ -145,7 +146,7 @@ def derivative_coefficients(coefficients: np.ndarray, n_vars: int, order: int, v
     imap = _index_map(n_vars, order)
     dst = np.array([imap[tuple(e)] for e in lowered], dtype=int)
     out = np.zeros(len(exps))
-    out[dst] = exps[src, var] * np.asarray(coefficients, dtype=float)[src]
+    out[dst] = exps[src, var] * as_array("coefficients", coefficients, (len(exps),))[src]
     return out
 
 
@@ -157,9 +158,9 @@ def compose_linear(coefficients: np.ndarray, n_vars: int, order: int, M: np.ndar
     every term is preserved, which is why a polynomial of order N in one set of twist(or)
     coordinates is one of order N in any other (3.69, 4.70).
     """
-    M = np.asarray(M, dtype=float)
-    a = np.asarray(coefficients, dtype=float)
     exps = monomial_exponents(n_vars, order)
+    M = as_array("M", M, (n_vars, n_vars))
+    a = as_array("coefficients", coefficients, (len(exps),))
     degree = exps.sum(axis=1)
     radix = (order + 1) ** np.arange(n_vars)
     lookup = {int(code): j for j, code in enumerate(exps @ radix)}
