@@ -97,9 +97,9 @@ def _number(ctx: _Ctx, key: str, value: Any, *, positive=False, nonnegative=Fals
     if not math.isfinite(v):
         raise ctx.fail(key, f"must be finite, got {_shown(value)}")
     if positive and v <= 0:
-        raise ctx.fail(key, f"must be positive, got {value!r}")
+        raise ctx.fail(key, f"must be positive, got {_shown(value)}")
     if nonnegative and v < 0:
-        raise ctx.fail(key, f"must not be negative, got {value!r}")
+        raise ctx.fail(key, f"must not be negative, got {_shown(value)}")
     return v
 
 
