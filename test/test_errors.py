@@ -35,7 +35,7 @@ def test_every_package_error_derives_from_the_root():
         "flexure_sim.recording.errors.RecordingError",
         "flexure_sim.engine.fitting.DataError",
         "flexure_sim.engine.fitting.FitError",
-        "flexure_sim.engine.polynomial.PolynomialFileError",
+        "flexure_sim.engine.polynomial_files.PolynomialFileError",
         "flexure_sim.tools.runlog.RunError",
         "flexure_sim.cli.UsageError",
         "flexure_sim.node.demo_drive.DriveError",
@@ -50,7 +50,7 @@ def test_every_package_error_derives_from_the_root():
     "name,builtin",
     [
         ("flexure_sim.engine.config.ConfigError", ValueError),
-        ("flexure_sim.engine.polynomial.PolynomialFileError", ValueError),
+        ("flexure_sim.engine.polynomial_files.PolynomialFileError", ValueError),
         ("flexure_sim.engine.fitting.DataError", ValueError),
         ("flexure_sim.engine.fitting.FitError", ValueError),
         ("flexure_sim.cli.UsageError", ValueError),

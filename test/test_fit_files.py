@@ -26,7 +26,7 @@ from flexure_sim.engine.fitting import (
     fit_polynomial,
     read_wrench_csv,
 )
-from flexure_sim.engine.polynomial import PolynomialFileError, load_law
+from flexure_sim.engine.polynomial_files import PolynomialFileError, load_law
 
 EXAMPLES = ROOT / "config" / "examples"
 TRAIN = (EXAMPLES / "notch_hinge_train.csv").read_text()

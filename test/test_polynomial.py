@@ -9,19 +9,16 @@ import yaml
 from flexure_sim.engine import kinematics as kin
 from flexure_sim.engine.hinge_laws import QuadraticLaw, evaluate
 from flexure_sim.engine.polynomial import (
-    PolynomialFileError,
     PolynomialLaw,
     derivative_coefficients,
-    law_from_dict,
-    load_law,
     monomial_exponents,
     monomial_index,
     monomials,
     quadratic_as_polynomial,
-    save_law,
     swap_bodies,
     transform_frames,
 )
+from flexure_sim.engine.polynomial_files import PolynomialFileError, law_from_dict, load_law, save_law
 
 K_GENERAL = np.array([[2.0, 30.0, -12.0], [30.0, 4.0e4, 5.0e3], [-12.0, 5.0e3, 2.0e4]])
 COORDS = ["twistor", "twist"]

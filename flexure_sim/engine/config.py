@@ -53,8 +53,9 @@ from .mechanism import (
     Output,
     SineRate,
 )
-from .polynomial import PolynomialFileError, PolynomialLaw
-from .polynomial import load_law as load_polynomial_law
+from .polynomial import PolynomialLaw
+from .polynomial_files import PolynomialFileError
+from .polynomial_files import load_law as load_polynomial_law
 
 #: Directory of the built-in mechanisms (installed to share/flexure_sim/config too).
 BUILTIN_DIRS = (

@@ -42,15 +42,11 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
-from pathlib import Path
-from typing import Any
 
 import numpy as np
-import yaml
 
-from ..errors import FlexureSimError, as_array
+from ..errors import as_array
 from .hinge_laws import LawPower, QuadraticLaw, evaluate
-from .yaml_files import read_yaml
 from .kinematics import adjoint, transform_stiffness
 
 #: Names of the law coordinates, in the order of c.
@@ -62,16 +58,8 @@ VARIABLES: dict[str, tuple[str, ...]] = {
 #: Law coordinates of the unstressed pose.
 REST: dict[str, tuple[float, ...]] = {"twistor": (1.0, 0.0, 0.0, 0.0), "twist": (0.0, 0.0, 0.0)}
 
-#: Identifies the YAML files written by ``PolynomialLaw.save`` (and ``flexure-sim fit``).
-FILE_FORMAT = "flexure_sim.polynomial_hinge"
-FILE_VERSION = 1
-
 #: Highest order accepted (the monomial count grows as N^4 / 24 for twistors).
 MAX_ORDER = 12
-
-
-class PolynomialFileError(FlexureSimError, ValueError):
-    """A polynomial hinge file is invalid; the message names the file, the key and the problem."""
 
 
 # ------------------------------------------------------------------ monomial indexing
@@ -363,137 +351,6 @@ def swap_bodies(law: PolynomialLaw) -> PolynomialLaw:
     return law._linear_map(T)
 
 
-# ---------------------------------------------------------------------- file I/O
-
-def law_to_dict(law: PolynomialLaw) -> dict[str, Any]:
-    """The YAML document of a law (without fit report or provenance)."""
-    return {
-        "format": FILE_FORMAT,
-        "version": FILE_VERSION,
-        "coordinates": law.coordinates,
-        "variables": list(law.variables),
-        "order": law.order,
-        "potential": "U = energy * sum(coefficient * prod(((c - rest) / scale) ** exponents))",
-        "rest": [float(v) for v in law.rest],
-        "scale": [float(v) for v in law.scale],
-        "energy": law.energy,
-        "terms": [
-            {"exponents": [int(v) for v in e], "coefficient": float(a)}
-            for e, a in zip(law.exponents, law.coefficients)
-        ],
-        "stiffness_at_rest": [[float(v) for v in row] for row in law.stiffness_at_rest()],
-    }
-
-
-def save_law(law: PolynomialLaw, path: str | Path, extra: dict[str, Any] | None = None) -> None:
-    """Write a law (and optional extra sections, e.g. fit report, provenance) as YAML."""
-    doc = law_to_dict(law)
-    doc.update(extra or {})
-    header = (
-        "# Polynomial hinge law for flexure_sim (dissertation 3.6 / 4.7); reference it from a\n"
-        "# mechanism as  law: {polynomial: <this file>}.  stiffness_at_rest, fit and provenance\n"
-        "# are informational.\n"
-    )
-    Path(path).write_text(header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100))
-
-
-def law_from_dict(doc: Any, source: str = "<dict>") -> PolynomialLaw:
-    """Validate a parsed polynomial hinge document and build the law (damping B = 0)."""
-
-    def fail(key: str, problem: str) -> PolynomialFileError:
-        return PolynomialFileError(f"{source}: {key}: {problem}")
-
-    if not isinstance(doc, dict):
-        raise PolynomialFileError(f"{source}: the document must be a mapping, got {type(doc).__name__}")
-    if doc.get("format") != FILE_FORMAT:
-        raise fail("format", f"expected {FILE_FORMAT!r} (a file written by flexure-sim fit), "
-                   f"got {_shown(doc.get('format'))}")
-    if doc.get("version") != FILE_VERSION:
-        raise fail("version", f"unsupported version {_shown(doc.get('version'))} "
-                   f"(this flexure_sim reads {FILE_VERSION})")
-    coords = doc.get("coordinates")
-    if not isinstance(coords, str) or coords not in VARIABLES:
-        raise fail("coordinates", f"expected one of {', '.join(VARIABLES)}, got {_shown(coords)}")
-    names = VARIABLES[coords]
-    k = len(names)
-    if "variables" in doc and doc["variables"] != list(names):
-        raise fail("variables", f"expected {list(names)} for {coords} coordinates, "
-                   f"got {_shown(doc['variables'])}")
-    order = doc.get("order")
-    if isinstance(order, bool) or not isinstance(order, int) or not 1 <= order <= MAX_ORDER:
-        raise fail("order", f"expected an integer in 1..{MAX_ORDER}, got {_shown(order)}")
-
-    def numbers(key: str, value: Any, n: int) -> list[float]:
-        if not isinstance(value, list) or len(value) != n:
-            raise fail(key, f"expected a list of {n} numbers, got {_shown(value)}")
-        out = []
-        for i, v in enumerate(value):
-            out.append(_finite(fail, f"{key}[{i}]", v))
-        return out
-
-    if "rest" in doc and not np.allclose(numbers("rest", doc["rest"], k), REST[coords], rtol=0, atol=0):
-        raise fail("rest", f"must be {list(REST[coords])}: the polynomial is written about the unstressed pose")
-    scale = numbers("scale", doc.get("scale"), k)
-    for i, s in enumerate(scale):
-        if s <= 0:
-            raise fail(f"scale[{i}]", f"must be positive, got {s}")
-    energy = _finite(fail, "energy", doc.get("energy"))
-    if energy <= 0:
-        raise fail("energy", f"must be positive, got {energy}")
-    terms = doc.get("terms")
-    if not isinstance(terms, list) or not terms:
-        raise fail("terms", "expected a non-empty list of {exponents: [...], coefficient: number}")
-    exps, coefs = [], []
-    for i, term in enumerate(terms):
-        key = f"terms[{i}]"
-        if not isinstance(term, dict) or set(term) != {"exponents", "coefficient"}:
-            raise fail(key, "expected a mapping with keys exponents and coefficient, "
-                       f"got {_shown(term)}")
-        e = term["exponents"]
-        naturals = isinstance(e, list) and all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in e)
-        if not naturals or len(e) != k:
-            raise fail(f"{key}.exponents",
-                       f"expected {k} non-negative integers ({', '.join(names)}), got {_shown(e)}")
-        if sum(e) > order:
-            raise fail(f"{key}.exponents", f"total degree {sum(e)} exceeds the order {order}")
-        exps.append(e)
-        coefs.append(_finite(fail, f"{key}.coefficient", term["coefficient"]))
-    try:
-        return PolynomialLaw(coords, order, np.array(exps, dtype=int), np.array(coefs), np.array(scale), energy,
-                             source=source)
-    except ValueError as exc:
-        raise fail("terms", str(exc)) from None
-
-
-def _finite(fail, key: str, value: Any) -> float:
-    if isinstance(value, str):
-        try:
-            value = float(value)
-        except ValueError:
-            pass
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise fail(key, f"expected a finite number, got {_shown(value)}")
-    try:
-        number = float(value)
-    except OverflowError:  # an integer beyond the double range
-        number = math.inf
-    if not math.isfinite(number):
-        raise fail(key, f"expected a finite number, got {_shown(value)}")
-    return number
-
-
-def _shown(value: Any, limit: int = 60) -> str:
-    """repr of a value from the file, shortened so that a message stays one line."""
-    text = repr(value)
-    return text if len(text) <= limit else text[:limit - 3] + "..."
-
-
-def load_law(path: str | Path) -> PolynomialLaw:
-    """Read a polynomial hinge file (as written by ``flexure-sim fit``)."""
-    path = Path(path)
-    return law_from_dict(read_yaml(path, PolynomialFileError), source=str(path))
-
-
 def quadratic_as_polynomial(K: np.ndarray, coordinates: str, B: np.ndarray | None = None) -> PolynomialLaw:
     """The quadratic law of ``coordinates`` with stiffness K -- U = 2 [xi; x]^T K [xi; x]
     (4.7) or U = 1/2 d^T K d (3.4) -- written as a PolynomialLaw of order 2 (unit scales,
@@ -514,8 +371,7 @@ def quadratic_as_polynomial(K: np.ndarray, coordinates: str, B: np.ndarray | Non
 
 
 __all__ = [
-    "FILE_FORMAT", "MAX_ORDER", "REST", "VARIABLES", "PolynomialFileError", "PolynomialLaw",
-    "compose_linear", "derivative_coefficients", "describe_monomial", "law_from_dict", "law_to_dict", "load_law",
-    "monomial_exponents", "monomial_gradients", "monomial_index", "monomials",
-    "quadratic_as_polynomial", "save_law", "swap_bodies", "transform_frames",
+    "MAX_ORDER", "REST", "VARIABLES", "PolynomialLaw", "compose_linear", "derivative_coefficients",
+    "describe_monomial", "monomial_exponents", "monomial_gradients", "monomial_index", "monomials",
+    "quadratic_as_polynomial", "swap_bodies", "transform_frames",
 ]

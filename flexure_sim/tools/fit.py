@@ -20,7 +20,8 @@ import numpy as np
 
 from .. import __version__
 from ..engine.fitting import DataError, FitError, fit_polynomial, read_wrench_csv, summarize_errors
-from ..engine.polynomial import MAX_ORDER, save_law
+from ..engine.polynomial import MAX_ORDER
+from ..engine.polynomial_files import save_law
 
 
 def register(subparsers) -> None:
