@@ -19,7 +19,8 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
-from ..engine.fitting import DataError, FitError, fit_polynomial, read_wrench_csv, summarize_errors
+from ..engine.fitting import FitError, fit_polynomial, read_wrench_csv, summarize_errors
+from ..errors import FlexureSimError
 from ..engine.polynomial import MAX_ORDER
 from ..engine.polynomial_files import save_law
 
@@ -55,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     """Handler: exit 0 on success, 2 with a message on stderr for any bad input."""
     try:
         out = _fit(args)
-    except (DataError, FitError) as exc:
+    except FlexureSimError as exc:  # DataError, FitError: one line, exit 2
         print(f"flexure-sim fit: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:
