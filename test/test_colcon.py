@@ -199,8 +199,9 @@ def test_ros2_run_topic_pub_and_param_set_against_the_built_node(workspace, tmp_
     try:
         peer.subscribe("/output/displacement", Float64)
         peer.spin_until(lambda: peer.last("/output/displacement") is not None, 60, "output")
-        pub = ros2("topic", "pub", "--once", "drive/displacement", "std_msgs/msg/Float64",
-                   "{data: 1.0e-6}")
+        # --keep-alive: the publisher outlives the reliable delivery of its one message.
+        pub = ros2("topic", "pub", "--once", "--keep-alive", "1", "drive/displacement",
+                   "std_msgs/msg/Float64", "{data: 1.0e-6}")
         assert pub.returncode == 0, pub
         peer.spin_until(lambda: peer.last("/output/displacement").data > MIN_GAIN * 1e-6, 60,
                         "the output to follow the command published by ros2 topic pub")
