@@ -4,6 +4,10 @@ One layout serves colcon (ament_python) and plain pip:
 - colcon honours setup.cfg's install_scripts, so console scripts land in lib/flexure_sim;
 - pip ignores it, so small launchers are also installed as data_files under
   lib/flexure_sim/ (what `ros2 run` looks for), next to the ament index marker.
+
+Dependencies: package.xml names the same ones by their rosdep keys. matplotlib is only needed
+by `flexure-sim plot` (extra "plot"); the node and the other tools never import it. The extra
+"test" is how colcon (and a Jazzy ament_python package) learns that `colcon test` runs pytest.
 """
 from glob import glob
 
@@ -27,7 +31,11 @@ setup(
         (f"share/{PACKAGE}/config/examples", sorted(glob("config/examples/*"))),
         (f"lib/{PACKAGE}", [f"scripts/ros2run/{name}" for name in sorted(EXECUTABLES)]),
     ],
-    install_requires=["numpy", "scipy", "numba", "PyYAML", "mcap", "mcap-ros2-support", "matplotlib"],
+    install_requires=["numpy", "scipy", "numba", "PyYAML", "mcap", "mcap-ros2-support"],
+    extras_require={
+        "plot": ["matplotlib"],
+        "test": ["pytest", "rosbags"],
+    },
     zip_safe=True,
     maintainer="flexure_sim developers",
     maintainer_email="flexure-sim@example.com",

@@ -16,7 +16,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from .errors import FlexureSimError
-from .engine.config import load_mechanism
+from .engine.config import load_mechanism, resolve_mechanism_path
 from .engine.solver import DEFAULT_STEP, Simulation, Snapshot
 
 #: Times (s) at which the step response is reported, as in the acceptance figures.
@@ -78,7 +78,8 @@ def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
 
 
 def run_simulate(args: argparse.Namespace) -> dict:
-    mech = load_mechanism(args.mechanism)
+    path = resolve_mechanism_path(args.mechanism)
+    mech = load_mechanism(path)
     amplitude = parse_drive(args.drive)
     if args.duration <= 0 or not np.isfinite(args.duration):
         raise UsageError(f"--duration {args.duration!r}: must be a positive number of seconds")
@@ -92,7 +93,8 @@ def run_simulate(args: argparse.Namespace) -> dict:
         result = sim.static(amplitude)
         wall = time.perf_counter() - start
         out = summarize(sim, result.snapshot, amplitude)
-        out.update(mode="static", newton_iterations=result.iterations, residual=result.residual, wall_s=wall)
+        out.update(mechanism_file=str(path), mode="static", newton_iterations=result.iterations,
+                   residual=result.residual, wall_s=wall)
         return out
     if sim.drive is not None:
         sim.set_command(amplitude)
@@ -106,6 +108,7 @@ def run_simulate(args: argparse.Namespace) -> dict:
     wall = time.perf_counter() - start
     out = summarize(sim, sim.snapshot(), amplitude)
     out.update(
+        mechanism_file=str(path),
         mode="dynamic", duration=args.duration, dt=args.dt, steps=n_steps,
         output_at=samples, wall_s=wall, real_time_factor=args.duration / wall if wall > 0 else None,
         linearizations=sim.stats.linearizations,
@@ -119,6 +122,7 @@ def _fmt(v: Optional[float], unit: str, scale: float = 1.0, digits: int = 6) -> 
 
 def print_table(out: dict) -> None:
     print(f"mechanism: {out['mechanism']}   mode: {out['mode']}   t = {out['t']:.6g} s")
+    print(f"file:      {out['mechanism_file']}")
     if out["input"] is not None:
         print(f"input:               {_fmt(out['input'], 'um', 1e6)}")
         print(f"output displacement: {_fmt(out['output_displacement'], 'um', 1e6)}")

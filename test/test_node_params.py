@@ -175,3 +175,17 @@ def test_pacer_sleeps_then_busy_waits_the_last_part():
     deadline = pacer.wait()
     assert slept and slept[0] == pytest.approx(0.8e-3, abs=5e-6)  # woke 0.15 ms early, then spun
     assert deadline <= t[0] <= deadline + 5e-6
+
+
+def test_numbers_given_as_integers_or_yaml_strings_set_double_parameters():
+    """``ros2 param set`` reads ``2`` as an integer and ``1e-6`` as a string (YAML 1.1)."""
+    from flexure_sim.node.params import as_declared_type
+
+    specs = {s.name: s for s in parameter_specs((0.0, 2e-6, 0.01))}
+    stroke, mode = specs["stroke_max"], specs["time_mode"]
+    assert as_declared_type(stroke, "1e-6") == 1e-6 and type(as_declared_type(stroke, 2)) is float
+    assert as_declared_type(stroke, "two") == "two" and as_declared_type(stroke, True) is True
+    assert as_declared_type(mode, "1e-6") == "1e-6" and as_declared_type(None, 3) == 3
+    # A non-finite string becomes a float that the validation then refuses, with the reason.
+    values = defaults() | {"stroke_max": as_declared_type(stroke, "nan")}
+    assert "stroke_max: must be finite" in validate(values)

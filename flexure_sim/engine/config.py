@@ -34,12 +34,14 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Callable
 
 import numpy as np
 
 from ..errors import FlexureSimError
 from . import stiffness as stiffness_models
+from .builtins import builtin_names, find_builtin
+from .builtins import searched as builtin_search_places
 from .yaml_files import read_yaml
 from .hinge_laws import COORDINATES, QuadraticLaw
 from .mechanism import (
@@ -56,11 +58,6 @@ from .mechanism import (
 from .polynomial import PolynomialLaw
 from .polynomial_files import PolynomialFileError
 from .polynomial_files import load_law as load_polynomial_law
-
-#: Directory of the built-in mechanisms (installed to share/flexure_sim/config too).
-BUILTIN_DIRS = (
-    Path(__file__).resolve().parents[2] / "config",
-)
 
 #: Largest mismatch (m) allowed between a hinge's two frames in the unstressed pose.
 COINCIDENCE_TOLERANCE = 1e-9
@@ -219,38 +216,24 @@ def load_mechanism(name_or_path: str | Path) -> Mechanism:
     return mechanism_from_dict(read_yaml(path, ConfigError), source=str(path))
 
 
-def builtin_names() -> list[str]:
-    """Names of the mechanisms shipped in config/."""
-    names: set[str] = set()
-    for d in _builtin_dirs():
-        names.update(p.stem for p in d.glob("*.yaml"))
-    return sorted(names)
-
-
-def _builtin_dirs() -> list[Path]:
-    dirs = [d for d in BUILTIN_DIRS if d.is_dir()]
-    import sys
-
-    share = Path(sys.prefix) / "share" / "flexure_sim" / "config"
-    if share.is_dir():
-        dirs.append(share)
-    return dirs
-
-
 def resolve_mechanism_path(name_or_path: str | Path) -> Path:
-    """A path as given if it exists or looks like a file; else a built-in name."""
+    """A path as given if it exists or looks like a file; else a built-in name.
+
+    Built-ins come from the running install's own share/flexure_sim/config (or the source
+    checkout's config/), else from the ament index: engine/builtins.py says why.
+    """
     candidate = Path(name_or_path)
     if candidate.suffix in (".yaml", ".yml") or candidate.exists() or "/" in str(name_or_path):
         if not candidate.exists():
             raise ConfigError(f"{candidate}: no such mechanism file")
         return candidate
-    for d in _builtin_dirs():
-        p = d / f"{name_or_path}.yaml"
-        if p.exists():
-            return p
-    raise ConfigError(
-        f"{name_or_path}: no such built-in mechanism (built-ins: {', '.join(builtin_names())})"
-    )
+    path = find_builtin(str(name_or_path))
+    if path is not None:
+        return path
+    names = builtin_names()
+    known = f"built-ins: {', '.join(names)}" if names else (
+        f"no built-ins found in {builtin_search_places()}")
+    raise ConfigError(f"{name_or_path}: no such built-in mechanism ({known})")
 
 
 def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
@@ -518,11 +501,3 @@ def _constraints(ctx, raw, by_name) -> list:
     if not any(isinstance(c, Fixed) for c in out):
         raise ctx.fail("constraints", "the mechanism has no fixed body (add {type: fixed, body: ...})")
     return out
-
-
-def builtin_path(name: str) -> Optional[Path]:
-    """Path of a built-in mechanism file, or None."""
-    try:
-        return resolve_mechanism_path(name)
-    except ConfigError:
-        return None

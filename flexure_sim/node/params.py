@@ -86,6 +86,26 @@ def parameter_specs(drive_defaults: Optional[tuple[float, float, float]] = None)
     ]
 
 
+def as_declared_type(spec: Optional[ParamSpec], value: Any) -> Any:
+    """A value for a double parameter given as an integer or a numeric string, as a float.
+
+    ``ros2 param set`` guesses a value's type with YAML 1.1, which reads ``2`` as an integer
+    and ``1e-6`` (an exponent without a dot) as a string; rclpy would refuse either for a
+    double parameter. Anything else (other parameters, non-numeric text) is returned as is,
+    for the usual type check and `validate`.
+    """
+    if spec is None or spec.type is not float or isinstance(value, (bool, float)):
+        return value
+    if isinstance(value, int):
+        return float(value)
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return value
+
+
 def steps_per_tick(publish_rate: float, sim_step: float) -> tuple[int, Optional[str]]:
     """Engine steps per tick, round(1 / (publish_rate * sim_step)), and the reason why the
     pair is invalid (None when valid)."""

@@ -55,7 +55,7 @@ from . import interface as itf
 from .drive_input import CommandFilter, CommandStatus, DriveLimits, WarningThrottle, parse_float64_cdr
 from .pacing import Pacer, set_thread_nice
 from .polled import PolledGroup, never_called, take_raw
-from .params import ParamSpec, parameter_specs, steps_per_tick, validate
+from .params import ParamSpec, as_declared_type, parameter_specs, steps_per_tick, validate
 from .record_process import ProcessRecording, RecorderProcess
 from .session import METADATA_NAME, PARAMETER_CHANGE_NAME, recording_path
 
@@ -206,6 +206,7 @@ class StageNode(Node):
                     self._recorder_process.quit()
                 raise StartupError(f"cannot record: {exc}") from exc
         self._sync_record_param = False
+        self.add_pre_set_parameters_callback(self._coerce_parameters)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
 
@@ -262,6 +263,14 @@ class StageNode(Node):
     def _limits(self, values: dict[str, Any]) -> DriveLimits:
         return DriveLimits(float(values["stroke_min"]), float(values["stroke_max"]),
                            float(values["slew_rate"]))
+
+    def _coerce_parameters(self, params: list[Parameter]) -> list[Parameter]:
+        """Pre-set callback: ``ros2 param set ... 1e-6`` or ``2`` sets a double parameter."""
+        out = []
+        for p in params:
+            value = as_declared_type(self._specs.get(p.name), p.value)
+            out.append(p if value is p.value else Parameter(p.name, Parameter.Type.DOUBLE, value))
+        return out
 
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
         """On-set callback: check the whole resulting set of values; no side effects."""

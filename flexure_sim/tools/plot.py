@@ -14,6 +14,8 @@ Figures (those the run's topics allow):
 - ``body_poses.png``    "Body poses" (runs without a drive, e.g. the four-bars).
 
 Each PNG carries its title in its metadata (``Title``). Matplotlib runs with the Agg backend.
+Matplotlib is optional (setup.py's extra ``plot``): without it the command says so in one
+line, before reading the run.
 """
 from __future__ import annotations
 
@@ -63,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     if args.dpi <= 0:
         raise RunError(f"--dpi {args.dpi}: must be positive", 2)
+    _pyplot()
     run_ = load_run(args.run, recover=args.recover, namespace=args.namespace)
     if args.recover:
         report_recovered(PROG, run_)
@@ -79,8 +82,17 @@ def _run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+#: What to tell a user who has no matplotlib.
+MISSING_MATPLOTLIB = ("plotting needs matplotlib (flexure_sim's extra 'plot'), which is not "
+                      "installed: pip install matplotlib, or pip install '.[plot]' in the "
+                      "source; on ROS: apt install python3-matplotlib")
+
+
 def _pyplot():
-    import matplotlib
+    try:
+        import matplotlib
+    except ImportError:
+        raise RunError(MISSING_MATPLOTLIB) from None
 
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt

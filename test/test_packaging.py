@@ -1,0 +1,114 @@
+"""Packaging: package.xml names every dependency setup.py declares (by rosdep key), matplotlib
+is an optional extra the node never imports, and the plot tool says what to install without
+it. Built-in mechanisms: found in the running code's own install (engine/builtins.py).
+"""
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+#: rosdep keys of the pip requirements, from rosdistro's rosdep/python.yaml (mcap has no key
+#: of its own: the pip key mcap-ros2-support installs it as its dependency).
+ROSDEP_KEYS = {
+    "numpy": "python3-numpy",
+    "scipy": "python3-scipy",
+    "numba": "python3-numba",
+    "PyYAML": "python3-yaml",
+    "mcap": "mcap-ros2-support",
+    "mcap-ros2-support": "mcap-ros2-support",
+    "matplotlib": "python3-matplotlib",
+    "pytest": "python3-pytest",
+    "rosbags": "python3-rosbags-pip",
+}
+
+
+def setup_keywords() -> dict:
+    """The literal keyword arguments of the setup() call in setup.py."""
+    tree = ast.parse((ROOT / "setup.py").read_text())
+    call = next(node for node in ast.walk(tree) if isinstance(node, ast.Call)
+                and getattr(node.func, "id", None) == "setup")
+    out = {}
+    for kw in call.keywords:
+        try:
+            out[kw.arg] = ast.literal_eval(kw.value)
+        except ValueError:
+            pass
+    return out
+
+
+def package_xml_depends() -> dict[str, set[str]]:
+    root = ET.parse(ROOT / "package.xml").getroot()
+    out: dict[str, set[str]] = {}
+    for el in root:
+        out.setdefault(el.tag, set()).add((el.text or "").strip())
+    return out
+
+
+def test_package_xml_names_every_python_dependency_by_its_rosdep_key():
+    setup = setup_keywords()
+    deps = package_xml_depends()
+    run = set(deps.get("exec_depend", set())) | deps.get("depend", set())
+    test = deps.get("test_depend", set()) | deps.get("depend", set())
+    wanted = [(r, run) for r in setup["install_requires"] + setup["extras_require"]["plot"]]
+    wanted += [(r, test) for r in setup["extras_require"]["test"]]
+    missing = [f"{req} ({ROSDEP_KEYS.get(req, 'no key known: add it to ROSDEP_KEYS')})"
+               for req, have in wanted if ROSDEP_KEYS.get(req) not in have]
+    assert not missing, f"package.xml lacks: {', '.join(missing)}"
+    assert "matplotlib" not in setup["install_requires"], "matplotlib is the extra 'plot'"
+    # colcon runs pytest (not unittest, which finds nothing) when pytest is a test dependency.
+    assert "pytest" in setup["extras_require"]["test"]
+
+
+def test_the_node_does_not_import_matplotlib():
+    probe = ("import sys; import flexure_sim.node.stage_node, flexure_sim.cli; "
+             "print(sorted(m for m in sys.modules if m.split('.')[0] == 'matplotlib'))")
+    p = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120,
+                       cwd=ROOT, check=True)
+    assert p.stdout.strip() == "[]"
+
+
+def test_plot_without_matplotlib_names_the_missing_extra(tmp_path):
+    from tools_fixtures import record_stage_run
+
+    run = tmp_path / "run.mcap"
+    record_stage_run(run, levels=(1.0e-6,), rest=0.002, dwell=0.005)
+    hide = ("import sys; sys.modules['matplotlib'] = None; from flexure_sim.cli import main; "
+            f"sys.exit(main(['plot', {str(run)!r}, '-o', {str(tmp_path / 'plots')!r}]))")
+    p = subprocess.run([sys.executable, "-c", hide], capture_output=True, text=True, timeout=120,
+                       cwd=ROOT)
+    assert p.returncode == 1 and "Traceback" not in p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and "matplotlib" in lines[0] and "extra 'plot'" in lines[0], p.stderr
+    assert not (tmp_path / "plots").exists()
+
+
+def test_builtins_come_from_the_install_the_code_belongs_to(tmp_path):
+    """Layouts built by hand: an installed copy reads <prefix>/share, a checkout its config/,
+    code in neither layout finds nothing of its own (then only the ament index can answer)."""
+    from flexure_sim.engine import builtins
+
+    prefix = tmp_path / "prefix"
+    installed = prefix / "lib" / "python3.11" / "site-packages" / "flexure_sim"
+    debian = tmp_path / "usr" / "lib" / "python3" / "dist-packages" / "flexure_sim"
+    share = prefix / "share" / "flexure_sim" / "config"
+    for folder in (installed, debian, share):
+        folder.mkdir(parents=True)
+    assert builtins.install_prefix(installed) == prefix
+    assert builtins.install_prefix(debian) == tmp_path / "usr"
+    assert builtins.own_data_dir(installed) == share
+    checkout = tmp_path / "checkout"
+    (checkout / "flexure_sim").mkdir(parents=True)
+    (checkout / "config").mkdir()
+    assert builtins.own_data_dir(checkout / "flexure_sim") is None, "no package.xml: not ours"
+    (checkout / "package.xml").write_text("<package/>")
+    assert builtins.own_data_dir(checkout / "flexure_sim") == checkout / "config"
+    assert builtins.install_prefix(checkout / "flexure_sim") is None
+    # This test runs the source tree: its built-ins are the checkout's.
+    assert builtins.builtin_dir() == ROOT / "config"
+    assert builtins.find_builtin("microstage") == ROOT / "config" / "microstage.yaml"
+    assert builtins.find_builtin("no_such_mechanism") is None
