@@ -76,7 +76,16 @@ class HyperDual:
 
     def __getitem__(self, key) -> "HyperDual":
         s = self.shape
-        return HyperDual(*(np.broadcast_to(p, s)[key] for p in (self.a, self.b, self.c, self.d)))
+        trailing = isinstance(key, tuple) and len(key) > 0 and key[0] is Ellipsis
+
+        def pick(p):
+            if p.ndim == 0:
+                return p
+            if trailing and p.shape[-(len(key) - 1):] == s[-(len(key) - 1):]:
+                return p[key]  # indexes trailing axes only: keep the part's own leading shape
+            return np.broadcast_to(p, s)[key]
+
+        return HyperDual(*(pick(p) for p in (self.a, self.b, self.c, self.d)))
 
     def __setitem__(self, key, value) -> None:
         shape = self.shape
@@ -272,9 +281,12 @@ def from_objects(values: Iterable) -> HyperDual:
 def stack(items, axis: int = -1) -> HyperDual:
     """np.stack for HyperDuals (plain numbers allowed)."""
     lifted = [_lift(x) for x in items]
-    shape = np.broadcast_shapes(*(x.shape for x in lifted))
-    return HyperDual(*(np.stack([np.broadcast_to(getattr(x, n), shape) for x in lifted], axis=axis)
-                       for n in "abcd"))
+    out = []
+    for n in "abcd":
+        parts = [getattr(x, n) for x in lifted]
+        shape = np.broadcast_shapes(*(p.shape for p in parts))
+        out.append(np.stack([np.broadcast_to(p, shape) for p in parts], axis=axis))
+    return HyperDual(*out)
 
 
 def hstack(items) -> HyperDual:
