@@ -199,3 +199,50 @@ def test_jacobian_of_the_model_is_the_engines(stage, stage_model):
     nF = len(stage_model.free)
     y = np.concatenate([stage_model.z[stage_model.free], np.zeros(nF), [U0]])
     np.testing.assert_array_equal(stage_model.A, sim._jacobian(y, 0.0, U0))
+
+
+# ------------------------------------------------------------- CLI, state space
+
+def _cli(*argv):
+    from flexure_sim.cli import main
+
+    return main([str(a) for a in argv])
+
+
+def test_linearize_exports_a_model_python_control_loads_and_its_bode_matches_frf(tmp_path, capsys):
+    import control
+    import scipy.io
+
+    assert _cli("linearize", "microstage", "--input", U0, "-o", tmp_path / "m.npz") == 0
+    assert _cli("linearize", "microstage", "--input", U0, "-o", tmp_path / "m.mat") == 0
+    assert _cli("frf", "microstage", "--input", U0, "--to", "output", "--to", "hinges.c.moment",
+                "--fmin", 10, "--fmax", 1e4, "--points", 50, "--csv", "-o", tmp_path) == 0
+    data = np.load(tmp_path / "m.npz")
+    sys = control.ss(data["A"], data["B"], data["C"], data["D"])
+    header = (tmp_path / "frf.csv").read_text().splitlines()[0].split(",")
+    table = np.loadtxt(tmp_path / "frf.csv", delimiter=",", skiprows=1)
+    csv = {name: table[:, k] for k, name in enumerate(header)}
+    names = list(data["output_names"])
+    for out in ("output", "hinges.c.moment"):
+        sub = control.ss(data["A"], data["B"], data["C"][[names.index(out)]], data["D"][[names.index(out)]])
+        resp = control.frequency_response(sub, 2 * np.pi * csv["frequency_hz"])
+        G = np.squeeze(resp.complex)
+        want = csv[f"{out}.real"] + 1j * csv[f"{out}.imag"]
+        np.testing.assert_allclose(G, want, rtol=1e-8)
+    assert sys.nstates == 25
+    mat = scipy.io.loadmat(tmp_path / "m.mat")
+    np.testing.assert_array_equal(mat["A"], data["A"])
+    assert (tmp_path / "frf.png").stat().st_size > 10_000
+    assert _cli("linearize", "microstage", "-o", tmp_path / "m.txt") == 2
+    assert "must end in .npz, .mat or .json" in capsys.readouterr().err
+
+
+def test_modes_command_json_and_plots(tmp_path, capsys):
+    import json
+
+    assert _cli("modes", "microstage", "--count", 2, "--json", "-o", tmp_path) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["undamped_frequencies_hz"][0] == pytest.approx(300.6, rel=1e-3)
+    assert [p.endswith(f"mode_{k}.png") for k, p in enumerate(out["plots"], 1)] == [True, True]
+    assert _cli("modes", "no_such_stage") == 2
+    assert "no such built-in mechanism" in capsys.readouterr().err

@@ -15,6 +15,7 @@ TOOL_MODULES: tuple[str, ...] = (
     "tools.plot",
     "tools.export",
     "node.replay",
+    "tools.dynamics",
     "tools.bench",
 )
 
