@@ -84,6 +84,9 @@ class Parameters:
         node = self.data if data is None else data
         for depth, key in enumerate(keys):
             where = ".".join(keys[:depth + 1])
+            if isinstance(node, str) and depth >= 1 and keys[depth - 1] == "stiffness":
+                # hinges.<h>.stiffness.<key> of a hinge that names a model: that model's number
+                node = (self.data.get("stiffness_models") or {}).get(node, node)
             if isinstance(node, dict):
                 if key not in node:
                     raise ParameterError(f"{where}: no such key in the mechanism file")
@@ -136,6 +139,13 @@ class Parameters:
         for path in overrides:
             self.check(path)
         data = copy.deepcopy(self.data)
+        for path in overrides:
+            keys = path.split(".")
+            if keys[0] == "hinges" and len(keys) >= 4 and keys[2] == "stiffness":
+                # one hinge's own copy of a named model, so only that hinge changes
+                entry = self._node(keys[:2], data)
+                if isinstance(entry.get("stiffness"), str):
+                    entry["stiffness"] = copy.deepcopy(data["stiffness_models"][entry["stiffness"]])
         for path, val in overrides.items():
             keys = path.split(".")
             parent = self._node(keys[:-1], data)
