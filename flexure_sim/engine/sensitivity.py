@@ -72,7 +72,7 @@ class Sensitivity:
         """Hyper-dual z(p) by Newton with the real stiffness (module docstring)."""
         z = hd.HyperDual(self.z.copy(), np.zeros_like(self.z), np.zeros_like(self.z), np.zeros_like(self.z))
         F = self.free
-        for _ in range(3):
+        for _ in range(2):  # e1, e2 parts exact after one, the e1e2 part after two
             Q = forces(design, self.params.twistor, self.ia, self.ib, z, self._v0).Q
             step = [self._solve(np.asarray(p)[F]) for p in hd.parts_of(Q)]
             for name, dp in zip("abcd", step):
@@ -116,11 +116,12 @@ class Sensitivity:
             np.sin(th0) * c[0] + np.cos(th0) * c[1])
         return dx, dy
 
-    def first_mode_derivative(self, path: str) -> float:
-        """d f_1 / dp (Hz per unit of p) by eigenvalue sensitivity."""
+    def first_mode_derivative(self, path: str, z_p: Optional[np.ndarray] = None) -> float:
+        """d f_1 / dp (Hz per unit of p) by eigenvalue sensitivity; z_p = dz/dp if known."""
         v = self.params.check(path)
         design = self.params.design({path: hd.HyperDual(v, 0.0, 1.0, 0.0)})
-        z_p = self.equilibrium(design).c
+        if z_p is None:
+            z_p = self.equilibrium(design).c
         F = self.free
         phi = np.zeros_like(self.z)
         phi[F] = self.phi
@@ -158,9 +159,12 @@ def sensitivities(params: Parameters, wrt: Sequence[str], of: Sequence[str] = OU
     values = {k: float(hd.real(v)) for k, v in sens.outputs(base, hd.HyperDual(sens.z), static).items()}
     gradient = {o: {} for o in of}
     second = {o: {} for o in of}
+    z_p = {}
     for p in wrt:
         design = params.design({p: hd.HyperDual(params.value(p), 1.0, 1.0, 0.0)})
-        res = sens.outputs(design, sens.equilibrium(design), static)
+        z = sens.equilibrium(design)
+        z_p[p] = np.asarray(z.b)
+        res = sens.outputs(design, z, static)
         for o, v in res.items():
             gradient[o][p] = float(v.b)
             second[o][f"{p}|{p}"] = float(v.d)
@@ -173,6 +177,6 @@ def sensitivities(params: Parameters, wrt: Sequence[str], of: Sequence[str] = OU
     if "first_mode" in of:
         values["first_mode"] = sens.first_mode()
         for p in wrt:
-            gradient["first_mode"][p] = sens.first_mode_derivative(p)
+            gradient["first_mode"][p] = sens.first_mode_derivative(p, z_p[p])
             second["first_mode"] = None
     return {"input": u, "values": values, "gradient": gradient, "second": second}
