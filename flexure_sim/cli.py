@@ -116,7 +116,7 @@ def run_simulate(args: argparse.Namespace) -> dict:
 
 
 def _geometry(args) -> list:
-    from .engine.parametric import Parameters
+    from .engine.design import Parameters
 
     return Parameters(args.mechanism).design().geometry
 

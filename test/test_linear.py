@@ -1,5 +1,6 @@
 """Hyper-dual numbers, the generic force chain, and the exact linearisation: modes, damped
 poles, frequency response against the time-domain engine, state space."""
+
 import dataclasses
 
 import numpy as np
@@ -10,7 +11,8 @@ from flexure_sim.engine import linear
 from flexure_sim.engine.assembly import Assembly
 from flexure_sim.engine.config import load_mechanism, mechanism_from_dict
 from flexure_sim.engine.hinge_laws import QuadraticLaw
-from flexure_sim.engine.parametric import Parameters, design_of, forces, hinge_indices, twistor_flags
+from flexure_sim.engine.design import design_of, hinge_indices, twistor_flags
+from flexure_sim.engine.parametric import forces
 from flexure_sim.engine.solver import Simulation, State
 
 U0 = 1.35e-6
@@ -28,6 +30,7 @@ def stage_model(stage):
 
 
 # ------------------------------------------------------------------- hyper-dual
+
 
 def test_hyperdual_parts_equal_hand_derivatives_to_machine_precision():
     # f(x, y) = sin(x) e^y / y: f_x = cos x e^y / y, f_y = sin x e^y (y - 1) / y^2,
@@ -71,6 +74,7 @@ def test_hyperdual_flows_through_the_notch_stiffness_formula():
 
 # ---------------------------------------------------------------- force chain
 
+
 @pytest.mark.parametrize("name", ["microstage", "fourbar_mixed"])
 def test_generic_force_chain_matches_the_engine_and_its_jacobians(name):
     mech = load_mechanism(name)
@@ -82,26 +86,46 @@ def test_generic_force_chain_matches_the_engine_and_its_jacobians(name):
     ref = asm.forces(z, v, jacobian=True)
     ia, ib = hinge_indices(mech)
     N = z.size
-    f = forces(design_of(mech), twistor_flags(mech), ia, ib, hd.HyperDual(z, np.eye(N), 0, 0),
-               hd.HyperDual(v, 0, np.eye(N), 0))
+    f = forces(
+        design_of(mech),
+        twistor_flags(mech),
+        ia,
+        ib,
+        hd.HyperDual(z, np.eye(N), 0, 0),
+        hd.HyperDual(v, 0, np.eye(N), 0),
+    )
     scale = np.max(np.abs(ref.Q))
     np.testing.assert_allclose(f.Q.a, ref.Q, rtol=0, atol=1e-13 * scale)
-    np.testing.assert_allclose(f.wrench.a, ref.wrench_b, rtol=0, atol=1e-13 * np.max(np.abs(ref.wrench_b)))
+    np.testing.assert_allclose(
+        f.wrench.a, ref.wrench_b, rtol=0, atol=1e-13 * np.max(np.abs(ref.wrench_b))
+    )
     np.testing.assert_allclose(f.Q.b.T, ref.dQ_dz, rtol=0, atol=1e-13 * np.max(np.abs(ref.dQ_dz)))
     np.testing.assert_allclose(f.Q.c.T, ref.dQ_dv, rtol=0, atol=1e-13 * np.max(np.abs(ref.dQ_dv)))
 
 
 # ----------------------------------------------------------------------- modes
 
+
 def _single_body(Ko=2.0, kx=3e6, ky=5e5, m=0.02, inertia=4e-6):
-    return mechanism_from_dict({
-        "name": "single", "defaults": {"law": "twistor", "damping": {"t_char": 1e-4}},
-        "bodies": [{"name": "ground", "mass": 1.0, "inertia": 1.0, "pose": [0, 0, 0]},
-                   {"name": "mass", "mass": m, "inertia": inertia, "pose": [0.01, 0.0, 0.0]}],
-        "hinges": [{"name": "h", "a": {"body": "ground", "at": [0.01, 0.0]}, "b": {"body": "mass", "at": [0, 0]},
-                    "stiffness": {"model": "matrix", "Ko": Ko, "Kt": [kx, ky]}}],
-        "constraints": [{"type": "fixed", "body": "ground"}],
-    })
+    return mechanism_from_dict(
+        {
+            "name": "single",
+            "defaults": {"law": "twistor", "damping": {"t_char": 1e-4}},
+            "bodies": [
+                {"name": "ground", "mass": 1.0, "inertia": 1.0, "pose": [0, 0, 0]},
+                {"name": "mass", "mass": m, "inertia": inertia, "pose": [0.01, 0.0, 0.0]},
+            ],
+            "hinges": [
+                {
+                    "name": "h",
+                    "a": {"body": "ground", "at": [0.01, 0.0]},
+                    "b": {"body": "mass", "at": [0, 0]},
+                    "stiffness": {"model": "matrix", "Ko": Ko, "Kt": [kx, ky]},
+                }
+            ],
+            "constraints": [{"type": "fixed", "body": "ground"}],
+        }
+    )
 
 
 def test_one_body_one_hinge_frequencies_are_sqrt_k_over_m():
@@ -116,12 +140,16 @@ def test_mode_shapes_are_mass_orthonormal_and_diagonalise_the_stiffness(stage_mo
     Phi, M = md.shapes, np.diag(stage_model.mass)
     np.testing.assert_allclose(Phi.T @ M @ Phi, np.eye(len(Phi)), atol=1e-10)
     w2 = (2 * np.pi * md.frequencies) ** 2
-    np.testing.assert_allclose(Phi.T @ stage_model.stiffness @ Phi, np.diag(w2), atol=1e-9 * w2.max())
+    np.testing.assert_allclose(
+        Phi.T @ stage_model.stiffness @ Phi, np.diag(w2), atol=1e-9 * w2.max()
+    )
 
 
 def _scaled_damping(mech, s):
-    hinges = tuple(dataclasses.replace(h, B=h.B * s, law=QuadraticLaw(h.law.coordinates, h.K, h.B * s))
-                   for h in mech.hinges)
+    hinges = tuple(
+        dataclasses.replace(h, B=h.B * s, law=QuadraticLaw(h.law.coordinates, h.K, h.B * s))
+        for h in mech.hinges
+    )
     return dataclasses.replace(mech, hinges=hinges)
 
 
@@ -145,6 +173,7 @@ def test_stage_first_mode_is_overdamped_pair_with_the_actuator_pole(stage_model)
 
 
 # ------------------------------------------------------------ frequency response
+
 
 def test_frf_at_the_lowest_frequency_is_the_static_gain(stage, stage_model):
     sim = Simulation(stage)
@@ -176,8 +205,10 @@ def _sine_response(sim, z_static, u0, amp, freq, dt, body, axis):
         sim.step()
         if k >= n_transient:
             t[k - n_transient] = sim.state.t
-            y[k - n_transient] = (sim.state.z[i:i + 2] - sim.z0[i:i + 2]) @ axis
-    basis = np.column_stack([np.sin(2 * np.pi * freq * t), np.cos(2 * np.pi * freq * t), np.ones_like(t)])
+            y[k - n_transient] = (sim.state.z[i : i + 2] - sim.z0[i : i + 2]) @ axis
+    basis = np.column_stack(
+        [np.sin(2 * np.pi * freq * t), np.cos(2 * np.pi * freq * t), np.ones_like(t)]
+    )
     (a, b, _), *_ = np.linalg.lstsq(basis, y, rcond=None)
     return (a + 1j * b) / amp  # y = Im(G e^{i w t}) amp = amp (Re G sin + Im G cos)
 
@@ -203,6 +234,7 @@ def test_jacobian_of_the_model_is_the_engines(stage, stage_model):
 
 # ------------------------------------------------------------- CLI, state space
 
+
 def _cli(*argv):
     from flexure_sim.cli import main
 
@@ -215,8 +247,28 @@ def test_linearize_exports_a_model_python_control_loads_and_its_bode_matches_frf
 
     assert _cli("linearize", "microstage", "--input", U0, "-o", tmp_path / "m.npz") == 0
     assert _cli("linearize", "microstage", "--input", U0, "-o", tmp_path / "m.mat") == 0
-    assert _cli("frf", "microstage", "--input", U0, "--to", "output", "--to", "hinges.c.moment",
-                "--fmin", 10, "--fmax", 1e4, "--points", 50, "--csv", "-o", tmp_path) == 0
+    assert (
+        _cli(
+            "frf",
+            "microstage",
+            "--input",
+            U0,
+            "--to",
+            "output",
+            "--to",
+            "hinges.c.moment",
+            "--fmin",
+            10,
+            "--fmax",
+            1e4,
+            "--points",
+            50,
+            "--csv",
+            "-o",
+            tmp_path,
+        )
+        == 0
+    )
     data = np.load(tmp_path / "m.npz")
     sys = control.ss(data["A"], data["B"], data["C"], data["D"])
     header = (tmp_path / "frf.csv").read_text().splitlines()[0].split(",")
@@ -224,7 +276,9 @@ def test_linearize_exports_a_model_python_control_loads_and_its_bode_matches_frf
     csv = {name: table[:, k] for k, name in enumerate(header)}
     names = list(data["output_names"])
     for out in ("output", "hinges.c.moment"):
-        sub = control.ss(data["A"], data["B"], data["C"][[names.index(out)]], data["D"][[names.index(out)]])
+        sub = control.ss(
+            data["A"], data["B"], data["C"][[names.index(out)]], data["D"][[names.index(out)]]
+        )
         resp = control.frequency_response(sub, 2 * np.pi * csv["frequency_hz"])
         G = np.squeeze(resp.complex)
         want = csv[f"{out}.real"] + 1j * csv[f"{out}.imag"]

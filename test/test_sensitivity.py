@@ -1,5 +1,6 @@
 """Exact design sensitivities by hyper-dual numbers against finite differences of re-solved
 mechanisms (the engine's own static solver and eigen-analysis, from edited YAML)."""
+
 import copy
 import json
 
@@ -9,7 +10,7 @@ import pytest
 from flexure_sim.cli import main
 from flexure_sim.engine import linear
 from flexure_sim.engine.config import mechanism_from_dict
-from flexure_sim.engine.parametric import ParameterError, Parameters
+from flexure_sim.engine.design import ParameterError, Parameters
 from flexure_sim.engine.sensitivity import sensitivities
 from flexure_sim.engine.solver import Simulation
 
@@ -71,7 +72,9 @@ def test_second_derivatives_agree_with_central_differences(params, result):
         return (f(h0 + d, t0) - 2 * f(h0, t0) + f(h0 - d, t0)) / d**2
 
     def ht(a, b):
-        return (f(h0 + a, t0 + b) - f(h0 + a, t0 - b) - f(h0 - a, t0 + b) + f(h0 - a, t0 - b)) / (4 * a * b)
+        return (f(h0 + a, t0 + b) - f(h0 + a, t0 - b) - f(h0 - a, t0 + b) + f(h0 - a, t0 - b)) / (
+            4 * a * b
+        )
 
     fd_hh = (4 * hh(dh / 2) - hh(dh)) / 3
     fd_ht = (4 * ht(dh / 2, dt / 2) - ht(dh, dt)) / 3
@@ -100,8 +103,20 @@ def test_bad_parameter_paths_are_named(params):
 
 
 def test_sensitivity_command_json(capsys):
-    assert main(["sensitivity", "microstage", "--wrt", "stiffness_models.notch.h,bodies.body4.mass",
-                 "--of", "gain,first_mode,peak_stress", "--json"]) == 0
+    assert (
+        main(
+            [
+                "sensitivity",
+                "microstage",
+                "--wrt",
+                "stiffness_models.notch.h,bodies.body4.mass",
+                "--of",
+                "gain,first_mode,peak_stress",
+                "--json",
+            ]
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert out["gradient"]["gain"]["bodies.body4.mass"] == 0.0  # statics do not depend on mass
     assert out["gradient"]["first_mode"]["bodies.body4.mass"] < 0

@@ -1,10 +1,11 @@
 """Hinge stress: the notch and leaf formulas, the stage's stress ratios, the stroke limit."""
+
 import numpy as np
 import pytest
 
 from flexure_sim.cli import main
 from flexure_sim.engine import stress
-from flexure_sim.engine.parametric import Parameters
+from flexure_sim.engine.design import Parameters
 from flexure_sim.engine.solver import Simulation
 
 
@@ -42,7 +43,9 @@ def test_stage_stroke_limit_reaches_yield_exactly():
     assert stress.peak_ratio(table) == (hinge, pytest.approx(1.0, abs=1e-8))
     assert u > sim.drive.stroke[1]  # the piezo's 2 um stroke is far from yield
     # Stress grows nearly linearly with the input: the ratio at full stroke times the limit.
-    full = stress.peak_ratio(stress.stress_table(sim.static(2e-6).snapshot.wrenches, geometry, names))[1]
+    full = stress.peak_ratio(
+        stress.stress_table(sim.static(2e-6).snapshot.wrenches, geometry, names)
+    )[1]
     assert u == pytest.approx(2e-6 / full, rel=1e-2)
 
 

@@ -19,6 +19,7 @@ part (an extra leading axis in the derivative parts carries several seed directi
 NumPy ufuncs dispatch to it through ``__array_ufunc__``, so ``np.sin(x)``, ``x * array`` and
 ``array * x`` all work; so does ``np.sqrt`` in the stiffness formulas of ``stiffness.py``.
 """
+
 from __future__ import annotations
 
 from typing import Any, Iterable
@@ -72,7 +73,9 @@ class HyperDual:
     def full(self) -> "HyperDual":
         """The same number with every part broadcast to the common shape (writable copies)."""
         s = self.shape
-        return HyperDual(*(np.array(np.broadcast_to(p, s)) for p in (self.a, self.b, self.c, self.d)))
+        return HyperDual(
+            *(np.array(np.broadcast_to(p, s)) for p in (self.a, self.b, self.c, self.d))
+        )
 
     def __getitem__(self, key) -> "HyperDual":
         s = self.shape
@@ -81,7 +84,7 @@ class HyperDual:
         def pick(p):
             if p.ndim == 0:
                 return p
-            if trailing and p.shape[-(len(key) - 1):] == s[-(len(key) - 1):]:
+            if trailing and p.shape[-(len(key) - 1) :] == s[-(len(key) - 1) :]:
                 return p[key]  # indexes trailing axes only: keep the part's own leading shape
             return np.broadcast_to(p, s)[key]
 
@@ -98,7 +101,9 @@ class HyperDual:
 
     def sum(self, axis=None) -> "HyperDual":
         s = self.shape
-        return HyperDual(*(np.broadcast_to(p, s).sum(axis=axis) for p in (self.a, self.b, self.c, self.d)))
+        return HyperDual(
+            *(np.broadcast_to(p, s).sum(axis=axis) for p in (self.a, self.b, self.c, self.d))
+        )
 
     # -------------------------------------------------------------- arithmetic
     def __neg__(self):
@@ -164,6 +169,7 @@ class HyperDual:
 
 
 # ------------------------------------------------------------ elementary functions
+
 
 def _lift(x) -> HyperDual:
     return x if isinstance(x, HyperDual) else HyperDual(x)
@@ -242,12 +248,20 @@ _UFUNCS: dict[Any, Any] = {
     np.power: lambda u, v: _lift(u) ** v,
     np.square: lambda u: _lift(u) * u,
     np.reciprocal: lambda u: _lift(u).reciprocal(),
-    np.sin: sin, np.cos: cos, np.tan: tan, np.sqrt: sqrt, np.exp: exp, np.log: log,
-    np.arctan: arctan, np.arctan2: arctan2, np.absolute: absolute,
+    np.sin: sin,
+    np.cos: cos,
+    np.tan: tan,
+    np.sqrt: sqrt,
+    np.exp: exp,
+    np.log: log,
+    np.arctan: arctan,
+    np.arctan2: arctan2,
+    np.absolute: absolute,
 }
 
 
 # ----------------------------------------------------------------- construction
+
 
 def seed(value, e1: float = 0.0, e2: float = 0.0) -> HyperDual:
     """value + e1 e1 + e2 e2: a parameter seeded for its derivatives (e1 = e2 = 1 for the
@@ -293,5 +307,11 @@ def hstack(items) -> HyperDual:
     """np.concatenate along the last axis for HyperDuals (plain arrays allowed)."""
     lifted = [_lift(x) for x in items]
     lead = np.broadcast_shapes(*(x.shape[:-1] for x in lifted))
-    return HyperDual(*(np.concatenate([np.broadcast_to(getattr(x, n), lead + x.shape[-1:]) for x in lifted],
-                                      axis=-1) for n in "abcd"))
+    return HyperDual(
+        *(
+            np.concatenate(
+                [np.broadcast_to(getattr(x, n), lead + x.shape[-1:]) for x in lifted], axis=-1
+            )
+            for n in "abcd"
+        )
+    )

@@ -21,6 +21,7 @@ diagonal mass matrix (``scipy.linalg.eigh``: phi^T M phi = I). The damped poles 
 eigenvalues of A (including the actuator pole -1/tau); with damping scaled to zero they
 tend to +-i omega. The frequency response is G(i w) = C (i w I - A)^-1 B + D.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -31,13 +32,15 @@ import scipy.linalg
 
 from . import hyperdual as hd
 from .kinematics import J
-from .parametric import design_of, forces, hinge_indices, twistor_flags
+from .design import design_of, hinge_indices, twistor_flags
+from .parametric import forces
 from .solver import Simulation
 
 WRENCH_COMPONENTS = ("moment", "force_x", "force_y")
 
 
 # ------------------------------------------------ the engine's internals, in one place
+
 
 def jacobian_at(sim: Simulation, y: np.ndarray, t: float, command: float) -> np.ndarray:
     """Exact A = dF/dy of the engine's first-order system at y (the one access to the
@@ -62,8 +65,14 @@ class Layout:
 def layout(sim: Simulation) -> Layout:
     """The state layout of a Simulation (see Layout)."""
     part = sim.part
-    return Layout(part.free, part.prescribed, np.asarray(part.du, dtype=float), sim.mass, sim.z0,
-                  sim.drive.response_time if sim.drive else None)
+    return Layout(
+        part.free,
+        part.prescribed,
+        np.asarray(part.du, dtype=float),
+        sim.mass,
+        sim.z0,
+        sim.drive.response_time if sim.drive else None,
+    )
 
 
 def tangent_at(sim: Simulation, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -73,6 +82,7 @@ def tangent_at(sim: Simulation, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # --------------------------------------------------------------------- the model
+
 
 @dataclass
 class LinearModel:
@@ -120,7 +130,7 @@ def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True) -> LinearM
     Vx[F, nF + np.arange(nF)] = 1.0
     if drive:
         tau = lay.tau
-        B[nF:2 * nF, 0] = dQv[np.ix_(F, P)] @ du / (tau * mF)
+        B[nF : 2 * nF, 0] = dQv[np.ix_(F, P)] @ du / (tau * mF)
         B[2 * nF, 0] = 1.0 / tau
         Zx[P, 2 * nF] = du
         Vx[P, 2 * nF] = -du / tau
@@ -130,13 +140,15 @@ def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True) -> LinearM
     if mech.output is not None:
         e = np.zeros(N)
         i = mech.body_index(mech.output.body)
-        e[3 * i:3 * i + 2] = mech.output.axis
+        e[3 * i : 3 * i + 2] = mech.output.axis
         names.append("output"), Cs.append(e @ Zx), Ds.append(0.0), y0.append(snap.output)
     if drive and mech.compression_hinge is not None:
         h = mech.hinges[mech.hinge_index(mech.compression_hinge)]
         G = _frame_jacobian(mech, h.b, z) - _frame_jacobian(mech, h.a, z)
         row = np.array(sim.drive.axis) @ G
-        names.append("compression"), Cs.append(row @ Zx), Ds.append(0.0), y0.append(snap.compression)
+        names.append("compression"), Cs.append(row @ Zx), Ds.append(0.0), y0.append(
+            snap.compression
+        )
     if drive:
         md = du @ (lay.mass[P] * du)
         tau = lay.tau
@@ -144,7 +156,9 @@ def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True) -> LinearM
         e_u[2 * nF] = 1.0
         row = md * e_u / tau**2 - du @ (dQz[P] @ Zx + dQv[P] @ Vx)
         d = -md / tau**2 - du @ (dQv[P] @ Vc)[:, 0]
-        names.append("drive_force"), Cs.append(row), Ds.append(float(d)), y0.append(snap.drive_force)
+        names.append("drive_force"), Cs.append(row), Ds.append(float(d)), y0.append(
+            snap.drive_force
+        )
     if wrenches:
         Jz, Jv = wrench_jacobians(mech, z)
         for k, hinge in enumerate(mech.hinges):
@@ -153,12 +167,27 @@ def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True) -> LinearM
                 Cs.append(Jz[k, c] @ Zx + Jv[k, c] @ Vx)
                 Ds.append(float(Jv[k, c] @ Vc[:, 0]))
                 y0.append(float(snap.wrenches[k, c]))
-    state_names = ([_coord(mech, k) for k in F] + [_coord(mech, k, rate=True) for k in F]
-                   + (["drive.u"] if drive else []))
+    state_names = (
+        [_coord(mech, k) for k in F]
+        + [_coord(mech, k, rate=True) for k in F]
+        + (["drive.u"] if drive else [])
+    )
     K = -dQz[np.ix_(F, F)]
-    return LinearModel(A, B, np.array(Cs).reshape(len(Cs), n), np.array(Ds).reshape(len(Ds), 1), state_names,
-                       ["drive"] if drive else [], names, float(u), z, np.array(y0, dtype=float),
-                       0.5 * (K + K.T), mF.copy(), F.copy())
+    return LinearModel(
+        A,
+        B,
+        np.array(Cs).reshape(len(Cs), n),
+        np.array(Ds).reshape(len(Ds), 1),
+        state_names,
+        ["drive"] if drive else [],
+        names,
+        float(u),
+        z,
+        np.array(y0, dtype=float),
+        0.5 * (K + K.T),
+        mF.copy(),
+        F.copy(),
+    )
 
 
 def _coord(mech, k: int, rate: bool = False) -> str:
@@ -171,9 +200,14 @@ def _frame_jacobian(mech, frame, z: np.ndarray) -> np.ndarray:
     i = mech.body_index(frame.body)
     th = z[3 * i + 2]
     c, s = np.cos(th), np.sin(th)
-    w = np.array([c * frame.position[0] - s * frame.position[1], s * frame.position[0] + c * frame.position[1]])
+    w = np.array(
+        [
+            c * frame.position[0] - s * frame.position[1],
+            s * frame.position[0] + c * frame.position[1],
+        ]
+    )
     G = np.zeros((2, len(z)))
-    G[:, 3 * i:3 * i + 2] = np.eye(2)
+    G[:, 3 * i : 3 * i + 2] = np.eye(2)
     G[:, 3 * i + 2] = J @ w
     return G
 
@@ -184,13 +218,20 @@ def wrench_jacobians(mech, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     N = len(z)
     ia, ib = hinge_indices(mech)
     eye = np.eye(N)
-    f = forces(design_of(mech), twistor_flags(mech), ia, ib, hd.HyperDual(z, eye, 0.0, 0.0),
-               hd.HyperDual(np.zeros(N), 0.0, eye, 0.0))
+    f = forces(
+        design_of(mech),
+        twistor_flags(mech),
+        ia,
+        ib,
+        hd.HyperDual(z, eye, 0.0, 0.0),
+        hd.HyperDual(np.zeros(N), 0.0, eye, 0.0),
+    )
     _, b, c, _ = hd.parts_of(f.wrench)
     return np.moveaxis(b, 0, -1), np.moveaxis(c, 0, -1)
 
 
 # ------------------------------------------------------------------------- modes
+
 
 @dataclass(frozen=True)
 class Modes:
@@ -210,8 +251,10 @@ def modes(model: LinearModel) -> Modes:
     """Undamped modes (generalised eigenproblem K phi = w^2 M phi) and damped poles (eig A)."""
     w2, shapes = scipy.linalg.eigh(model.stiffness, np.diag(model.mass))
     if np.any(w2 <= 0):
-        raise ValueError("the tangent stiffness is not positive definite at this equilibrium "
-                         f"(smallest eigenvalue {w2.min():.3g})")
+        raise ValueError(
+            "the tangent stiffness is not positive definite at this equilibrium "
+            f"(smallest eigenvalue {w2.min():.3g})"
+        )
     poles = np.linalg.eigvals(model.A)
     poles = poles[np.lexsort((poles.imag, np.abs(poles)))]
     mag = np.abs(poles)
@@ -221,7 +264,10 @@ def modes(model: LinearModel) -> Modes:
 
 # ------------------------------------------------------------ frequency response
 
-def frf(model: LinearModel, frequencies: Sequence[float], outputs: Optional[Sequence[str]] = None) -> np.ndarray:
+
+def frf(
+    model: LinearModel, frequencies: Sequence[float], outputs: Optional[Sequence[str]] = None
+) -> np.ndarray:
     """G(i 2 pi f) = C (i w I - A)^-1 B + D for the drive input: (n_outputs, n_frequencies).
 
     The first-order system has the engine's block structure x = (z, v, u) with z' = v, so
@@ -231,14 +277,18 @@ def frf(model: LinearModel, frequencies: Sequence[float], outputs: Optional[Sequ
     """
     if not model.input_names:
         raise ValueError("the mechanism has no drive input")
-    rows = [model.output_index(o) for o in outputs] if outputs is not None else list(range(len(model.output_names)))
+    rows = (
+        [model.output_index(o) for o in outputs]
+        if outputs is not None
+        else list(range(len(model.output_names)))
+    )
     s = 2j * np.pi * np.asarray(frequencies, dtype=float)
     A, nF = model.A, len(model.free)
-    Avz, Avv, Avu = A[nF:2 * nF, :nF], A[nF:2 * nF, nF:2 * nF], A[nF:2 * nF, 2 * nF]
+    Avz, Avv, Avu = A[nF : 2 * nF, :nF], A[nF : 2 * nF, nF : 2 * nF], A[nF : 2 * nF, 2 * nF]
     tau = -1.0 / A[2 * nF, 2 * nF]
     u = 1.0 / (1.0 + tau * s)
     M = (s * s)[:, None, None] * np.eye(nF) - s[:, None, None] * Avv - Avz
-    rhs = u[:, None] * Avu + model.B[nF:2 * nF, 0]
+    rhs = u[:, None] * Avu + model.B[nF : 2 * nF, 0]
     z = np.linalg.solve(M, rhs[..., None])[..., 0]
     x = np.concatenate([z, s[:, None] * z, u[:, None]], axis=1)
     return model.C[rows] @ x.T + model.D[rows]
@@ -246,5 +296,9 @@ def frf(model: LinearModel, frequencies: Sequence[float], outputs: Optional[Sequ
 
 def static_gain(model: LinearModel, outputs: Optional[Sequence[str]] = None) -> np.ndarray:
     """G(0) = D - C A^-1 B (the derivative of the static outputs in the drive input)."""
-    rows = [model.output_index(o) for o in outputs] if outputs is not None else list(range(len(model.output_names)))
+    rows = (
+        [model.output_index(o) for o in outputs]
+        if outputs is not None
+        else list(range(len(model.output_names)))
+    )
     return (model.D[rows] - model.C[rows] @ np.linalg.solve(model.A, model.B))[:, 0]

@@ -19,192 +19,19 @@ It is the quadratic-law path of ``kernels.quadratic_forces`` written for generic
 arithmetic; a test checks that both agree to rounding and that its derivative parts equal
 the engine's exact Jacobians.
 
-``Parameters`` names any numeric key of the mechanism file by its path
-(``stiffness_models.notch.h``, ``hinges.a.a.at.0``, ``bodies.body4.mass``) and builds the
-``Design`` -- stiffness, damping, hinge frames, masses -- with chosen keys replaced by
-(hyper-dual) values.
+Design parameters by path are in ``design.py``.
 """
+
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
 from . import hyperdual as hd
-from .config import ConfigError, mechanism_from_dict, resolve_mechanism_path
-from .mechanism import Mechanism
-from .stiffness import cantilever_stiffness, notch_stiffness
-from .yaml_files import read_yaml
+from .design import Design
 
-_MODELS = {
-    "notch": (notch_stiffness, ("D", "h", "t", "E", "nu")),
-    "cantilever": (cantilever_stiffness, ("length", "thickness", "width", "E", "nu")),
-}
-_LISTS_BY_NAME = ("bodies", "hinges")
-
-
-class ParameterError(ValueError):
-    """A parameter path does not name a numeric key the analyses can vary (names it)."""
-
-
-@dataclass
-class Design:
-    """Per-hinge and per-body numbers, floats or HyperDual (n hinges, N = 3 n_bodies).
-
-    K, B (n, 3, 3): stiffness and damping in the hinge frame; ca, cb (n, 2), phia, phib
-    (n,): frame a on body A and frame b on body B; mass (N,): diagonal mass matrix;
-    geometry: per hinge the stiffness model's numbers (dict, with ``model``)."""
-
-    K: Any
-    B: Any
-    ca: Any
-    cb: Any
-    phia: Any
-    phib: Any
-    mass: Any
-    geometry: list
-
-
-class Parameters:
-    """A mechanism file's numbers, addressable by path; ``design(overrides)`` rebuilds the
-    parametric parts with some of them replaced (hyper-dual or float)."""
-
-    def __init__(self, name_or_path: str | Path):
-        path = resolve_mechanism_path(name_or_path)
-        self.path = path
-        self.data = read_yaml(path, ConfigError)
-        self.mechanism: Mechanism = mechanism_from_dict(self.data, source=str(path))
-        self.twistor = twistor_flags(self.mechanism)
-
-    # ---------------------------------------------------------------- paths
-    def _node(self, keys: list[str], data=None):
-        node = self.data if data is None else data
-        for depth, key in enumerate(keys):
-            where = ".".join(keys[:depth + 1])
-            if isinstance(node, str) and depth >= 1 and keys[depth - 1] == "stiffness":
-                # hinges.<h>.stiffness.<key> of a hinge that names a model: that model's number
-                node = (self.data.get("stiffness_models") or {}).get(node, node)
-            if isinstance(node, dict):
-                if key not in node:
-                    raise ParameterError(f"{where}: no such key in the mechanism file")
-                node = node[key]
-            elif isinstance(node, list):
-                if keys[depth - 1] in _LISTS_BY_NAME and depth == 1:
-                    found = [x for x in node if isinstance(x, dict) and x.get("name") == key]
-                    if not found:
-                        raise ParameterError(f"{where}: no entry named {key!r}")
-                    node = found[0]
-                else:
-                    try:
-                        node = node[int(key)]
-                    except (ValueError, IndexError):
-                        raise ParameterError(f"{where}: not an index of a list of {len(node)}") from None
-            else:
-                raise ParameterError(f"{where}: {'.'.join(keys[:depth])} is a number, not a mapping or list")
-        return node
-
-    def value(self, path: str) -> float:
-        """The number at ``path`` (ParameterError if missing or not numeric)."""
-        node = self._node(path.split("."))
-        try:
-            if isinstance(node, bool):
-                raise TypeError
-            return float(node)
-        except (TypeError, ValueError):
-            raise ParameterError(f"{path}: not a number ({node!r})") from None
-
-    def check(self, path: str) -> float:
-        """Value of a parameter the analyses can vary; ParameterError naming the problem if not."""
-        v = self.value(path)
-        keys = path.split(".")
-        head = keys[0]
-        if head == "stiffness_models" and len(keys) >= 3:
-            return v
-        if head == "bodies" and len(keys) == 3 and keys[2] in ("mass", "inertia"):
-            return v
-        if head == "hinges" and len(keys) >= 3 and keys[2] in ("a", "b", "stiffness", "damping"):
-            return v
-        if head == "defaults" and keys[1:] == ["damping", "t_char"]:
-            return v
-        raise ParameterError(f"{path}: not a design parameter the analyses vary (stiffness models, "
-                             "hinge frames/stiffness/damping, body mass and inertia)")
-
-    # --------------------------------------------------------------- design
-    def design(self, overrides: Optional[dict[str, Any]] = None) -> Design:
-        """The Design with the numbers at the given paths replaced (values may be HyperDual)."""
-        overrides = dict(overrides or {})
-        for path in overrides:
-            self.check(path)
-        data = copy.deepcopy(self.data)
-        for path in overrides:
-            keys = path.split(".")
-            if keys[0] == "hinges" and len(keys) >= 4 and keys[2] == "stiffness":
-                # one hinge's own copy of a named model, so only that hinge changes
-                entry = self._node(keys[:2], data)
-                if isinstance(entry.get("stiffness"), str):
-                    entry["stiffness"] = copy.deepcopy(data["stiffness_models"][entry["stiffness"]])
-        for path, val in overrides.items():
-            keys = path.split(".")
-            parent = self._node(keys[:-1], data)
-            parent[keys[-1] if isinstance(parent, dict) else int(keys[-1])] = val
-        mech = self.mechanism
-        models = data.get("stiffness_models", {}) or {}
-        defaults = data.get("defaults", {}) or {}
-        Ks, Bs, geometry, ca, cb, phia, phib = [], [], [], [], [], [], []
-        for hinge, spec in zip(mech.hinges, data["hinges"]):
-            sspec = spec.get("stiffness")
-            sspec = models[sspec] if isinstance(sspec, str) else sspec
-            K = _stiffness(sspec) if sspec is not None else hinge.K
-            damping = spec.get("damping", defaults.get("damping"))
-            B = K * _num(damping["t_char"]) if "t_char" in damping else np.array(_num(damping["B"]), dtype=object)
-            Ks.append(K)
-            Bs.append(B)
-            geometry.append(dict(sspec or {}))
-            a_at, b_at = _num(spec["a"]["at"]), _num(spec["b"]["at"])
-            ca.append(a_at[:2])
-            cb.append(b_at[:2])
-            phia.append(a_at[2] if len(a_at) > 2 else 0.0)
-            phib.append(b_at[2] if len(b_at) > 2 else 0.0)
-        mass = []
-        for body in data["bodies"]:
-            mass += [_num(body["mass"]), _num(body["mass"]), _num(body["inertia"])]
-        return Design(_array(Ks), _array(Bs), _array(ca), _array(cb), _array(phia), _array(phib),
-                      _array(mass), geometry)
-
-
-def _num(x):
-    """A number of the YAML document (PyYAML reads 69.0e9 as a string) or a HyperDual."""
-    if isinstance(x, hd.HyperDual):
-        return x
-    if isinstance(x, (list, tuple)):
-        return [_num(v) for v in x]
-    return float(x)
-
-
-def _stiffness(spec: dict):
-    model = spec["model"]
-    if model in _MODELS:
-        fn, names = _MODELS[model]
-        return fn(*(_num(spec[n]) for n in names))
-    if "K" in spec:
-        return np.array(_num(spec["K"]), dtype=object)
-    kc = _num(spec.get("Kc", [0.0, 0.0]))
-    kt = _num(spec["Kt"])
-    return np.array([[spec["Ko"], kc[0], kc[1]], [kc[0], kt[0], 0.0], [kc[1], 0.0, kt[1]]], dtype=object)
-
-
-def _array(values):
-    """A float array, or a HyperDual array if any entry is hyper-dual."""
-    arr = np.asarray(values, dtype=object) if not isinstance(values, np.ndarray) else values
-    if any(isinstance(v, hd.HyperDual) for v in np.asarray(arr, dtype=object).ravel()):
-        return hd.from_objects(arr)
-    return np.asarray(arr, dtype=float)
-
-
-# -------------------------------------------------------------------- the forces
 
 @dataclass
 class Forces:
@@ -217,9 +44,11 @@ class Forces:
     energy: Any
 
 
-def forces(design: Design, twistor: np.ndarray, ia: np.ndarray, ib: np.ndarray, z, v) -> Forces:
+def forces(
+    design: Design, twistor: np.ndarray, ia: np.ndarray, ib: np.ndarray, z, v=None
+) -> Forces:
     """Hinge forces at coordinates z and velocities v (length N in the last axis; float or
-    HyperDual), as in the module docstring."""
+    HyperDual; v None: at rest, no damping terms), as in the module docstring."""
     A, B = 3 * ia, 3 * ib
     xA, yA, thA = z[..., A], z[..., A + 1], z[..., A + 2]
     xB, yB, thB = z[..., B], z[..., B + 1], z[..., B + 2]
@@ -239,25 +68,62 @@ def forces(design: Design, twistor: np.ndarray, ia: np.ndarray, ib: np.ndarray, 
     # dr/dzz rows (alpha, p1, p2) over (xA, yA, thA, xB, yB, thB), as Assembly.relative.
     ta1, ta2 = -ce * wa2 + se * wa1, se * wa2 + ce * wa1
     tb1, tb2 = -ce * wb2 + se * wb1, se * wb2 + ce * wb1
-    dr = ((0.0, 0.0, -1.0, 0.0, 0.0, 1.0),
-          (-ce, -se, p2 - ta1, ce, se, tb1),
-          (se, -ce, -p1 - ta2, -se, ce, tb2))
-    vv = [v[..., A], v[..., A + 1], v[..., A + 2], v[..., B], v[..., B + 1], v[..., B + 2]]
-    rdot = [sum(dr[i][j] * vv[j] for j in range(6)) for i in range(3)]
+    dr = (
+        (0.0, 0.0, -1.0, 0.0, 0.0, 1.0),
+        (-ce, -se, p2 - ta1, ce, se, tb1),
+        (se, -ce, -p1 - ta2, -se, ce, tb2),
+    )
     c, dc = _law_coordinates(twistor, alpha, p1, p2)
     scale = np.where(twistor, 4.0, 1.0)[:, None, None]
-    W, C = design.K * scale, design.B * scale
-    cdot = [sum(dc[k][i] * rdot[i] for i in range(3)) for k in range(3)]
-    e = [sum(W[..., k, m] * c[m] for m in range(3)) + sum(C[..., k, m] * cdot[m] for m in range(3))
-         for k in range(3)]
-    total = [sum(dc[k][i] * e[k] for k in range(3)) for i in range(3)]
-    energy = 0.5 * sum(c[k] * W[..., k, m] * c[m] for k in range(3) for m in range(3))
-    q_local = [-sum(dr[i][j] * total[i] for i in range(3)) for j in range(6)]
+    W = _entries(design.K * scale)
+    e = [_dot(W[k], c) for k in range(3)]
+    energy = 0.5 * _dot(c, e)
+    if v is not None:  # damping: C (dc/dr) r_dot, with r_dot = dr/dzz v
+        vv = [v[..., A], v[..., A + 1], v[..., A + 2], v[..., B], v[..., B + 1], v[..., B + 2]]
+        rdot = [_dot(dr[i], vv) for i in range(3)]
+        cdot = [_dot(dc[k], rdot) for k in range(3)]
+        C = _entries(design.B * scale)
+        e = [e[k] + _dot(C[k], cdot) for k in range(3)]
+    total = [_dot([dc[k][i] for k in range(3)], e) for i in range(3)]
+    q_local = [-_dot([dr[i][j] for i in range(3)], total) for j in range(6)]
     Q = _scatter(q_local, ia, ib, z.shape[-1])
     ca_, sa_ = np.cos(alpha), np.sin(alpha)
-    wrench = _stack([-total[0], -(ca_ * total[1] + sa_ * total[2]), -(-sa_ * total[1] + ca_ * total[2])])
+    wrench = _stack(
+        [-total[0], -(ca_ * total[1] + sa_ * total[2]), -(-sa_ * total[1] + ca_ * total[2])]
+    )
     r = _stack([alpha, p1, p2])
     return Forces(Q, r, wrench, energy)
+
+
+def _dot(coefficients, values):
+    """sum_i a_i x_i, skipping the structural zeros and units of the coefficient lists (most
+    entries of dr/dzz and dc/dr, off-diagonal stiffness) -- they cost four array products
+    each in hyper-dual arithmetic."""
+    terms = []
+    for a, x in zip(coefficients, values):
+        if isinstance(a, float):
+            if a == 0.0:
+                continue
+            terms.append(x if a == 1.0 else (-x if a == -1.0 else a * x))
+        elif isinstance(x, float) and x == 0.0:
+            continue
+        else:
+            terms.append(a * x)
+    if not terms:
+        return 0.0
+    out = terms[0]
+    for t in terms[1:]:
+        out = out + t
+    return out
+
+
+def _entries(M):
+    """Rows of M[..., k, m] (n, 3, 3) as nested lists, 0.0 where every part is zero."""
+    parts = hd.parts_of(M) if isinstance(M, hd.HyperDual) else (M,)
+    return [
+        [0.0 if not any(np.any(p[..., k, m]) for p in parts) else M[..., k, m] for m in range(3)]
+        for k in range(3)
+    ]
 
 
 def _law_coordinates(twistor, alpha, p1, p2):
@@ -266,14 +132,36 @@ def _law_coordinates(twistor, alpha, p1, p2):
     x1 = 0.5 * (sg * p1 + xi * p2)
     x2 = 0.5 * (-xi * p1 + sg * p2)
     if np.all(twistor):
-        return (xi, x1, x2), ((0.5 * sg, 0.0, 0.0), (0.5 * x2, 0.5 * sg, 0.5 * xi), (-0.5 * x1, -0.5 * xi, 0.5 * sg))
+        return (xi, x1, x2), (
+            (0.5 * sg, 0.0, 0.0),
+            (0.5 * x2, 0.5 * sg, 0.5 * xi),
+            (-0.5 * x1, -0.5 * xi, 0.5 * sg),
+        )
     f, f1 = _half_cot(alpha)
     t = (alpha, f * p1 + 0.5 * alpha * p2, f * p2 - 0.5 * alpha * p1)
-    dt = ((1.0, 0.0, 0.0), (f1 * p1 + 0.5 * p2, f, 0.5 * alpha), (f1 * p2 - 0.5 * p1, -0.5 * alpha, f))
-    pick = (lambda a, b: _where(twistor, a, b))
-    return (tuple(pick(a, b) for a, b in zip((xi, x1, x2), t)),
-            tuple(tuple(pick(a, b) for a, b in zip(ra, rb)) for ra, rb in zip(
-                ((0.5 * sg, 0.0, 0.0), (0.5 * x2, 0.5 * sg, 0.5 * xi), (-0.5 * x1, -0.5 * xi, 0.5 * sg)), dt)))
+    dt = (
+        (1.0, 0.0, 0.0),
+        (f1 * p1 + 0.5 * p2, f, 0.5 * alpha),
+        (f1 * p2 - 0.5 * p1, -0.5 * alpha, f),
+    )
+
+    def pick(a, b):
+        return _where(twistor, a, b)
+
+    return (
+        tuple(pick(a, b) for a, b in zip((xi, x1, x2), t)),
+        tuple(
+            tuple(pick(a, b) for a, b in zip(ra, rb))
+            for ra, rb in zip(
+                (
+                    (0.5 * sg, 0.0, 0.0),
+                    (0.5 * x2, 0.5 * sg, 0.5 * xi),
+                    (-0.5 * x1, -0.5 * xi, 0.5 * sg),
+                ),
+                dt,
+            )
+        ),
+    )
 
 
 def _half_cot(alpha):
@@ -295,8 +183,12 @@ def _where(cond, x, y):
         return np.where(cond, x, y)
     xs, ys = hd.parts_of(x), hd.parts_of(y)
     shape = np.broadcast_shapes(np.shape(cond), xs[0].shape, ys[0].shape)
-    return hd.HyperDual(*(np.where(cond, np.broadcast_to(a, shape), np.broadcast_to(b, shape))
-                          for a, b in zip(xs, ys)))
+    return hd.HyperDual(
+        *(
+            np.where(cond, np.broadcast_to(a, shape), np.broadcast_to(b, shape))
+            for a, b in zip(xs, ys)
+        )
+    )
 
 
 def _stack(items):
@@ -306,46 +198,21 @@ def _stack(items):
 
 
 def _scatter(q_local, ia, ib, N):
-    """Sum the per-hinge six forces into the N generalized forces (a linear map, applied
-    part by part for HyperDuals)."""
+    """Sum the per-hinge six forces into the N generalized forces: one product with the 0/1
+    scatter matrix (a linear map, applied part by part for HyperDuals)."""
     n = len(ia)
-    S = np.zeros((6, n, N))
+    S = np.zeros((n, 6, N))
+    rows = np.arange(n)
     for j in range(3):
-        S[j, np.arange(n), 3 * ia + j] += 1.0
-        S[3 + j, np.arange(n), 3 * ib + j] += 1.0
-
-    def lin(parts):
-        shape = np.broadcast_shapes(*(np.shape(p) for p in parts))
-        return sum(np.broadcast_to(parts[j], shape) @ S[j] for j in range(6))
-
-    if any(isinstance(q, hd.HyperDual) for q in q_local):
-        lifted = [q if isinstance(q, hd.HyperDual) else hd.HyperDual(q) for q in q_local]
-        return hd.HyperDual(*(lin([getattr(q, name) for q in lifted]) for name in "abcd"))
-    return lin(q_local)
-
-
-def design_of(mechanism: Mechanism) -> Design:
-    """The Design of a built mechanism (floats: its K, B, frames and masses as loaded)."""
-    hinges = mechanism.hinges
-    mass = np.array([[b.mass, b.mass, b.inertia] for b in mechanism.bodies], dtype=float).ravel()
-    return Design(
-        np.array([h.K for h in hinges], dtype=float), np.array([h.B for h in hinges], dtype=float),
-        np.array([h.a.position for h in hinges], dtype=float), np.array([h.b.position for h in hinges], dtype=float),
-        np.array([h.a.angle for h in hinges], dtype=float), np.array([h.b.angle for h in hinges], dtype=float),
-        mass, [{"model": h.stiffness_source} for h in hinges])
-
-
-def twistor_flags(mechanism: Mechanism) -> np.ndarray:
-    """Per hinge: True for the twistor law, False for the twist law (ParameterError for
-    laws this chain does not cover)."""
-    for h in mechanism.hinges:
-        if not hasattr(h.law, "metric"):
-            raise ParameterError(f"hinge {h.name!r}: the analyses support the quadratic laws "
-                                 "(twistor, twist), not fitted polynomial laws")
-    return np.array([h.law.coordinates == "twistor" for h in mechanism.hinges])
-
-
-def hinge_indices(mechanism: Mechanism) -> tuple[np.ndarray, np.ndarray]:
-    """Body indices (A, B) of every hinge."""
-    return (np.array([mechanism.body_index(h.a.body) for h in mechanism.hinges]),
-            np.array([mechanism.body_index(h.b.body) for h in mechanism.hinges]))
+        S[rows, j, 3 * ia + j] += 1.0
+        S[rows, 3 + j, 3 * ib + j] += 1.0
+    S = S.reshape(6 * n, N)
+    q = _stack(q_local)  # (..., n, 6)
+    if isinstance(q, hd.HyperDual):
+        return hd.HyperDual(
+            *(
+                p.reshape(p.shape[:-2] + (6 * n,)) @ S if p.ndim else p
+                for p in (q.a, q.b, q.c, q.d)
+            )
+        )
+    return q.reshape(q.shape[:-2] + (6 * n,)) @ S

@@ -25,6 +25,7 @@ M-normalised, where dK/dp phi (total: z moves with p) is the e1e2 part of one hy
 force evaluation at z + e1 phi + e2 dz/dp with p + e2; its second derivative would need
 third derivatives of the forces and is not computed (None).
 """
+
 from __future__ import annotations
 
 from typing import Optional, Sequence
@@ -34,7 +35,8 @@ import scipy.linalg
 
 from . import hyperdual as hd
 from . import linear
-from .parametric import Parameters, ParameterError, forces, hinge_indices
+from .design import ParameterError, Parameters, hinge_indices
+from .parametric import forces
 from .solver import Simulation
 from .stress import hinge_stress
 
@@ -49,7 +51,9 @@ class Sensitivity:
         self.params = params
         mech = params.mechanism
         if mech.drive is None:
-            raise ParameterError(f"mechanism {mech.name!r} has no drive: gain and stress need a drive input")
+            raise ParameterError(
+                f"mechanism {mech.name!r} has no drive: gain and stress need a drive input"
+            )
         if u == 0:
             raise ParameterError("the drive input must be non-zero (gain = output / input)")
         self.u = float(u)
@@ -63,17 +67,18 @@ class Sensitivity:
         w2, shapes = scipy.linalg.eigh(0.5 * (K + K.T), np.diag(lay.mass[lay.free]))
         self.lam, self.phi = w2[0], shapes[:, 0]
         self.ia, self.ib = hinge_indices(mech)
-        self._v0 = np.zeros_like(self.z)
 
     def _solve(self, x: np.ndarray) -> np.ndarray:
         return scipy.linalg.lu_solve(self.lu, x.T).T
 
     def equilibrium(self, design):
         """Hyper-dual z(p) by Newton with the real stiffness (module docstring)."""
-        z = hd.HyperDual(self.z.copy(), np.zeros_like(self.z), np.zeros_like(self.z), np.zeros_like(self.z))
+        z = hd.HyperDual(
+            self.z.copy(), np.zeros_like(self.z), np.zeros_like(self.z), np.zeros_like(self.z)
+        )
         F = self.free
         for _ in range(2):  # e1, e2 parts exact after one, the e1e2 part after two
-            Q = forces(design, self.params.twistor, self.ia, self.ib, z, self._v0).Q
+            Q = forces(design, self.params.twistor, self.ia, self.ib, z).Q
             step = [self._solve(np.asarray(p)[F]) for p in hd.parts_of(Q)]
             for name, dp in zip("abcd", step):
                 part = getattr(z, name)
@@ -86,17 +91,21 @@ class Sensitivity:
         if "gain" in which:
             i = mech.body_index(mech.output.body)
             axis = np.array(mech.output.axis)
-            out["gain"] = ((z[3 * i] - self.sim.z0[3 * i]) * axis[0]
-                           + (z[3 * i + 1] - self.sim.z0[3 * i + 1]) * axis[1]) / self.u
+            out["gain"] = (
+                (z[3 * i] - self.sim.z0[3 * i]) * axis[0]
+                + (z[3 * i + 1] - self.sim.z0[3 * i + 1]) * axis[1]
+            ) / self.u
         if "compression" in which:
             k = mech.hinge_index(mech.compression_hinge)
             h = mech.hinges[k]
-            (bx, by), (ax_, ay) = (self._frame_move(h.b.body, design.cb[k], z),
-                                   self._frame_move(h.a.body, design.ca[k], z))
+            (bx, by), (ax_, ay) = (
+                self._frame_move(h.b.body, design.cb[k], z),
+                self._frame_move(h.a.body, design.ca[k], z),
+            )
             axis = mech.drive.axis
             out["compression"] = (bx - ax_) * axis[0] + (by - ay) * axis[1]
         if "peak_stress" in which:
-            wrench = forces(design, self.params.twistor, self.ia, self.ib, z, self._v0).wrench
+            wrench = forces(design, self.params.twistor, self.ia, self.ib, z).wrench
             best = None
             for k, g in enumerate(design.geometry):
                 s = hinge_stress(wrench[..., k, :], g)
@@ -110,10 +119,20 @@ class Sensitivity:
     def _frame_move(self, body: str, c, z):
         i = self.params.mechanism.body_index(body)
         th, th0 = z[3 * i + 2], self.sim.z0[3 * i + 2]
-        dx = z[3 * i] - self.sim.z0[3 * i] + np.cos(th) * c[0] - np.sin(th) * c[1] - (np.cos(th0) * c[0]
-                                                                                     - np.sin(th0) * c[1])
-        dy = z[3 * i + 1] - self.sim.z0[3 * i + 1] + np.sin(th) * c[0] + np.cos(th) * c[1] - (
-            np.sin(th0) * c[0] + np.cos(th0) * c[1])
+        dx = (
+            z[3 * i]
+            - self.sim.z0[3 * i]
+            + np.cos(th) * c[0]
+            - np.sin(th) * c[1]
+            - (np.cos(th0) * c[0] - np.sin(th0) * c[1])
+        )
+        dy = (
+            z[3 * i + 1]
+            - self.sim.z0[3 * i + 1]
+            + np.sin(th) * c[0]
+            + np.cos(th) * c[1]
+            - (np.sin(th0) * c[0] + np.cos(th0) * c[1])
+        )
         return dx, dy
 
     def first_mode_derivative(self, path: str, z_p: Optional[np.ndarray] = None) -> float:
@@ -126,10 +145,14 @@ class Sensitivity:
         phi = np.zeros_like(self.z)
         phi[F] = self.phi
         zz = hd.HyperDual(self.z, phi, z_p, 0.0)
-        Q = forces(design, self.params.twistor, self.ia, self.ib, zz, self._v0).Q
+        Q = forces(design, self.params.twistor, self.ia, self.ib, zz).Q
         dK_phi = -np.asarray(hd.parts_of(Q)[3])[F]
         mass = design.mass
-        dM = np.asarray(hd.parts_of(mass)[2])[F] if isinstance(mass, hd.HyperDual) else np.zeros(len(F))
+        dM = (
+            np.asarray(hd.parts_of(mass)[2])[F]
+            if isinstance(mass, hd.HyperDual)
+            else np.zeros(len(F))
+        )
         dlam = self.phi @ dK_phi - self.lam * self.phi @ (dM * self.phi)
         return float(dlam / (2.0 * np.sqrt(self.lam)) / (2.0 * np.pi))
 
@@ -137,8 +160,9 @@ class Sensitivity:
         return float(np.sqrt(self.lam) / (2.0 * np.pi))
 
 
-def sensitivities(params: Parameters, wrt: Sequence[str], of: Sequence[str] = OUTPUTS,
-                  u: Optional[float] = None) -> dict:
+def sensitivities(
+    params: Parameters, wrt: Sequence[str], of: Sequence[str] = OUTPUTS, u: Optional[float] = None
+) -> dict:
     """Values, gradients and second derivatives of the outputs ``of`` in the parameters
     ``wrt`` at drive input u (default: the top of the drive's stroke).
 
@@ -156,7 +180,9 @@ def sensitivities(params: Parameters, wrt: Sequence[str], of: Sequence[str] = OU
     sens = Sensitivity(params, u)
     static = [o for o in of if o != "first_mode"]
     base = params.design()
-    values = {k: float(hd.real(v)) for k, v in sens.outputs(base, hd.HyperDual(sens.z), static).items()}
+    values = {
+        k: float(hd.real(v)) for k, v in sens.outputs(base, hd.HyperDual(sens.z), static).items()
+    }
     gradient = {o: {} for o in of}
     second = {o: {} for o in of}
     z_p = {}
@@ -170,8 +196,12 @@ def sensitivities(params: Parameters, wrt: Sequence[str], of: Sequence[str] = OU
             second[o][f"{p}|{p}"] = float(v.d)
     if len(wrt) == 2:
         p, q = wrt
-        design = params.design({p: hd.HyperDual(params.value(p), 1.0, 0.0, 0.0),
-                                q: hd.HyperDual(params.value(q), 0.0, 1.0, 0.0)})
+        design = params.design(
+            {
+                p: hd.HyperDual(params.value(p), 1.0, 0.0, 0.0),
+                q: hd.HyperDual(params.value(q), 0.0, 1.0, 0.0),
+            }
+        )
         for o, v in sens.outputs(design, sens.equilibrium(design), static).items():
             second[o][f"{p}|{q}"] = float(v.d)
     if "first_mode" in of:

@@ -28,6 +28,7 @@ moment f_x L / 2 at either end, so the largest end moment is |m| + |f_x| L / 2:
 (straight beam, no concentration: the fillets at the clamps are not modelled).
 Hinges with a ``matrix`` stiffness have no geometry: no stress.
 """
+
 from __future__ import annotations
 
 from typing import Any, Optional
@@ -51,8 +52,9 @@ def notch_stress(wrench, D, h, t):
 def leaf_stress(wrench, length, thickness, width):
     """Peak stress (Pa) of a leaf hinge under wrench (m, f_x, f_y) at its centroid."""
     m, fx, fy = wrench[..., 0], wrench[..., 1], wrench[..., 2]
-    return (6.0 * (np.abs(m) + 0.5 * length * np.abs(fx)) / (width * thickness * thickness)
-            + np.abs(fy) / (width * thickness))
+    return 6.0 * (np.abs(m) + 0.5 * length * np.abs(fx)) / (
+        width * thickness * thickness
+    ) + np.abs(fy) / (width * thickness)
 
 
 def _num(x):
@@ -84,7 +86,7 @@ def stress_table(wrenches, geometry: list, names: list) -> dict:
 
 
 def peak_ratio(table: dict) -> Optional[tuple[str, float]]:
-    """(hinge, largest stress ratio) of a stress table, or None if no hinge has a yield strength."""
+    """(hinge, largest stress ratio) of a stress table; None if no hinge has a yield strength."""
     ratios = [(name, v["ratio"]) for name, v in table.items() if v["ratio"] is not None]
     return max(ratios, key=lambda x: x[1]) if ratios else None
 

@@ -202,7 +202,7 @@ SENSITIVITY_PARAMETERS = (
 def bench_analyses(frequencies: int = 1000) -> dict:
     """Modes + FRF of the stage at full stroke, and sensitivities of 4 outputs to 20 parameters."""
     from ..engine import linear
-    from ..engine.parametric import Parameters
+    from ..engine.design import Parameters
     from ..engine.sensitivity import OUTPUTS, sensitivities
 
     mech = load_mechanism("microstage")

@@ -1,13 +1,13 @@
 """``flexure-sim modes | frf | linearize``: the designer's linear analyses (engine/linear.py).
 
-    flexure-sim modes microstage [--input U] [--count N] [--json] [-o DIR]
-    flexure-sim frf microstage --from drive --to output [--to hinges.a.force_x] [--fmin F --fmax F
-                    --points N] [-o DIR] [--csv]
-    flexure-sim linearize microstage --input U -o model.npz|model.mat|model.json
+flexure-sim modes microstage [--input U] [--count N] [--json] [-o DIR]
+flexure-sim frf microstage --from drive --to output [--to hinges.a.force_x] [--fmin F --fmax F
+                --points N] [-o DIR] [--csv]
+flexure-sim linearize microstage --input U -o model.npz|model.mat|model.json
 """
+
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -16,7 +16,7 @@ import numpy as np
 
 from ..engine import linear
 from ..engine.config import ConfigError, load_mechanism
-from ..engine.parametric import ParameterError
+from ..engine.design import ParameterError
 from ..engine.solver import Simulation, SolverError
 
 EXIT_OK, EXIT_USAGE = 0, 2
@@ -42,14 +42,32 @@ def _guarded(prog: str, work) -> int:
 
 # ------------------------------------------------------------------------ modes
 
+
 def modes_summary(mech, model, md, count: int) -> dict:
-    mech_modes = [{"frequency_hz": float(f), "shape": {name: float(v) for name, v in
-                                                      zip(model.state_names, md.shapes[:, k])}}
-                  for k, f in enumerate(md.frequencies[:count])]
-    poles = [{"real": float(p.real), "imag": float(p.imag), "frequency_hz": float(f), "damping_ratio": float(z)}
-             for p, f, z in zip(md.poles, md.pole_frequencies, md.damping_ratios) if p.imag >= 0]
-    return {"mechanism": mech.name, "input": model.u0, "undamped_frequencies_hz": md.frequencies.tolist(),
-            "modes": mech_modes, "poles": poles}
+    mech_modes = [
+        {
+            "frequency_hz": float(f),
+            "shape": {name: float(v) for name, v in zip(model.state_names, md.shapes[:, k])},
+        }
+        for k, f in enumerate(md.frequencies[:count])
+    ]
+    poles = [
+        {
+            "real": float(p.real),
+            "imag": float(p.imag),
+            "frequency_hz": float(f),
+            "damping_ratio": float(z),
+        }
+        for p, f, z in zip(md.poles, md.pole_frequencies, md.damping_ratios)
+        if p.imag >= 0
+    ]
+    return {
+        "mechanism": mech.name,
+        "input": model.u0,
+        "undamped_frequencies_hz": md.frequencies.tolist(),
+        "modes": mech_modes,
+        "poles": poles,
+    }
 
 
 def run_modes(args) -> int:
@@ -58,16 +76,23 @@ def run_modes(args) -> int:
         md = linear.modes(model)
         out = modes_summary(mech, model, md, args.count)
         if args.output:
-            out["plots"] = [str(p) for p in plot_modes(mech, model, md, args.count, Path(args.output))]
+            out["plots"] = [
+                str(p) for p in plot_modes(mech, model, md, args.count, Path(args.output))
+            ]
         if args.json:
             print(json.dumps(out))
             return EXIT_OK
         print(f"mechanism: {mech.name}   linearised at drive input {model.u0 * 1e6:.6g} um")
-        print("undamped natural frequencies [Hz]: " + ", ".join(f"{f:.6g}" for f in md.frequencies))
+        print(
+            "undamped natural frequencies [Hz]: " + ", ".join(f"{f:.6g}" for f in md.frequencies)
+        )
         print("poles of the damped system (upper half-plane), by |pole|:")
         print("   real [1/s]     imag [1/s]   natural f [Hz]   damping ratio")
         for p in out["poles"]:
-            print(f"{p['real']:13.6g}  {p['imag']:13.6g}  {p['frequency_hz']:15.6g}  {p['damping_ratio']:14.4g}")
+            print(
+                f"{p['real']:13.6g}  {p['imag']:13.6g}  {p['frequency_hz']:15.6g}  "
+                f"{p['damping_ratio']:14.4g}"
+            )
         for path in out.get("plots", []):
             print(f"plot: {path}")
         return EXIT_OK
@@ -108,8 +133,11 @@ def plot_modes(mech, model, md, count: int, out_dir: Path) -> list[Path]:
         ax.set_aspect("equal")
         ax.set_xlabel("x [mm]")
         ax.set_ylabel("y [mm]")
-        ax.set_title(f"{mech.name}: mode {k + 1}, {md.frequencies[k]:.6g} Hz\n"
-                     "grey: at rest; blue: displaced (scaled to be visible); red: hinges", fontsize=10)
+        ax.set_title(
+            f"{mech.name}: mode {k + 1}, {md.frequencies[k]:.6g} Hz\n"
+            "grey: at rest; blue: displaced (scaled to be visible); red: hinges",
+            fontsize=10,
+        )
         path = out_dir / f"mode_{k + 1}.png"
         fig.tight_layout()
         fig.savefig(path, dpi=110)
@@ -123,17 +151,19 @@ def _mode_points(mech, points, z, dz):
     (the displacement to first order: d(P + R c) = dP + dtheta J R c)."""
     out = {}
     for i, body in enumerate(mech.bodies):
-        x, y, th = z[3 * i:3 * i + 3]
+        x, y, th = z[3 * i : 3 * i + 3]
         c, s = np.cos(th), np.sin(th)
-        rest = [np.array([x, y])] + [np.array([x + c * p[0] - s * p[1], y + s * p[0] + c * p[1]])
-                                     for p in points[body.name]]
-        dx, dy, dth = dz[3 * i:3 * i + 3]
+        rest = [np.array([x, y])] + [
+            np.array([x + c * p[0] - s * p[1], y + s * p[0] + c * p[1]]) for p in points[body.name]
+        ]
+        dx, dy, dth = dz[3 * i : 3 * i + 3]
         disp = [q + np.array([dx, dy]) + dth * np.array([-(q[1] - y), q[0] - x]) for q in rest]
         out[body.name] = (np.array(rest), np.array(disp))
     return out
 
 
 # -------------------------------------------------------------------------- frf
+
 
 def run_frf(args) -> int:
     def work():
@@ -155,8 +185,10 @@ def run_frf(args) -> int:
             written.append(write_frf_csv(f, G, outputs, out_dir / "frf.csv"))
         gains = linear.static_gain(model, outputs)
         for name, g, g0 in zip(outputs, G[:, 0], gains):
-            print(f"{name}: |G| {abs(g):.6g} at {f[0]:.3g} Hz (static gain {g0:.6g}), "
-                  f"|G| {abs(G[outputs.index(name), -1]):.3g} at {f[-1]:.3g} Hz")
+            print(
+                f"{name}: |G| {abs(g):.6g} at {f[0]:.3g} Hz (static gain {g0:.6g}), "
+                f"|G| {abs(G[outputs.index(name), -1]):.3g} at {f[-1]:.3g} Hz"
+            )
         for path in written:
             print(f"wrote {path}")
         return EXIT_OK
@@ -170,7 +202,9 @@ def write_frf_csv(f, G, outputs, path: Path) -> Path:
     for name, row in zip(outputs, G):
         cols += [f"{name}.magnitude", f"{name}.phase_deg", f"{name}.real", f"{name}.imag"]
         data += [np.abs(row), np.degrees(np.unwrap(np.angle(row))), row.real, row.imag]
-    np.savetxt(path, np.column_stack(data), delimiter=",", header=",".join(cols), comments="", fmt="%.10g")
+    np.savetxt(
+        path, np.column_stack(data), delimiter=",", header=",".join(cols), comments="", fmt="%.10g"
+    )
     return path
 
 
@@ -182,7 +216,9 @@ def plot_bode(mech, model, f, G, outputs, path: Path) -> Path:
 
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
     for name, row in zip(outputs, G):
-        unit = "m/m" if name in ("output", "compression") else ("N/m" if "force" in name else "N m/m")
+        unit = (
+            "m/m" if name in ("output", "compression") else ("N/m" if "force" in name else "N m/m")
+        )
         ax1.loglog(f, np.abs(row), label=f"{name} [{unit}]")
         ax2.semilogx(f, np.degrees(np.unwrap(np.angle(row))), label=name)
     ax1.set_ylabel("magnitude")
@@ -200,12 +236,19 @@ def plot_bode(mech, model, f, G, outputs, path: Path) -> Path:
 
 # -------------------------------------------------------------------- linearize
 
+
 def export_model(model: linear.LinearModel, path: Path, mechanism: str) -> Path:
     """A, B, C, D with names: .npz (numpy), .mat (MATLAB, scipy.io.savemat), .json."""
-    meta = {"mechanism": mechanism, "input_u0": model.u0, "state_names": model.state_names,
-            "input_names": model.input_names, "output_names": model.output_names, "y0": model.y0.tolist(),
-            "units": "SI; states are deviations of (z_F, v_F, u) from the equilibrium, outputs deviations "
-                     "from y0; the input is the drive command (m)"}
+    meta = {
+        "mechanism": mechanism,
+        "input_u0": model.u0,
+        "state_names": model.state_names,
+        "input_names": model.input_names,
+        "output_names": model.output_names,
+        "y0": model.y0.tolist(),
+        "units": "SI; states are deviations of (z_F, v_F, u) from the equilibrium, outputs "
+        "deviations from y0; the input is the drive command (m)",
+    }
     arrays = {"A": model.A, "B": model.B, "C": model.C, "D": model.D}
     suffix = path.suffix.lower()
     if suffix == ".npz":
@@ -213,8 +256,16 @@ def export_model(model: linear.LinearModel, path: Path, mechanism: str) -> Path:
     elif suffix == ".mat":
         import scipy.io
 
-        scipy.io.savemat(path, {**arrays, **{k: (np.array(v, dtype=object) if isinstance(v, list) else v)
-                                             for k, v in meta.items()}})
+        scipy.io.savemat(
+            path,
+            {
+                **arrays,
+                **{
+                    k: (np.array(v, dtype=object) if isinstance(v, list) else v)
+                    for k, v in meta.items()
+                },
+            },
+        )
     elif suffix == ".json":
         path.write_text(json.dumps({**{k: v.tolist() for k, v in arrays.items()}, **meta}))
     else:
@@ -226,8 +277,10 @@ def run_linearize(args) -> int:
     def work():
         mech, model = _model(args)
         path = export_model(model, Path(args.output), mech.name)
-        print(f"{mech.name}: {len(model.state_names)} states, {len(model.input_names)} input, "
-              f"{len(model.output_names)} outputs at drive input {model.u0:.6g} m -> {path}")
+        print(
+            f"{mech.name}: {len(model.state_names)} states, {len(model.input_names)} input, "
+            f"{len(model.output_names)} outputs at drive input {model.u0:.6g} m -> {path}"
+        )
         return EXIT_OK
 
     return _guarded("flexure-sim linearize", work)
@@ -235,9 +288,15 @@ def run_linearize(args) -> int:
 
 # ---------------------------------------------------------------------- parsers
 
+
 def _common(p) -> None:
     p.add_argument("mechanism", help="built-in name or YAML path")
-    p.add_argument("--input", type=float, default=0.0, help="drive input (m) of the static equilibrium (default 0)")
+    p.add_argument(
+        "--input",
+        type=float,
+        default=0.0,
+        help="drive input (m) of the static equilibrium (default 0)",
+    )
 
 
 def register(subparsers) -> None:
@@ -248,19 +307,31 @@ def register(subparsers) -> None:
     p.add_argument("-o", "--output", help="directory for mode-shape plots (mode_<k>.png)")
     p.set_defaults(handler=run_modes)
 
-    p = subparsers.add_parser("frf", help="frequency response (Bode plot, CSV) from the exact linearisation")
+    p = subparsers.add_parser(
+        "frf", help="frequency response (Bode plot, CSV) from the exact linearisation"
+    )
     _common(p)
     p.add_argument("--from", dest="source", default="drive", help="input (only 'drive')")
-    p.add_argument("--to", action="append", help="output: output, compression, drive_force, "
-                   "hinges.<h>.moment|force_x|force_y (repeatable; default output)")
+    p.add_argument(
+        "--to",
+        action="append",
+        help="output: output, compression, drive_force, "
+        "hinges.<h>.moment|force_x|force_y (repeatable; default output)",
+    )
     p.add_argument("--fmin", type=float, default=1.0, help="Hz (default 1)")
     p.add_argument("--fmax", type=float, default=1e5, help="Hz (default 1e5)")
-    p.add_argument("--points", type=int, default=1000, help="log-spaced frequencies (default 1000)")
-    p.add_argument("-o", "--output", default="frf", help="directory for frf.png / frf.csv (default ./frf)")
+    p.add_argument(
+        "--points", type=int, default=1000, help="log-spaced frequencies (default 1000)"
+    )
+    p.add_argument(
+        "-o", "--output", default="frf", help="directory for frf.png / frf.csv (default ./frf)"
+    )
     p.add_argument("--csv", action="store_true", help="also write frf.csv")
     p.set_defaults(handler=run_frf)
 
-    p = subparsers.add_parser("linearize", help="state-space model (A, B, C, D, names) for control design")
+    p = subparsers.add_parser(
+        "linearize", help="state-space model (A, B, C, D, names) for control design"
+    )
     _common(p)
     p.add_argument("-o", "--output", required=True, help="model.npz, model.mat or model.json")
     p.set_defaults(handler=run_linearize)

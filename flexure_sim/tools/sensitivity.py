@@ -1,17 +1,19 @@
-"""``flexure-sim sensitivity MECH --wrt PARAM[,PARAM...] --of gain,compression,first_mode,peak_stress``:
-exact first and second design sensitivities by hyper-dual numbers (engine/sensitivity.py).
+"""``flexure-sim sensitivity MECH --wrt PARAM[,PARAM...] --of OUTPUT[,OUTPUT...]``: exact
+first and second design sensitivities by hyper-dual numbers (engine/sensitivity.py) of
+gain, compression, first_mode and peak_stress.
 
 PARAM is any numeric key of the mechanism file by path: ``stiffness_models.notch.h``,
 ``hinges.a.a.at.0``, ``bodies.body4.mass``; ``hinges.<h>.stiffness.<key>`` varies one hinge's
 copy of a named stiffness model.
 """
+
 from __future__ import annotations
 
 import json
 import sys
 
 from ..engine.config import ConfigError
-from ..engine.parametric import ParameterError, Parameters
+from ..engine.design import ParameterError, Parameters
 from ..engine.sensitivity import OUTPUTS, sensitivities
 from ..engine.solver import SolverError
 
@@ -48,10 +50,20 @@ def run(args) -> int:
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("sensitivity", help="exact design sensitivities (hyper-dual numbers)")
+    p = subparsers.add_parser(
+        "sensitivity", help="exact design sensitivities (hyper-dual numbers)"
+    )
     p.add_argument("mechanism", help="built-in name or YAML path")
-    p.add_argument("--wrt", required=True, help="parameter paths, comma-separated (e.g. stiffness_models.notch.h)")
-    p.add_argument("--of", default=",".join(OUTPUTS), help=f"outputs, comma-separated ({', '.join(OUTPUTS)})")
-    p.add_argument("--input", type=float, default=None, help="drive input (m); default the top of the stroke")
+    p.add_argument(
+        "--wrt",
+        required=True,
+        help="parameter paths, comma-separated (e.g. stiffness_models.notch.h)",
+    )
+    p.add_argument(
+        "--of", default=",".join(OUTPUTS), help=f"outputs, comma-separated ({', '.join(OUTPUTS)})"
+    )
+    p.add_argument(
+        "--input", type=float, default=None, help="drive input (m); default the top of the stroke"
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=run)
