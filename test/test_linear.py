@@ -300,3 +300,18 @@ def test_modes_command_json_and_plots(tmp_path, capsys):
     assert [p.endswith(f"mode_{k}.png") for k, p in enumerate(out["plots"], 1)] == [True, True]
     assert _cli("modes", "no_such_stage") == 2
     assert "no such built-in mechanism" in capsys.readouterr().err
+
+
+def test_modal_damping_of_proportional_damping_is_omega_t_char_over_two(stage):
+    # At rest B = t_char K (t_char = 1 ms) makes the damping tangent t_char times the
+    # stiffness tangent: phi^T C phi = t_char omega^2, so zeta = omega t_char / 2; the first
+    # mode (0.94) is the only one below critical damping, and its pole pair is
+    # omega (-zeta +- i sqrt(1 - zeta^2)). (Under load the geometric stiffness terms make
+    # the damping slightly non-proportional: 5e-6 at 1.35 um.)
+    md = linear.modes(linear.linearize(Simulation(stage), 0.0, wrenches=False))
+    omega = 2 * np.pi * md.frequencies
+    np.testing.assert_allclose(md.modal_damping, omega * 1e-3 / 2, rtol=1e-9)
+    z1 = md.modal_damping[0]
+    pair = md.poles[md.poles.imag > 0]
+    assert len(pair) == 1
+    assert pair[0] == pytest.approx(omega[0] * (-z1 + 1j * np.sqrt(1 - z1**2)), rel=1e-9)

@@ -57,11 +57,15 @@ class Parameters:
     """A mechanism file's numbers, addressable by path; ``design(overrides)`` rebuilds the
     parametric parts with some of them replaced (hyper-dual or float)."""
 
-    def __init__(self, name_or_path: str | Path):
-        path = resolve_mechanism_path(name_or_path)
-        self.path = path
-        self.data = read_yaml(path, ConfigError)
-        self.mechanism: Mechanism = mechanism_from_dict(self.data, source=str(path))
+    def __init__(self, name_or_path: str | Path, data: Optional[dict] = None):
+        """From a built-in name or YAML path, or (with ``data``) from a parsed document
+        whose name_or_path is only used in messages."""
+        if data is None:
+            path = resolve_mechanism_path(name_or_path)
+            data = read_yaml(path, ConfigError)
+        self.path = Path(name_or_path)
+        self.data = data
+        self.mechanism: Mechanism = mechanism_from_dict(data, source=str(name_or_path))
         self.twistor = twistor_flags(self.mechanism)
 
     # ---------------------------------------------------------------- paths

@@ -103,6 +103,7 @@ class LinearModel:
     stiffness: np.ndarray = field(repr=False)
     mass: np.ndarray = field(repr=False)
     free: np.ndarray = field(repr=False)
+    damping: np.ndarray = field(repr=False, default=None)
 
     def output_index(self, name: str) -> int:
         if name not in self.output_names:
@@ -124,7 +125,7 @@ def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True) -> LinearM
     A = jacobian_at(sim, y, 0.0, u)
     dQz, dQv = tangent_at(sim, z)
     mF = lay.mass[F]
-    B = np.zeros((n, 1))
+    B = np.zeros((n, 1 if drive else 0))
     Zx, Vx, Vc = np.zeros((N, n)), np.zeros((N, n)), np.zeros((N, 1))
     Zx[F, np.arange(nF)] = 1.0
     Vx[F, nF + np.arange(nF)] = 1.0
@@ -177,7 +178,7 @@ def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True) -> LinearM
         A,
         B,
         np.array(Cs).reshape(len(Cs), n),
-        np.array(Ds).reshape(len(Ds), 1),
+        np.array(Ds).reshape(len(Ds), 1)[:, : B.shape[1]],
         state_names,
         ["drive"] if drive else [],
         names,
@@ -187,6 +188,7 @@ def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True) -> LinearM
         0.5 * (K + K.T),
         mF.copy(),
         F.copy(),
+        -dQv[np.ix_(F, F)],
     )
 
 
@@ -237,7 +239,10 @@ def wrench_jacobians(mech, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class Modes:
     """Undamped modes: frequencies (Hz, ascending), shapes (nF, n) M-orthonormal columns on
     the free coordinates ``free``; damped poles (complex, 1/s, by |pole|), their natural
-    frequencies (Hz) and damping ratios."""
+    frequencies |pole| / 2 pi (Hz) and damping ratios -Re/|pole| (1 for a real pole);
+    modal damping ratios phi^T C phi / (2 omega) of the undamped modes (exact for the
+    proportional damping B = t_char K, where they are omega t_char / 2: a mode above
+    zeta = 1 splits into two real poles, one near -1/t_char)."""
 
     frequencies: np.ndarray
     shapes: np.ndarray
@@ -245,6 +250,7 @@ class Modes:
     poles: np.ndarray
     pole_frequencies: np.ndarray
     damping_ratios: np.ndarray
+    modal_damping: np.ndarray
 
 
 def modes(model: LinearModel) -> Modes:
@@ -259,7 +265,9 @@ def modes(model: LinearModel) -> Modes:
     poles = poles[np.lexsort((poles.imag, np.abs(poles)))]
     mag = np.abs(poles)
     zeta = np.where(mag > 0, -poles.real / np.where(mag > 0, mag, 1.0), 1.0)
-    return Modes(np.sqrt(w2) / (2 * np.pi), shapes, model.free, poles, mag / (2 * np.pi), zeta)
+    omega = np.sqrt(w2)
+    modal = np.einsum("ik,ij,jk->k", shapes, model.damping, shapes) / (2.0 * omega)
+    return Modes(omega / (2 * np.pi), shapes, model.free, poles, mag / (2 * np.pi), zeta, modal)
 
 
 # ------------------------------------------------------------ frequency response

@@ -47,6 +47,7 @@ def modes_summary(mech, model, md, count: int) -> dict:
     mech_modes = [
         {
             "frequency_hz": float(f),
+            "modal_damping_ratio": float(md.modal_damping[k]),
             "shape": {name: float(v) for name, v in zip(model.state_names, md.shapes[:, k])},
         }
         for k, f in enumerate(md.frequencies[:count])
@@ -65,6 +66,7 @@ def modes_summary(mech, model, md, count: int) -> dict:
         "mechanism": mech.name,
         "input": model.u0,
         "undamped_frequencies_hz": md.frequencies.tolist(),
+        "modal_damping_ratios": md.modal_damping.tolist(),
         "modes": mech_modes,
         "poles": poles,
     }
@@ -82,17 +84,16 @@ def run_modes(args) -> int:
         if args.json:
             print(json.dumps(out))
             return EXIT_OK
-        print(f"mechanism: {mech.name}   linearised at drive input {model.u0 * 1e6:.6g} um")
-        print(
-            "undamped natural frequencies [Hz]: " + ", ".join(f"{f:.6g}" for f in md.frequencies)
-        )
+        where = f"drive input {model.u0 * 1e6:.6g} um" if model.input_names else "rest (no drive)"
+        print(f"mechanism: {mech.name}   linearised at the static equilibrium at {where}")
+        print("mode  undamped f [Hz]  modal damping ratio")
+        for k, (f, z) in enumerate(zip(md.frequencies, md.modal_damping), 1):
+            print(f"{k:4d} {f:16.6g} {z:20.4g}")
         print("poles of the damped system (upper half-plane), by |pole|:")
-        print("   real [1/s]     imag [1/s]   natural f [Hz]   damping ratio")
+        print("   real [1/s]     imag [1/s]   |pole|/2pi [Hz]   damping ratio")
         for p in out["poles"]:
-            print(
-                f"{p['real']:13.6g}  {p['imag']:13.6g}  {p['frequency_hz']:15.6g}  "
-                f"{p['damping_ratio']:14.4g}"
-            )
+            kind = f"{p['damping_ratio']:14.4g}" if p["imag"] else "   (real pole)"
+            print(f"{p['real']:13.6g}  {p['imag']:13.6g}  {p['frequency_hz']:15.6g}  {kind}")
         for path in out.get("plots", []):
             print(f"plot: {path}")
         return EXIT_OK
@@ -172,6 +173,8 @@ def run_frf(args) -> int:
         if not (0 < args.fmin < args.fmax) or args.points < 2:
             raise ValueError("need 0 < --fmin < --fmax and --points >= 2")
         mech, model = _model(args)
+        if not model.input_names:
+            raise ValueError(f"mechanism {mech.name!r} has no drive input")
         outputs = args.to or ["output"]
         for o in outputs:
             model.output_index(o)
