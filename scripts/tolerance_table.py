@@ -60,12 +60,13 @@ def main() -> None:
                 )
             gain, first, peak = resolve(params, hinge, h0 + d, u)
             print(
-                f"| {hinge} | {d * 1e6:+.0f} um | {pred[0]:.5f} / {gain:.5f} | {pred[1]:.3f} / {first:.3f} "
-                f"| {pred[2] / 1e6:.4f} / {peak / 1e6:.4f} |"
+                f"| {hinge} | {d * 1e6:+.0f} um | {pred[0]:.5f} / {gain:.5f} "
+                f"| {pred[1]:.3f} / {first:.3f} | {pred[2] / 1e6:.4f} / {peak / 1e6:.4f} |"
             )
+    v = res["values"]
     print(
-        f"\nat drive input {u * 1e6:g} um; base: gain {res['values']['gain']:.5f}, first mode "
-        f"{res['values']['first_mode']:.3f} Hz, peak stress {res['values']['peak_stress'] / 1e6:.4f} MPa"
+        f"\nat drive input {u * 1e6:g} um; base: gain {v['gain']:.5f}, first mode "
+        f"{v['first_mode']:.3f} Hz, peak stress {v['peak_stress'] / 1e6:.4f} MPa"
     )
 
 
