@@ -123,3 +123,73 @@ def test_sensitivity_command_json(capsys):
     assert "stiffness_models.notch.h|bodies.body4.mass" in out["second"]["peak_stress"]
     assert main(["sensitivity", "microstage", "--wrt", "nonsense.key"]) == 2
     assert "nonsense: no such key" in capsys.readouterr().err
+
+
+def _replaced(mech, hinge=None, frame=None, index=None, value=None, body=None, mass=None):
+    """The engine's mechanism with one hinge frame coordinate or one body mass changed,
+    bypassing the file's coincidence check (a moved frame prestresses its hinge)."""
+    import dataclasses
+
+    if hinge is not None:
+        hinges = list(mech.hinges)
+        k = mech.hinge_index(hinge)
+        f = getattr(hinges[k], frame)
+        pos = list(f.position)
+        pos[index] = value
+        hinges[k] = dataclasses.replace(
+            hinges[k], **{frame: dataclasses.replace(f, position=tuple(pos))}
+        )
+        return dataclasses.replace(mech, hinges=tuple(hinges))
+    bodies = list(mech.bodies)
+    i = mech.body_index(body)
+    bodies[i] = dataclasses.replace(bodies[i], mass=mass)
+    return dataclasses.replace(mech, bodies=tuple(bodies))
+
+
+def test_derivatives_through_the_kinematics_and_the_mass_matrix(params):
+    """A hinge frame position flows through r(z) and the twistor; a mass only through M."""
+    mech = params.mechanism
+    path = "hinges.c.b.at.1"
+    res = sensitivities(
+        params, [path, "bodies.body4.mass"], ["gain", "compression", "first_mode"], U
+    )
+    y0 = params.value(path)
+
+    def solve(y):
+        sim = Simulation(_replaced(mech, "c", "b", 1, y))
+        snap = sim.static(U).snapshot
+        return np.array([snap.output / U, snap.compression])
+
+    fd = _richardson_first(solve, y0, 1e-6)
+    exact = [res["gradient"][o][path] for o in ("gain", "compression")]
+    np.testing.assert_allclose(exact, fd, rtol=1e-6)
+
+    m0 = params.value("bodies.body4.mass")
+
+    def first(m):
+        sim = Simulation(_replaced(mech, body="body4", mass=m))
+        return linear.modes(linear.linearize(sim, U, wrenches=False)).frequencies[0]
+
+    fd_m = _richardson_first(first, m0, 1e-2 * m0)
+    assert res["gradient"]["first_mode"]["bodies.body4.mass"] == pytest.approx(fd_m, rel=1e-6)
+
+
+def test_first_mode_sensitivity_of_a_mechanism_without_drive(capsys):
+    assert (
+        main(
+            [
+                "sensitivity",
+                "fourbar_mixed",
+                "--wrt",
+                "stiffness_models.notch.h",
+                "--of",
+                "first_mode",
+                "--json",
+            ]
+        )
+        == 0
+    )
+    out = json.loads(capsys.readouterr().out)
+    assert out["gradient"]["first_mode"]["stiffness_models.notch.h"] > 0  # thicker: stiffer
+    assert main(["sensitivity", "fourbar_mixed", "--wrt", "stiffness_models.notch.h"]) == 2
+    assert "names no output body" in capsys.readouterr().err

@@ -47,14 +47,15 @@ class Sensitivity:
     """Static equilibrium, its tangent stiffness and first mode at drive input u, ready to
     differentiate outputs by hyper-dual evaluation."""
 
-    def __init__(self, params: Parameters, u: float):
+    def __init__(self, params: Parameters, u: float, static_outputs: bool = True):
         self.params = params
         mech = params.mechanism
-        if mech.drive is None:
+        if static_outputs and mech.drive is None:
             raise ParameterError(
-                f"mechanism {mech.name!r} has no drive: gain and stress need a drive input"
+                f"mechanism {mech.name!r} has no drive: gain, compression and peak_stress "
+                "need a drive input (first_mode does not)"
             )
-        if u == 0:
+        if static_outputs and u == 0:
             raise ParameterError("the drive input must be non-zero (gain = output / input)")
         self.u = float(u)
         self.sim = Simulation(mech)
@@ -177,8 +178,12 @@ def sensitivities(
     mech = params.mechanism
     if u is None:
         u = mech.drive.stroke[1] if mech.drive else 0.0
-    sens = Sensitivity(params, u)
+    if "gain" in of and mech.output is None:
+        raise ParameterError(f"gain: mechanism {mech.name!r} names no output body")
+    if "compression" in of and mech.compression_hinge is None:
+        raise ParameterError(f"compression: mechanism {mech.name!r} names no compression hinge")
     static = [o for o in of if o != "first_mode"]
+    sens = Sensitivity(params, u, bool(static))
     base = params.design()
     values = {
         k: float(hd.real(v)) for k, v in sens.outputs(base, hd.HyperDual(sens.z), static).items()

@@ -34,7 +34,8 @@ def run(args) -> int:
     if args.json:
         print(json.dumps(res))
         return 0
-    print(f"mechanism: {res['mechanism']}   drive input {res['input'] * 1e6:.6g} um")
+    where = f"drive input {res['input'] * 1e6:.6g} um" if params.mechanism.drive else "rest"
+    print(f"mechanism: {res['mechanism']}   static equilibrium at {where}")
     for p, v in res["parameters"].items():
         print(f"parameter {p} = {v:.6g}")
     for o in of:
