@@ -9,19 +9,38 @@ from flexure_sim.engine.design import Parameters
 from flexure_sim.engine.solver import Simulation
 
 
-def test_notch_concentration_factor_formula():
-    # K_t = (1 + t/(2R))^(9/20) (Smith, "Flexures", 2000; Lobontiu, "Compliant Mechanisms",
-    # 2003): a thin neck in a wide notch concentrates little, t = 2R (h = D) gives 2^0.45.
-    assert stress.notch_concentration(0.0, 3e-3) == 1.0
-    assert stress.notch_concentration(3e-3, 3e-3) == pytest.approx(2**0.45, rel=1e-15)
-    # The stage's hinge: h/D = 1/12 -> (13/12)^0.45 = 1.036676 (hand calculation).
-    assert stress.notch_concentration(0.25e-3, 3e-3) == pytest.approx(1.036676, abs=1e-6)
+def test_notch_concentration_factor_is_roarks_semicircular_u_notch_in_bending():
+    # Young & Budynas, "Roark's Formulas for Stress and Strain", 7th ed., Table 17.1, two
+    # U-notches in a member of rectangular section, in-plane bending, 0.25 <= h/r <= 2.0:
+    # C1 = 0.723 + 2.845 sqrt(h/r) - 0.504 h/r, C2 = -1.836 - 5.746 sqrt(h/r) + 1.314 h/r,
+    # C3 = 7.254 - 1.885 sqrt(h/r) + 1.646 h/r, C4 = -5.140 + 4.785 sqrt(h/r) - 2.456 h/r
+    # (as printed at eng-calculations.com, "two U-notches ... in-plane bending"). Semicircular
+    # notches h/r = 1: C = (3.064, -6.268, 7.015, -2.811), evaluated here by hand.
+    def published(x):
+        return 3.064 - 6.268 * x + 7.015 * x**2 - 2.811 * x**3
+
+    # Neck as thick as the holes (h = D): 2a/W = D / (2 D) = 0.5 -> 1.332375.
+    assert stress.notch_concentration(3e-3, 3e-3) == pytest.approx(1.332375, abs=1e-12)
+    # The stage's hinge, h = 0.25 mm, D = 3 mm: 2a/W = 3 / 3.25.
+    assert stress.notch_concentration(0.25e-3, 3e-3) == pytest.approx(
+        published(3 / 3.25), abs=1e-12
+    )
+    assert published(3 / 3.25) == pytest.approx(1.04450, abs=1e-5)
+    # A thin neck between large holes concentrates no stress (the coefficients sum to 1).
+    assert stress.notch_concentration(1e-12, 3e-3) == pytest.approx(1.0, abs=1e-6)
+    # Deep notches (h/r > 2) use the second row: h/r = 4, 2h/D = 0.5 gives
+    # C1 = 0.833 + 4.138 - 0.036, C2 = 0.024 - 10.766 + 0.504, C3 = -0.856 + 12.92 - 0.796,
+    # C4 = 0.999 - 6.292 + 0.328.
+    want = 4.935 + (-10.238) * 0.5 + 11.268 * 0.25 + (-4.965) * 0.125
+    assert stress.u_notch_bending_factor(4.0, 1.0, 16.0) == pytest.approx(want, abs=1e-12)
+    with pytest.raises(ValueError, match="outside Roark's range"):
+        stress.u_notch_bending_factor(0.1, 1.0, 4.0)
 
 
 def test_notch_stress_is_beam_bending_plus_axial_times_kt():
     # 1 N m on a 0.25 mm x 20 mm neck: 6 M / (t h^2) = 6 / (0.02 * 6.25e-8) = 4.8 GPa nominal;
     # 10 N axial: 10 / (0.02 * 2.5e-4) = 2 MPa. Shear force has no lever arm at the centre.
-    kt = (1 + 0.25 / 3) ** 0.45
+    kt = stress.notch_concentration(0.25e-3, 3e-3)
     s = stress.notch_stress(np.array([1.0, -10.0, 1e3]), 3e-3, 0.25e-3, 0.02)
     assert s == pytest.approx(kt * (4.8e9 + 2e6), rel=1e-12)
 

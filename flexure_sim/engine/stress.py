@@ -9,15 +9,19 @@ thickness t; axial direction x of the hinge frame, as in microstage.sci). The th
 section is at the centre, where the moment is given, so the shear force has no lever arm
 there. Nominal stresses: bending 6 |m| / (t h^2), axial |f_x| / (t h). The peak is
 
-    sigma = K_t (6 |m| / (t h^2) + |f_x| / (t h)),  K_t = (1 + h / D)^(9/20),
+    sigma = K_t (6 |m| / (t h^2) + |f_x| / (t h)),
 
-with K_t the stress-concentration factor of a circular notch hinge in bending,
-K_t = (1 + t_min / (2 R))^(9/20) with R = D / 2 the notch radius, the fit to Peterson's
-charts given by S. T. Smith, "Flexures: Elements of Elastic Mechanisms" (Gordon and Breach,
-2000) and used by N. Lobontiu, "Compliant Mechanisms: Design of Flexure Hinges" (CRC, 2003),
-after W. D. Pilkey, "Peterson's Stress Concentration Factors" (Wiley, 1997). Applying the
-bending factor to the axial part too is conservative (the tension factor of a shallow notch
-is smaller).
+with K_t the elastic stress-concentration factor of two opposite U-notches in a member of
+rectangular section under in-plane bending, W. C. Young and R. G. Budynas, "Roark's
+Formulas for Stress and Strain", 7th ed. (McGraw-Hill, 2002), Table 17.1:
+
+    K_t = C1 + C2 (2a/W) + C3 (2a/W)^2 + C4 (2a/W)^3,   Ci = ci1 + ci2 sqrt(a/r) + ci3 a/r,
+
+for notch depth a, notch radius r and gross width W. A circular notch hinge is the case of
+semicircular notches, a = r = D/2, W = h + D (a/r = 1, 2a/W = D/(h + D)); the factor tends to
+1 for a thin neck between large holes (2a/W -> 1), as flexure hinges are designed. Applying
+the bending factor to the axial part too is conservative (the tension factor of the same
+notch is smaller).
 
 Leaf (cantilever) hinge (stiffness.cantilever_stiffness: length L along the hinge frame's y
 axis, thickness T along x, width w; frame at the centroid). The shear force f_x adds a
@@ -37,10 +41,42 @@ import numpy as np
 
 from . import hyperdual as hd
 
+#: Roark's Table 17.1, two U-notches in a rectangular member, in-plane bending: rows C1..C4,
+#: columns (constant, sqrt(a/r), a/r), for 0.25 <= a/r <= 2 and 2 < a/r <= 50.
+_ROARK_U_NOTCH_BENDING = (
+    (
+        (0.723, 2.845, -0.504),
+        (-1.836, -5.746, 1.314),
+        (7.254, -1.885, 1.646),
+        (-5.140, 4.785, -2.456),
+    ),
+    (
+        (0.833, 2.069, -0.009),
+        (0.024, -5.383, 0.126),
+        (-0.856, 6.460, -0.199),
+        (0.999, -3.146, 0.082),
+    ),
+)
+
+
+def u_notch_bending_factor(depth, radius, width):
+    """K_t of two opposite U-notches (depth a, radius r) in a member of gross width W under
+    in-plane bending (Roark, Table 17.1; module docstring); 0.25 <= a/r <= 50."""
+    ar = depth / radius
+    ar_real = float(hd.real(ar))
+    if not 0.25 <= ar_real <= 50.0:
+        raise ValueError(f"notch depth / radius {ar_real:.3g} outside Roark's range [0.25, 50]")
+    rows = _ROARK_U_NOTCH_BENDING[0 if ar_real <= 2.0 else 1]
+    x = 2.0 * depth / width
+    root = np.sqrt(ar)
+    c = [k0 + k1 * root + k2 * ar for k0, k1, k2 in rows]
+    return c[0] + x * (c[1] + x * (c[2] + x * c[3]))
+
 
 def notch_concentration(h, D):
-    """K_t = (1 + h/D)^(9/20) of a circular notch hinge in bending (module docstring)."""
-    return (1.0 + h / D) ** 0.45
+    """K_t of a circular notch hinge (neck h, holes D) in bending: semicircular U-notches,
+    a = r = D/2 in a member of width h + D (module docstring)."""
+    return u_notch_bending_factor(0.5 * D, 0.5 * D, h + D)
 
 
 def notch_stress(wrench, D, h, t):
