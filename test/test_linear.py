@@ -47,10 +47,13 @@ def test_hyperdual_parts_equal_hand_derivatives_to_machine_precision():
 def test_hyperdual_composites_with_known_derivatives():
     x = hd.seed(np.array([0.3, 1.7, 2.9]), 1.0, 1.0)
     y = hd.seed(np.array([0.4, -0.8, 1.1]), 0.0, 0.0)
-    # sqrt(x^2 + y^2) cos(atan2(y, x)) = x: derivatives 1 and 0.
-    g = np.sqrt(x * x + y * y) * np.cos(np.arctan2(y, x))
-    np.testing.assert_allclose(g.b, 1.0, rtol=0, atol=8 * EPS)
-    np.testing.assert_allclose(g.d, 0.0, rtol=0, atol=32 * EPS)
+    # sqrt(x^2 + y^2) cos(atan2(y, x)) = x in every quadrant: derivatives 1 and 0.
+    for sx in (1.0, -1.0):
+        xs = hd.seed(sx * x.a, 1.0, 1.0)
+        g = np.sqrt(xs * xs + y * y) * np.cos(np.arctan2(y, xs))
+        np.testing.assert_allclose(g.a, xs.a, rtol=4 * EPS)
+        np.testing.assert_allclose(g.b, 1.0, rtol=0, atol=8 * EPS)
+        np.testing.assert_allclose(g.d, 0.0, rtol=0, atol=32 * EPS)
     # exp(log x * 3) = x^3: second derivative 6x; tan(arctan(x)) = x.
     h = np.exp(np.log(x) * 3.0)
     np.testing.assert_allclose(h.d, 6 * x.a, rtol=16 * EPS)
@@ -242,6 +245,8 @@ def _cli(*argv):
 
 
 def test_linearize_exports_a_model_python_control_loads_and_its_bode_matches_frf(tmp_path, capsys):
+    import json
+
     import control
     import scipy.io
 
@@ -286,6 +291,11 @@ def test_linearize_exports_a_model_python_control_loads_and_its_bode_matches_frf
     assert sys.nstates == 25
     mat = scipy.io.loadmat(tmp_path / "m.mat")
     np.testing.assert_array_equal(mat["A"], data["A"])
+    assert str(np.ravel(mat["output_names"])[0][0]) == "output"  # a MATLAB cell array of strings
+    assert _cli("linearize", "microstage", "--input", U0, "-o", tmp_path / "m.json") == 0
+    model = json.loads((tmp_path / "m.json").read_text())
+    np.testing.assert_array_equal(np.array(model["C"]), data["C"])
+    assert model["state_names"][0] == "body2.x" and model["input_names"] == ["drive"]
     assert (tmp_path / "frf.png").stat().st_size > 10_000
     assert _cli("linearize", "microstage", "-o", tmp_path / "m.txt") == 2
     assert "must end in .npz, .mat or .json" in capsys.readouterr().err
