@@ -60,13 +60,20 @@ class Parameters:
     def __init__(self, name_or_path: str | Path, data: Optional[dict] = None):
         """From a built-in name or YAML path, or (with ``data``) from a parsed document
         whose name_or_path is only used in messages."""
+        source = str(name_or_path)
         if data is None:
             path = resolve_mechanism_path(name_or_path)
             data = read_yaml(path, ConfigError)
-        self.path = Path(name_or_path)
+            source = str(path)  # files a mechanism refers to are relative to it
+        self.path = Path(source)
         self.data = data
-        self.mechanism: Mechanism = mechanism_from_dict(data, source=str(name_or_path))
-        self.twistor = twistor_flags(self.mechanism)
+        self.mechanism: Mechanism = mechanism_from_dict(data, source=source)
+
+    @property
+    def twistor(self) -> np.ndarray:
+        """Per hinge: twistor law (True) or twist law (False); ParameterError for laws the
+        generic force chain does not cover (fitted polynomials)."""
+        return twistor_flags(self.mechanism)
 
     # ---------------------------------------------------------------- paths
     def _node(self, keys: list[str], data=None):

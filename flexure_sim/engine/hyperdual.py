@@ -26,7 +26,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
-__all__ = ["HyperDual", "seed", "parts_of", "real", "hstack", "stack"]
+__all__ = ["HyperDual", "seed", "parts_of", "real", "stack", "from_objects"]
 
 
 def _parts(x):
@@ -69,13 +69,6 @@ class HyperDual:
 
     def __repr__(self) -> str:
         return f"HyperDual({self.a!r}, {self.b!r}, {self.c!r}, {self.d!r})"
-
-    def full(self) -> "HyperDual":
-        """The same number with every part broadcast to the common shape (writable copies)."""
-        s = self.shape
-        return HyperDual(
-            *(np.array(np.broadcast_to(p, s)) for p in (self.a, self.b, self.c, self.d))
-        )
 
     def __getitem__(self, key) -> "HyperDual":
         s = self.shape
@@ -301,17 +294,3 @@ def stack(items, axis: int = -1) -> HyperDual:
         shape = np.broadcast_shapes(*(p.shape for p in parts))
         out.append(np.stack([np.broadcast_to(p, shape) for p in parts], axis=axis))
     return HyperDual(*out)
-
-
-def hstack(items) -> HyperDual:
-    """np.concatenate along the last axis for HyperDuals (plain arrays allowed)."""
-    lifted = [_lift(x) for x in items]
-    lead = np.broadcast_shapes(*(x.shape[:-1] for x in lifted))
-    return HyperDual(
-        *(
-            np.concatenate(
-                [np.broadcast_to(getattr(x, n), lead + x.shape[-1:]) for x in lifted], axis=-1
-            )
-            for n in "abcd"
-        )
-    )

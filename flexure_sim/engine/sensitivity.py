@@ -68,6 +68,7 @@ class Sensitivity:
         w2, shapes = scipy.linalg.eigh(0.5 * (K + K.T), np.diag(lay.mass[lay.free]))
         self.lam, self.phi = w2[0], shapes[:, 0]
         self.ia, self.ib = hinge_indices(mech)
+        self.twistor = params.twistor
 
     def _solve(self, x: np.ndarray) -> np.ndarray:
         return scipy.linalg.lu_solve(self.lu, x.T).T
@@ -79,7 +80,7 @@ class Sensitivity:
         )
         F = self.free
         for _ in range(2):  # e1, e2 parts exact after one, the e1e2 part after two
-            Q = forces(design, self.params.twistor, self.ia, self.ib, z).Q
+            Q = forces(design, self.twistor, self.ia, self.ib, z).Q
             step = [self._solve(np.asarray(p)[F]) for p in hd.parts_of(Q)]
             for name, dp in zip("abcd", step):
                 part = getattr(z, name)
@@ -106,7 +107,7 @@ class Sensitivity:
             axis = mech.drive.axis
             out["compression"] = (bx - ax_) * axis[0] + (by - ay) * axis[1]
         if "peak_stress" in which:
-            wrench = forces(design, self.params.twistor, self.ia, self.ib, z).wrench
+            wrench = forces(design, self.twistor, self.ia, self.ib, z).wrench
             best = None
             for k, g in enumerate(design.geometry):
                 s = hinge_stress(wrench[..., k, :], g)
@@ -146,7 +147,7 @@ class Sensitivity:
         phi = np.zeros_like(self.z)
         phi[F] = self.phi
         zz = hd.HyperDual(self.z, phi, z_p, 0.0)
-        Q = forces(design, self.params.twistor, self.ia, self.ib, zz).Q
+        Q = forces(design, self.twistor, self.ia, self.ib, zz).Q
         dK_phi = -np.asarray(hd.parts_of(Q)[3])[F]
         mass = design.mass
         dM = (

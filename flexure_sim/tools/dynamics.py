@@ -172,7 +172,8 @@ def run_frf(args) -> int:
             raise ValueError(f"--from {args.source!r}: the only input is 'drive'")
         if not (0 < args.fmin < args.fmax) or args.points < 2:
             raise ValueError("need 0 < --fmin < --fmax and --points >= 2")
-        mech, model = _model(args)
+        wanted = args.to or ["output"]
+        mech, model = _model(args, wrenches=any(o.startswith("hinges.") for o in wanted))
         if not model.input_names:
             raise ValueError(f"mechanism {mech.name!r} has no drive input")
         outputs = args.to or ["output"]
