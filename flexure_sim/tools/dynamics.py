@@ -74,6 +74,8 @@ def modes_summary(mech, model, md, count: int) -> dict:
 
 def run_modes(args) -> int:
     def work():
+        if args.count < 0:
+            raise ValueError(f"--count {args.count}: must not be negative")
         mech, model = _model(args, wrenches=False)
         md = linear.modes(model)
         out = modes_summary(mech, model, md, args.count)
