@@ -89,12 +89,15 @@ def run_simulate(args: argparse.Namespace) -> dict:
     if amplitude and sim.drive is None:
         raise UsageError(f"--drive: mechanism {mech.name!r} has no drive")
     start = time.perf_counter()
+    if args.stroke_limit:
+        return _stroke_limit(args, sim)
     if args.static:
         result = sim.static(amplitude)
         wall = time.perf_counter() - start
         out = summarize(sim, result.snapshot, amplitude)
         out.update(mechanism_file=str(path), mode="static", newton_iterations=result.iterations,
                    residual=result.residual, wall_s=wall)
+        out["hinge_stress"] = _stress(args, sim, result.snapshot)
         return out
     if sim.drive is not None:
         sim.set_command(amplitude)
@@ -116,11 +119,44 @@ def run_simulate(args: argparse.Namespace) -> dict:
     return out
 
 
+def _geometry(args) -> list:
+    from .engine.design import Parameters
+
+    return Parameters(args.mechanism).design().geometry
+
+
+def _stress(args, sim: Simulation, snap: Snapshot) -> dict:
+    """Peak stress and stress ratio per notch/leaf hinge (engine/stress.py)."""
+    from .engine.stress import stress_table
+
+    return stress_table(snap.wrenches, _geometry(args), [h.name for h in sim.mechanism.hinges])
+
+
+def _stroke_limit(args, sim: Simulation) -> dict:
+    """--stroke-limit: the drive input at which the first hinge reaches its yield strength."""
+    from .engine.stress import stroke_limit
+
+    if sim.drive is None:
+        raise UsageError(f"--stroke-limit: mechanism {sim.mechanism.name!r} has no drive")
+    try:
+        u, hinge = stroke_limit(sim, _geometry(args))
+    except ValueError as exc:
+        raise UsageError(f"--stroke-limit: {exc}") from None
+    return {"mechanism": sim.mechanism.name, "mechanism_file": str(resolve_mechanism_path(
+                args.mechanism)), "mode": "stroke_limit", "stroke_limit": u, "hinge": hinge,
+            "actuator_stroke": list(sim.drive.stroke)}
+
+
 def _fmt(v: Optional[float], unit: str, scale: float = 1.0, digits: int = 6) -> str:
     return "n/a" if v is None else f"{v * scale:.{digits}g} {unit}"
 
 
 def print_table(out: dict) -> None:
+    if out["mode"] == "stroke_limit":
+        print(f"mechanism: {out['mechanism']}   stroke limit (first hinge at yield): "
+              f"{out['stroke_limit'] * 1e6:.6g} um at hinge {out['hinge']} "
+              f"(actuator stroke {out['actuator_stroke'][1] * 1e6:g} um)")
+        return
     print(f"mechanism: {out['mechanism']}   mode: {out['mode']}   t = {out['t']:.6g} s")
     print(f"file:      {out['mechanism_file']}")
     if out["input"] is not None:
@@ -134,6 +170,12 @@ def print_table(out: dict) -> None:
     print("hinge deflection, frame b in frame a:  rotation [urad]  x [nm]  y [nm]")
     for name, h in out["hinges"].items():
         print(f"{name:6s} {h['rotation'] * 1e6:14.6g} {h['x'] * 1e9:11.6g} {h['y'] * 1e9:11.6g}")
+    if out.get("hinge_stress"):
+        print("hinge stress:  peak [MPa]  sigma_y [MPa]  ratio")
+        for name, h in out["hinge_stress"].items():
+            sy = "n/a" if h["sigma_y"] is None else f"{h['sigma_y'] / 1e6:.4g}"
+            ratio = "n/a" if h["ratio"] is None else f"{h['ratio']:.4g}"
+            print(f"{name:6s} {h['stress'] / 1e6:17.5g} {sy:>14s} {ratio:>6s}")
     e = out["energy"]
     print(f"energy [J]: kinetic {e['kinetic']:.6g}, potential {e['potential']:.6g}, "
           f"dissipated {e['dissipated']:.6g}, drive work {e['drive_work']:.6g}")
@@ -153,6 +195,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="also re-linearize when the configuration moved this much (rad, or m per "
                           "mechanism size; 0: every step). Default: only when the step's iteration needs it")
     sim.add_argument("--static", action="store_true", help="solve the static equilibrium instead")
+    sim.add_argument("--stroke-limit", action="store_true",
+                     help="report the drive input at which the first hinge reaches its yield strength")
     sim.add_argument("--json", action="store_true", help="print one JSON object")
     _add_tool_commands(sub)
     return parser

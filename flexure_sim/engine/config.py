@@ -165,6 +165,10 @@ def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
     if not isinstance(model, str):
         raise ctx.fail(f"{key}.model",
                        f"expected a model name (notch, cantilever, matrix), got {_shown(model)}")
+    # Material yield strength (Pa) for the hinge stress ratio (engine/stress.py); optional.
+    if "sigma_y" in spec:
+        _number(ctx, f"{key}.sigma_y", spec["sigma_y"], positive=True)
+    spec = {k: v for k, v in spec.items() if k != "sigma_y"}
     if model in _STIFFNESS_KEYS:
         fn, names = _STIFFNESS_KEYS[model]
         _no_unknown(ctx, key, spec, {"model", *names})

@@ -1,5 +1,7 @@
 """``flexure-sim analyse RUN.mcap``: per step of the drive, the gain, 2 % settling time,
-overshoot, steady-state joint-a compression, peak wrench per hinge and peak drive force.
+overshoot, steady-state joint-a compression, peak wrench per hinge, peak drive force and the
+peak hinge stress ratio sigma / sigma_y (engine/stress.py, from the recorded wrenches and the
+recorded mechanism's hinge geometry).
 
     flexure-sim analyse runs/stage.mcap [--json] [--recover] [--band 0.02] [--no-static]
 
@@ -172,8 +174,59 @@ def analyse_run(run: Run, band: float = analysis.DEFAULT_BAND, static: bool = Tr
         d = m.as_dict()
         d["static_gain"] = gains.get(m.index)
         out.append(d)
+    peaks, problem = stress_peaks(run, out)
+    if problem and out:
+        notes.append(problem)
+    for d in out:
+        d["peak_stress"] = peaks.get(d["index"])
     return {"steps": out, "source": source, "notes": notes, "band": band,
             "duration": (run.end_ns - run.start_ns) / 1e9}
+
+
+def stress_peaks(run: Run, steps: list[dict]) -> tuple[dict[int, Optional[dict]], str]:
+    """Per step index: the hinge with the largest stress ratio sigma / sigma_y over the step's
+    wrench samples, {"hinge", "stress" (Pa), "ratio"}, or None; and a note if there is none."""
+    import yaml
+
+    from ..engine.config import ConfigError
+    from ..engine.design import ParameterError, Parameters
+    from ..engine.stress import hinge_stress
+
+    text = run.metadata.get("mechanism_yaml", "")
+    if not text:
+        return {}, "no hinge stress: the run has no recorded mechanism YAML"
+    try:
+        params = Parameters(run.mechanism_name or "<recorded YAML>", data=yaml.safe_load(text))
+        geometry = params.design().geometry
+    except (ConfigError, ParameterError, yaml.YAMLError, KeyError, TypeError, ValueError) as exc:
+        return {}, f"no hinge stress: recorded mechanism: {exc}"
+    wrenches = run.wrenches()
+    hinges = [
+        (h.name, g) for h, g in zip(params.mechanism.hinges, geometry)
+        if h.name in wrenches and g.get("sigma_y") is not None
+        and g.get("model") in ("notch", "cantilever")
+    ]
+    if not hinges:
+        return {}, "no hinge stress: no recorded notch or leaf hinge has a yield strength sigma_y"
+    out: dict[int, Optional[dict]] = {}
+    for s in steps:
+        t0, t1 = s["t"], s["t"] + s["duration"]
+        best = None
+        for name, g in hinges:
+            series = wrenches[name]
+            inside = (series.t > t0) & (series.t <= t1)  # the step's window, as analysis._window
+            if not inside.any():
+                continue
+            peak = float(np.max(hinge_stress(series.values[inside], g)))
+            ratio = peak / float(g["sigma_y"])
+            if best is None or ratio > best["ratio"]:
+                best = {"hinge": name, "stress": peak, "ratio": ratio}
+        out[s["index"]] = best
+    return out, ""
+
+
+def _stress_cell(peak: Optional[dict]) -> str:
+    return "-" if not peak else f"{peak['ratio']:.4f} ({peak['hinge']})"
 
 
 def _fixed(v: Optional[float], scale: float, decimals: int) -> str:
@@ -194,7 +247,8 @@ def format_result(run: Run, result: dict) -> str:
         return "\n".join(lines)
     hinge = steps[0].get("compression_hinge") or "a"
     header = ["step", "t [ms]", "input [um]", "gain", "static gain", "settling [ms]", "overshoot [%]",
-              "rise [ms]", f"joint-{hinge} compr. [nm]", "drive force [N]", "peak drive force [N]"]
+              "rise [ms]", f"joint-{hinge} compr. [nm]", "drive force [N]", "peak drive force [N]",
+              "peak stress/yield"]
     rows = []
     for s in steps:
         rows.append([
@@ -209,6 +263,7 @@ def format_result(run: Run, result: dict) -> str:
             _fixed(s["joint_a_compression"], 1e9, 3),
             _fixed(s["drive_force"], 1.0, 4),
             _fixed(s["peak_drive_force"], 1.0, 4),
+            _stress_cell(s.get("peak_stress")),
         ])
     lines.append(columns(rows, header))
     hinges = sorted({h for s in steps for h in s["peak_wrench"]},
@@ -233,5 +288,6 @@ def format_result(run: Run, result: dict) -> str:
         lines.append("* not settled before the next step (or the end): no gain reported")
     lines.append(f"gain = output change / applied input change between settled values; settling "
                  f"time to within {result['band'] * 100:g} % of the output change, from the command; "
-                 "static gain: the engine's static solve at the same inputs.")
+                 "static gain: the engine's static solve at the same inputs; peak stress/yield: "
+                 "the largest hinge stress ratio sigma/sigma_y during the step (hinge).")
     return "\n".join(lines)

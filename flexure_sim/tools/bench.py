@@ -9,6 +9,8 @@ Wall times are medians of several runs (7 for flexure_sim, 3 for the baseline).
   exact Jacobian, atol 1e-8 of each component's scale of motion) on the same equations.
 - steps_per_s at the node's default step, and the cost of a step's parts.
 - static_sweep: 1000 drive levels from 0 to the stroke.
+- analyses: the stage's exact linearisation + modes + FRF at 1000 frequencies (goal < 0.1 s),
+  and hyper-dual sensitivities of 4 outputs to 20 parameters (goal < 1 s).
 - node (with --node): stage_node in fast mode (real-time factor) and real-time mode
   (missed ticks, tick jitter) at 1 kHz with all topics and recording on.
 """
@@ -190,6 +192,47 @@ def bench_static_sweep(levels: int = 1000) -> dict:
     }
 
 
+#: The 20 design parameters of the sensitivity benchmark (each hinge's h and D, four masses,
+#: the notch material's E and the plate thickness t).
+SENSITIVITY_PARAMETERS = (
+    [f"hinges.{h}.stiffness.h" for h in "abcdefg"] + [f"hinges.{h}.stiffness.D" for h in "abcdefg"]
+    + [f"bodies.body{i}.mass" for i in (2, 3, 4, 5)] + ["stiffness_models.notch.E", "stiffness_models.notch.t"])
+
+
+def bench_analyses(frequencies: int = 1000) -> dict:
+    """Modes + FRF of the stage at full stroke, and sensitivities of 4 outputs to 20 parameters."""
+    from ..engine import linear
+    from ..engine.design import Parameters
+    from ..engine.sensitivity import OUTPUTS, sensitivities
+
+    mech = load_mechanism("microstage")
+    u = mech.drive.stroke[1]
+    sim = Simulation(mech)
+    sim.static(u)  # warm-up (compiled kernels)
+    f = np.logspace(0, 5, frequencies)
+    walls = []
+    for _ in range(REPEATS):
+        start = time.perf_counter()
+        model = linear.linearize(sim, u, wrenches=False)
+        md = linear.modes(model)
+        linear.frf(model, f, ["output"])
+        walls.append(time.perf_counter() - start)
+    params = Parameters("microstage")
+    sens_walls = []
+    for _ in range(BASELINE_REPEATS):
+        start = time.perf_counter()
+        sensitivities(params, SENSITIVITY_PARAMETERS, OUTPUTS, u)
+        sens_walls.append(time.perf_counter() - start)
+    return {
+        "frequencies": frequencies,
+        "modes_frf_wall_s": float(np.median(walls)),
+        "first_mode_hz": float(md.frequencies[0]),
+        "sensitivity_parameters": len(SENSITIVITY_PARAMETERS),
+        "sensitivity_outputs": len(OUTPUTS),
+        "sensitivity_wall_s": float(np.median(sens_walls)),
+    }
+
+
 #: wake_spin of the second real-time run: the CPU / punctuality trade-off of a short spin.
 LOW_WAKE_SPIN_S = 2e-4
 #: Topics a controller would subscribe to, for the real-time runs next to a subscriber.
@@ -262,6 +305,12 @@ def print_table(res: dict) -> None:
     w = res["static_sweep"]
     print(f"\nstatic sweep, {w['levels']} levels over the stroke: {w['wall_s'] * 1e3:.1f} ms "
           f"({w['newton_iterations']} Newton iterations)")
+    a = res.get("analyses")
+    if a:
+        print(f"\nanalyses: linearisation + modes + FRF at {a['frequencies']} frequencies "
+              f"{a['modes_frf_wall_s'] * 1e3:.1f} ms (goal < 100 ms); sensitivities of "
+              f"{a['sensitivity_outputs']} outputs to {a['sensitivity_parameters']} parameters "
+              f"{a['sensitivity_wall_s'] * 1e3:.0f} ms (goal < 1000 ms)")
     if "node" in res:
         nd = res["node"]
         print(f"\nstage_node at 1 kHz, all topics, recording on: fast-mode RTF {nd.get('fast_rtf', float('nan')):.2f}; "
@@ -284,6 +333,7 @@ def run(args: argparse.Namespace) -> dict:
     res["step_cost"] = bench_step_cost(args.dt)
     res["steps_per_s"] = res["step_cost"]["steps_per_s"]
     res["static_sweep"] = bench_static_sweep()
+    res["analyses"] = bench_analyses()
     if args.node:
         res["node"] = bench_node(args.node_seconds)
     return res

@@ -15,6 +15,8 @@ TOOL_MODULES: tuple[str, ...] = (
     "tools.plot",
     "tools.export",
     "node.replay",
+    "tools.dynamics",
+    "tools.sensitivity",
     "tools.bench",
 )
 

@@ -1,0 +1,70 @@
+"""``flexure-sim sensitivity MECH --wrt PARAM[,PARAM...] --of OUTPUT[,OUTPUT...]``: exact
+first and second design sensitivities by hyper-dual numbers (engine/sensitivity.py) of
+gain, compression, first_mode and peak_stress.
+
+PARAM is any numeric key of the mechanism file by path: ``stiffness_models.notch.h``,
+``hinges.a.a.at.0``, ``bodies.body4.mass``; ``hinges.<h>.stiffness.<key>`` varies one hinge's
+copy of a named stiffness model.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from ..engine.config import ConfigError
+from ..engine.design import ParameterError, Parameters
+from ..engine.sensitivity import OUTPUTS, sensitivities
+from ..engine.solver import SolverError
+
+
+def run(args) -> int:
+    try:
+        params = Parameters(args.mechanism)
+        wrt = [p for p in args.wrt.split(",") if p]
+        of = [o for o in args.of.split(",") if o]
+        if not wrt:
+            raise ParameterError("--wrt: give at least one parameter path")
+        res = sensitivities(params, wrt, of, args.input)
+    except (ConfigError, ParameterError, SolverError, ValueError) as exc:
+        print(f"flexure-sim sensitivity: error: {exc}", file=sys.stderr)
+        return 2
+    res["mechanism"] = params.mechanism.name
+    res["parameters"] = {p: params.value(p) for p in wrt}
+    if args.json:
+        print(json.dumps(res))
+        return 0
+    where = f"drive input {res['input'] * 1e6:.6g} um" if params.mechanism.drive else "rest"
+    print(f"mechanism: {res['mechanism']}   static equilibrium at {where}")
+    for p, v in res["parameters"].items():
+        print(f"parameter {p} = {v:.6g}")
+    for o in of:
+        print(f"{o} = {res['values'][o]:.10g}")
+        for p, d in res["gradient"][o].items():
+            print(f"  d/d {p}: {d:.10g}")
+        if res["second"][o] is None:
+            print("  second derivatives: not available (needs third derivatives of the forces)")
+            continue
+        for pq, d in res["second"][o].items():
+            print(f"  d2/d {pq.replace('|', ' d ')}: {d:.10g}")
+    return 0
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "sensitivity", help="exact design sensitivities (hyper-dual numbers)"
+    )
+    p.add_argument("mechanism", help="built-in name or YAML path")
+    p.add_argument(
+        "--wrt",
+        required=True,
+        help="parameter paths, comma-separated (e.g. stiffness_models.notch.h)",
+    )
+    p.add_argument(
+        "--of", default=",".join(OUTPUTS), help=f"outputs, comma-separated ({', '.join(OUTPUTS)})"
+    )
+    p.add_argument(
+        "--input", type=float, default=None, help="drive input (m); default the top of the stroke"
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=run)

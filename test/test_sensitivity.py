@@ -1,0 +1,195 @@
+"""Exact design sensitivities by hyper-dual numbers against finite differences of re-solved
+mechanisms (the engine's own static solver and eigen-analysis, from edited YAML)."""
+
+import copy
+import json
+
+import numpy as np
+import pytest
+
+from flexure_sim.cli import main
+from flexure_sim.engine import linear
+from flexure_sim.engine.config import mechanism_from_dict
+from flexure_sim.engine.design import ParameterError, Parameters
+from flexure_sim.engine.sensitivity import sensitivities
+from flexure_sim.engine.solver import Simulation
+
+U = 1.35e-6
+H_C, X_C = "hinges.c.stiffness.h", "hinges.e.stiffness.D"
+
+
+@pytest.fixture(scope="module")
+def params():
+    return Parameters("microstage")
+
+
+def _resolve(params, changes):
+    """gain, compression, first mode of the stage with the YAML numbers changed, re-solved
+    by the engine."""
+    data = copy.deepcopy(params.data)
+    for path, value in changes.items():
+        keys = path.split(".")
+        if keys[0] == "hinges":
+            entry = [h for h in data["hinges"] if h["name"] == keys[1]][0]
+            if isinstance(entry["stiffness"], str):
+                entry["stiffness"] = dict(data["stiffness_models"][entry["stiffness"]])
+            entry["stiffness"][keys[3]] = value
+        else:
+            data["stiffness_models"]["notch"][keys[2]] = value
+    sim = Simulation(mechanism_from_dict(data))
+    snap = sim.static(U).snapshot
+    first = linear.modes(linear.linearize(sim, U, wrenches=False)).frequencies[0]
+    return np.array([snap.output / U, snap.compression, first])
+
+
+def _richardson_first(f, x, dx):
+    d1 = (f(x + dx) - f(x - dx)) / (2 * dx)
+    d2 = (f(x + dx / 2) - f(x - dx / 2)) / dx
+    return (4 * d2 - d1) / 3
+
+
+@pytest.fixture(scope="module")
+def result(params):
+    return sensitivities(params, [H_C, X_C], ["gain", "compression", "first_mode"], U)
+
+
+def test_first_derivatives_agree_with_central_differences(params, result):
+    for path in (H_C, X_C):
+        x0 = params.value(path)
+        fd = _richardson_first(lambda x: _resolve(params, {path: x}), x0, 2e-3 * x0)
+        exact = [result["gradient"][o][path] for o in ("gain", "compression", "first_mode")]
+        np.testing.assert_allclose(exact, fd, rtol=1e-6)
+
+
+def test_second_derivatives_agree_with_central_differences(params, result):
+    h0, t0 = params.value(H_C), params.value(X_C)
+    dh, dt = 1e-2 * h0, 1e-2 * t0
+
+    def f(h, t):
+        return _resolve(params, {H_C: h, X_C: t})[:2]
+
+    def hh(d):
+        return (f(h0 + d, t0) - 2 * f(h0, t0) + f(h0 - d, t0)) / d**2
+
+    def ht(a, b):
+        return (f(h0 + a, t0 + b) - f(h0 + a, t0 - b) - f(h0 - a, t0 + b) + f(h0 - a, t0 - b)) / (
+            4 * a * b
+        )
+
+    fd_hh = (4 * hh(dh / 2) - hh(dh)) / 3
+    fd_ht = (4 * ht(dh / 2, dt / 2) - ht(dh, dt)) / 3
+    for k, o in enumerate(("gain", "compression")):
+        assert result["second"][o][f"{H_C}|{H_C}"] == pytest.approx(fd_hh[k], rel=1e-4)
+        assert result["second"][o][f"{H_C}|{X_C}"] == pytest.approx(fd_ht[k], rel=1e-4)
+
+
+def test_taylor_remainder_falls_as_the_square_of_the_step(params, result):
+    h0 = params.value(H_C)
+    g0 = result["values"]["gain"]
+    grad = result["gradient"]["gain"][H_C]
+    errors = []
+    for step in (4e-2, 2e-2, 1e-2):
+        d = step * h0
+        errors.append(abs(_resolve(params, {H_C: h0 + d})[0] - (g0 + grad * d)))
+    ratios = np.array(errors[:-1]) / np.array(errors[1:])
+    np.testing.assert_allclose(ratios, 4.0, rtol=0.05)
+
+
+def test_bad_parameter_paths_are_named(params):
+    with pytest.raises(ParameterError, match="bodies.body9: no entry named"):
+        params.check("bodies.body9.mass")
+    with pytest.raises(ParameterError, match="not a number"):
+        params.check("hinges.a.a.body")
+
+
+def test_sensitivity_command_json(capsys):
+    assert (
+        main(
+            [
+                "sensitivity",
+                "microstage",
+                "--wrt",
+                "stiffness_models.notch.h,bodies.body4.mass",
+                "--of",
+                "gain,first_mode,peak_stress",
+                "--json",
+            ]
+        )
+        == 0
+    )
+    out = json.loads(capsys.readouterr().out)
+    assert out["gradient"]["gain"]["bodies.body4.mass"] == 0.0  # statics do not depend on mass
+    assert out["gradient"]["first_mode"]["bodies.body4.mass"] < 0
+    assert "stiffness_models.notch.h|bodies.body4.mass" in out["second"]["peak_stress"]
+    assert main(["sensitivity", "microstage", "--wrt", "nonsense.key"]) == 2
+    assert "nonsense: no such key" in capsys.readouterr().err
+
+
+def _replaced(mech, hinge=None, frame=None, index=None, value=None, body=None, mass=None):
+    """The engine's mechanism with one hinge frame coordinate or one body mass changed,
+    bypassing the file's coincidence check (a moved frame prestresses its hinge)."""
+    import dataclasses
+
+    if hinge is not None:
+        hinges = list(mech.hinges)
+        k = mech.hinge_index(hinge)
+        f = getattr(hinges[k], frame)
+        pos = list(f.position)
+        pos[index] = value
+        hinges[k] = dataclasses.replace(
+            hinges[k], **{frame: dataclasses.replace(f, position=tuple(pos))}
+        )
+        return dataclasses.replace(mech, hinges=tuple(hinges))
+    bodies = list(mech.bodies)
+    i = mech.body_index(body)
+    bodies[i] = dataclasses.replace(bodies[i], mass=mass)
+    return dataclasses.replace(mech, bodies=tuple(bodies))
+
+
+def test_derivatives_through_the_kinematics_and_the_mass_matrix(params):
+    """A hinge frame position flows through r(z) and the twistor; a mass only through M."""
+    mech = params.mechanism
+    path = "hinges.c.b.at.1"
+    res = sensitivities(
+        params, [path, "bodies.body4.mass"], ["gain", "compression", "first_mode"], U
+    )
+    y0 = params.value(path)
+
+    def solve(y):
+        sim = Simulation(_replaced(mech, "c", "b", 1, y))
+        snap = sim.static(U).snapshot
+        return np.array([snap.output / U, snap.compression])
+
+    fd = _richardson_first(solve, y0, 1e-6)
+    exact = [res["gradient"][o][path] for o in ("gain", "compression")]
+    np.testing.assert_allclose(exact, fd, rtol=1e-6)
+
+    m0 = params.value("bodies.body4.mass")
+
+    def first(m):
+        sim = Simulation(_replaced(mech, body="body4", mass=m))
+        return linear.modes(linear.linearize(sim, U, wrenches=False)).frequencies[0]
+
+    fd_m = _richardson_first(first, m0, 1e-2 * m0)
+    assert res["gradient"]["first_mode"]["bodies.body4.mass"] == pytest.approx(fd_m, rel=1e-6)
+
+
+def test_first_mode_sensitivity_of_a_mechanism_without_drive(capsys):
+    assert (
+        main(
+            [
+                "sensitivity",
+                "fourbar_mixed",
+                "--wrt",
+                "stiffness_models.notch.h",
+                "--of",
+                "first_mode",
+                "--json",
+            ]
+        )
+        == 0
+    )
+    out = json.loads(capsys.readouterr().out)
+    assert out["gradient"]["first_mode"]["stiffness_models.notch.h"] > 0  # thicker: stiffer
+    assert main(["sensitivity", "fourbar_mixed", "--wrt", "stiffness_models.notch.h"]) == 2
+    assert "names no output body" in capsys.readouterr().err

@@ -1,0 +1,136 @@
+"""Hinge stress: the notch and leaf formulas, the stage's stress ratios, the stroke limit."""
+
+import json
+
+import numpy as np
+import pytest
+
+from flexure_sim.cli import main
+from flexure_sim.engine import stress
+from flexure_sim.engine.design import Parameters
+from flexure_sim.engine.solver import Simulation
+
+
+def test_notch_concentration_factor_is_roarks_semicircular_u_notch_in_bending():
+    # Young & Budynas, "Roark's Formulas for Stress and Strain", 7th ed., Table 17.1, two
+    # U-notches in a member of rectangular section, in-plane bending, 0.25 <= h/r <= 2.0:
+    # C1 = 0.723 + 2.845 sqrt(h/r) - 0.504 h/r, C2 = -1.836 - 5.746 sqrt(h/r) + 1.314 h/r,
+    # C3 = 7.254 - 1.885 sqrt(h/r) + 1.646 h/r, C4 = -5.140 + 4.785 sqrt(h/r) - 2.456 h/r
+    # (as printed at eng-calculations.com, "two U-notches ... in-plane bending"). Semicircular
+    # notches h/r = 1: C = (3.064, -6.268, 7.015, -2.811), evaluated here by hand.
+    def published(x):
+        return 3.064 - 6.268 * x + 7.015 * x**2 - 2.811 * x**3
+
+    # Neck as thick as the holes (h = D): 2a/W = D / (2 D) = 0.5 -> 1.332375.
+    assert stress.notch_concentration(3e-3, 3e-3) == pytest.approx(1.332375, abs=1e-12)
+    # The stage's hinge, h = 0.25 mm, D = 3 mm: 2a/W = 3 / 3.25.
+    assert stress.notch_concentration(0.25e-3, 3e-3) == pytest.approx(
+        published(3 / 3.25), abs=1e-12
+    )
+    assert published(3 / 3.25) == pytest.approx(1.04450, abs=1e-5)
+    # A thin neck between large holes concentrates no stress (the coefficients sum to 1).
+    assert stress.notch_concentration(1e-12, 3e-3) == pytest.approx(1.0, abs=1e-6)
+    # Deep notches (h/r > 2) use the second row: h/r = 4, 2h/D = 0.5 gives
+    # C1 = 0.833 + 4.138 - 0.036, C2 = 0.024 - 10.766 + 0.504, C3 = -0.856 + 12.92 - 0.796,
+    # C4 = 0.999 - 6.292 + 0.328.
+    want = 4.935 + (-10.238) * 0.5 + 11.268 * 0.25 + (-4.965) * 0.125
+    assert stress.u_notch_bending_factor(4.0, 1.0, 16.0) == pytest.approx(want, abs=1e-12)
+    with pytest.raises(ValueError, match="outside Roark's range"):
+        stress.u_notch_bending_factor(0.1, 1.0, 4.0)
+
+
+def test_notch_stress_is_beam_bending_plus_axial_times_kt():
+    # 1 N m on a 0.25 mm x 20 mm neck: 6 M / (t h^2) = 6 / (0.02 * 6.25e-8) = 4.8 GPa nominal;
+    # 10 N axial: 10 / (0.02 * 2.5e-4) = 2 MPa. Shear force has no lever arm at the centre.
+    kt = stress.notch_concentration(0.25e-3, 3e-3)
+    s = stress.notch_stress(np.array([1.0, -10.0, 1e3]), 3e-3, 0.25e-3, 0.02)
+    assert s == pytest.approx(kt * (4.8e9 + 2e6), rel=1e-12)
+
+
+def test_leaf_stress_adds_the_shear_force_lever_arm():
+    # Leaf 10 mm x 1 mm x 5 mm: end moment |m| + |f_x| L/2 = 0.01 + 2 * 0.005 = 0.02 N m;
+    # 6 * 0.02 / (5e-3 * 1e-6) = 24 MPa; axial 5 N / 5e-6 m^2 = 1 MPa.
+    s = stress.leaf_stress(np.array([-0.01, 2.0, 5.0]), 0.010, 0.001, 0.005)
+    assert s == pytest.approx(25e6, rel=1e-12)
+
+
+def test_stage_stroke_limit_reaches_yield_exactly():
+    params = Parameters("microstage")
+    sim = Simulation(params.mechanism)
+    geometry = params.design().geometry
+    u, hinge = stress.stroke_limit(sim, geometry)
+    names = [h.name for h in params.mechanism.hinges]
+    table = stress.stress_table(sim.static(u).snapshot.wrenches, geometry, names)
+    assert stress.peak_ratio(table) == (hinge, pytest.approx(1.0, abs=1e-8))
+    assert u > sim.drive.stroke[1]  # the piezo's 2 um stroke is far from yield
+    # Stress grows nearly linearly with the input: the ratio at full stroke times the limit.
+    full = stress.peak_ratio(
+        stress.stress_table(sim.static(2e-6).snapshot.wrenches, geometry, names)
+    )[1]
+    assert u == pytest.approx(2e-6 / full, rel=1e-2)
+
+
+def test_simulate_static_shows_stress_and_stroke_limit_command(capsys):
+    import json
+
+    assert main(["simulate", "microstage", "--drive", "step:2e-6", "--static", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out["hinge_stress"]) == set("abcdefg")
+    assert out["hinge_stress"]["c"]["sigma_y"] == 276e6
+    assert main(["simulate", "microstage", "--stroke-limit"]) == 0
+    assert "stroke limit (first hinge at yield)" in capsys.readouterr().out
+    assert main(["simulate", "fourbar_mixed", "--stroke-limit"]) == 2
+    assert "has no drive" in capsys.readouterr().err
+
+
+def test_analyse_reports_the_peak_stress_ratio_of_each_step(tmp_path, capsys):
+    """A recorded stage run (tools_fixtures: the engine stepped as the node steps it, written
+    as the node writes it) analysed from the file, against the same schedule stepped here
+    with the engine and the stress of every tick's snapshot. The damping wrenches of the
+    transient make the peaks exceed the static ratio of the level (which they must reach)."""
+    from tools_fixtures import DEMO_LEVELS, record_stage_run
+
+    path = tmp_path / "stage.mcap"
+    record_stage_run(path)  # rest 10 ms, then each level for 20 ms, 1 kHz ticks of 10 steps
+    assert main(["analyse", str(path), "--json"]) == 0
+    steps = json.loads(capsys.readouterr().out)
+
+    params = Parameters("microstage")
+    geometry = params.design().geometry
+    names = [h.name for h in params.mechanism.hinges]
+    sim = Simulation(params.mechanism, dt=1e-4, relinearize_tol=1e-4)
+    expected = [(0.0, None)] * len(DEMO_LEVELS)
+    for tick in range(110):
+        if tick >= 10 and (tick - 10) % 20 == 0:
+            sim.set_command(DEMO_LEVELS[(tick - 10) // 20])
+        sim.step(10)
+        if tick >= 10:
+            k = (tick - 10) // 20
+            table = stress.stress_table(sim.snapshot().wrenches, geometry, names)
+            hinge, ratio = stress.peak_ratio(table)
+            if ratio > expected[k][0]:
+                expected[k] = (ratio, hinge)
+    for s, (ratio, hinge), level in zip(steps, expected, DEMO_LEVELS):
+        assert s["peak_stress"]["hinge"] == hinge
+        assert s["peak_stress"]["ratio"] == pytest.approx(ratio, rel=1e-9)
+        static = stress.peak_ratio(
+            stress.stress_table(sim.static(level).snapshot.wrenches, geometry, names)
+        )[1]
+        assert s["peak_stress"]["ratio"] >= static * (1 - 1e-6)
+    assert main(["analyse", str(path)]) == 0
+    assert "peak stress/yield" in capsys.readouterr().out
+
+
+def test_static_stress_with_a_polynomial_hinge_covers_the_notch_hinges(capsys):
+    """A fitted polynomial hinge has no geometry: no stress for it, the others as usual; the
+    analyses that need the generic force chain say why they cannot run."""
+    from flexure_sim.engine.config import resolve_mechanism_path
+
+    path = str(
+        resolve_mechanism_path("microstage").parent / "examples" / "microstage_polynomial_a.yaml"
+    )
+    assert main(["simulate", path, "--drive", "step:1e-6", "--static", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out["hinge_stress"]) == set("bcdefg")
+    assert main(["linearize", path, "-o", "model.npz"]) == 2
+    assert "not fitted polynomial laws" in capsys.readouterr().err
