@@ -18,6 +18,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ..errors import FlexureSimError
 from . import hyperdual as hd
 from .config import ConfigError, mechanism_from_dict, resolve_mechanism_path
 from .mechanism import Mechanism
@@ -31,7 +32,7 @@ _MODELS = {
 _LISTS_BY_NAME = ("bodies", "hinges")
 
 
-class ParameterError(ValueError):
+class ParameterError(FlexureSimError, ValueError):
     """A parameter path does not name a numeric key the analyses can vary (names it)."""
 
 
