@@ -20,6 +20,9 @@ the node decides when a file ends. If the node dies (even ``kill -9``), the chil
 finishes the open file, so it is complete; if both die, the chunks already written are
 readable (``read_log(path, recover=True)``).
 
+Test hook: with ``FLEXURE_SIM_RECORDER_WRITE_DELAY_S`` set in its environment, every write
+the child makes to the file's descriptor first sleeps that long (a slow or contended disk).
+
 The parent never blocks on the pipe while recording: frames go out through a non-blocking
 pipe (1 MiB where the system allows it); what does not fit waits in a bounded backlog, and
 beyond that ticks are dropped and counted.
@@ -28,6 +31,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import io
 import json
 import os
 import select
@@ -53,6 +57,8 @@ MAX_BACKLOG = 64 << 20
 #: How long open/close wait for the child's answer.
 ANSWER_TIMEOUT_S = 60.0
 _F_SETPIPE_SZ = 1031
+#: Environment variable of the test hook that slows every write of the file (seconds).
+WRITE_DELAY_ENV = "FLEXURE_SIM_RECORDER_WRITE_DELAY_S"
 #: Niceness the recorder process adds to its own (lower priority than the node's).
 RECORDER_NICE = 10
 
@@ -232,6 +238,26 @@ def _lower_priority() -> None:
         pass
 
 
+class _SlowFile(io.FileIO):
+    """A file whose every write first sleeps ``delay`` seconds (the test hook's slow disk)."""
+
+    delay = 0.0
+
+    def write(self, data: Any) -> Optional[int]:
+        time.sleep(self.delay)
+        return super().write(data)
+
+
+def _output(path: Path) -> Path | BinaryIO:
+    """What the recorder writes to: the path, or a slowed file when the test hook asks."""
+    delay = float(os.environ.get(WRITE_DELAY_ENV) or 0.0)
+    if delay <= 0.0:
+        return path
+    raw = _SlowFile(path, "xb")
+    raw.delay = delay
+    return io.BufferedWriter(raw)
+
+
 def _child(stdin: BinaryIO, stdout: BinaryIO) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, signal.SIG_IGN)
@@ -280,7 +306,7 @@ def _child(stdin: BinaryIO, stdout: BinaryIO) -> int:
                     if path.exists():
                         raise RecordingError(f"{path}: exists; recordings are never overwritten")
                     path.parent.mkdir(parents=True, exist_ok=True)
-                    new = McapRecorder(path)
+                    new = McapRecorder(_output(path))
                     try:
                         for name, type_name, qos in spec["topics"]:
                             new.add_topic(name, type_name, QosDescription.from_dict(qos))
