@@ -537,8 +537,9 @@ class StageNode(Node):
             topics.append((self._command_topic, self.interface.command.type_name, itf.command_qos()))
         if self._recorder_process is None or not self._recorder_process.alive():
             self._recorder_process = RecorderProcess()
+        # Real time may drop (counted) rather than stall the paced loop; other modes wait.
         self._recording = ProcessRecording(self._recorder_process, path, topics, self._metadata(values),
-                                           METADATA_NAME)
+                                           METADATA_NAME, lossless=self.time_mode != "realtime")
         self._recording_index += 1
         self._recording_error = ""
         self._recorded_files.append(str(path))
@@ -554,7 +555,7 @@ class StageNode(Node):
             self._recording_error = str(exc)
             self._log.error(f"recording {recording.path} could not be finished: {exc}")
             return recording.path
-        dropped = stats.get("dropped", 0) + recording.dropped_count
+        dropped = stats.get("dropped", 0)  # the child's count includes the node's drops
         self._log.info(f"closed {recording.path}: {stats.get('accepted', 0)} messages"
                        + (f", {dropped} dropped" if dropped else ""))
         return recording.path
