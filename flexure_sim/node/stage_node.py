@@ -20,7 +20,6 @@ import collections
 import concurrent.futures
 import datetime as _dt
 import gc
-import math
 import signal
 import sys
 import threading
@@ -51,7 +50,8 @@ from ..engine.config import ConfigError, load_mechanism, resolve_mechanism_path
 from ..recording import RecordingError
 from ..engine.solver import Simulation, SolverError
 from . import interface as itf
-from .drive_input import CommandFilter, CommandStatus, DriveLimits, WarningThrottle, parse_float64_cdr
+from .cdr import parse_float64
+from .drive_input import CommandFilter, CommandStatus, DriveLimits, WarningThrottle
 from .pacing import Pacer, set_thread_nice
 from .polled import PolledGroup, never_called, take_raw
 from .params import ParamSpec, parameter_specs, steps_per_tick, validate
@@ -496,9 +496,12 @@ class StageNode(Node):
         for data in commands:
             received.append((channel, data))
             try:
-                value = parse_float64_cdr(data)
-            except ValueError:
-                value = math.nan
+                value = parse_float64(data)
+            except ValueError as exc:  # not a Float64 we can read: refused, never a NaN
+                if filt is not None:
+                    filt.reject_malformed()
+                    self._warn("malformed", f"drive command rejected: {exc}")
+                continue
             if filt is None:
                 continue
             status = filt.submit(value)
