@@ -105,16 +105,18 @@ class RecorderProcess:
         self.max_backlog = int(os.environ.get(MAX_BACKLOG_ENV) or MAX_BACKLOG)
 
     # ------------------------------------------------------------------ pipe
-    def send(self, opcode: bytes, body: bytes, *, droppable: bool = False) -> bool:
-        """Queue one frame. Droppable frames are refused (False) when the backlog is full and
-        never wait for the pipe; others always go, waiting for the pipe if need be."""
+    def send(self, opcode: bytes, body: bytes, *, droppable: bool = False,
+             wait: bool = True) -> bool:
+        """Queue one frame and write what the pipe takes. A ``droppable`` frame is refused
+        (False) when the backlog is full. ``wait``: write the whole backlog, waiting for the
+        pipe; otherwise never wait (what does not fit stays in the backlog)."""
         frame = _HEADER.pack(opcode, len(body)) + body
         with self._lock:
             if droppable and self._backlog_bytes + len(frame) > self.max_backlog:
                 return False
             self._backlog.append(frame)
             self._backlog_bytes += len(frame)
-            self._flush(block=not droppable)
+            self._flush(block=wait)
         return True
 
     def _flush(self, block: bool) -> None:
@@ -244,10 +246,11 @@ class ProcessRecording:
         for channel, data in items:
             parts.append(_ITEM.pack(channel, len(data)))
             parts.append(data)
-        if self.process.send(b"B", b"".join(parts), droppable=not self.lossless):
+        lossless = self.lossless
+        if self.process.send(b"B", b"".join(parts), droppable=not lossless, wait=lossless):
             self.sent += len(items)
             if self._unreported:
-                self._report_dropped(wait=False)
+                self._report_dropped(wait=lossless)
             return True
         self.dropped += len(items)
         unreported = self._unreported
@@ -258,11 +261,13 @@ class ProcessRecording:
     def _report_dropped(self, wait: bool) -> None:
         """Tell the child how many messages per channel never reached it (for the file)."""
         body = json.dumps({str(c): n for c, n in self._unreported.items()}).encode()
-        if self.process.send(b"D", body, droppable=not wait):
-            self._unreported = {}
+        self.process.send(b"D", body, wait=wait)  # small, never dropped
+        self._unreported = {}
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
-        self.process.send(b"M", json.dumps({"name": name, "data": dict(data)}).encode())
+        """A Metadata record; never dropped, and in real time it never waits for the pipe."""
+        self.process.send(b"M", json.dumps({"name": name, "data": dict(data)}).encode(),
+                          wait=self.lossless)
 
     @property
     def accepted_count(self) -> int:
