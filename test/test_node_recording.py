@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import subprocess
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -17,7 +18,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from flexure_sim.node.record_process import MAX_BACKLOG_ENV, WRITE_DELAY_ENV
 from flexure_sim.recording import read_log
 
-from node_harness import ROOT, NodeProcess, Peer, diagnostics_values, next_domain_id
+from node_harness import ROOT, NodeProcess, Peer, diagnostics_values, next_domain_id, node_env
 
 PERIOD_NS = 5_000_000  # publish_rate 200 Hz
 TICK_TOPICS = (
@@ -29,33 +30,38 @@ DROPPED = "flexure_sim.dropped_messages"
 
 
 @pytest.fixture
-def domain() -> int:
-    return next_domain_id()
+def domain_peer() -> Iterator[tuple[int, Peer]]:
+    """A fresh DDS domain and a test peer node in it."""
+    domain = next_domain_id()
+    peer = Peer(domain)
+    try:
+        yield domain, peer
+    finally:
+        peer.close()
 
 
-@pytest.fixture
-def peer(domain):
-    p = Peer(domain)
-    yield p
-    p.close()
-
-
-def start(cwd: Path, domain: int, params: dict, **env: str) -> NodeProcess:
-    from node_harness import node_env
-    return NodeProcess(cwd, domain, params, env=node_env(
+def start(tmp_path: Path, domain_peer: tuple[int, Peer], time_mode: str, record_path: str,
+          **env: str) -> NodeProcess:
+    """The stage at 200 Hz recording to ``record_path`` (relative: in ``tmp_path/node``), with
+    extra environment variables (the recorder's test hooks), watched by the peer."""
+    domain, peer = domain_peer
+    cwd = tmp_path / "node"
+    params = dict(time_mode=time_mode, sim_step=5e-4, publish_rate=200.0,
+                  record_path=record_path)
+    node = NodeProcess(cwd, domain, params, env=node_env(
         domain, PYTHONPATH=str(ROOT), ROS_LOG_DIR=str(cwd / "ros_log"), **env))
+    peer.watch = node
+    return node
 
 
 def tick_stamps(log, topic: str) -> list[int]:
     return [m.log_time_ns for m in log.messages_on(topic)]
 
 
-def test_fast_mode_waits_for_a_slow_recorder_and_loses_nothing(tmp_path, domain, peer):
+def test_fast_mode_waits_for_a_slow_recorder_and_loses_nothing(tmp_path, domain_peer):
+    _, peer = domain_peer
     path = tmp_path / "node" / "fast.mcap"
-    node = start(tmp_path / "node", domain, dict(time_mode="fast", sim_step=5e-4,
-                                                 publish_rate=200.0, record_path="fast.mcap"),
-                 **{WRITE_DELAY_ENV: "0.2"})
-    peer.watch = node
+    node = start(tmp_path, domain_peer, "fast", "fast.mcap", **{WRITE_DELAY_ENV: "0.2"})
     try:
         peer.spin_until(lambda: path.exists() and path.stat().st_size > 3_000_000, 90,
                         "3 MB recorded through a slow disk")
@@ -75,12 +81,11 @@ def test_fast_mode_waits_for_a_slow_recorder_and_loses_nothing(tmp_path, domain,
     assert "dropped" not in node.stderr
 
 
-def test_real_time_drops_are_counted_in_diagnostics_and_file(tmp_path, domain, peer):
+def test_real_time_drops_are_counted_in_diagnostics_and_file(tmp_path, domain_peer):
+    _, peer = domain_peer
     path = tmp_path / "node" / "rt.mcap"
-    node = start(tmp_path / "node", domain, dict(time_mode="realtime", sim_step=5e-4,
-                                                 publish_rate=200.0, record_path="rt.mcap"),
+    node = start(tmp_path, domain_peer, "realtime", "rt.mcap",
                  **{WRITE_DELAY_ENV: "2.0", MAX_BACKLOG_ENV: str(64 << 10)})
-    peer.watch = node
     peer.subscribe("/diagnostics", DiagnosticArray)
 
     def dropping() -> bool:
@@ -126,11 +131,10 @@ def full_disk(tmp_path):
 
 
 def test_full_disk_is_one_error_line_no_traceback_and_the_node_goes_on(
-        tmp_path, domain, peer, full_disk):
+        tmp_path, domain_peer, full_disk):
+    _, peer = domain_peer
     path = full_disk / "run.mcap"
-    node = start(tmp_path / "node", domain, dict(time_mode="realtime", sim_step=5e-4,
-                                                 publish_rate=200.0, record_path=str(path)))
-    peer.watch = node
+    node = start(tmp_path, domain_peer, "realtime", str(path))
     peer.subscribe("/diagnostics", DiagnosticArray)
 
     def failed() -> bool:
