@@ -617,6 +617,41 @@ def test_full_queue_drops_are_counted_returned_and_recorded(tmp_path: Path) -> N
     )
 
 
+def test_batches_are_written_or_dropped_whole(tmp_path: Path) -> None:
+    read_fd, write_fd = os.pipe()
+    recorder = McapRecorder(os.fdopen(write_fd, "wb"), chunk_size=1024, queue_size=2,
+                            max_block_s=0.0)
+    for topic in ("/a", "/b"):
+        recorder.add_topic(topic, "std_msgs/msg/String")
+    big = serialize_message(String(data="x" * 200_000))  # larger than a pipe buffer
+    kept = [recorder.write_batch([("/a", big), ("/b", big)], i) for i in range(20)]
+    assert kept.count(False) >= 10
+    stats = recorder.stats
+    assert stats.dropped == {"/a": kept.count(False), "/b": kept.count(False)}
+    assert stats.accepted == {"/a": kept.count(True), "/b": kept.count(True)}
+    with pytest.raises(ValueError, match="/c"):
+        recorder.write_batch([("/a", big), ("/c", big)], 0)
+    drained = bytearray()
+
+    def drain() -> None:
+        with os.fdopen(read_fd, "rb") as source:
+            while chunk := source.read(1 << 16):
+                drained.extend(chunk)
+
+    reader_thread = threading.Thread(target=drain)
+    reader_thread.start()
+    recorder.close()
+    reader_thread.join(10)
+    path = tmp_path / "batches.mcap"
+    path.write_bytes(bytes(drained))
+    log = read_log(path, decode=False)
+    times = [i for i, ok in enumerate(kept) if ok]
+    assert [(m.topic, m.log_time_ns) for m in log.messages] == [
+        (t, i) for i in times for t in ("/a", "/b")]
+    assert log.bag_metadata["custom_data"]["flexure_sim.dropped_messages"] == str(
+        2 * kept.count(False))
+
+
 def test_write_errors_surface_as_recording_errors() -> None:
     with pytest.raises(RecordingError, match="No space left"):
         McapRecorder(open("/dev/full", "wb"))  # noqa: SIM115 - closed by the recorder

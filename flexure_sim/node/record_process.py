@@ -74,8 +74,8 @@ _F_SETPIPE_SZ = 1031
 #: Environment variables of the test hooks: seconds every write of the file takes; backlog.
 WRITE_DELAY_ENV = "FLEXURE_SIM_RECORDER_WRITE_DELAY_S"
 MAX_BACKLOG_ENV = "FLEXURE_SIM_RECORDER_MAX_BACKLOG"
-#: Messages the child's writer thread may have queued: the pipe is the real buffer.
-CHILD_QUEUE = 1000
+#: Ticks the child's writer thread may have queued: the pipe is the real buffer.
+CHILD_QUEUE = 64
 #: Niceness the recorder process adds to its own (lower priority than the node's).
 RECORDER_NICE = 10
 
@@ -386,12 +386,13 @@ def _child(stdin: BinaryIO, stdout: BinaryIO) -> int:
                     continue
                 (stamp,) = _STAMP.unpack_from(body, 0)
                 offset = _STAMP.size
-                write = recorder.write
+                messages = []
                 while offset < len(body):
                     channel, size = _ITEM.unpack_from(body, offset)
                     offset += _ITEM.size
-                    write(names[channel], body[offset:offset + size], stamp)
+                    messages.append((names[channel], body[offset:offset + size]))
                     offset += size
+                recorder.write_batch(messages, stamp)
             elif opcode == b"O":
                 spec = json.loads(body)
                 try:

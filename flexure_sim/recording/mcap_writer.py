@@ -123,7 +123,7 @@ class Close:
 class Worker:
     """The background thread and everything it owns. Holds no reference to the recorder.
 
-    Queue items: ``(channel_id, stamp_ns, payload)`` tuples (one message), `AddTopic`,
+    Queue items: ``(stamp_ns, [(channel_id, payload), ...])`` tuples (messages), `AddTopic`,
     `AddMetadata`, `Close`. ``dropped`` returns the total count of dropped messages when the
     bag metadata is written.
     """
@@ -198,10 +198,11 @@ class Worker:
                     self._flush()
                     continue
                 if type(item) is tuple:
-                    channel_id, stamp, payload = item
-                    counts[channel_id] += 1
-                    writer.add_message(channel_id, stamp, payload, stamp,
-                                       counts[channel_id] & 0xFFFFFFFF)
+                    stamp, messages = item
+                    for channel_id, payload in messages:
+                        counts[channel_id] += 1
+                        writer.add_message(channel_id, stamp, payload, stamp,
+                                           counts[channel_id] & 0xFFFFFFFF)
                     if self._start < 0 or stamp < self._start:
                         self._start = stamp
                     if stamp > self._end:

@@ -3,9 +3,10 @@
 The caller (the simulation loop) only enqueues; a background thread (`mcap_writer.Worker`,
 on the `mcap` library's ``Writer``) owns the file.
 
-Overflow policy: the queue holds ``queue_size`` messages. When it is full, `McapRecorder.write`
-waits at most ``max_block_s`` for room (``None``: as long as it takes, back-pressure that never
-drops), then drops the message, counts it per topic and returns False. Messages a producer
+Overflow policy: the queue holds ``queue_size`` batches (`McapRecorder.write_batch`, e.g. one
+tick; `write` queues a batch of one message). When it is full, a write waits at most
+``max_block_s`` for room (``None``: as long as it takes, back-pressure that never drops), then
+drops the batch, counts its messages per topic and returns False. Messages a producer
 dropped before they reached the recorder are added with `McapRecorder.add_dropped`. Drops are
 never silent: `McapRecorder.stats` exposes them and the bag metadata of the file records the
 total under ``custom_data['flexure_sim.dropped_messages']``.
@@ -228,31 +229,41 @@ class McapRecorder:
         never drops. Raises `RecorderClosedError` after `close`, `RecorderFailedError` if the
         writer thread failed.
         """
-        channel_id = self._channels.get(topic)
-        if channel_id is None:
-            raise ValueError(f"topic: {topic!r} was not added (call add_topic first)")
+        return self.write_batch(((topic, payload),), stamp_ns)
+
+    def write_batch(
+        self,
+        messages: Sequence[tuple[str, bytes | bytearray | memoryview]],
+        stamp_ns: int,
+    ) -> bool:
+        """Queue several messages (topic, CDR payload) with one log time, e.g. one tick of the
+        simulation: one queue entry, kept or dropped whole (as `write` says)."""
+        channels = self._channels
+        items = []
+        for topic, payload in messages:
+            channel_id = channels.get(topic)
+            if channel_id is None:
+                raise ValueError(f"topic: {topic!r} was not added (call add_topic first)")
+            items.append((channel_id, payload if isinstance(payload, bytes) else bytes(payload)))
         if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, int):
             raise ValueError(f"stamp_ns: expected an int of nanoseconds, got {stamp_ns!r}")
         if not 0 <= stamp_ns <= _MAX_STAMP:
             raise ValueError(f"stamp_ns: must be in [0, 2**64), got {stamp_ns}")
-        data = payload if isinstance(payload, bytes) else bytes(payload)
-        item = (channel_id, stamp_ns, data)
         worker = self._worker
         with self._lock:
             self._check_open()
             if worker.error is not None:
                 raise RecorderFailedError(f"MCAP writer failed: {describe(worker.error)}") \
                     from worker.error
-            if not self._enqueue(item):
-                with self._counters.lock:
-                    self._counters.dropped[topic] += 1
-                return False
+            kept = self._enqueue((stamp_ns, items))
+            counts = self._counters.accepted if kept else self._counters.dropped
             with self._counters.lock:
-                self._counters.accepted[topic] += 1
-        return True
+                for topic, _ in messages:
+                    counts[topic] += 1
+        return kept
 
-    def _enqueue(self, item: tuple[int, int, bytes]) -> bool:
-        """Put a message on the queue, waiting at most ``max_block_s`` for room (None: until
+    def _enqueue(self, item: tuple[int, list[tuple[int, bytes]]]) -> bool:
+        """Put a batch on the queue, waiting at most ``max_block_s`` for room (None: until
         there is room, unless the writer thread fails)."""
         pending = self._worker.queue
         try:
