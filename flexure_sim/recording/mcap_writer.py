@@ -4,10 +4,11 @@ The file is written by ``mcap.writer.Writer`` (profile ``ros2``, uncompressed ch
 CRCs, a data-section CRC, message and chunk indexes, statistics, summary offsets): the layout
 rosbag2 opens. The hand-written writer used before was not faster: on the node's write pattern
 (26 messages of 12-404 bytes per tick, 20 000 ticks, 1 MiB uncompressed chunks, one run on the
-shared 2-core machine, script in the commit message of this switch) the library took 6.6 µs
+shared 2-core machine, method in the commit message of this switch) the library took 6.6 µs
 per message (173 µs per tick), the hand-written one 7.0-7.5 µs (181-196 µs per tick).
-Schema and Channel records go into the chunk open when they are added, so each chunk a
-recovery reads is self-describing; the first chunk carries them on top of ``chunk_size``.
+Schema and Channel records go into the chunk open when they are added (so a recovered prefix
+of complete chunks holds its definitions); the first chunk carries them on top of
+``chunk_size``.
 
 Crash safety: the Writer finishes a chunk when it passes ``chunk_size`` bytes, and this thread
 calls ``Writer.flush()`` (mcap >= 1.6: finish the open chunk, flush the stream)
