@@ -1,6 +1,5 @@
 """Drive command validation (flexure_sim.node.drive_input), without ROS."""
 import math
-import struct
 
 import pytest
 
@@ -10,7 +9,6 @@ from flexure_sim.node.drive_input import (
     DriveLimits,
     WarningThrottle,
     limits_problem,
-    parse_float64_cdr,
 )
 
 STAGE = DriveLimits(0.0, 2e-6, 0.01)
@@ -20,7 +18,8 @@ def test_finite_commands_inside_the_stroke_are_accepted_unchanged():
     f = CommandFilter(STAGE)
     assert f.submit(1.35e-6) is CommandStatus.ACCEPTED
     assert f.target == 1.35e-6
-    assert f.counters.as_dict() == dict(received=1, accepted=1, clamped=0, rejected=0, rate_limited=0)
+    assert f.counters.as_dict() == dict(received=1, accepted=1, clamped=0, rejected=0, malformed=0,
+                                        rate_limited=0)
 
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf, float("nan"), "1e-6", None, True])
@@ -129,12 +128,10 @@ def test_warning_throttle_emits_once_per_interval_with_the_count_it_stands_for()
     assert throttle.event("rejected") is None
 
 
-def test_float64_cdr_parsing_matches_both_byte_orders():
-    for value in (0.0, 1.35e-6, -2.5, math.inf):
-        assert parse_float64_cdr(b"\x00\x01\x00\x00" + struct.pack("<d", value)) == value
-        assert parse_float64_cdr(b"\x00\x00\x00\x00" + struct.pack(">d", value)) == value
-    assert math.isnan(parse_float64_cdr(b"\x00\x01\x00\x00" + struct.pack("<d", math.nan)))
-    with pytest.raises(ValueError):
-        parse_float64_cdr(b"\x00\x01\x00\x00\x00")
-    with pytest.raises(ValueError):
-        parse_float64_cdr(b"\x00\x07\x00\x00" + bytes(8))
+def test_malformed_payloads_are_counted_as_rejected_and_keep_the_target():
+    f = CommandFilter(STAGE)
+    assert f.submit(1e-6) is CommandStatus.ACCEPTED
+    f.reject_malformed()
+    c = f.counters.as_dict()
+    assert (c["received"], c["accepted"], c["rejected"], c["malformed"]) == (2, 1, 1, 1)
+    assert f.target == 1e-6

@@ -551,10 +551,16 @@ def test_chunks_are_bounded_by_chunk_size(tmp_path: Path) -> None:
     record_standard_log(path, chunk_size=4096)
     with path.open("rb") as stream:
         summary = make_reader(stream).get_summary()
-    sizes = [ci.uncompressed_size for ci in summary.chunk_indexes]
+    sizes = [ci.uncompressed_size for ci in sorted(summary.chunk_indexes,
+                                                    key=lambda ci: ci.chunk_start_offset)]
     largest_message = 400  # a PoseArray record is well below this
     assert len(sizes) > 20
-    assert max(sizes) < 4096 + largest_message
+    assert max(sizes[1:]) < 4096 + largest_message
+    # mcap's Writer puts Schema and Channel records in the chunk open when they are added
+    # (so every recovered chunk prefix is self-describing): the first chunk carries them too.
+    definitions = sum(len(s.data) + len(s.name) + 64 for s in summary.schemas.values()) + sum(
+        1024 for _ in summary.channels)
+    assert sizes[0] < 4096 + largest_message + definitions
 
 
 def test_open_chunk_reaches_the_disk_within_the_chunk_interval(tmp_path: Path) -> None:
@@ -609,6 +615,41 @@ def test_full_queue_drops_are_counted_returned_and_recorded(tmp_path: Path) -> N
     assert log.bag_metadata["custom_data"]["flexure_sim.dropped_messages"] == str(
         accepted.count(False)
     )
+
+
+def test_batches_are_written_or_dropped_whole(tmp_path: Path) -> None:
+    read_fd, write_fd = os.pipe()
+    recorder = McapRecorder(os.fdopen(write_fd, "wb"), chunk_size=1024, queue_size=2,
+                            max_block_s=0.0)
+    for topic in ("/a", "/b"):
+        recorder.add_topic(topic, "std_msgs/msg/String")
+    big = serialize_message(String(data="x" * 200_000))  # larger than a pipe buffer
+    kept = [recorder.write_batch([("/a", big), ("/b", big)], i) for i in range(20)]
+    assert kept.count(False) >= 10
+    stats = recorder.stats
+    assert stats.dropped == {"/a": kept.count(False), "/b": kept.count(False)}
+    assert stats.accepted == {"/a": kept.count(True), "/b": kept.count(True)}
+    with pytest.raises(ValueError, match="/c"):
+        recorder.write_batch([("/a", big), ("/c", big)], 0)
+    drained = bytearray()
+
+    def drain() -> None:
+        with os.fdopen(read_fd, "rb") as source:
+            while chunk := source.read(1 << 16):
+                drained.extend(chunk)
+
+    reader_thread = threading.Thread(target=drain)
+    reader_thread.start()
+    recorder.close()
+    reader_thread.join(10)
+    path = tmp_path / "batches.mcap"
+    path.write_bytes(bytes(drained))
+    log = read_log(path, decode=False)
+    times = [i for i, ok in enumerate(kept) if ok]
+    assert [(m.topic, m.log_time_ns) for m in log.messages] == [
+        (t, i) for i in times for t in ("/a", "/b")]
+    assert log.bag_metadata["custom_data"]["flexure_sim.dropped_messages"] == str(
+        2 * kept.count(False))
 
 
 def test_write_errors_surface_as_recording_errors() -> None:

@@ -12,14 +12,59 @@ The packers write zeros into alignment padding, where serialize_message leaves w
 in its buffer; ``test/test_node_interface.py`` proves the output byte-identical to
 serialize_message everywhere else (and equal after deserialization) for every message type
 the node publishes.
+
+The packed layouts are used only where they are known to be what the middleware expects:
+`packing_applies` is true for the types in `PACKED_TYPES` under Fast DDS (rmw_fastrtps_*);
+otherwise the node serializes with ``rclpy.serialization.serialize_message``.
+
+`parse_float64` reads the drive commands. The encapsulation identifier (first two bytes,
+DDS-XTypes 1.3, 7.6.3.1.2) names the encoding: plain CDR (``00 00`` big-, ``00 01``
+little-endian) is read here (Fast DDS only); plain XCDR2 (``00 06``/``00 07``) and anything
+under another middleware go to ``rclpy.serialization.deserialize_message``; delimited XCDR2
+(``00 08``/``00 09``, an appendable type) is its 4-byte DHEADER followed by the plain XCDR2
+members, handed to rclpy as plain XCDR2. Parameter-list encodings (mutable types) and
+everything else are refused with ValueError, never turned into a number.
 """
 from __future__ import annotations
 
+import functools
+import os
 import struct
 from collections.abc import Sequence
 
 #: Encapsulation header of little-endian plain CDR (what rmw_fastrtps_cpp writes).
 CDR_LE = b"\x00\x01\x00\x00"
+#: Middlewares whose wire format the packers reproduce.
+FAST_DDS = ("rmw_fastrtps_cpp", "rmw_fastrtps_dynamic_cpp")
+#: Message types with a packer here (their layout is known).
+PACKED_TYPES = frozenset({
+    "rosgraph_msgs/msg/Clock", "std_msgs/msg/Float64", "geometry_msgs/msg/PoseStamped",
+    "geometry_msgs/msg/PoseArray", "geometry_msgs/msg/WrenchStamped",
+    "geometry_msgs/msg/TransformStamped", "diagnostic_msgs/msg/DiagnosticArray",
+})
+#: Encapsulation identifiers (DDS-XTypes 1.3, Table 60): name, byte order of the body.
+ENCAPSULATIONS = {
+    0x0000: ("CDR_BE", ">"), 0x0001: ("CDR_LE", "<"),
+    0x0002: ("PL_CDR_BE", ">"), 0x0003: ("PL_CDR_LE", "<"),
+    0x0006: ("CDR2_BE", ">"), 0x0007: ("CDR2_LE", "<"),
+    0x0008: ("D_CDR2_BE", ">"), 0x0009: ("D_CDR2_LE", "<"),
+    0x000A: ("PL_CDR2_BE", ">"), 0x000B: ("PL_CDR2_LE", "<"),
+}
+
+
+@functools.lru_cache(maxsize=1)
+def middleware() -> str:
+    """The rmw implementation rclpy loaded (``RMW_IMPLEMENTATION`` if rclpy cannot say)."""
+    try:
+        import rclpy
+        return rclpy.get_rmw_implementation_identifier()
+    except Exception:  # noqa: BLE001 - no rclpy or no rmw: the environment is all we know
+        return os.environ.get("RMW_IMPLEMENTATION") or "rmw_fastrtps_cpp"
+
+
+def packing_applies(type_name: str, rmw: str | None = None) -> bool:
+    """True if the node may publish ``type_name`` packed here rather than serialize it."""
+    return (rmw or middleware()) in FAST_DDS and type_name in PACKED_TYPES
 
 
 class _Layout:
@@ -188,3 +233,46 @@ def pack_diagnostics(
 def split_stamp(stamp_ns: int) -> tuple[int, int]:
     """Nanoseconds -> (sec, nanosec) as in builtin_interfaces/Time (stamp_ns >= 0)."""
     return divmod(stamp_ns, 1_000_000_000)
+
+
+_DOUBLE = {"<": struct.Struct("<d"), ">": struct.Struct(">d")}
+_UINT32 = {"<": struct.Struct("<I"), ">": struct.Struct(">I")}
+
+
+def parse_float64(data: bytes, rmw: str | None = None) -> float:
+    """The value of a serialized ``std_msgs/msg/Float64`` in any encoding named in the module
+    docstring. Raises ValueError naming the problem (unknown or unsupported encapsulation,
+    too short, not a Float64)."""
+    if len(data) < 4:
+        raise ValueError(f"{len(data)} bytes: too short for a serialized Float64")
+    kind = int.from_bytes(data[:2], "big")
+    name, order = ENCAPSULATIONS.get(kind, ("", "<"))
+    if not name:
+        raise ValueError(f"unknown CDR encapsulation {bytes(data[:2]).hex(' ')}")
+    if (rmw or middleware()) not in FAST_DDS:
+        return _deserialize(data, name)
+    if name in ("CDR_BE", "CDR_LE"):
+        if len(data) < 12:
+            raise ValueError(f"{name}: a Float64 needs 12 bytes, got {len(data)}")
+        return _DOUBLE[order].unpack_from(data, 4)[0]
+    if name in ("CDR2_BE", "CDR2_LE"):
+        return _deserialize(data, name)
+    if name in ("D_CDR2_BE", "D_CDR2_LE"):
+        if len(data) < 8:
+            raise ValueError(f"{name}: {len(data)} bytes, too short for a DHEADER")
+        (size,) = _UINT32[order].unpack_from(data, 4)
+        if not 0 <= len(data) - 8 - size < 4:  # the members, then at most end padding
+            raise ValueError(f"{name}: DHEADER says {size} bytes, {len(data) - 8} follow")
+        plain = (0x0006 if order == ">" else 0x0007).to_bytes(2, "big") + bytes(data[2:4])
+        return _deserialize(plain + bytes(data[8:8 + size]), name)
+    raise ValueError(f"{name}: parameter-list encoding (mutable types) not supported")
+
+
+def _deserialize(data: bytes, name: str) -> float:
+    """rclpy's deserialisation (the middleware's own type support) of a Float64."""
+    from rclpy.serialization import deserialize_message
+    from std_msgs.msg import Float64
+    try:
+        return float(deserialize_message(bytes(data), Float64).data)
+    except Exception as exc:  # noqa: BLE001 - rclpy raises RMWError or others on bad bytes
+        raise ValueError(f"{name}: not a Float64 ({type(exc).__name__})") from None

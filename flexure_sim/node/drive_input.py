@@ -19,15 +19,10 @@ outputs.
 from __future__ import annotations
 
 import math
-import struct
 import time
 from dataclasses import dataclass, fields
 from enum import Enum
 from typing import Callable, Optional
-
-
-_LE = struct.Struct("<d")
-_BE = struct.Struct(">d")
 
 
 class CommandStatus(Enum):
@@ -76,7 +71,8 @@ class CommandCounters:
     """Counts since the filter was created (they survive `CommandFilter.reset`).
 
     received: every command submitted; accepted: finite ones (clamped included);
-    clamped: finite but outside the stroke; rejected: NaN or +-Inf;
+    clamped: finite but outside the stroke; rejected: NaN or +-Inf, and malformed ones;
+    malformed: payloads that are not a Float64 in an encoding the node reads (`cdr`);
     rate_limited: accepted commands the actuator could not reach within one publish period
     at its slew rate (so the engine sees a ramp).
     """
@@ -85,6 +81,7 @@ class CommandCounters:
     accepted: int = 0
     clamped: int = 0
     rejected: int = 0
+    malformed: int = 0
     rate_limited: int = 0
 
     def as_dict(self) -> dict[str, int]:
@@ -126,7 +123,8 @@ class CommandFilter:
         """Validate one command; on success it becomes the new target."""
         c = self.counters
         c.received += 1
-        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+        if (not isinstance(value, (int, float)) or isinstance(value, bool)
+                or not math.isfinite(value)):
             c.rejected += 1
             return CommandStatus.REJECTED
         value = float(value)
@@ -138,6 +136,13 @@ class CommandFilter:
             c.clamped += 1
             return CommandStatus.CLAMPED
         return CommandStatus.ACCEPTED
+
+    def reject_malformed(self) -> None:
+        """Count a received payload that could not be read as a command (the target stays)."""
+        c = self.counters
+        c.received += 1
+        c.rejected += 1
+        c.malformed += 1
 
     def begin_tick(self, period: float) -> bool:
         """Start of a publish tick of ``period`` seconds: count the new target as rate-limited
@@ -176,7 +181,9 @@ class WarningThrottle:
     """At most one warning per kind every ``interval_s`` (wall clock), with the number of
     events it stands for. ``clock`` is injectable for tests."""
 
-    def __init__(self, interval_s: float = 1.0, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self, interval_s: float = 1.0, clock: Callable[[], float] = time.monotonic
+    ) -> None:
         self.interval_s = float(interval_s)
         self._clock = clock
         self._last: dict[str, float] = {}
@@ -194,13 +201,3 @@ class WarningThrottle:
         self._last[kind] = now
         self._pending[kind] = 0
         return pending
-
-
-def parse_float64_cdr(data: bytes) -> float:
-    """The value of a CDR-serialized ``std_msgs/msg/Float64`` (4-byte encapsulation header,
-    then the float64 in the byte order the header names). Raises ValueError if malformed."""
-    if len(data) < 12:
-        raise ValueError(f"a serialized Float64 needs 12 bytes, got {len(data)}")
-    if data[0] != 0 or data[1] not in (0, 1):
-        raise ValueError(f"unsupported CDR encapsulation {bytes(data[:2]).hex()}")
-    return _LE.unpack_from(data, 4)[0] if data[1] == 1 else _BE.unpack_from(data, 4)[0]

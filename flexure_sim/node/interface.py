@@ -3,7 +3,9 @@ and the conversion of an engine ``Snapshot`` into messages.
 
 Two equivalent conversions exist: `StageInterface.messages` builds rclpy message objects
 (the reference, readable), `StageInterface.encode` packs the same messages straight to CDR
-bytes (what the node publishes and records; see `cdr`). Tests prove them identical.
+bytes (what the node publishes and records; see `cdr`). Tests prove them identical. Where
+the packed layouts do not apply (middleware other than Fast DDS, a type without a packer:
+`cdr.packing_applies`), `encode` serializes the reference messages with serialize_message.
 
 Conventions (README "## stage_node"):
 - frames: root ``stage``; one frame per body, named after it; per hinge ``hinge_<name>``
@@ -21,13 +23,15 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Pose, PoseArray, PoseStamped, TransformStamped, WrenchStamped
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from ..engine.mechanism import Mechanism
 from .. import topics
 from ..topics import ROOT_FRAME, hinge_frame, hinge_frame_a
-from .cdr import ClockPacker, Float64Packer, StampedPacker, pack_diagnostics, split_stamp
+from .cdr import (
+    ClockPacker, Float64Packer, StampedPacker, pack_diagnostics, packing_applies, split_stamp)
 
 TIME_MODES = ("realtime", "fast", "lockstep")
 #: Modes in which the node publishes /clock (simulated time is not wall time).
@@ -171,6 +175,8 @@ class StageInterface:
                                  "drive command (subscribed): target actuator displacement "
                                  "along the drive axis")
         self._build_packers()
+        #: True: `encode` packs (Fast DDS, every layout known); False: serialize_message.
+        self.packed = all(packing_applies(spec.type_name) for spec in self.tick_topics)
 
     # ---------------------------------------------------------------- packing
     def _build_packers(self) -> None:
@@ -199,6 +205,8 @@ class StageInterface:
 
     def encode(self, snap: Any, stamp_ns: int) -> list[bytes]:
         """CDR payloads of every tick topic, in `tick_topics` order, stamped ``stamp_ns``."""
+        if not self.packed:
+            return [serialize_message(m) for m in self.messages(snap, stamp_ns)]
         sec, nsec = split_stamp(stamp_ns)
         out: list[bytes] = []
         if self.publishes_clock:
@@ -295,7 +303,11 @@ def encode_diagnostics(
     message: str,
     values: Sequence[tuple[str, Any]],
 ) -> bytes:
-    """CDR of `diagnostics_message` with the same arguments, packed by `cdr.pack_diagnostics`."""
+    """CDR of `diagnostics_message` with the same arguments, packed by `cdr.pack_diagnostics`
+    (serialized by serialize_message where packing does not apply)."""
+    if not packing_applies("diagnostic_msgs/msg/DiagnosticArray"):
+        return serialize_message(
+            diagnostics_message(stamp_ns, name, hardware_id, level, message, values))
     sec, nsec = split_stamp(stamp_ns)
     return pack_diagnostics(sec, nsec, level, name, message, hardware_id,
                             [(k, value_text(v)) for k, v in values])

@@ -3,7 +3,7 @@
 At 1 kHz the node records ~26 000 messages/s. `McapRecorder` already writes on a background
 thread, but in the node's process that thread competes with the stepping loop for the GIL
 (~8 us per message, ~200 us per 1 ms tick). So the node runs the recorder in a child process
-(``python -m flexure_sim.node.record_process``, using the recording layer's public API) and
+(``python -m flexure_sim.node.record_child``, using the recording layer's public API) and
 hands it each tick's payloads as one frame on a pipe: a few microseconds per tick.
 
 Protocol on the child's stdin, frames of ``<opcode:1><length:u32 LE><body>``:
@@ -12,17 +12,31 @@ Protocol on the child's stdin, frames of ``<opcode:1><length:u32 LE><body>``:
 - ``B`` batch: ``<stamp:u64>`` then per message ``<channel:u16><size:u32><cdr bytes>``
   (channel = index into the topics of the open file)
 - ``M`` metadata: JSON {name, data}
+- ``D`` dropped: JSON {channel index: count} of messages the parent could not send
 - ``C`` close the file; ``Q`` quit.
 
 ``O`` and ``C`` are answered with one JSON line on the child's stdout ({"ok": true, ...} or
 {"ok": false, "error": ...}). The child runs in its own session and ignores SIGINT/SIGTERM:
 the node decides when a file ends. If the node dies (even ``kill -9``), the child reads EOF and
 finishes the open file, so it is complete; if both die, the chunks already written are
-readable (``read_log(path, recover=True)``).
+readable (``read_log(path, recover=True)``). If the file cannot be written (a full disk), the
+child leaves one line {"ok": false, "error": "<file>: <reason>"} on its stdout and exits 1,
+with no traceback; the parent's next frame fails with that reason (`RecordingError`), and the
+chunks already written stay readable.
 
-The parent never blocks on the pipe while recording: frames go out through a non-blocking
-pipe (1 MiB where the system allows it); what does not fit waits in a bounded backlog, and
-beyond that ticks are dropped and counted.
+Test hooks (environment): ``FLEXURE_SIM_RECORDER_WRITE_DELAY_S`` makes every write the child
+makes to the file's descriptor first sleep that long (a slow or contended disk);
+``FLEXURE_SIM_RECORDER_MAX_BACKLOG`` (bytes) replaces `MAX_BACKLOG` in the node's process.
+
+Loss policy. The child never drops: when its writer falls behind it stops reading the pipe.
+A `ProcessRecording` made ``lossless`` (fast and lockstep modes, which have no deadline) then
+waits for the pipe: back-pressure slows the simulation, nothing is lost. One that is not
+(real-time mode) must not stall the paced loop: frames go out through a non-blocking pipe
+(1 MiB where the system allows it), what does not fit waits in a backlog of at most
+`MAX_BACKLOG` bytes, and beyond that whole ticks are dropped. Every dropped message is counted
+(`ProcessRecording.dropped_count`, which the node reports as ``recording_dropped``) and sent
+to the child (``D``), which adds it to the file's dropped count (bag metadata
+``custom_data['flexure_sim.dropped_messages']``, printed by ``flexure-sim info``).
 """
 from __future__ import annotations
 
@@ -31,7 +45,6 @@ import fcntl
 import json
 import os
 import select
-import signal
 import struct
 import subprocess
 import sys
@@ -40,19 +53,25 @@ import time
 from collections import deque
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, BinaryIO, Optional
+from typing import Any
 
-from ..recording import McapRecorder, QosDescription, RecordingError
+from ..recording import RecordingError
 from ..recording.qos import as_qos_description
 
-_HEADER = struct.Struct("<cI")
-_STAMP = struct.Struct("<Q")
-_ITEM = struct.Struct("<HI")
-#: Bytes of frames kept in the parent when the pipe is full, before ticks are dropped.
+FRAME_HEADER = struct.Struct("<cI")
+FRAME_STAMP = struct.Struct("<Q")
+FRAME_ITEM = struct.Struct("<HI")
+#: Bytes of frames kept in the parent when the pipe is full, before ticks are dropped (only
+#: for recordings that are not lossless).
 MAX_BACKLOG = 64 << 20
 #: How long open/close wait for the child's answer.
 ANSWER_TIMEOUT_S = 60.0
 _F_SETPIPE_SZ = 1031
+#: Environment variables of the test hooks: seconds every write of the file takes; backlog.
+WRITE_DELAY_ENV = "FLEXURE_SIM_RECORDER_WRITE_DELAY_S"
+MAX_BACKLOG_ENV = "FLEXURE_SIM_RECORDER_MAX_BACKLOG"
+#: Ticks the child's writer thread may have queued: the pipe is the real buffer.
+CHILD_QUEUE = 64
 #: Niceness the recorder process adds to its own (lower priority than the node's).
 RECORDER_NICE = 10
 
@@ -63,9 +82,9 @@ class RecorderProcess:
     def __init__(self) -> None:
         env = dict(os.environ)
         package_root = str(Path(__file__).resolve().parents[2])
-        env["PYTHONPATH"] = package_root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH")) if p)
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "flexure_sim.node.record_process"],
+            [sys.executable, "-m", "flexure_sim.node.record_child"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, start_new_session=True,
             bufsize=0,
         )
@@ -79,20 +98,21 @@ class RecorderProcess:
         self._backlog: deque[bytes] = deque()
         self._backlog_bytes = 0
         self._blocking = True
-        self.dropped_ticks = 0
+        self.max_backlog = int(os.environ.get(MAX_BACKLOG_ENV) or MAX_BACKLOG)
 
     # ------------------------------------------------------------------ pipe
-    def send(self, opcode: bytes, body: bytes, *, droppable: bool = False) -> bool:
-        """Queue one frame. Droppable frames (message batches) are refused when the backlog is
-        full; others always go (blocking if need be)."""
-        frame = _HEADER.pack(opcode, len(body)) + body
+    def send(self, opcode: bytes, body: bytes, *, droppable: bool = False,
+             wait: bool = True) -> bool:
+        """Queue one frame and write what the pipe takes. A ``droppable`` frame is refused
+        (False) when the backlog is full. ``wait``: write the whole backlog, waiting for the
+        pipe; otherwise never wait (what does not fit stays in the backlog)."""
+        frame = FRAME_HEADER.pack(opcode, len(body)) + body
         with self._lock:
-            if droppable and self._backlog_bytes + len(frame) > MAX_BACKLOG:
-                self.dropped_ticks += 1
+            if droppable and self._backlog_bytes + len(frame) > self.max_backlog:
                 return False
             self._backlog.append(frame)
             self._backlog_bytes += len(frame)
-            self._flush(block=not droppable)
+            self._flush(block=wait)
         return True
 
     def _flush(self, block: bool) -> None:
@@ -107,7 +127,7 @@ class RecorderProcess:
             except BlockingIOError:
                 return
             except BrokenPipeError as exc:
-                raise RecordingError(f"the recorder process exited ({self.proc.poll()})") from exc
+                raise RecordingError(self.exit_reason()) from exc
             except OSError as exc:
                 if exc.errno == errno.EAGAIN:
                     return
@@ -130,9 +150,35 @@ class RecorderProcess:
                 raise RecordingError(f"the recorder process did not answer within {timeout:g} s")
             chunk = os.read(fd, 65536)
             if not chunk:
-                raise RecordingError(f"the recorder process exited (exit code {self.proc.poll()})")
+                raise RecordingError(self.exit_reason(line))
             line += chunk
         return json.loads(line)
+
+    def exit_reason(self, pending: bytes = b"") -> str:
+        """Why the child stopped: the error it left on its stdout, else its exit code."""
+        assert self.proc.stdout is not None
+        fd = self.proc.stdout.fileno()
+        text = pending
+        try:
+            while select.select([fd], [], [], 1.0)[0]:
+                chunk = os.read(fd, 65536)
+                if not chunk:
+                    break
+                text += chunk
+        except OSError:
+            pass
+        for line in reversed(text.splitlines()):
+            try:
+                error = json.loads(line).get("error")
+            except (ValueError, AttributeError):
+                continue
+            if error:
+                return f"the recorder process stopped: {error}"
+        try:
+            code = self.proc.wait(5)
+        except subprocess.TimeoutExpired:
+            code = None
+        return f"the recorder process exited (exit code {code})"
 
     def quit(self, timeout: float = 30.0) -> None:
         try:
@@ -152,10 +198,12 @@ class RecorderProcess:
 
 
 class ProcessRecording:
-    """One MCAP file written by a `RecorderProcess`; same role as `session.RunRecording`.
+    """One MCAP file written by a `RecorderProcess`.
 
     ``topics``: (absolute name, ``pkg/msg/Type``, QoS) in channel order; `write_batch` takes
-    the payloads of one tick as (channel index, bytes) pairs.
+    the payloads of one tick as (channel index, bytes) pairs. ``lossless`` (default): wait for
+    the recorder rather than drop (fast and lockstep modes); False: never wait, drop whole
+    batches the pipe and backlog cannot take and count them (real-time mode).
     """
 
     def __init__(
@@ -165,13 +213,16 @@ class ProcessRecording:
         topics: Sequence[tuple[str, str, Any]],
         metadata: Mapping[str, str],
         metadata_name: str,
+        *,
+        lossless: bool = True,
     ) -> None:
         self.process = process
         self.path = Path(path)
-        self.index = {name: i for i, (name, _, _) in enumerate(topics)}
+        self.lossless = lossless
         spec = {
             "path": str(self.path.resolve()),
-            "topics": [[name, type_name, as_qos_description(qos).to_dict()] for name, type_name, qos in topics],
+            "topics": [[name, type_name, as_qos_description(qos).to_dict()]
+                       for name, type_name, qos in topics],
             "metadata": {metadata_name: dict(metadata)},
         }
         process.send(b"O", json.dumps(spec).encode())
@@ -180,25 +231,39 @@ class ProcessRecording:
             raise RecordingError(reply.get("error", "the recorder process refused the file"))
         self.sent = 0
         self.dropped = 0
+        self._unreported: dict[int, int] = {}  # channel -> dropped, not yet sent to the child
         self._closed = False
 
     def write_batch(self, items: Sequence[tuple[int, bytes]], stamp: int) -> bool:
-        """Send one tick's messages (channel index, CDR bytes), log time ``stamp`` (ns)."""
-        parts = [_STAMP.pack(stamp)]
+        """Send one tick's messages (channel index, CDR bytes), log time ``stamp`` (ns).
+
+        False if the batch was dropped (only when not ``lossless``; counted)."""
+        parts = [FRAME_STAMP.pack(stamp)]
         for channel, data in items:
-            parts.append(_ITEM.pack(channel, len(data)))
+            parts.append(FRAME_ITEM.pack(channel, len(data)))
             parts.append(data)
-        if self.process.send(b"B", b"".join(parts), droppable=True):
+        lossless = self.lossless
+        if self.process.send(b"B", b"".join(parts), droppable=not lossless, wait=lossless):
             self.sent += len(items)
+            if self._unreported:
+                self._report_dropped(wait=lossless)
             return True
         self.dropped += len(items)
+        unreported = self._unreported
+        for channel, _ in items:
+            unreported[channel] = unreported.get(channel, 0) + 1
         return False
 
-    def write(self, topic: str, payload: bytes, stamp: int) -> bool:
-        return self.write_batch(((self.index[topic], payload),), stamp)
+    def _report_dropped(self, wait: bool) -> None:
+        """Tell the child how many messages per channel never reached it (for the file)."""
+        body = json.dumps({str(c): n for c, n in self._unreported.items()}).encode()
+        self.process.send(b"D", body, wait=wait)  # small, never dropped
+        self._unreported = {}
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
-        self.process.send(b"M", json.dumps({"name": name, "data": dict(data)}).encode())
+        """A Metadata record; never dropped, and in real time it never waits for the pipe."""
+        self.process.send(b"M", json.dumps({"name": name, "data": dict(data)}).encode(),
+                          wait=self.lossless)
 
     @property
     def accepted_count(self) -> int:
@@ -209,113 +274,16 @@ class ProcessRecording:
         return self.dropped
 
     def close(self) -> dict[str, Any]:
-        """Finish the file; returns the child's counts. Raises RecordingError on failure."""
+        """Finish the file; returns the child's counts (``dropped``: every message dropped on
+        the way, the parent's included). Raises RecordingError on failure."""
         if self._closed:
             return {}
         self._closed = True
+        if self._unreported:
+            self._report_dropped(wait=True)
         self.process.send(b"C", b"")
         reply = self.process.answer()
         if not reply.get("ok"):
-            raise RecordingError(reply.get("error", "the recorder process could not finish the file"))
+            raise RecordingError(
+                reply.get("error", "the recorder process could not finish the file"))
         return reply
-
-
-# ============================================================================ child
-def _lower_priority() -> None:
-    """Let the node's paced thread take a shared core from the recorder as soon as it wakes.
-    The recorder works in bursts (a compressed chunk every few hundred ms) that, at equal
-    priority, the scheduler may let finish first: a late tick. The pipe and the backlog
-    absorb the recorder's delay instead."""
-    try:
-        os.nice(RECORDER_NICE)
-    except OSError:
-        pass
-
-
-def _child(stdin: BinaryIO, stdout: BinaryIO) -> int:
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, signal.SIG_IGN)
-    _lower_priority()
-    recorder: Optional[McapRecorder] = None
-    names: list[str] = []
-
-    def reply(obj: dict[str, Any]) -> None:
-        stdout.write(json.dumps(obj).encode() + b"\n")
-        stdout.flush()
-
-    def read_exact(n: int) -> Optional[bytes]:
-        chunks, got = [], 0
-        while got < n:
-            chunk = stdin.read(n - got)
-            if not chunk:
-                return None
-            chunks.append(chunk)
-            got += len(chunk)
-        return b"".join(chunks)
-
-    try:
-        while True:
-            header = read_exact(_HEADER.size)
-            if header is None:
-                break  # the node is gone: finish the file below
-            opcode, length = _HEADER.unpack(header)
-            body = read_exact(length) if length else b""
-            if body is None:
-                break
-            if opcode == b"B":
-                if recorder is None:
-                    continue
-                (stamp,) = _STAMP.unpack_from(body, 0)
-                offset = _STAMP.size
-                write = recorder.write
-                while offset < len(body):
-                    channel, size = _ITEM.unpack_from(body, offset)
-                    offset += _ITEM.size
-                    write(names[channel], body[offset:offset + size], stamp)
-                    offset += size
-            elif opcode == b"O":
-                spec = json.loads(body)
-                try:
-                    path = Path(spec["path"])
-                    if path.exists():
-                        raise RecordingError(f"{path}: exists; recordings are never overwritten")
-                    path.parent.mkdir(parents=True, exist_ok=True)
-                    new = McapRecorder(path)
-                    try:
-                        for name, type_name, qos in spec["topics"]:
-                            new.add_topic(name, type_name, QosDescription.from_dict(qos))
-                        for name, data in spec["metadata"].items():
-                            new.add_metadata(name, data)
-                    except BaseException:
-                        new.close()
-                        raise
-                except (RecordingError, OSError, ValueError) as exc:
-                    reply({"ok": False, "error": str(exc)})
-                    continue
-                recorder, names = new, [t[0] for t in spec["topics"]]
-                reply({"ok": True})
-            elif opcode == b"M":
-                if recorder is not None:
-                    item = json.loads(body)
-                    recorder.add_metadata(item["name"], item["data"])
-            elif opcode == b"C":
-                if recorder is None:
-                    reply({"ok": True, "accepted": 0, "dropped": 0})
-                    continue
-                current, recorder = recorder, None
-                try:
-                    stats = current.close()
-                except RecordingError as exc:
-                    reply({"ok": False, "error": str(exc)})
-                    continue
-                reply({"ok": True, "accepted": stats.accepted_count, "dropped": stats.dropped_count})
-            elif opcode == b"Q":
-                break
-    finally:
-        if recorder is not None:
-            recorder.close()
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(_child(sys.stdin.buffer, sys.stdout.buffer))

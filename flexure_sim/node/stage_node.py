@@ -20,7 +20,6 @@ import collections
 import concurrent.futures
 import datetime as _dt
 import gc
-import math
 import signal
 import sys
 import threading
@@ -52,7 +51,8 @@ from ..engine.config import ConfigError, load_mechanism, resolve_mechanism_path
 from ..recording import RecordingError
 from ..engine.solver import Simulation, SolverError
 from . import interface as itf
-from .drive_input import CommandFilter, CommandStatus, DriveLimits, WarningThrottle, parse_float64_cdr
+from .cdr import parse_float64
+from .drive_input import CommandFilter, CommandStatus, DriveLimits, WarningThrottle
 from .pacing import Pacer, set_thread_nice
 from .polled import PolledGroup, never_called, take_raw
 from .params import ParamSpec, as_declared_type, parameter_specs, steps_per_tick, validate
@@ -506,9 +506,12 @@ class StageNode(Node):
         for data in commands:
             received.append((channel, data))
             try:
-                value = parse_float64_cdr(data)
-            except ValueError:
-                value = math.nan
+                value = parse_float64(data)
+            except ValueError as exc:  # not a Float64 we can read: refused, never a NaN
+                if filt is not None:
+                    filt.reject_malformed()
+                    self._warn("malformed", f"drive command rejected: {exc}")
+                continue
             if filt is None:
                 continue
             status = filt.submit(value)
@@ -547,8 +550,9 @@ class StageNode(Node):
             topics.append((self._command_topic, self.interface.command.type_name, itf.command_qos()))
         if self._recorder_process is None or not self._recorder_process.alive():
             self._recorder_process = RecorderProcess()
+        # Real time may drop (counted) rather than stall the paced loop; other modes wait.
         self._recording = ProcessRecording(self._recorder_process, path, topics, self._metadata(values),
-                                           METADATA_NAME)
+                                           METADATA_NAME, lossless=self.time_mode != "realtime")
         self._recording_index += 1
         self._recording_error = ""
         self._recorded_files.append(str(path))
@@ -564,7 +568,7 @@ class StageNode(Node):
             self._recording_error = str(exc)
             self._log.error(f"recording {recording.path} could not be finished: {exc}")
             return recording.path
-        dropped = stats.get("dropped", 0) + recording.dropped_count
+        dropped = stats.get("dropped", 0)  # the child's count includes the node's drops
         self._log.info(f"closed {recording.path}: {stats.get('accepted', 0)} messages"
                        + (f", {dropped} dropped" if dropped else ""))
         return recording.path

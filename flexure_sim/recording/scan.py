@@ -116,9 +116,13 @@ def scan_file(path: Path) -> FileScan:
         except CRCValidationError as exc:
             scan.cause = exc
             scan.problem = f"damaged: {exc} (record at byte {start})"
-        except RecordLengthLimitExceeded as exc:
+        except RecordLengthLimitExceeded as exc:  # a cut file, or a damaged length field
+            scan.truncated = True
             scan.cause = exc
-            scan.problem = f"damaged: the record at byte {start} is longer than the file ({exc})"
+            scan.problem = (
+                f"truncated: the file ({total} bytes) ends inside the record that starts at "
+                f"byte {start} (or its length field is damaged: {exc})"
+            )
         except Exception as exc:  # any parse failure of damaged bytes
             scan.cause = exc
             scan.problem = (

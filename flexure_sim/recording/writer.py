@@ -1,26 +1,27 @@
 """`McapRecorder`: records serialized ROS 2 messages to an MCAP file as rosbag2 (Jazzy) does.
 
-The caller (the simulation loop) only enqueues; a background thread owns the file.
+The caller (the simulation loop) only enqueues; a background thread (`mcap_writer.Worker`,
+on the `mcap` library's ``Writer``) owns the file.
 
-Overflow policy: the queue holds ``queue_size`` messages. When it is full, `McapRecorder.write`
-waits at most ``max_block_s`` for room, then drops the message, counts it per topic and returns
-False. Drops are never silent: `McapRecorder.stats` exposes them and the bag metadata of the file
-records the total under ``custom_data['flexure_sim.dropped_messages']``.
+Overflow policy: the queue holds ``queue_size`` batches (`McapRecorder.write_batch`, e.g. one
+tick; `write` queues a batch of one message). When it is full, a write waits at most
+``max_block_s`` for room (``None``: as long as it takes, back-pressure that never drops), then
+drops the batch, counts its messages per topic and returns False. Messages a producer
+dropped before they reached the recorder are added with `McapRecorder.add_dropped`. Drops are
+never silent: `McapRecorder.stats` exposes them and the bag metadata of the file records the
+total under ``custom_data['flexure_sim.dropped_messages']``.
 
 Crash safety: a chunk is closed and handed to the OS when it reaches ``chunk_size`` bytes or
 ``chunk_interval_s`` seconds (wall clock) after its first message, whichever comes first, so a
-``kill -9`` loses at most that much. Chunks are not compressed (as rosbag2's default), so a
-recovered prefix needs no decompressor. `close` (idempotent) writes the ``rosbag2`` metadata
+``kill -9`` loses at most that much. `close` (idempotent) writes the ``rosbag2`` metadata
 record and the summary; a recorder never closed is finished at interpreter exit.
 """
 from __future__ import annotations
 
-import contextlib
 import os
 import queue
 import re
 import threading
-import time
 import weakref
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -28,21 +29,21 @@ from pathlib import Path
 from typing import BinaryIO
 
 from .. import __version__
-from .bag_metadata import (
-    METADATA_RECORD_KEY,
-    METADATA_RECORD_NAME,
-    TopicRecord,
-    build_bag_metadata,
-    dump_serialized_metadata,
-)
+from .bag_metadata import METADATA_RECORD_NAME
 from .errors import RecorderClosedError, RecorderFailedError, RecordingError
-from .mcap_writer import ChunkedMcapWriter
+from .mcap_writer import (
+    DROPPED_KEY,
+    AddMetadata,
+    AddTopic,
+    Worker,
+    describe,
+    metadata_items,
+    start_writer,
+)
 from .qos import QosDescription, QosLike, qos_profiles_yaml
 from .schema import SchemaResolver, normalize_type_name
 
-PROFILE = "ros2"
-MESSAGE_ENCODING = "cdr"
-DROPPED_KEY = "flexure_sim.dropped_messages"
+__all__ = ["DROPPED_KEY", "McapRecorder", "RecordingStats"]
 _TOPIC_NAME = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_]*)+$")
 _MAX_STAMP = 2**64 - 1
 
@@ -67,27 +68,6 @@ class RecordingStats:
         return sum(self.dropped.values())
 
 
-@dataclass(frozen=True)
-class _AddTopic:
-    channel_id: int
-    topic: str
-    type_name: str
-    schema_id: int
-    schema_text: bytes | None  # None when the schema was already written
-    qos_yaml: str
-    type_hash: str
-
-
-@dataclass(frozen=True)
-class _AddMetadata:
-    name: str
-    data: dict[str, str]
-
-
-class _Close:
-    pass
-
-
 class _Counters:
     """Counts shared by the producers and the writer thread, guarded by ``lock``."""
 
@@ -96,137 +76,13 @@ class _Counters:
         self.accepted: dict[str, int] = {}
         self.dropped: dict[str, int] = {}
 
+    def dropped_total(self) -> int:
+        with self.lock:
+            return sum(self.dropped.values())
+
     def snapshot(self, pending: int = 0) -> RecordingStats:
         with self.lock:
             return RecordingStats(dict(self.accepted), dict(self.dropped), pending)
-
-
-class _Worker:
-    """The background thread and everything it owns. Holds no reference to the recorder."""
-
-    def __init__(
-        self,
-        writer: ChunkedMcapWriter,
-        file_name: str,
-        counters: _Counters,
-        queue_size: int,
-        chunk_interval_s: float,
-        ros_distro: str,
-    ) -> None:
-        self.queue: queue.Queue[object] = queue.Queue(maxsize=queue_size)
-        self.error: BaseException | None = None
-        self._writer = writer
-        self._file_name = file_name
-        self._counters = counters
-        self._interval = chunk_interval_s
-        self._ros_distro = ros_distro
-        self._topics: dict[int, _AddTopic] = {}
-        self._sequences: dict[int, int] = {}
-        self._deadline: float | None = None
-        self.thread = threading.Thread(target=self._run, name="mcap-recorder", daemon=True)
-        self.thread.start()
-
-    def put_control(self, item: object, timeout_s: float = _CONTROL_TIMEOUT_S) -> None:
-        """Enqueue a command that must not be dropped; fail if the thread is gone or stuck."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            if self.error is not None:
-                raise RecorderFailedError(f"MCAP writer failed: {self.error}") from self.error
-            try:
-                self.queue.put(item, timeout=0.1)
-                return
-            except queue.Full:
-                if not self.thread.is_alive():
-                    raise RecorderFailedError("MCAP writer thread is not running") from None
-                if time.monotonic() > deadline:
-                    raise RecorderFailedError(
-                        f"MCAP writer made no room in its queue for {timeout_s} s"
-                    ) from None
-
-    def shutdown(self, timeout_s: float) -> None:
-        """Finish the file (drains the queue first); used by close() and at interpreter exit."""
-        if self.thread.is_alive():
-            deadline = time.monotonic() + timeout_s
-            with contextlib.suppress(RecordingError):
-                self.put_control(_Close(), timeout_s)
-            self.thread.join(max(0.0, deadline - time.monotonic()))
-
-    def _run(self) -> None:
-        writer = self._writer
-        get = self.queue.get
-        try:
-            while True:
-                timeout = None
-                if self._deadline is not None:
-                    timeout = max(0.0, self._deadline - time.monotonic())
-                try:
-                    item = get(timeout=timeout)
-                except queue.Empty:
-                    writer.finish_chunk()
-                    self._deadline = None
-                    continue
-                if type(item) is tuple:
-                    channel_id, stamp, payload = item
-                    sequence = self._sequences.get(channel_id, 0) + 1
-                    self._sequences[channel_id] = sequence
-                    if writer.add_message(channel_id, stamp, stamp, sequence, payload):
-                        self._deadline = None
-                    elif self._deadline is None:
-                        self._deadline = time.monotonic() + self._interval
-                    elif time.monotonic() >= self._deadline:
-                        writer.finish_chunk()
-                        self._deadline = None
-                elif isinstance(item, _AddTopic):
-                    if item.schema_text is not None:
-                        writer.add_schema(item.schema_id, item.type_name, "ros2msg",
-                                          item.schema_text)
-                    writer.add_channel(
-                        item.channel_id,
-                        item.topic,
-                        MESSAGE_ENCODING,
-                        item.schema_id,
-                        {"offered_qos_profiles": item.qos_yaml,
-                         "topic_type_hash": item.type_hash},
-                    )
-                    self._topics[item.channel_id] = item
-                elif isinstance(item, _AddMetadata):
-                    writer.add_metadata(item.name, item.data)
-                elif isinstance(item, _Close):
-                    self._finish()
-                    return
-        except BaseException as exc:  # reported to the producer side
-            self.error = exc
-            writer.abandon()
-
-    def _finish(self) -> None:
-        writer = self._writer
-        writer.finish_chunk()
-        counts = writer.channel_message_counts
-        start, end = writer.message_time_range
-        with self._counters.lock:
-            dropped = sum(self._counters.dropped.values())
-        topics = [
-            TopicRecord(
-                name=t.topic,
-                type=t.type_name,
-                offered_qos_profiles=t.qos_yaml,
-                type_description_hash=t.type_hash,
-                message_count=counts.get(t.channel_id, 0),
-            )
-            for t in sorted(self._topics.values(), key=lambda t: t.channel_id)
-        ]
-        metadata = build_bag_metadata(
-            file_name=self._file_name,
-            topics=topics,
-            start_ns=start,
-            end_ns=end,
-            custom_data={DROPPED_KEY: str(dropped)},
-            ros_distro=self._ros_distro,
-        )
-        writer.add_metadata(
-            METADATA_RECORD_NAME, {METADATA_RECORD_KEY: dump_serialized_metadata(metadata)}
-        )
-        writer.finish()
 
 
 class McapRecorder:
@@ -245,7 +101,7 @@ class McapRecorder:
         chunk_size: int = 1 << 20,
         chunk_interval_s: float = 1.0,
         queue_size: int = 10_000,
-        max_block_s: float = 0.05,
+        max_block_s: float | None = 0.05,
         fsync_chunks: bool = False,
         overwrite: bool = False,
         ament_prefixes: Sequence[str | os.PathLike[str]] | None = None,
@@ -257,21 +113,10 @@ class McapRecorder:
             raise ValueError(f"chunk_interval_s: must be > 0, got {chunk_interval_s}")
         if queue_size <= 0:
             raise ValueError(f"queue_size: must be > 0, got {queue_size}")
-        if not max_block_s >= 0:
-            raise ValueError(f"max_block_s: must be >= 0, got {max_block_s}")
+        if max_block_s is not None and not max_block_s >= 0:
+            raise ValueError(f"max_block_s: must be >= 0 or None, got {max_block_s}")
         stream, self._path, file_name = _open_output(output, overwrite)
-        try:
-            writer = ChunkedMcapWriter(
-                stream,
-                profile=PROFILE,
-                library=f"flexure_sim {__version__}",
-                chunk_size=chunk_size,
-                fsync=fsync_chunks,
-            )
-        except OSError as exc:
-            with contextlib.suppress(OSError):  # flushing the buffered header fails again
-                stream.close()
-            raise RecordingError(f"cannot write {file_name}: {exc}") from exc
+        writer, out = start_writer(stream, file_name, f"flexure_sim {__version__}", chunk_size)
         self._max_block_s = max_block_s
         self._resolver = SchemaResolver(ament_prefixes)
         self._lock = threading.RLock()
@@ -281,8 +126,9 @@ class McapRecorder:
         self._channels: dict[str, int] = {}
         self._types: dict[str, str] = {}
         self._schema_ids: dict[str, int] = {}
-        self._worker = _Worker(
-            writer, file_name, self._counters, queue_size, chunk_interval_s, ros_distro
+        self._worker = Worker(
+            writer, out, file_name, self._counters.dropped_total,
+            queue_size, chunk_interval_s, ros_distro, fsync_chunks,
         )
         self._finalizer = weakref.finalize(self, self._worker.shutdown, 30.0)
 
@@ -357,7 +203,7 @@ class McapRecorder:
                 schema_id = len(self._schema_ids) + 1
             channel_id = len(self._channels) + 1
             self._worker.put_control(
-                _AddTopic(
+                AddTopic(
                     channel_id=channel_id,
                     topic=name,
                     type_name=full_type,
@@ -365,7 +211,8 @@ class McapRecorder:
                     schema_text=schema.text.encode("utf-8") if new_schema else None,
                     qos_yaml=qos_yaml,
                     type_hash=schema.type_hash,
-                )
+                ),
+                _CONTROL_TIMEOUT_S,
             )
             self._schema_ids[full_type] = schema_id
             self._channels[name] = channel_id
@@ -378,38 +225,54 @@ class McapRecorder:
         """Queue one CDR-serialized message; log_time = publish_time = ``stamp_ns`` (sim time).
 
         Returns False if the message was dropped because the queue stayed full for
-        ``max_block_s`` (counted in `stats`). Raises `RecorderClosedError` after `close`,
-        `RecorderFailedError` if the writer thread failed.
+        ``max_block_s`` (counted in `stats`); with ``max_block_s=None`` it waits for room and
+        never drops. Raises `RecorderClosedError` after `close`, `RecorderFailedError` if the
+        writer thread failed.
         """
-        channel_id = self._channels.get(topic)
-        if channel_id is None:
-            raise ValueError(f"topic: {topic!r} was not added (call add_topic first)")
+        return self.write_batch(((topic, payload),), stamp_ns)
+
+    def write_batch(
+        self,
+        messages: Sequence[tuple[str, bytes | bytearray | memoryview]],
+        stamp_ns: int,
+    ) -> bool:
+        """Queue several messages (topic, CDR payload) with one log time, e.g. one tick of the
+        simulation: one queue entry, kept or dropped whole (as `write` says)."""
+        channels = self._channels
+        items = []
+        for topic, payload in messages:
+            channel_id = channels.get(topic)
+            if channel_id is None:
+                raise ValueError(f"topic: {topic!r} was not added (call add_topic first)")
+            items.append((channel_id, payload if isinstance(payload, bytes) else bytes(payload)))
         if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, int):
             raise ValueError(f"stamp_ns: expected an int of nanoseconds, got {stamp_ns!r}")
         if not 0 <= stamp_ns <= _MAX_STAMP:
             raise ValueError(f"stamp_ns: must be in [0, 2**64), got {stamp_ns}")
-        data = payload if isinstance(payload, bytes) else bytes(payload)
-        item = (channel_id, stamp_ns, data)
         worker = self._worker
         with self._lock:
             self._check_open()
             if worker.error is not None:
-                raise RecorderFailedError(f"MCAP writer failed: {worker.error}") from worker.error
-            if not self._enqueue(item):
-                with self._counters.lock:
-                    self._counters.dropped[topic] += 1
-                return False
+                raise RecorderFailedError(f"MCAP writer failed: {describe(worker.error)}") \
+                    from worker.error
+            kept = self._enqueue((stamp_ns, items))
+            counts = self._counters.accepted if kept else self._counters.dropped
             with self._counters.lock:
-                self._counters.accepted[topic] += 1
-        return True
+                for topic, _ in messages:
+                    counts[topic] += 1
+        return kept
 
-    def _enqueue(self, item: tuple[int, int, bytes]) -> bool:
-        """Put a message on the queue, waiting at most ``max_block_s`` for room."""
+    def _enqueue(self, item: tuple[int, list[tuple[int, bytes]]]) -> bool:
+        """Put a batch on the queue, waiting at most ``max_block_s`` for room (None: until
+        there is room, unless the writer thread fails)."""
         pending = self._worker.queue
         try:
             pending.put_nowait(item)
             return True
         except queue.Full:
+            if self._max_block_s is None:
+                self._worker.put_control(item, None)
+                return True
             if self._max_block_s <= 0:
                 return False
         try:
@@ -424,13 +287,22 @@ class McapRecorder:
             raise ValueError(f"name: expected a non-empty string, got {name!r}")
         if name == METADATA_RECORD_NAME:
             raise ValueError(f"name: {name!r} is reserved for the bag metadata written by close()")
-        items = dict(data)
-        for key, value in items.items():
-            if not isinstance(key, str) or not isinstance(value, str):
-                raise ValueError(f"data: keys and values must be str, got {key!r}: {value!r}")
+        items = metadata_items(data)
         with self._lock:
             self._check_open()
-            self._worker.put_control(_AddMetadata(name, items))
+            self._worker.put_control(AddMetadata(name, items), _CONTROL_TIMEOUT_S)
+
+    def add_dropped(self, topic: str, count: int) -> None:
+        """Count ``count`` messages of ``topic`` that a producer dropped before they reached
+        this recorder (e.g. ticks a full pipe refused): in `stats` and the file's metadata."""
+        if topic not in self._channels:
+            raise ValueError(f"topic: {topic!r} was not added (call add_topic first)")
+        if isinstance(count, bool) or not isinstance(count, int) or count < 0:
+            raise ValueError(f"count: expected an int >= 0, got {count!r}")
+        with self._lock:
+            self._check_open()
+            with self._counters.lock:
+                self._counters.dropped[topic] += count
 
     def close(self, timeout_s: float = 30.0) -> RecordingStats:
         """Drain the queue, write the bag metadata and summary, close the file.
@@ -450,7 +322,8 @@ class McapRecorder:
         if worker.thread.is_alive():
             raise RecorderFailedError(f"MCAP writer did not finish within {timeout_s} s")
         if worker.error is not None:
-            raise RecorderFailedError(f"MCAP writer failed: {worker.error}") from worker.error
+            raise RecorderFailedError(f"MCAP writer failed: {describe(worker.error)}") \
+                from worker.error
         return self._close_result
 
     def _check_open(self) -> None:

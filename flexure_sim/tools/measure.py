@@ -276,7 +276,8 @@ def profile(rate: float, sim_step: float, ticks: int = 300, mechanism: str = "mi
         process = RecorderProcess()
         try:
             topics = [(name, spec.type_name, stream_qos()) for name, spec in zip(names, itf.tick_topics)]
-            recording = ProcessRecording(process, Path(tmp) / "q.mcap", topics, {}, "flexure_sim")
+            recording = ProcessRecording(process, Path(tmp) / "q.mcap", topics, {}, "flexure_sim",
+                                         lossless=False)  # the real-time hand-off: never waits
             t = perf()
             for k in range(ticks):
                 recording.write_batch(list(enumerate(payloads)), k)
