@@ -79,10 +79,12 @@ def parameter_specs(drive_defaults: Optional[tuple[float, float, float]] = None)
                   "(same as ~/record)."),
         ParamSpec("record_dir", "runs", str, "", False, None, None,
                   "Directory of the recordings (relative to the working directory), created if "
-                  "missing; files are named <mechanism>_<UTC time>.mcap."),
+                  "missing; files are named <mechanism>_<namespace_node>_<UTC time>.mcap, with "
+                  "_1, _2, ... when the name is taken (names are claimed atomically)."),
         ParamSpec("record_path", "", str, "", False, None, None,
                   "Explicit file for the next recording (later ones get _1, _2, ... before the "
-                  "suffix); empty: a new name in record_dir. Existing files are never overwritten."),
+                  "suffix, or the next free one); empty: a new name in record_dir. Existing files "
+                  "are never overwritten."),
     ]
 
 

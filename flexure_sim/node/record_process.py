@@ -152,10 +152,11 @@ class RecorderProcess:
 
 
 class ProcessRecording:
-    """One MCAP file written by a `RecorderProcess`; same role as `session.RunRecording`.
+    """One MCAP file written by a `RecorderProcess`.
 
     ``topics``: (absolute name, ``pkg/msg/Type``, QoS) in channel order; `write_batch` takes
-    the payloads of one tick as (channel index, bytes) pairs.
+    the payloads of one tick as (channel index, bytes) pairs. ``claimed``: ``path`` is an
+    empty file the caller created to claim the name (`session.claim_recording_path`).
     """
 
     def __init__(
@@ -165,6 +166,8 @@ class ProcessRecording:
         topics: Sequence[tuple[str, str, Any]],
         metadata: Mapping[str, str],
         metadata_name: str,
+        *,
+        claimed: bool = False,
     ) -> None:
         self.process = process
         self.path = Path(path)
@@ -173,6 +176,7 @@ class ProcessRecording:
             "path": str(self.path.resolve()),
             "topics": [[name, type_name, as_qos_description(qos).to_dict()] for name, type_name, qos in topics],
             "metadata": {metadata_name: dict(metadata)},
+            "claimed": claimed,
         }
         process.send(b"O", json.dumps(spec).encode())
         reply = process.answer()
@@ -277,10 +281,13 @@ def _child(stdin: BinaryIO, stdout: BinaryIO) -> int:
                 spec = json.loads(body)
                 try:
                     path = Path(spec["path"])
-                    if path.exists():
+                    # claimed: the node created the empty file with O_EXCL (session), it is ours.
+                    claimed = bool(spec.get("claimed")) and path.is_file() \
+                        and path.stat().st_size == 0
+                    if path.exists() and not claimed:
                         raise RecordingError(f"{path}: exists; recordings are never overwritten")
                     path.parent.mkdir(parents=True, exist_ok=True)
-                    new = McapRecorder(path)
+                    new = McapRecorder(path, overwrite=claimed)
                     try:
                         for name, type_name, qos in spec["topics"]:
                             new.add_topic(name, type_name, QosDescription.from_dict(qos))

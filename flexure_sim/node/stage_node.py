@@ -56,7 +56,8 @@ from .pacing import Pacer, set_thread_nice
 from .polled import PolledGroup, never_called, take_raw
 from .params import ParamSpec, parameter_specs, steps_per_tick, validate
 from .record_process import ProcessRecording, RecorderProcess
-from .session import METADATA_NAME, PARAMETER_CHANGE_NAME, recording_path
+from .session import (METADATA_NAME, PARAMETER_CHANGE_NAME, claim_recording_path, node_token,
+                      release_claim)
 
 NODE_NAME = "stage_node"
 #: Engine's relinearize_tol: None = its default, re-linearize only when the step's iteration
@@ -527,8 +528,12 @@ class StageNode(Node):
     # ================================================================ recording
     def _start_recording(self) -> None:
         values = self._values()
-        path = recording_path(values["record_dir"], values["record_path"], self.mechanism.name,
-                              self._recording_index)
+        try:
+            path = claim_recording_path(values["record_dir"], values["record_path"],
+                                        self.mechanism.name, self._recording_index,
+                                        node=node_token(self.get_fully_qualified_name()))
+        except OSError as exc:
+            raise RecordingError(f"cannot create a recording: {exc}") from exc
         qos = itf.stream_qos()
         topics = [(name, spec.type_name, qos)
                   for name, spec in zip(self._tick_names, self.interface.tick_topics)]
@@ -537,8 +542,12 @@ class StageNode(Node):
             topics.append((self._command_topic, self.interface.command.type_name, itf.command_qos()))
         if self._recorder_process is None or not self._recorder_process.alive():
             self._recorder_process = RecorderProcess()
-        self._recording = ProcessRecording(self._recorder_process, path, topics, self._metadata(values),
-                                           METADATA_NAME)
+        try:
+            self._recording = ProcessRecording(self._recorder_process, path, topics,
+                                               self._metadata(values), METADATA_NAME, claimed=True)
+        except BaseException:
+            release_claim(path)
+            raise
         self._recording_index += 1
         self._recording_error = ""
         self._recorded_files.append(str(path))
