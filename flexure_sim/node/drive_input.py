@@ -166,6 +166,12 @@ class CommandFilter:
                 self.applied += limit if delta > 0 else -limit
         return self.applied
 
+    def hold(self, value: float) -> None:
+        """Target and applied target both ``value`` (the engine could not follow the command:
+        the actuator stays where it was)."""
+        self.target = self.applied = float(value)
+        self._checked = True
+
     def reset(self) -> None:
         """Back to the initial target (simulation reset); counters are kept."""
         self.target = self.applied = self._initial

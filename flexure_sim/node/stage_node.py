@@ -51,6 +51,7 @@ from ..engine.config import ConfigError, load_mechanism, resolve_mechanism_path
 from ..recording import RecordingError
 from ..engine.solver import Simulation, SolverError
 from . import interface as itf
+from .engine_guard import EngineHold, StrokeProbe, snapshot_finite
 from .drive_input import CommandFilter, CommandStatus, DriveLimits, WarningThrottle, parse_float64_cdr
 from .pacing import Pacer, set_thread_nice
 from .polled import PolledGroup, never_called, take_raw
@@ -92,15 +93,16 @@ class _Window:
     """Accumulators of one diagnostics window (wall-clock timings of the stepping thread)."""
 
     __slots__ = ("ticks", "step_sum", "step_max", "snap_sum", "pub_sum", "pub_max", "tick_max",
-                 "wall0", "sim0", "missed0", "lin0", "steps0", "counters0")
+                 "wall0", "sim0", "missed0", "lin0", "steps0", "counters0", "engine_failures0")
 
     def __init__(self, wall0: float, sim0: float, missed0: int, lin0: int, steps0: int,
-                 counters0: dict[str, int]) -> None:
+                 counters0: dict[str, int], engine_failures0: int = 0) -> None:
         self.ticks = 0
         self.step_sum = self.step_max = self.snap_sum = self.pub_sum = self.pub_max = 0.0
         self.tick_max = 0.0
         self.wall0, self.sim0, self.missed0, self.lin0, self.steps0 = wall0, sim0, missed0, lin0, steps0
         self.counters0 = counters0
+        self.engine_failures0 = engine_failures0
 
 
 class StageNode(Node):
@@ -127,7 +129,9 @@ class StageNode(Node):
         except ParameterException as exc:
             raise StartupError(f"invalid parameter: {exc}") from exc
         values = self._values()
-        problem = validate(values)
+        self._probe = StrokeProbe(self.mechanism, float(values["sim_step"]))
+        own = {"stroke_min": defaults[0], "stroke_max": defaults[1]} if defaults else {}
+        problem = validate(values) or self._stroke_problem(values, {**values, **own})
         if problem:
             raise StartupError(f"invalid parameters: {problem}")
         self.time_mode: str = values["time_mode"]
@@ -181,6 +185,7 @@ class StageNode(Node):
         self.stopped = Future()
         self._failure: Optional[BaseException] = None
         self._throttle = WarningThrottle(1.0)
+        self._hold = EngineHold()
         self._ticks = 0
         self._wake_spin = float(values["wake_spin"])
         self._nice_request = int(values["stepping_nice"])
@@ -265,12 +270,24 @@ class StageNode(Node):
 
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
         """On-set callback: check the whole resulting set of values; no side effects."""
-        values = self._values()
+        current = self._values()
+        values = dict(current)
         for p in params:
             if p.name in values:
                 values[p.name] = p.value
-        problem = validate(values)
+        problem = validate(values) or self._stroke_problem(values, current)
         return SetParametersResult(successful=problem is None, reason=problem or "")
+
+    def _stroke_problem(self, values: dict[str, Any], current: dict[str, Any]) -> Optional[str]:
+        """Why the engine could not follow the (changed) stroke ends in ``values``, or None."""
+        if self.mechanism.drive is None:
+            return None
+        for name in ("stroke_max", "stroke_min"):
+            if values[name] != current[name]:
+                problem = self._probe.end_problem(name, values[name])
+                if problem:
+                    return problem
+        return None
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
         """Post-set callback: hand accepted changes to the stepping thread."""
@@ -425,21 +442,18 @@ class StageNode(Node):
             except (InvalidHandle, RuntimeError):
                 pass  # the executor is already gone (shutdown): nobody to wake
 
-    def _step_once(self) -> str:
-        self._tick()
-        return f"t = {self.sim.state.t:.9g} s"
+    def _step_once(self) -> tuple[bool, str]:
+        ok = self._tick()
+        if not ok:
+            return False, f"{self._hold.last_error}; state held at t = {self.sim.state.t:.9g} s"
+        return True, f"t = {self.sim.state.t:.9g} s"
 
-    def _tick(self) -> None:
-        """One publish tick: commands, engine steps, publish + record every topic."""
-        perf = time.perf_counter
-        t0 = perf()
+    def _advance_engine(self) -> None:
+        """The tick's engine steps, following the drive filter's ramp."""
         sim = self.sim
         filt = self.filter
-        period = self._n_steps * self._dt
-        if self._command_sub is not None:
-            self._apply_commands(round(sim.state.t * 1e9))
         if filt is not None:
-            if filt.begin_tick(period):
+            if filt.begin_tick(self._n_steps * self._dt):
                 self._warn("rate_limited", "drive command faster than the slew limit "
                            f"({filt.limits.slew_rate:g} m/s): ramping")
             if filt.settled:
@@ -453,8 +467,32 @@ class StageNode(Node):
                     sim.step(1)
         else:
             sim.step(self._n_steps)
-        t1 = perf()
-        snap = sim.snapshot()
+
+    def _tick(self) -> bool:
+        """One publish tick: commands, engine steps, publish + record every topic. Returns
+        False when the engine failed: the state is then held (`EngineHold`) and nothing but
+        the diagnostics is published."""
+        perf = time.perf_counter
+        t0 = perf()
+        sim = self.sim
+        if self._command_sub is not None:
+            self._apply_commands(round(sim.state.t * 1e9))
+        self._hold.save(sim, self.filter)
+        try:
+            self._advance_engine()
+            t1 = perf()
+            snap = sim.snapshot()
+            if not snapshot_finite(snap):
+                raise SolverError(f"non-finite result at t = {snap.t:.9g} s")
+        except Exception as exc:  # noqa: BLE001 - any engine failure: hold, report, go on
+            message = self._hold.restore(sim, self.filter, exc)
+            count = self._throttle.event("engine")
+            if count is not None:
+                self._log.error(message + f" ({self._hold.failures} engine failures in all)")
+            self._ticks += 1
+            if self._ticks % self._diag_every == 0:
+                self._publish_diagnostics(round(sim.state.t * 1e9))
+            return False
         t2 = perf()
         stamp = round(snap.t * 1e9)
         payloads = self.interface.encode(snap, stamp)
@@ -485,6 +523,7 @@ class StageNode(Node):
             w.tick_max = tick_time
         if self._ticks % self._diag_every == 0:
             self._publish_diagnostics(stamp)
+        return True
 
     def _apply_commands(self, stamp: int) -> None:
         """Take the commands received since the last tick; validate them in order; record each."""
@@ -633,7 +672,8 @@ class StageNode(Node):
     def _new_window(self) -> _Window:
         pacer = self._pacer
         return _Window(time.perf_counter(), self.sim.state.t, pacer.stats.missed if pacer else 0,
-                       self.sim.stats.linearizations, self.sim.stats.steps, self._counters())
+                       self.sim.stats.linearizations, self.sim.stats.steps, self._counters(),
+                       self._hold.failures)
 
     def _publish_diagnostics(self, stamp: int) -> None:
         w = self._window
@@ -657,6 +697,10 @@ class StageNode(Node):
             level, notes = itf.WARN, notes + [f"{new['clamped']} commands clamped"]
         if new.get("rate_limited"):
             notes.append(f"{new['rate_limited']} commands rate-limited")
+        failures = self._hold.failures - w.engine_failures0
+        if failures:
+            level, notes = itf.ERROR, notes + [
+                f"{failures} engine failures, state held: {self._hold.last_error}"]
         rec = self._recording
         if self._recording_error:
             level, notes = itf.ERROR, notes + [f"recording failed: {self._recording_error}"]
@@ -684,6 +728,8 @@ class StageNode(Node):
             ("linearizations", stats.linearizations),
             ("linearizations_window", stats.linearizations - w.lin0),
             ("engine_steps", stats.steps),
+            ("engine_failures", self._hold.failures),
+            ("engine_error", self._hold.last_error),
         ]
         if pacer is not None:
             p50, p99 = pacer.stats.late_percentiles(0.5, 0.99)
