@@ -15,8 +15,9 @@ Two lines of defence keep input from ever stopping the node (issue 16.10):
 """
 from __future__ import annotations
 
-import math
 from typing import Any, Optional
+
+import numpy as np
 
 from ..engine.mechanism import Mechanism
 from ..engine.solver import Simulation, SolverError
@@ -52,19 +53,17 @@ class StrokeProbe:
 
     def problem(self, stroke_min: float, stroke_max: float) -> Optional[str]:
         """Why [stroke_min, stroke_max] is beyond the engine, or None."""
-        return self.end_problem("stroke_max", stroke_max) or self.end_problem("stroke_min", stroke_min)
+        return (self.end_problem("stroke_max", stroke_max)
+                or self.end_problem("stroke_min", stroke_min))
 
 
 def snapshot_finite(snap: Any) -> bool:
-    """True if every number a tick publishes from ``snap`` is finite."""
-    for array in (snap.poses, snap.wrenches, snap.deflections):
-        if not all(math.isfinite(x) for x in array.ravel().tolist()):
-            return False
-    for name in ("compression", "output", "drive_input", "drive_force"):
-        value = getattr(snap, name, 0.0)
-        if value is not None and not math.isfinite(float(value)):
-            return False
-    return True
+    """True if every number a tick publishes from ``snap`` is finite (~3 us)."""
+    scalars = [getattr(snap, name, 0.0) for name in
+               ("compression", "output", "drive_input", "drive_force")]
+    return bool(np.isfinite(snap.poses).all() and np.isfinite(snap.wrenches).all()
+                and np.isfinite(snap.deflections).all()
+                and np.isfinite(np.array([0.0 if v is None else v for v in scalars])).all())
 
 
 class EngineHold:

@@ -1,4 +1,5 @@
-"""Recordings of the stage node: file names and metadata record names.
+"""Recordings of the stage node: file names, metadata, and the session of files one node
+writes (`RecordingSession`).
 
 Each recording holds a channel per published topic plus the drive command topic, and a
 metadata record ``flexure_sim`` (mechanism, parameters, engine settings); the node records
@@ -14,9 +15,14 @@ from __future__ import annotations
 import datetime as _dt
 import os
 from pathlib import Path
-from typing import Iterator, Optional
+from typing import Any, Iterator, Mapping, Optional, Sequence
 
-from ..topics import METADATA_NAME, PARAMETER_CHANGE_NAME  # noqa: F401  (the node's names)
+from .. import __version__
+from ..engine.mechanism import Mechanism
+from ..recording import RecordingError
+from ..topics import METADATA_NAME, PARAMETER_CHANGE_NAME, ROOT_FRAME  # noqa: F401
+from .interface import value_text
+from .record_process import ProcessRecording, RecorderProcess
 
 #: Suffixes tried before giving up (a directory holding that many runs of one second).
 MAX_SUFFIX = 10_000
@@ -77,7 +83,8 @@ def claim_recording_path(
             continue
         os.close(fd)
         return candidate
-    raise FileExistsError(f"{record_dir or record_path}: {MAX_SUFFIX} recordings of one name exist")
+    raise FileExistsError(
+        f"{record_dir or record_path}: {MAX_SUFFIX} recordings of one name exist")
 
 
 def release_claim(path: Path) -> None:
@@ -87,3 +94,116 @@ def release_claim(path: Path) -> None:
             path.unlink()
     except OSError:
         pass
+
+
+def run_metadata(values: Mapping[str, Any], mechanism: Mechanism, mechanism_path: Path,
+                 interface: Any, node: str, steps_per_tick: int, relinearize_tol: Any, run: int,
+                 sim_time: float) -> dict[str, str]:
+    """The ``flexure_sim`` metadata record of one recording: every parameter by name, the
+    mechanism (its YAML text included) and the engine settings."""
+    try:
+        yaml_text = mechanism_path.read_text()
+    except (OSError, UnicodeDecodeError):
+        yaml_text = ""
+    meta = {name: value_text(value) for name, value in values.items()}
+    meta.update({
+        "mechanism_name": mechanism.name,
+        "mechanism_path": str(mechanism_path),
+        "mechanism_yaml": yaml_text,
+        "node": node,
+        "flexure_sim_version": __version__,
+        "steps_per_tick": str(steps_per_tick),
+        "relinearize_tol": repr(relinearize_tol),
+        "root_frame": ROOT_FRAME,
+        "bodies": ",".join(interface.body_names),
+        "hinges": ",".join(interface.hinge_names),
+        "run": str(run),
+        "sim_time_start": repr(sim_time),
+        "started_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    })
+    return meta
+
+
+class RecordingSession:
+    """The node's recordings, one after the other, written by one `RecorderProcess`.
+
+    Used by the stepping thread only (and before it starts / after it ended). A write that
+    fails ends the recording: the reason is kept in `error` (diagnostics ERROR) and logged.
+    """
+
+    def __init__(self, log: Any) -> None:
+        self.log = log
+        self.current: Optional[ProcessRecording] = None
+        self._process: Optional[RecorderProcess] = None
+        self._index = 0
+        self.error = ""
+
+    def start(self, values: Mapping[str, Any], mechanism_name: str, node: str,
+              topics: Sequence[tuple[str, str, Any]], metadata: Mapping[str, str]) -> Path:
+        """Claim the next name and open it; raises RecordingError if that is impossible."""
+        try:
+            path = claim_recording_path(values["record_dir"], values["record_path"],
+                                        mechanism_name, self._index, node=node_token(node))
+        except OSError as exc:
+            raise RecordingError(f"cannot create a recording: {exc}") from exc
+        try:
+            if self._process is None or not self._process.alive():
+                self._process = RecorderProcess()
+            self.current = ProcessRecording(self._process, path, topics, metadata, METADATA_NAME,
+                                            claimed=True)
+        except BaseException:
+            release_claim(path)
+            raise
+        self._index += 1
+        self.error = ""
+        self.log.info(f"recording to {path}")
+        return path
+
+    def stop(self) -> Optional[Path]:
+        """Finish the current file; its path (None if not recording)."""
+        recording, self.current = self.current, None
+        if recording is None:
+            return None
+        try:
+            stats = recording.close()
+        except RecordingError as exc:
+            self.error = str(exc)
+            self.log.error(f"recording {recording.path} could not be finished: {exc}")
+            return recording.path
+        dropped = stats.get("dropped", 0) + recording.dropped_count
+        self.log.info(f"closed {recording.path}: {stats.get('accepted', 0)} messages"
+                      + (f", {dropped} dropped" if dropped else ""))
+        return recording.path
+
+    def write(self, items: Sequence[tuple[int, bytes]], stamp: int) -> None:
+        """Record one batch (channel index, CDR bytes) at log time ``stamp`` (ns)."""
+        recording = self.current
+        if recording is None:
+            return
+        try:
+            recording.write_batch(items, stamp)
+        except RecordingError as exc:
+            self._failed(exc)
+
+    def note(self, name: str, data: Mapping[str, str]) -> None:
+        """A metadata record in the current file (if any)."""
+        if self.current is not None:
+            self.current.add_metadata(name, data)
+
+    def _failed(self, exc: BaseException) -> None:
+        self.error = str(exc)
+        self.log.error(f"recording stopped: {exc}")
+        recording, self.current = self.current, None
+        if recording is not None:
+            try:
+                recording.close()
+            except RecordingError:
+                pass
+
+    def close(self) -> None:
+        """Finish the current file and end the recorder process (idempotent)."""
+        if self.current is not None:
+            self.stop()
+        process, self._process = self._process, None
+        if process is not None:
+            process.quit()

@@ -207,7 +207,7 @@ def profile(rate: float, sim_step: float, ticks: int = 300, mechanism: str = "mi
     from ..node.interface import StageInterface, stream_qos
     from ..node.params import steps_per_tick
     from ..node.record_process import ProcessRecording, RecorderProcess
-    from ..node.stage_node import RELINEARIZE_TOL
+    from ..node.stepping import RELINEARIZE_TOL
 
     n, problem = steps_per_tick(rate, sim_step)
     if problem:
