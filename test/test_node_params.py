@@ -21,7 +21,9 @@ def test_defaults_are_valid_and_give_ten_steps_per_tick():
     assert values["record"] is True and values["record_dir"] == "runs" and values["record_path"] == ""
     assert steps_per_tick(1000.0, 1e-4) == (10, None)
     read_only = {s.name for s in parameter_specs() if s.read_only}
-    assert read_only == {"mechanism", "sim_step", "time_mode", "stepping_nice"}
+    assert read_only == {"mechanism", "sim_step", "time_mode", "stepping_nice",
+                         "command_reliability"}
+    assert values["command_reliability"] == "reliable"
 
 
 @pytest.mark.parametrize("rate, step, n", [
@@ -51,6 +53,7 @@ def test_steps_per_tick(rate, step, n):
     (dict(wake_spin=float("nan")), "wake_spin"),
     (dict(stepping_nice=-21), "stepping_nice"),
     (dict(stepping_nice=2.5), "stepping_nice"),
+    (dict(command_reliability="sometimes"), "command_reliability"),
 ])
 def test_invalid_values_are_refused_with_the_reason(changes, word):
     values = {**defaults(), **changes}

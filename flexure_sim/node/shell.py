@@ -4,8 +4,8 @@ It loads the mechanism, declares and validates the parameters (`params`, `declar
 the publishers, the polled command subscription (`polled`, `commands`) and the services, and
 hands everything that touches the simulation or the recording to the stepping thread
 (`stepping`) through its request queue (`requests`). Recording files are managed by a
-`session.RecordingSession`, diagnostics by `diagnostics`. The executor (main thread) serves
-only services and parameter changes. Topics, parameters and services are documented in
+`session.RecordingSession`, diagnostics by `diagnostics`, incompatible QoS by `qos_watch`.
+The executor (main thread) serves only services, parameter changes and QoS events. Topics, parameters and services are documented in
 README.md, "## stage_node".
 """
 from __future__ import annotations
@@ -36,6 +36,7 @@ from .drive_input import CommandFilter, DriveLimits
 from .engine_guard import StrokeProbe
 from .params import parameter_specs, validate
 from .polled import PolledGroup, never_called
+from .qos_watch import QosWatch
 from .requests import REQUEST_TIMEOUT_S
 from .session import PARAMETER_CHANGE_NAME, RecordingSession, run_metadata
 from .stepping import RELINEARIZE_TOL, SteppingLoop
@@ -123,11 +124,15 @@ class StageNode(Node):
 
         # ---- publishers, subscription, services ----
         qos = itf.stream_qos()
-        tick_pubs = [self.create_publisher(t.msg_type, t.name, qos)
+        reliability = values["command_reliability"]
+        self.qos_watch = watch = QosWatch(self._log, reliability)
+        tick_pubs = [self.create_publisher(t.msg_type, t.name, qos,
+                                           event_callbacks=watch.publisher_callbacks(t.name))
                      for t in self.interface.tick_topics]
         self._tick_names = [p.topic_name for p in tick_pubs]
-        diag_pub = self.create_publisher(self.interface.diagnostics.msg_type,
-                                         self.interface.diagnostics.name, qos)
+        diag_pub = self.create_publisher(
+            self.interface.diagnostics.msg_type, self.interface.diagnostics.name, qos,
+            event_callbacks=watch.publisher_callbacks(self.interface.diagnostics.name))
         self._diag_topic = diag_pub.topic_name
         self.loop = loop = SteppingLoop(
             sim, drive_filter, self.interface, tick_pubs, self.session, self._log,
@@ -138,12 +143,13 @@ class StageNode(Node):
         if self.interface.command is not None:
             self._command_sub = self.create_subscription(
                 self.interface.command.msg_type, self.interface.command.name, never_called,
-                itf.command_qos(), raw=True,
-                callback_group=PolledGroup())
+                itf.command_qos(reliability), raw=True, callback_group=PolledGroup(),
+                event_callbacks=watch.subscription_callbacks(self.interface.command.name))
+            watch.adopt(self._command_sub)
             loop.intake = CommandIntake(self._command_sub, drive_filter, len(tick_pubs) + 1,
                                         self.session.write, self._log, loop.throttle)
         loop.diagnostics = Diagnostics(loop, diag_pub, len(tick_pubs), self.get_name(),
-                                       self.mechanism.name)
+                                       self.mechanism.name, watch.diagnostics)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/record", self._on_record)
         self.create_service(Trigger, "~/step", self._on_step)
@@ -265,7 +271,7 @@ class StageNode(Node):
         topics.append((self._diag_topic, self.interface.diagnostics.type_name, qos))
         if self._command_sub is not None:
             topics.append((self._command_sub.topic_name, self.interface.command.type_name,
-                           itf.command_qos()))
+                           itf.command_qos(values["command_reliability"])))
         loop = self.loop
         node = self.get_fully_qualified_name()
         metadata = run_metadata(values, self.mechanism, self.mechanism_path, self.interface, node,
