@@ -67,8 +67,8 @@ def test_a_stroke_without_static_equilibrium_is_refused_with_the_reason(tmp_path
     assert "Traceback" not in bad.stderr
 
 
-def test_a_step_the_engine_cannot_take_holds_the_state_and_the_node_goes_on(tmp_path,
-                                                                           peer_and_domain):
+def test_a_step_the_engine_cannot_take_holds_the_state_and_the_node_goes_on(
+        tmp_path, peer_and_domain):
     peer, domain = peer_and_domain
     # Independently: at a 5e-4 s step the engine cannot follow a 20 um jump of the command.
     sim = Simulation(load_mechanism("microstage"), dt=5e-4)

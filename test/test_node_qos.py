@@ -76,8 +76,8 @@ def test_a_best_effort_publisher_is_warned_about_within_a_second(tmp_path, peer_
     assert rc == 0, node.stderr
 
 
-def test_best_effort_command_reliability_hears_both_kinds_of_publisher(tmp_path,
-                                                                      peer_and_domain):
+def test_best_effort_command_reliability_hears_both_kinds_of_publisher(
+        tmp_path, peer_and_domain):
     peer, domain = peer_and_domain
     node = NodeProcess(tmp_path / "node", domain, dict(PARAMS, command_reliability="best_effort"))
     peer.watch = node

@@ -24,6 +24,7 @@ from rclpy.qos import qos_policy_name_from_kind
 
 from . import interface as itf
 
+
 class QosWatch:
     """Counters and WARN lines of incompatible-QoS events (executor thread); read by the
     diagnostics (stepping thread)."""

@@ -5,8 +5,8 @@ the publishers, the polled command subscription (`polled`, `commands`) and the s
 hands everything that touches the simulation or the recording to the stepping thread
 (`stepping`) through its request queue (`requests`). Recording files are managed by a
 `session.RecordingSession`, diagnostics by `diagnostics`, incompatible QoS by `qos_watch`.
-The executor (main thread) serves only services, parameter changes and QoS events. Topics, parameters and services are documented in
-README.md, "## stage_node".
+The executor (main thread) serves only services, parameter changes and QoS events. Topics,
+parameters and services are documented in README.md, "## stage_node".
 """
 from __future__ import annotations
 
