@@ -14,10 +14,12 @@ class Window:
     the cumulative counters at its start."""
 
     __slots__ = ("ticks", "step_sum", "step_max", "snap_sum", "pub_sum", "pub_max", "tick_max",
-                 "wall0", "sim0", "missed0", "lin0", "steps0", "counters0", "engine_failures0")
+                 "wall0", "sim0", "missed0", "lin0", "steps0", "counters0", "engine_failures0",
+                 "intake0")
 
     def __init__(self, wall0: float, sim0: float, missed0: int, lin0: int, steps0: int,
-                 counters0: dict[str, int], engine_failures0: int) -> None:
+                 counters0: dict[str, int], engine_failures0: int,
+                 intake0: tuple[int, float]) -> None:
         self.ticks = 0
         self.step_sum = self.step_max = self.snap_sum = self.pub_sum = self.pub_max = 0.0
         self.tick_max = 0.0
@@ -25,6 +27,7 @@ class Window:
         self.lin0, self.steps0 = lin0, steps0
         self.counters0 = counters0
         self.engine_failures0 = engine_failures0
+        self.intake0 = intake0
 
     def add(self, step_time: float, snap_time: float, pub_time: float, tick_time: float) -> None:
         """One tick's wall-clock times (s): engine steps, snapshot, pack + record + publish,
@@ -60,12 +63,18 @@ class Diagnostics:
         filt = self.loop.filter
         return filt.counters.as_dict() if filt is not None else {}
 
+    def intake(self) -> tuple[int, float]:
+        """Commands taken so far and the time their intake took (s)."""
+        intake = self.loop.intake
+        return (intake.count, intake.time_s) if intake is not None else (0, 0.0)
+
     def new_window(self) -> Window:
         loop = self.loop
         pacer = loop.pacer
         stats = loop.sim.stats
         return Window(time.perf_counter(), loop.sim.state.t, pacer.stats.missed if pacer else 0,
-                      stats.linearizations, stats.steps, self.counters(), loop.hold.failures)
+                      stats.linearizations, stats.steps, self.counters(), loop.hold.failures,
+                      self.intake())
 
     def publish(self, stamp: int) -> None:
         """Publish (and record) the status of the window ending now; start a new window."""
@@ -147,6 +156,10 @@ class Diagnostics:
                 ("jitter_p99_us", 1e6 * p99),
             ]
         values += [(f"commands_{k}", v) for k, v in counters.items()]
+        taken, intake_s = self.intake()
+        taken -= w.intake0[0]
+        values.append(("command_time_mean_us",
+                       1e6 * (intake_s - w.intake0[1]) / taken if taken else 0.0))
         if loop.filter is not None:
             values += [("drive_target", loop.filter.target),
                        ("drive_applied", loop.filter.applied)]

@@ -23,7 +23,7 @@ import struct
 import time
 from dataclasses import dataclass, fields
 from enum import Enum
-from typing import Callable, Optional
+from typing import Callable, Optional, Sequence
 
 
 _LE = struct.Struct("<d")
@@ -139,6 +139,38 @@ class CommandFilter:
             return CommandStatus.CLAMPED
         return CommandStatus.ACCEPTED
 
+    def submit_many(self, values: Sequence[float]) -> tuple[int, int, float, float]:
+        """`submit` for each of ``values`` (floats) in order, in one call: the same target and
+        counters, without a Python call per command. Returns (rejected, clamped, last
+        rejected value, last clamped value as received); the values are NaN when none."""
+        lo, hi = self._limits.stroke_min, self._limits.stroke_max
+        isfinite = math.isfinite
+        target = self.target
+        rejected = clamped = 0
+        last_rejected = last_clamped = math.nan
+        for value in values:
+            if not isfinite(value):
+                rejected += 1
+                last_rejected = value
+            elif value < lo:
+                target, last_clamped = lo, value
+                clamped += 1
+            elif value > hi:
+                target, last_clamped = hi, value
+                clamped += 1
+            else:
+                target = value
+        c = self.counters
+        n = len(values)
+        c.received += n
+        c.accepted += n - rejected
+        c.rejected += rejected
+        c.clamped += clamped
+        if n > rejected:
+            self.target = float(target)
+            self._checked = False
+        return rejected, clamped, last_rejected, last_clamped
+
     def begin_tick(self, period: float) -> bool:
         """Start of a publish tick of ``period`` seconds: count the new target as rate-limited
         if the actuator cannot reach it within the tick. Returns True when it was counted."""
@@ -188,10 +220,10 @@ class WarningThrottle:
         self._last: dict[str, float] = {}
         self._pending: dict[str, int] = {}
 
-    def event(self, kind: str) -> Optional[int]:
-        """Record one event of ``kind``; return how many events the warning to be emitted now
-        stands for (including this one), or None if it is suppressed."""
-        pending = self._pending.get(kind, 0) + 1
+    def event(self, kind: str, count: int = 1) -> Optional[int]:
+        """Record ``count`` events of ``kind``; return how many events the warning to be
+        emitted now stands for (including these), or None if it is suppressed."""
+        pending = self._pending.get(kind, 0) + count
         now = self._clock()
         last = self._last.get(kind)
         if last is not None and now - last < self.interval_s:
