@@ -19,7 +19,7 @@ from std_msgs.msg import Float64
 from flexure_sim.engine.config import load_mechanism
 from flexure_sim.engine.solver import Simulation, SolverError
 
-from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id
+from node_harness import NodeProcess, Peer, diagnostics_values
 
 import pytest
 
@@ -30,14 +30,6 @@ def set_double(peer: Peer, name: str, value: float) -> tuple[bool, str]:
     answer = peer.call(SetParameters, "/stage_node/set_parameters",
                        SetParameters.Request(parameters=[msg]))
     return answer.results[0].successful, answer.results[0].reason
-
-
-@pytest.fixture
-def peer_and_domain():
-    domain = next_domain_id()
-    peer = Peer(domain)
-    yield peer, domain
-    peer.close()
 
 
 def test_a_stroke_without_static_equilibrium_is_refused_with_the_reason(tmp_path, peer_and_domain):

@@ -15,7 +15,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64
 
-from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id
+from node_harness import NodeProcess, Peer, diagnostics_values
 
 import pytest
 
@@ -23,14 +23,6 @@ BEST_EFFORT = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                          reliability=ReliabilityPolicy.BEST_EFFORT,
                          durability=DurabilityPolicy.VOLATILE)
 PARAMS = dict(time_mode="realtime", sim_step=5e-4, publish_rate=200.0, record=False)
-
-
-@pytest.fixture
-def peer_and_domain():
-    domain = next_domain_id()
-    peer = Peer(domain)
-    yield peer, domain
-    peer.close()
 
 
 def diag(peer: Peer) -> dict[str, str]:
@@ -89,15 +81,23 @@ def test_best_effort_command_reliability_hears_both_kinds_of_publisher(
         reliable = peer.publisher("/drive/displacement", Float64)
         peer.wait_for_subscribers(best_effort)
         peer.wait_for_subscribers(reliable)
-        best_effort.publish(Float64(data=1.0e-6))
-        peer.spin_until(lambda: peer.last("/drive/input") is not None
-                        and peer.last("/drive/input").data == pytest.approx(1.0e-6, rel=1e-9),
-                        10, "the best-effort command applied")
+        sent = [0]
+
+        def best_effort_applied() -> bool:
+            # Best effort is not resent: stream, as a controller does, until one arrives.
+            best_effort.publish(Float64(data=1.0e-6))
+            sent[0] += 1
+            last = peer.last("/drive/input")
+            return last is not None and last.data == pytest.approx(1.0e-6, rel=1e-9)
+
+        peer.spin_until(best_effort_applied, 10, "the best-effort command applied")
         reliable.publish(Float64(data=0.5e-6))
         peer.spin_until(lambda: peer.last("/drive/input").data == pytest.approx(0.5e-6, rel=1e-9),
                         10, "the reliable command applied")
-        peer.spin_until(lambda: diag(peer).get("commands_received") == "2", 10, "two commands")
+        peer.spin_until(lambda: int(diag(peer).get("commands_received", 0)) >= 2, 10,
+                        "both commands counted")
         values = diag(peer)
+        assert int(values["commands_received"]) <= sent[0] + 1
         assert values["command_reliability"] == "best_effort"
         assert values["qos_incompatible_publishers"] == "0"
     finally:
