@@ -34,7 +34,9 @@ def test_nodes_started_together_on_one_directory_each_get_their_own_file(tmp_pat
     finally:
         codes = [node.stop(signal.SIGINT) for node in nodes]
     assert codes == [0, 0, 0, 0], "\n".join(node.stderr for node in nodes)
-    paths = [line.rsplit("recording to ", 1)[1].strip() for line in lines]
+    paths = [line.rsplit("recording to ", 1)[1].split(" instead")[0].strip() for line in lines]
+    taken = [line for line in lines[:2] if "instead" in line]
+    assert len(taken) == 1 and f"{explicit} exists" in taken[0] and "[WARN]" in taken[0]
     assert sorted(paths[:2]) == [str(explicit), str(shared / "run_1.mcap")]
     assert "microstage_left_stage_node_" in paths[2] and "microstage_right_stage_node_" in paths[3]
     files = sorted(shared.iterdir())

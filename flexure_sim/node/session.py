@@ -156,7 +156,13 @@ class RecordingSession:
             raise
         self._index += 1
         self.error = ""
-        self.log.info(f"recording to {path}")
+        wanted = next(_candidates(values["record_dir"], values["record_path"], mechanism_name,
+                                  node_token(node), self._index - 1, None))
+        if values["record_path"] and path != wanted:
+            self.log.warning(f"{wanted} exists (recordings are never overwritten): "
+                             f"recording to {path} instead")
+        else:
+            self.log.info(f"recording to {path}")
         return path
 
     def stop(self) -> Optional[Path]:
