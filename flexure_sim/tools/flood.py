@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import select
 import struct
+import subprocess
 import sys
 import time
 from typing import Any, Callable, Optional, Sequence
@@ -67,6 +69,40 @@ def flood(rate: float, duration: float, topic: str = topics.COMMAND, wait_s: flo
         node.destroy_node()
         rclpy.try_shutdown(context=context)
     return {"rate_hz": rate, "sent": sent, "wall_s": wall, "sent_per_s": sent / wall}
+
+
+class FloodProcess:
+    """`flood` in a process of its own (this interpreter, environment ``env``), for
+    tools/measure.py: `wait_started` until it floods, `result` when it ended."""
+
+    def __init__(self, rate: float, duration: float, env: dict[str, str]) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "flexure_sim.tools.flood", "--rate", repr(rate),
+             "--duration", repr(duration), "--json"],
+            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+    def wait_started(self, idle: Callable[[], None], timeout: float = 60.0) -> None:
+        """Call ``idle`` (e.g. spin an executor briefly) until the flood has begun."""
+        deadline = time.monotonic() + timeout
+        stdout = self.proc.stdout
+        while time.monotonic() < deadline:
+            if select.select([stdout], [], [], 0.0)[0]:
+                line = stdout.readline()
+                if line.strip() == STARTED:
+                    return
+                if not line:
+                    break
+            idle()
+        raise RuntimeError("the command flood did not start")
+
+    def result(self, timeout: float = 60.0) -> dict[str, Any]:
+        """The flood's JSON summary (it ends on its own)."""
+        out, _ = self.proc.communicate(timeout=timeout)
+        lines = [line for line in out.splitlines() if line.startswith("{")]
+        if self.proc.returncode != 0 or not lines:
+            raise RuntimeError(f"the command flood failed ({self.proc.returncode}): "
+                               f"{out.strip()}")
+        return json.loads(lines[-1])
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

@@ -121,11 +121,10 @@ def run_node(
             executor.spin_once(timeout_sec=0.05)
         flooder = None
         if flood_hz > 0:  # flooding from the first to past the last sample of the window
-            flooder = subprocess.Popen(
-                [sys.executable, "-m", "flexure_sim.tools.flood", "--rate", repr(flood_hz),
-                 "--duration", repr(duration + 2.0), "--json"],
-                env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-            _wait_for_flood(flooder, executor)
+            from .flood import FloodProcess
+
+            flooder = FloodProcess(flood_hz, duration + 2.0, env)
+            flooder.wait_started(lambda: executor.spin_once(timeout_sec=0.05))
         first = len(samples)
         received_start = received["count"]
         cpu_start, cpu_wall_start = _cpu_seconds(proc.pid), time.monotonic()
@@ -134,7 +133,7 @@ def run_node(
             executor.spin_once(timeout_sec=0.05)
         window = samples[first - 1:]
         cpu_end, cpu_wall_end = _cpu_seconds(proc.pid), time.monotonic()
-        flood = _flood_result(flooder) if flooder is not None else None
+        flood = flooder.result() if flooder is not None else None
     finally:
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
@@ -215,33 +214,6 @@ def run_node(
     else:
         shutil.rmtree(workdir, ignore_errors=True)
     return result
-
-
-def _wait_for_flood(flooder: subprocess.Popen, executor: Any, timeout: float = 60.0) -> None:
-    """Spin ``executor`` until the flood process says it has begun."""
-    import select
-
-    from .flood import STARTED
-
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if select.select([flooder.stdout], [], [], 0.0)[0]:
-            line = flooder.stdout.readline()
-            if line.strip() == STARTED:
-                return
-            if not line:
-                break
-        executor.spin_once(timeout_sec=0.05)
-    raise RuntimeError("the command flood did not start")
-
-
-def _flood_result(flooder: subprocess.Popen) -> dict[str, Any]:
-    """The flood process's JSON summary (it ends on its own after the window)."""
-    out, _ = flooder.communicate(timeout=60)
-    lines = [line for line in out.splitlines() if line.startswith("{")]
-    if flooder.returncode != 0 or not lines:
-        raise RuntimeError(f"the command flood failed ({flooder.returncode}): {out.strip()}")
-    return json.loads(lines[-1])
 
 
 def profile(rate: float, sim_step: float, ticks: int = 300, mechanism: str = "microstage") -> dict[str, float]:
