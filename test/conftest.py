@@ -22,3 +22,14 @@ def context():
     rclpy.init(context=ctx, domain_id=next_domain_id())
     yield ctx
     rclpy.try_shutdown(context=ctx)
+
+
+@pytest.fixture
+def peer_and_domain():
+    """A fresh DDS domain and a real rclpy peer node on it (node_harness.Peer)."""
+    from node_harness import Peer, next_domain_id
+
+    domain = next_domain_id()
+    peer = Peer(domain)
+    yield peer, domain
+    peer.close()

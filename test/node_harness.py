@@ -112,6 +112,23 @@ class NodeProcess:
     def stdout(self) -> str:
         return (self.cwd / "node.stdout").read_text(errors="replace")
 
+    def wait_for_output(self, text: str, timeout: float = 60.0, stream: str = "stderr") -> str:
+        """Wait until the node's ``stream`` holds a line containing ``text``; return that line.
+        Fails at once with the output if the node exits first."""
+        path = self.cwd / f"node.{stream}"
+        end = time.monotonic() + timeout
+        while True:
+            exited = not self.alive()
+            for line in path.read_text(errors="replace").splitlines():
+                if text in line:
+                    return line
+            if exited:
+                raise AssertionError(f"stage_node exited ({self.proc.returncode}) before printing "
+                                     f"{text!r}:\n{self.stderr}")
+            if time.monotonic() > end:
+                raise AssertionError(f"timed out after {timeout:g} s waiting for {text!r}:\n{self.stderr}")
+            time.sleep(0.01)  # polling interval of the file, not a synchronisation
+
     def children(self) -> list[int]:
         """Process ids of the node's child processes (its MCAP recorder)."""
         kids = []

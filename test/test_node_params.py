@@ -1,11 +1,12 @@
 """Parameter validation, real-time pacing and recording names of the stage node (no ROS)."""
 import datetime as dt
+import multiprocessing
 
 import pytest
 
 from flexure_sim.node.pacing import Pacer, PacingStats
 from flexure_sim.node.params import parameter_specs, steps_per_tick, validate
-from flexure_sim.node.session import recording_path
+from flexure_sim.node.session import claim_recording_path, node_token, release_claim
 
 
 def defaults() -> dict:
@@ -20,7 +21,9 @@ def test_defaults_are_valid_and_give_ten_steps_per_tick():
     assert values["record"] is True and values["record_dir"] == "runs" and values["record_path"] == ""
     assert steps_per_tick(1000.0, 1e-4) == (10, None)
     read_only = {s.name for s in parameter_specs() if s.read_only}
-    assert read_only == {"mechanism", "sim_step", "time_mode", "stepping_nice"}
+    assert read_only == {"mechanism", "sim_step", "time_mode", "stepping_nice",
+                         "command_reliability"}
+    assert values["command_reliability"] == "reliable"
 
 
 @pytest.mark.parametrize("rate, step, n", [
@@ -50,6 +53,7 @@ def test_steps_per_tick(rate, step, n):
     (dict(wake_spin=float("nan")), "wake_spin"),
     (dict(stepping_nice=-21), "stepping_nice"),
     (dict(stepping_nice=2.5), "stepping_nice"),
+    (dict(command_reliability="sometimes"), "command_reliability"),
 ])
 def test_invalid_values_are_refused_with_the_reason(changes, word):
     values = {**defaults(), **changes}
@@ -148,14 +152,48 @@ def test_pacer_period_change_and_reanchor():
         Pacer(0.0)
 
 
-def test_recording_names(tmp_path):
+def test_recording_names_hold_the_node_and_take_the_next_suffix_when_taken(tmp_path):
     now = dt.datetime(2026, 1, 2, 3, 4, 5, tzinfo=dt.timezone.utc)
-    first = recording_path(str(tmp_path), "", "microstage", 0, now)
-    assert first == tmp_path / "microstage_20260102T030405.mcap"
-    first.write_bytes(b"")
-    assert recording_path(str(tmp_path), "", "microstage", 1, now) == tmp_path / "microstage_20260102T030405_1.mcap"
-    assert recording_path("runs", "out/run.mcap", "microstage", 0) .as_posix() == "out/run.mcap"
-    assert recording_path("runs", "out/run.mcap", "microstage", 2).as_posix() == "out/run_2.mcap"
+    d = str(tmp_path / "runs")
+    first = claim_recording_path(d, "", "microstage", 0, now, node="left_stage_node")
+    assert first == tmp_path / "runs" / "microstage_left_stage_node_20260102T030405.mcap"
+    assert first.is_file() and first.stat().st_size == 0  # claimed
+    second = claim_recording_path(d, "", "microstage", 0, now, node="left_stage_node")
+    assert second.name == "microstage_left_stage_node_20260102T030405_1.mcap"
+    other = claim_recording_path(d, "", "microstage", 0, now, node="right_stage_node")
+    assert other.name == "microstage_right_stage_node_20260102T030405.mcap"
+    assert node_token("/left/stage_node") == "left_stage_node"
+    assert node_token("/stage_node") == "stage_node"
+    out = tmp_path / "out" / "run.mcap"
+    assert claim_recording_path("runs", str(out), "microstage", 0) == out
+    assert claim_recording_path("runs", str(out), "microstage", 0).name == "run_1.mcap"
+    assert claim_recording_path("runs", str(out), "microstage", 2).name == "run_2.mcap"
+    assert claim_recording_path("runs", str(out), "microstage", 1).name == "run_3.mcap"
+    release_claim(out)
+    assert not out.exists()
+    out.write_bytes(b"data")
+    release_claim(out)  # never removes a file that holds anything
+    assert out.read_bytes() == b"data"
+
+
+def _claim_many(directory, barrier, results):
+    now = dt.datetime(2026, 1, 2, 3, 4, 5, tzinfo=dt.timezone.utc)
+    barrier.wait()  # all processes claim at once
+    results.put([str(claim_recording_path(directory, "", "microstage", 0, now, node="stage_node"))
+                 for _ in range(20)])
+
+
+def test_processes_racing_for_one_name_never_get_the_same(tmp_path):
+    ctx = multiprocessing.get_context("spawn")
+    barrier, results = ctx.Barrier(4), ctx.Queue()
+    procs = [ctx.Process(target=_claim_many, args=(str(tmp_path), barrier, results)) for _ in range(4)]
+    for p in procs:
+        p.start()
+    names = [name for _ in procs for name in results.get(timeout=60)]
+    for p in procs:
+        p.join(30)
+    assert len(names) == 80 and len(set(names)) == 80
+    assert len(list(tmp_path.iterdir())) == 80
 
 
 def test_pacer_sleeps_then_busy_waits_the_last_part():

@@ -12,7 +12,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.task import Future
 from std_msgs.msg import Float64
 
-from flexure_sim.node.stage_node import spin_until_stopped
+from flexure_sim.node.shell import spin_until_stopped
 
 
 class ShutdownWhileCollecting(CallbackGroup):

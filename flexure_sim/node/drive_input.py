@@ -22,7 +22,7 @@ import math
 import time
 from dataclasses import dataclass, fields
 from enum import Enum
-from typing import Callable, Optional
+from typing import Callable, Optional, Sequence
 
 
 class CommandStatus(Enum):
@@ -144,6 +144,38 @@ class CommandFilter:
         c.rejected += 1
         c.malformed += 1
 
+    def submit_many(self, values: Sequence[float]) -> tuple[int, int, float, float]:
+        """`submit` for each of ``values`` (floats) in order, in one call: the same target and
+        counters, without a Python call per command. Returns (rejected, clamped, last
+        rejected value, last clamped value as received); the values are NaN when none."""
+        lo, hi = self._limits.stroke_min, self._limits.stroke_max
+        isfinite = math.isfinite
+        target = self.target
+        rejected = clamped = 0
+        last_rejected = last_clamped = math.nan
+        for value in values:
+            if not isfinite(value):
+                rejected += 1
+                last_rejected = value
+            elif value < lo:
+                target, last_clamped = lo, value
+                clamped += 1
+            elif value > hi:
+                target, last_clamped = hi, value
+                clamped += 1
+            else:
+                target = value
+        c = self.counters
+        n = len(values)
+        c.received += n
+        c.accepted += n - rejected
+        c.rejected += rejected
+        c.clamped += clamped
+        if n > rejected:
+            self.target = float(target)
+            self._checked = False
+        return rejected, clamped, last_rejected, last_clamped
+
     def begin_tick(self, period: float) -> bool:
         """Start of a publish tick of ``period`` seconds: count the new target as rate-limited
         if the actuator cannot reach it within the tick. Returns True when it was counted."""
@@ -171,6 +203,12 @@ class CommandFilter:
                 self.applied += limit if delta > 0 else -limit
         return self.applied
 
+    def hold(self, value: float) -> None:
+        """Target and applied target both ``value`` (the engine could not follow the command:
+        the actuator stays where it was)."""
+        self.target = self.applied = float(value)
+        self._checked = True
+
     def reset(self) -> None:
         """Back to the initial target (simulation reset); counters are kept."""
         self.target = self.applied = self._initial
@@ -189,10 +227,10 @@ class WarningThrottle:
         self._last: dict[str, float] = {}
         self._pending: dict[str, int] = {}
 
-    def event(self, kind: str) -> Optional[int]:
-        """Record one event of ``kind``; return how many events the warning to be emitted now
-        stands for (including this one), or None if it is suppressed."""
-        pending = self._pending.get(kind, 0) + 1
+    def event(self, kind: str, count: int = 1) -> Optional[int]:
+        """Record ``count`` events of ``kind``; return how many events the warning to be
+        emitted now stands for (including these), or None if it is suppressed."""
+        pending = self._pending.get(kind, 0) + count
         now = self._clock()
         last = self._last.get(kind)
         if last is not None and now - last < self.interval_s:

@@ -52,12 +52,19 @@ def stream_qos() -> QoSProfile:
     return _reliable_volatile(QUEUE_DEPTH)
 
 
-def command_qos() -> QoSProfile:
-    """QoS of the drive command subscription: reliable, keep last `COMMAND_DEPTH`, volatile.
+def command_qos(reliability: str = "reliable") -> QoSProfile:
+    """QoS of the drive command subscription: ``reliability`` (``reliable``: only reliable
+    publishers match; ``best_effort``: reliable and best-effort ones), keep last
+    `COMMAND_DEPTH`, volatile.
 
     The reader is emptied once per tick (`polled`), so it must hold a tick's worth of
     commands: 1000 is a 1 MHz stream at 1 kHz ticks, or 200 ms of a 5 kHz stream at 5 Hz."""
-    return _reliable_volatile(COMMAND_DEPTH)
+    qos = _reliable_volatile(COMMAND_DEPTH)
+    if reliability == "best_effort":
+        qos.reliability = ReliabilityPolicy.BEST_EFFORT
+    elif reliability != "reliable":
+        raise ValueError(f"reliability: expected reliable or best_effort, got {reliability!r}")
+    return qos
 
 
 def check_names(mechanism: Mechanism) -> None:

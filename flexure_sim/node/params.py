@@ -18,6 +18,8 @@ from .interface import TIME_MODES
 DIVISION_TOLERANCE = 1e-6
 MAX_PUBLISH_RATE = 10000.0
 MAX_SIM_STEP = 1e-2
+#: Values of ``command_reliability``.
+COMMAND_RELIABILITIES = ("reliable", "best_effort")
 #: Default of ``wake_spin``: see its description (measured in BENCHMARKS.md).
 WAKE_SPIN_S = 1e-3
 #: Default of ``stepping_nice``: see its description (measured in BENCHMARKS.md).
@@ -74,15 +76,22 @@ def parameter_specs(drive_defaults: Optional[tuple[float, float, float]] = None)
                   "processes' it gets a shared core first, which keeps real-time ticks on time "
                   "next to busy nodes. Needs CAP_SYS_NICE or an RLIMIT_NICE allowing it; if "
                   "refused, the node says so once and runs unchanged. Read-only."),
+        ParamSpec("command_reliability", "reliable", str, "", True, None, None,
+                  "Reliability of the drive command subscription: reliable (only reliable "
+                  "publishers are heard) or best_effort (reliable and best-effort publishers "
+                  "alike; a command lost on the wire is not resent). A publisher that does not "
+                  "match gets a warning and a diagnostics count. Read-only."),
         ParamSpec("record", True, bool, "", False, None, None,
                   "Record every published topic and the received drive commands to MCAP "
                   "(same as ~/record)."),
         ParamSpec("record_dir", "runs", str, "", False, None, None,
                   "Directory of the recordings (relative to the working directory), created if "
-                  "missing; files are named <mechanism>_<UTC time>.mcap."),
+                  "missing; files are named <mechanism>_<namespace_node>_<UTC time>.mcap, with "
+                  "_1, _2, ... when the name is taken (names are claimed atomically)."),
         ParamSpec("record_path", "", str, "", False, None, None,
                   "Explicit file for the next recording (later ones get _1, _2, ... before the "
-                  "suffix); empty: a new name in record_dir. Existing files are never overwritten."),
+                  "suffix, or the next free one); empty: a new name in record_dir. Existing files "
+                  "are never overwritten."),
     ]
 
 
@@ -142,6 +151,9 @@ def validate(values: Mapping[str, Any]) -> Optional[str]:
     nice = values["stepping_nice"]
     if not (isinstance(nice, int) and not isinstance(nice, bool) and -20 <= nice <= 19):
         return f"stepping_nice: must be an integer in [-20, 19], got {nice!r}"
+    if values["command_reliability"] not in COMMAND_RELIABILITIES:
+        return (f"command_reliability: expected one of {', '.join(COMMAND_RELIABILITIES)}, "
+                f"got {values['command_reliability']!r}")
     if not isinstance(values["mechanism"], str) or not values["mechanism"].strip():
         return "mechanism: expected a built-in name or a YAML path, got an empty string"
     if not isinstance(values["record_dir"], str) or not values["record_dir"].strip():

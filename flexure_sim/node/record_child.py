@@ -48,12 +48,12 @@ class _SlowFile(io.FileIO):
         return super().write(data)
 
 
-def _output(path: Path) -> Path | BinaryIO:
-    """What the recorder writes to: the path, or a slowed file when the test hook asks."""
+def _output(path: Path, claimed: bool = False) -> Path | BinaryIO:
+    """Return what the recorder writes to: the path, or a slowed file when the test hook asks."""
     delay = float(os.environ.get(WRITE_DELAY_ENV) or 0.0)
     if delay <= 0.0:
         return path
-    raw = _SlowFile(path, "xb")
+    raw = _SlowFile(path, "wb" if claimed else "xb")
     raw.delay = delay
     return io.BufferedWriter(raw)
 
@@ -61,11 +61,14 @@ def _output(path: Path) -> Path | BinaryIO:
 def _open(spec: dict[str, Any]) -> McapRecorder:
     """A recorder for an ``O`` frame; the child never drops (it waits for its writer)."""
     path = Path(spec["path"])
-    if path.exists():
+    # claimed: the node created the empty file with O_EXCL (session), so it is ours to fill.
+    claimed = bool(spec.get("claimed")) and path.is_file() and path.stat().st_size == 0
+    if path.exists() and not claimed:
         raise RecordingError(f"{path}: exists; recordings are never overwritten")
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
-        new = McapRecorder(_output(path), queue_size=CHILD_QUEUE, max_block_s=None)
+        new = McapRecorder(_output(path, claimed), queue_size=CHILD_QUEUE, max_block_s=None,
+                           overwrite=claimed)
     except BaseException:
         with contextlib.suppress(OSError):  # not even the header fits: leave no empty file
             if path.stat().st_size == 0:

@@ -203,7 +203,9 @@ class ProcessRecording:
     ``topics``: (absolute name, ``pkg/msg/Type``, QoS) in channel order; `write_batch` takes
     the payloads of one tick as (channel index, bytes) pairs. ``lossless`` (default): wait for
     the recorder rather than drop (fast and lockstep modes); False: never wait, drop whole
-    batches the pipe and backlog cannot take and count them (real-time mode).
+    batches the pipe and backlog cannot take and count them (real-time mode). ``claimed``:
+    ``path`` is an empty file the caller created to claim the name
+    (`session.claim_recording_path`).
     """
 
     def __init__(
@@ -215,6 +217,7 @@ class ProcessRecording:
         metadata_name: str,
         *,
         lossless: bool = True,
+        claimed: bool = False,
     ) -> None:
         self.process = process
         self.path = Path(path)
@@ -224,6 +227,7 @@ class ProcessRecording:
             "topics": [[name, type_name, as_qos_description(qos).to_dict()]
                        for name, type_name, qos in topics],
             "metadata": {metadata_name: dict(metadata)},
+            "claimed": claimed,
         }
         process.send(b"O", json.dumps(spec).encode())
         reply = process.answer()

@@ -235,6 +235,8 @@ def bench_analyses(frequencies: int = 1000) -> dict:
 
 #: wake_spin of the second real-time run: the CPU / punctuality trade-off of a short spin.
 LOW_WAKE_SPIN_S = 2e-4
+#: Rate of the drive-command flood of the last real-time run (another process, tools/flood.py).
+FLOOD_HZ = 10000.0
 #: Topics a controller would subscribe to, for the real-time runs next to a subscriber.
 CONTROLLER_TOPICS = (topics.OUTPUT, topics.DRIVE_FORCE, topics.hinge_compression("a"))
 
@@ -246,9 +248,10 @@ def bench_node(duration: float = 30.0) -> dict:
     stepping-thread niceness and with none."""
     from . import measure  # needs ROS 2
 
-    def realtime(subscribe=False, **params) -> dict:
+    def realtime(subscribe=False, flood_hz=0.0, **params) -> dict:
         return measure.run_node("realtime", duration, 1000.0, DEFAULT_STEP, True, subscribe,
-                                params={k: repr(v) for k, v in params.items()})
+                                params={k: repr(v) for k, v in params.items()},
+                                flood_hz=flood_hz)
 
     fast = measure.run_node("fast", min(duration, 10.0), 1000.0, DEFAULT_STEP, True, False)
     default = realtime()
@@ -257,6 +260,7 @@ def bench_node(duration: float = 30.0) -> dict:
         "realtime_low_spin": realtime(wake_spin=LOW_WAKE_SPIN_S),
         "realtime_controller": realtime(list(CONTROLLER_TOPICS)),
         "realtime_controller_nice0": realtime(list(CONTROLLER_TOPICS), stepping_nice=0),
+        "realtime_flood": realtime(flood_hz=FLOOD_HZ),
     }
     return {
         "fast_rtf": fast["real_time_factor"],
@@ -265,6 +269,8 @@ def bench_node(duration: float = 30.0) -> dict:
         "jitter_p99_s": default["jitter_p99_s"],
         "max_late_s": 1e-6 * default["max_late_us"],
         "realtime_rtf": default["real_time_factor"],
+        "flood_missed_tick_fraction": runs["realtime_flood"]["missed_fraction"],
+        "flood_command_time_us": runs["realtime_flood"]["command_time_mean_us"],
         "fast": fast,
         **runs,
     }
@@ -317,11 +323,15 @@ def print_table(res: dict) -> None:
               f"real-time missed ticks {nd.get('missed_tick_fraction', float('nan')):.4%}, "
               f"jitter p50 {nd.get('jitter_p50_s', float('nan')) * 1e6:.0f} us, "
               f"p99 {nd.get('jitter_p99_s', float('nan')) * 1e6:.0f} us")
-        for key in ("realtime", "realtime_low_spin", "realtime_controller", "realtime_controller_nice0"):
+        for key in ("realtime", "realtime_low_spin", "realtime_controller", "realtime_controller_nice0",
+                    "realtime_flood"):
             r = nd.get(key)
             if r:
                 print(f"  real-time, wake_spin {r['wake_spin_s'] * 1e3:.2f} ms, stepping nice {r['stepping_nice']}"
                       + (f", subscriber on {r['subscribed']}" if r["subscribed"] else "")
+                      + (f", {r['flood_sent_per_s']:.0f} commands/s from another process "
+                         f"({r['command_time_mean_us'] or float('nan'):.1f} us each)"
+                         if r.get("flood_hz") else "")
                       + f": missed {r['missed_ticks']} of {r['paced_ticks']} ticks ({r['missed_fraction']:.3%}), "
                       f"node CPU {r['node_cpu_cores'] or float('nan'):.2f} cores, "
                       f"worst lateness {r['max_late_us'] / 1e3:.1f} ms")

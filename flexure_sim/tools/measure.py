@@ -57,11 +57,15 @@ def run_node(
     domain_id: Optional[int] = None,
     keep_dir: Optional[Path] = None,
     params: Optional[dict[str, str]] = None,
+    flood_hz: float = 0.0,
 ) -> dict[str, Any]:
     """Run the node in ``mode`` for warm-up + ``duration`` seconds and return the figures.
 
     ``params``: further node parameters (name -> value as on the command line). The node
-    runs in ``keep_dir`` (kept) or in a temporary directory (removed afterwards)."""
+    runs in ``keep_dir`` (kept) or in a temporary directory (removed afterwards).
+    ``flood_hz``: during the measuring window another process (`flood`) publishes drive
+    commands at that rate; the figures then include the commands received and the node's
+    intake cost per command."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.context import Context
@@ -115,6 +119,12 @@ def run_node(
         start_at = time.monotonic() + warmup
         while time.monotonic() < start_at:
             executor.spin_once(timeout_sec=0.05)
+        flooder = None
+        if flood_hz > 0:  # flooding from the first to past the last sample of the window
+            from .flood import FloodProcess
+
+            flooder = FloodProcess(flood_hz, duration + 2.0, env)
+            flooder.wait_started(lambda: executor.spin_once(timeout_sec=0.05))
         first = len(samples)
         received_start = received["count"]
         cpu_start, cpu_wall_start = _cpu_seconds(proc.pid), time.monotonic()
@@ -123,6 +133,7 @@ def run_node(
             executor.spin_once(timeout_sec=0.05)
         window = samples[first - 1:]
         cpu_end, cpu_wall_end = _cpu_seconds(proc.pid), time.monotonic()
+        flood = flooder.result() if flooder is not None else None
     finally:
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
@@ -177,6 +188,17 @@ def run_node(
                       wake_spin_s=1e-6 * float(b.get("wake_spin_us", "nan")))
     if subscribe:
         result["messages_received_per_s"] = (received["count"] - received_start) / duration
+    if flood is not None:
+        # Intake cost per command: the windows' means weighted by their commands.
+        counts = [float(v.get("commands_received", 0)) for _, v in window]
+        per_window = [(n1 - n0, float(v.get("command_time_mean_us", 0.0)))
+                      for n0, n1, (_, v) in zip(counts, counts[1:], window[1:])]
+        taken = sum(n for n, _ in per_window)
+        result.update(
+            flood_hz=flood_hz, flood_sent_per_s=flood.get("sent_per_s"),
+            flood_sent=flood.get("sent"), commands_received=int(delta("commands_received")),
+            command_time_mean_us=(sum(n * us for n, us in per_window) / taken
+                                  if taken else None))
     if record:
         from ..recording import read_log
 
@@ -207,7 +229,7 @@ def profile(rate: float, sim_step: float, ticks: int = 300, mechanism: str = "mi
     from ..node.interface import StageInterface, stream_qos
     from ..node.params import steps_per_tick
     from ..node.record_process import ProcessRecording, RecorderProcess
-    from ..node.stage_node import RELINEARIZE_TOL
+    from ..node.stepping import RELINEARIZE_TOL
 
     n, problem = steps_per_tick(rate, sim_step)
     if problem:
@@ -308,6 +330,11 @@ def _print_run(r: dict[str, Any]) -> None:
     if r.get("node_cpu_cores") is not None:
         print(f"   node process CPU: {r['node_cpu_cores']:.2f} cores; stepping thread niceness "
               f"{r['stepping_nice']}")
+    if r.get("flood_hz"):
+        cost = r["command_time_mean_us"]
+        print(f"   flood from another process: {r['flood_sent_per_s']:.0f} commands/s sent, "
+              f"{r['commands_received']} received; intake "
+              + (f"{cost:.1f} us per command" if cost is not None else "n/a"))
     if r.get("messages_received_per_s") is not None:
         print(f"   subscriber received {r['messages_received_per_s']:.0f} messages/s")
     if r["record"]:
@@ -331,6 +358,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                              "such as output/displacement,drive/force")
     parser.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE",
                         help="a further node parameter, e.g. wake_spin:=0.001 (repeatable)")
+    parser.add_argument("--flood", type=float, default=0.0, metavar="HZ",
+                        help="another process publishes drive commands at HZ during the window")
     parser.add_argument("--domain-id", type=int, default=None)
     parser.add_argument("--keep", type=Path, default=None, metavar="DIR",
                         help="run the node in DIR and keep its recording and logs there")
@@ -358,7 +387,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                            else [t for t in args.subscribe.split(",") if t])
         r = run_node(mode, args.duration, args.rate, args.sim_step, not args.no_record, subscribe,
                      warmup=args.warmup, mechanism=args.mechanism, domain_id=args.domain_id,
-                     keep_dir=args.keep / mode if args.keep else None, params=params)
+                     keep_dir=args.keep / mode if args.keep else None, params=params,
+                     flood_hz=args.flood)
         results.append(r)
         if not args.json:
             _print_run(r)

@@ -1,0 +1,97 @@
+"""What the engine can follow: refusing actuator strokes beyond it, holding the state when a
+step fails anyway (no ROS).
+
+Two lines of defence keep input from ever stopping the node (issue 16.10):
+
+1. `StrokeProbe` checks a new stroke before it is accepted: the mechanism must have a static
+   equilibrium (``Simulation.static``, Newton with the exact stiffness) at both ends. Where
+   there is none — the microstage driven 1 mm, hundreds of times its 2 um stroke, bends its
+   hinges past anything the twistor model converges on — the engine cannot follow a command
+   there either, so the parameter is refused with the engine's reason.
+2. `EngineHold` makes a tick transactional: it saves the engine state and the actuator target
+   before the tick's steps; if a step fails (``SolverError``) or the result is not finite, it
+   puts both back, so the simulation holds its last good state and nothing non-finite is
+   ever published, and counts the failure for the diagnostics.
+"""
+from __future__ import annotations
+
+from typing import Any, Optional
+
+import numpy as np
+
+from ..engine.mechanism import Mechanism
+from ..engine.solver import Simulation, SolverError
+
+
+class StrokeProbe:
+    """Static-equilibrium check of stroke ends on a simulation of its own (the node's is
+    stepped by another thread). Results are cached per value; the first check builds the
+    probe (tens of milliseconds)."""
+
+    def __init__(self, mechanism: Mechanism, dt: float) -> None:
+        self._mechanism = mechanism
+        self._dt = dt
+        self._sim: Optional[Simulation] = None
+        self._known: dict[float, Optional[str]] = {}
+
+    def end_problem(self, name: str, value: float) -> Optional[str]:
+        """Why the engine cannot hold the actuator at ``value`` (m), or None."""
+        value = float(value)
+        if value not in self._known:
+            if self._sim is None:
+                self._sim = Simulation(self._mechanism, dt=self._dt)
+            try:
+                self._sim.static(value)
+                self._known[value] = None
+            except SolverError as exc:
+                self._known[value] = (
+                    f"{name}: the engine finds no static equilibrium of {self._mechanism.name} at "
+                    f"{value:g} m ({exc}); it could not follow a command there")
+            except (ValueError, ArithmeticError):
+                self._known[value] = None  # the static solver cannot judge: run-time hold guards
+        return self._known[value]
+
+    def problem(self, stroke_min: float, stroke_max: float) -> Optional[str]:
+        """Why [stroke_min, stroke_max] is beyond the engine, or None."""
+        return (self.end_problem("stroke_max", stroke_max)
+                or self.end_problem("stroke_min", stroke_min))
+
+
+def snapshot_finite(snap: Any) -> bool:
+    """True if every number a tick publishes from ``snap`` is finite (~3 us)."""
+    scalars = [getattr(snap, name, 0.0) for name in
+               ("compression", "output", "drive_input", "drive_force")]
+    return bool(np.isfinite(snap.poses).all() and np.isfinite(snap.wrenches).all()
+                and np.isfinite(snap.deflections).all()
+                and np.isfinite(np.array([0.0 if v is None else v for v in scalars])).all())
+
+
+class EngineHold:
+    """Saves the engine state (and the drive filter's targets) before a tick; `restore` puts
+    them back after a failed step. Counts failures (`failures`) and keeps the last reason."""
+
+    def __init__(self) -> None:
+        self.failures = 0
+        self.last_error = ""
+        self._state: Any = None
+        self._targets: Optional[tuple[float, float]] = None
+
+    def save(self, sim: Simulation, drive_filter: Any) -> None:
+        """Remember the state before the tick's steps (a copy: ~3 us)."""
+        self._state = sim.state.copy()
+        self._targets = (drive_filter.target, drive_filter.applied) if drive_filter else None
+
+    def restore(self, sim: Simulation, drive_filter: Any, exc: BaseException) -> str:
+        """Back to the saved state after ``exc``; the drive target returns to where the actuator
+        was (the command the engine could not follow is dropped). Returns the reason logged."""
+        self.failures += 1
+        sim.state = self._state.copy()
+        dropped = ""
+        if drive_filter is not None and self._targets is not None:
+            target, applied = self._targets
+            if drive_filter.target != applied:
+                dropped = f"; drive command {drive_filter.target:g} m dropped"
+            drive_filter.hold(applied)
+        self.last_error = f"{type(exc).__name__}: {exc}"
+        return (f"the engine failed at t = {sim.state.t:.9g} s ({self.last_error}); state held"
+                + dropped)

@@ -1,0 +1,85 @@
+"""Incompatible QoS on the stage node's topics: counted, logged, shown in the diagnostics.
+
+A DDS reader and writer whose QoS do not match never exchange a message, and nothing else
+says so. The node therefore handles rmw's incompatible-QoS events:
+
+- on the drive command subscription (a publisher the node cannot hear, e.g. a best-effort
+  one while ``command_reliability`` is ``reliable``): WARN naming the policy and the remedy;
+- on every published topic (a subscriber the node cannot serve, e.g. one asking for
+  transient-local durability): WARN naming the topic and the policy.
+
+The command subscription is polled by the stepping thread and its callback group is never
+served by the executor (`polled`), so its event handlers are moved to a group of their own
+that the executor does serve: events are rare, so they cost the stepping thread nothing.
+Counts appear in the diagnostics (`qos_incompatible_publishers`, `..._subscribers`, WARN in
+the window in which one appeared).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.qos import qos_policy_name_from_kind
+
+from . import interface as itf
+
+
+class QosWatch:
+    """Counters and WARN lines of incompatible-QoS events (executor thread); read by the
+    diagnostics (stepping thread)."""
+
+    def __init__(self, log: Any, command_reliability: str) -> None:
+        self._log = log
+        self.command_reliability = command_reliability
+        self.group = MutuallyExclusiveCallbackGroup()
+        self.publishers = 0
+        self.subscribers = 0
+        self._reported = (0, 0)
+
+    # ------------------------------------------------------------- callbacks
+    def subscription_callbacks(self, topic: str) -> SubscriptionEventCallbacks:
+        def incompatible(event: Any) -> None:
+            change = max(int(getattr(event, "total_count_change", 1)), 1)
+            self.publishers += change
+            policy = qos_policy_name_from_kind(event.last_policy_kind)
+            remedy = (" (it publishes best effort? set command_reliability:=best_effort, or "
+                      "publish reliable)" if policy == "RELIABILITY"
+                      and self.command_reliability == "reliable" else "")
+            self._log.warning(
+                f"a publisher on {topic} offers QoS incompatible with the command subscription "
+                f"({policy}): none of its commands reach the node{remedy}; "
+                f"{self.publishers} such publishers so far")
+        return SubscriptionEventCallbacks(incompatible_qos=incompatible)
+
+    def publisher_callbacks(self, topic: str) -> PublisherEventCallbacks:
+        def incompatible(event: Any) -> None:
+            self.subscribers += max(int(getattr(event, "total_count_change", 1)), 1)
+            policy = qos_policy_name_from_kind(event.last_policy_kind)
+            self._log.warning(
+                f"a subscriber of {topic} requests QoS this node does not offer ({policy}): "
+                f"it receives nothing (the node publishes reliable, volatile); "
+                f"{self.subscribers} such subscribers so far")
+        return PublisherEventCallbacks(incompatible_qos=incompatible)
+
+    def adopt(self, entity: Any) -> None:
+        """Serve the event handlers of a polled ``entity`` in this watch's callback group."""
+        for handler in entity.event_handlers:
+            handler.callback_group = self.group
+            self.group.add_entity(handler)
+
+    # ------------------------------------------------------------ diagnostics
+    def diagnostics(self) -> tuple[list[tuple[str, Any]], list[str], int]:
+        """(values, notes, level) for the diagnostics window ending now."""
+        publishers, subscribers = self.publishers, self.subscribers
+        new_p, new_s = publishers - self._reported[0], subscribers - self._reported[1]
+        self._reported = (publishers, subscribers)
+        notes = []
+        if new_p:
+            notes.append(f"{new_p} command publishers with incompatible QoS")
+        if new_s:
+            notes.append(f"{new_s} subscribers with incompatible QoS")
+        values = [("command_reliability", self.command_reliability),
+                  ("qos_incompatible_publishers", publishers),
+                  ("qos_incompatible_subscribers", subscribers)]
+        return values, notes, itf.WARN if notes else itf.OK

@@ -1,0 +1,220 @@
+"""The stage node's stepping thread: it owns the `Simulation` and the recording, and per
+publish tick applies the drive commands received since the last tick (`commands`),
+advances the engine by round(1 / (publish_rate * sim_step)) steps and publishes the state
+(`interface`), packing each message to CDR once and publishing and recording the same bytes.
+
+Real-time mode paces ticks with absolute deadlines of a steady clock (`pacing.Pacer`); fast
+mode runs flat out; lockstep mode runs one tick per ``~/step`` request. Between ticks the
+thread runs the work services and parameter changes queued for it (`requests`). A tick whose
+engine step fails holds the last good state (`engine_guard.EngineHold`): input never stops
+the thread.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Optional, Sequence
+
+from ..engine.solver import Simulation, SolverError
+from .diagnostics import Diagnostics
+from .drive_input import CommandFilter, WarningThrottle
+from .engine_guard import EngineHold, snapshot_finite
+from .pacing import Pacer, set_thread_nice
+from .params import steps_per_tick
+from .requests import RequestQueue
+from .session import RecordingSession
+
+#: Engine's relinearize_tol: None = its default, re-linearize only when the step's iteration
+#: stops contracting (the answer does not depend on where the Jacobian was taken), which lets
+#: Simulation.step(n) run all n steps in one compiled loop.
+RELINEARIZE_TOL = None
+#: Diagnostics rate (Hz of simulated time), or every tick if the publish rate is lower.
+DIAGNOSTICS_RATE = 10.0
+
+
+class SteppingLoop:
+    """Ticks of one simulation. Build, attach `diagnostics` and `intake`, then `start`."""
+
+    def __init__(self, sim: Simulation, drive_filter: Optional[CommandFilter], interface: Any,
+                 publishers: Sequence[Any], session: RecordingSession, log: Any, *,
+                 time_mode: str, rate: float, dt: float, wake_spin: float, nice: int) -> None:
+        self.sim = sim
+        self.filter = drive_filter
+        self.interface = interface
+        self._publishers = list(publishers)
+        self.session = session
+        self._log = log
+        self.time_mode = time_mode
+        self.rate = rate
+        self.dt = dt
+        self.n_steps, _ = steps_per_tick(rate, dt)
+        self.diag_every = max(1, round(rate / DIAGNOSTICS_RATE))
+        self.pacer: Optional[Pacer] = (
+            Pacer(1.0 / rate, spin_s=min(wake_spin, 1.0 / rate)) if time_mode == "realtime"
+            else None)
+        self._nice_request = nice
+        self.nice = 0
+        self.ticks = 0
+        self.runs = 0
+        self.hold = EngineHold()
+        self.throttle = WarningThrottle(1.0)
+        self.intake: Any = None
+        self.diagnostics: Optional[Diagnostics] = None
+        self.requests = RequestQueue(self.alive)
+        self.run_wall0 = time.perf_counter()
+        self.run_sim0 = sim.state.t
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        #: Why the thread ended, if it failed.
+        self.failure: Optional[BaseException] = None
+
+    # ------------------------------------------------------------------ thread
+    def start(self, on_end: Any, on_failure: Any) -> None:
+        """Run the loop in its own thread. ``on_end(ok)`` is called when it ends;
+        ``on_failure(exc)`` first if it raised: it reports and returns whether that is a
+        failure (False: the node was shutting down anyway)."""
+        self._on_end, self._on_failure = on_end, on_failure
+        self._thread = threading.Thread(target=self._run, name="stage-stepping", daemon=True)
+        self._thread.start()
+
+    def alive(self) -> bool:
+        thread = self._thread
+        return thread is not None and thread.is_alive()
+
+    def stop(self, timeout: float) -> None:
+        """End the thread (waits up to ``timeout`` s); idempotent."""
+        self._stop.set()
+        self.requests.wake.set()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=timeout)
+
+    def _run(self) -> None:
+        try:
+            self.nice, refused = set_thread_nice(self._nice_request)
+            if refused:
+                self._log.info(f"stepping thread: {refused}")
+            pacer = self.pacer
+            if pacer is not None:
+                pacer.start()
+            self.restart_clocks()
+            requests = self.requests
+            while not self._stop.is_set():
+                if requests and requests.serve() and pacer is not None:
+                    pacer.reanchor()
+                if self.time_mode == "lockstep":
+                    requests.wake.wait(0.1)
+                    requests.wake.clear()
+                    continue
+                if pacer is not None:
+                    pacer.wait()
+                self.tick()
+                if pacer is not None:
+                    pacer.done()
+        except BaseException as exc:  # noqa: BLE001 - reported, then the node shuts down
+            if not self._stop.is_set() and self._on_failure(exc):
+                self.failure = exc
+        finally:
+            self.requests.fail_all()
+            self._on_end(self.failure is None)
+
+    def restart_clocks(self) -> None:
+        """A new run or window starts now (wall clock and simulated time)."""
+        if self.diagnostics is not None:
+            self.diagnostics.window = self.diagnostics.new_window()
+        self.run_wall0, self.run_sim0 = time.perf_counter(), self.sim.state.t
+
+    # ------------------------------------------------------------------ ticks
+    def step_once(self) -> tuple[bool, str]:
+        """One tick (lockstep ``~/step``)."""
+        if not self.tick():
+            return False, f"{self.hold.last_error}; state held at t = {self.sim.state.t:.9g} s"
+        return True, f"t = {self.sim.state.t:.9g} s"
+
+    def _advance_engine(self) -> None:
+        """The tick's engine steps, following the drive filter's ramp."""
+        sim = self.sim
+        filt = self.filter
+        if filt is None:
+            sim.step(self.n_steps)
+            return
+        if filt.begin_tick(self.n_steps * self.dt) and self.intake is not None:
+            self.intake.warn("rate_limited", "drive command faster than the slew limit "
+                             f"({filt.limits.slew_rate:g} m/s): ramping")
+        if filt.settled:
+            if sim.state.command != filt.applied:
+                sim.set_command(filt.applied)
+            sim.step(self.n_steps)
+        else:
+            dt = self.dt
+            for _ in range(self.n_steps):
+                sim.set_command(filt.advance(dt))
+                sim.step(1)
+
+    def tick(self) -> bool:
+        """One publish tick: commands, engine steps, publish + record every topic. Returns
+        False when the engine failed: the state is then held and only diagnostics go out."""
+        perf = time.perf_counter
+        t0 = perf()
+        sim = self.sim
+        if self.intake is not None:
+            self.intake.apply(round(sim.state.t * 1e9))
+        self.hold.save(sim, self.filter)
+        try:
+            self._advance_engine()
+            t1 = perf()
+            snap = sim.snapshot()
+            if not snapshot_finite(snap):
+                raise SolverError(f"non-finite result at t = {snap.t:.9g} s")
+        except Exception as exc:  # noqa: BLE001 - any engine failure: hold, report, go on
+            message = self.hold.restore(sim, self.filter, exc)
+            if self.throttle.event("engine") is not None:
+                self._log.error(message + f" ({self.hold.failures} engine failures in all)")
+            self._count_tick(round(sim.state.t * 1e9))
+            return False
+        t2 = perf()
+        stamp = round(snap.t * 1e9)
+        payloads = self.interface.encode(snap, stamp)
+        # Recorded first, so that the file holds every message a subscriber can have seen even
+        # if a shutdown interrupts the publishing. Channels 0..n-1: the tick topics.
+        if self.session.current is not None:
+            self.session.write(list(enumerate(payloads)), stamp)
+        for pub, payload in zip(self._publishers, payloads):
+            pub.publish(payload)
+        t3 = perf()
+        if self.diagnostics is not None:
+            self.diagnostics.window.add(t1 - t0, t2 - t1, t3 - t2, t3 - t0)
+        self._count_tick(stamp)
+        return True
+
+    def _count_tick(self, stamp: int) -> None:
+        self.ticks += 1
+        if self.ticks % self.diag_every == 0 and self.diagnostics is not None:
+            self.diagnostics.publish(stamp)
+
+    # ------------------------------------------------------------- live changes
+    def set_pacing(self, rate: float, wake_spin: float) -> None:
+        """New publish rate and busy-wait (stepping thread)."""
+        if self.pacer is not None:
+            self.pacer.spin_s = min(wake_spin, 1.0 / rate)
+        if rate == self.rate:
+            return
+        self.rate = rate
+        self.n_steps, _ = steps_per_tick(rate, self.dt)
+        self.diag_every = max(1, round(rate / DIAGNOSTICS_RATE))
+        if self.pacer is not None:
+            self.pacer.set_period(1.0 / rate)
+        self._log.info(f"publish_rate {rate:g} Hz: {self.n_steps} engine steps per tick")
+
+    def reset(self) -> None:
+        """Back to t = 0 and the initial command (stepping thread); counters are kept."""
+        self.sim.reset()
+        if self.filter is not None:
+            self.filter.reset()
+            if self.filter.applied != 0.0:
+                self.sim.set_command(self.filter.applied)
+        if self.intake is not None:
+            self.intake.discard()  # sent before the reset: discarded
+        self.runs += 1
+        self.ticks = 0
+        self.restart_clocks()

@@ -1,0 +1,106 @@
+"""Publishers and subscribers whose QoS does not match the node's (issue 18.2).
+
+A real node process and real rclpy peers. With the default ``command_reliability`` reliable,
+a best-effort command publisher cannot be heard: the node says so (WARN line, diagnostics
+count) within a second of the publisher appearing. With ``best_effort`` its commands are
+applied, as are a reliable publisher's. A subscriber asking for more than the node offers
+(transient-local durability) is reported the same way.
+"""
+from __future__ import annotations
+
+import signal
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64
+
+from node_harness import NodeProcess, Peer, diagnostics_values
+
+import pytest
+
+BEST_EFFORT = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                         reliability=ReliabilityPolicy.BEST_EFFORT,
+                         durability=DurabilityPolicy.VOLATILE)
+PARAMS = dict(time_mode="realtime", sim_step=5e-4, publish_rate=200.0, record=False)
+
+
+def diag(peer: Peer) -> dict[str, str]:
+    """The latest diagnostics values ({} before the first)."""
+    msg = peer.last("/diagnostics")
+    return diagnostics_values(msg) if msg is not None else {}
+
+
+def test_a_best_effort_publisher_is_warned_about_within_a_second(tmp_path, peer_and_domain):
+    peer, domain = peer_and_domain
+    node = NodeProcess(tmp_path / "node", domain, PARAMS)
+    peer.watch = node
+    try:
+        peer.subscribe("/diagnostics", DiagnosticArray)
+        peer.wait_for_publishers(["/diagnostics"])
+        peer.spin_until(lambda: peer.node.count_subscribers("/drive/displacement") > 0, 20,
+                        "the command subscription in the graph")
+        t0 = time.monotonic()
+        drive = peer.node.create_publisher(Float64, "/drive/displacement", BEST_EFFORT)
+        line = node.wait_for_output("offers QoS incompatible", timeout=20)
+        elapsed = time.monotonic() - t0
+        assert elapsed < 1.0, f"warned after {elapsed:.2f} s"
+        assert "RELIABILITY" in line and "command_reliability:=best_effort" in line
+        drive.publish(Float64(data=1e-6))
+        peer.spin_until(lambda: diag(peer).get("qos_incompatible_publishers") == "1", 10,
+                        "the count in the diagnostics")
+        values = diag(peer)
+        assert values["command_reliability"] == "reliable"
+        assert values["commands_received"] == "0"  # nothing from it reached the node
+        # A subscriber wanting transient-local data the node does not keep: reported too.
+        wants_history = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                                   reliability=ReliabilityPolicy.RELIABLE,
+                                   durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        peer.node.create_subscription(Float64, "/output/displacement", lambda m: None,
+                                      wants_history)
+        line = node.wait_for_output("requests QoS this node does not offer", timeout=20)
+        assert "/output/displacement" in line or "output/displacement" in line
+        assert "DURABILITY" in line
+        peer.spin_until(lambda: diag(peer).get("qos_incompatible_subscribers") == "1", 10,
+                        "the subscriber count in the diagnostics")
+    finally:
+        rc = node.stop(signal.SIGINT)
+    assert rc == 0, node.stderr
+
+
+def test_best_effort_command_reliability_hears_both_kinds_of_publisher(
+        tmp_path, peer_and_domain):
+    peer, domain = peer_and_domain
+    node = NodeProcess(tmp_path / "node", domain, dict(PARAMS, command_reliability="best_effort"))
+    peer.watch = node
+    try:
+        peer.subscribe("/diagnostics", DiagnosticArray)
+        peer.subscribe("/drive/input", Float64, depth=10000)
+        peer.wait_for_publishers(["/diagnostics", "/drive/input"])
+        best_effort = peer.node.create_publisher(Float64, "/drive/displacement", BEST_EFFORT)
+        reliable = peer.publisher("/drive/displacement", Float64)
+        peer.wait_for_subscribers(best_effort)
+        peer.wait_for_subscribers(reliable)
+        sent = [0]
+
+        def best_effort_applied() -> bool:
+            # Best effort is not resent: stream, as a controller does, until one arrives.
+            best_effort.publish(Float64(data=1.0e-6))
+            sent[0] += 1
+            last = peer.last("/drive/input")
+            return last is not None and last.data == pytest.approx(1.0e-6, rel=1e-9)
+
+        peer.spin_until(best_effort_applied, 10, "the best-effort command applied")
+        reliable.publish(Float64(data=0.5e-6))
+        peer.spin_until(lambda: peer.last("/drive/input").data == pytest.approx(0.5e-6, rel=1e-9),
+                        10, "the reliable command applied")
+        peer.spin_until(lambda: int(diag(peer).get("commands_received", 0)) >= 2, 10,
+                        "both commands counted")
+        values = diag(peer)
+        assert int(values["commands_received"]) <= sent[0] + 1
+        assert values["command_reliability"] == "best_effort"
+        assert values["qos_incompatible_publishers"] == "0"
+    finally:
+        rc = node.stop(signal.SIGINT)
+    assert rc == 0, node.stderr
+    assert "incompatible" not in node.stderr
