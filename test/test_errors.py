@@ -39,7 +39,7 @@ def test_every_package_error_derives_from_the_root():
         "flexure_sim.tools.runlog.RunError",
         "flexure_sim.cli.UsageError",
         "flexure_sim.node.demo_drive.DriveError",
-        "flexure_sim.node.stage_node.StartupError",
+        "flexure_sim.node.shell.StartupError",
     }
     assert expected <= set(classes), sorted(expected - set(classes))
     outside = sorted(name for name, cls in classes.items() if not issubclass(cls, FlexureSimError))
@@ -56,7 +56,8 @@ def test_every_package_error_derives_from_the_root():
         ("flexure_sim.cli.UsageError", ValueError),
         ("flexure_sim.engine.solver.SolverError", RuntimeError),
         ("flexure_sim.node.demo_drive.DriveError", RuntimeError),
-        ("flexure_sim.node.stage_node.StartupError", RuntimeError),
+        ("flexure_sim.node.stage_node.UsageError", ValueError),
+        ("flexure_sim.node.shell.StartupError", RuntimeError),
     ],
 )
 def test_errors_keep_their_builtin_base(name, builtin):

@@ -26,6 +26,7 @@ from rclpy.task import Future
 from std_srvs.srv import SetBool, Trigger
 
 from ..engine.config import ConfigError, load_mechanism, resolve_mechanism_path
+from ..errors import FlexureSimError
 from ..engine.solver import Simulation
 from ..recording import RecordingError
 from . import interface as itf
@@ -47,7 +48,7 @@ NODE_NAME = "stage_node"
 SPIN_TIMEOUT_S = 1.0
 
 
-class StartupError(RuntimeError):
+class StartupError(FlexureSimError, RuntimeError):
     """The node cannot start (bad mechanism, invalid parameters, recording impossible)."""
 
 

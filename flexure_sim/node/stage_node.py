@@ -20,6 +20,8 @@ import signal
 import sys
 from typing import Any, Optional
 
+rom ..errors import FlexureSimError
+
 #: GIL switch interval: keeps the stepping thread's latency low while callbacks run.
 SWITCH_INTERVAL_S = 0.0005
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -41,7 +43,7 @@ class Interrupted(BaseException):
         self.signum = signum
 
 
-class UsageError(Exception):
+class UsageError(FlexureSimError, ValueError):
     """Bad command-line arguments (exit code 2)."""
 
 
