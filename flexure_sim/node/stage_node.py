@@ -20,7 +20,7 @@ import signal
 import sys
 from typing import Any, Optional
 
-rom ..errors import FlexureSimError
+from ..errors import FlexureSimError
 
 #: GIL switch interval: keeps the stepping thread's latency low while callbacks run.
 SWITCH_INTERVAL_S = 0.0005
