@@ -15,12 +15,17 @@ from flexure_sim.errors import FlexureSimError
 
 
 def _package_error_classes():
-    """Every exception class defined in a module of the package (all modules imported)."""
+    """
+    Return every error class defined in a module of the package (all modules imported).
+
+    Errors derive from Exception; BaseException subclasses that are not Exceptions are control
+    flow (as KeyboardInterrupt is: the node's Interrupted), not errors.
+    """
     found = {}
     for info in pkgutil.walk_packages(flexure_sim.__path__, prefix="flexure_sim."):
         module = importlib.import_module(info.name)
         for _, obj in inspect.getmembers(module, inspect.isclass):
-            if issubclass(obj, BaseException) and obj.__module__ == module.__name__:
+            if issubclass(obj, Exception) and obj.__module__ == module.__name__:
                 found[f"{obj.__module__}.{obj.__qualname__}"] = obj
     return found
 
