@@ -191,7 +191,8 @@ def builtin_names() -> list[str]:
     """Names of the mechanisms shipped in config/."""
     names: set[str] = set()
     for d in _builtin_dirs():
-        names.update(p.stem for p in d.glob("*.yaml"))
+        # *.params.yaml files next to the mechanisms are node parameter files.
+        names.update(p.stem for p in d.glob("*.yaml") if not p.stem.endswith(".params"))
     return sorted(names)
 
 
