@@ -90,7 +90,8 @@ def _argument_names_by_parsing(path: Path) -> set:
 def test_launch_file_declares_its_arguments_and_the_node(capsys):
     names = _argument_names_by_parsing(LAUNCH_FILE)
     assert names == LAUNCH_ARGUMENTS
-    if importlib.util.find_spec("launch") is None or importlib.util.find_spec("launch_ros") is None:
+    find = importlib.util.find_spec
+    if find("launch") is None or find("launch_ros") is None:
         with capsys.disabled():
             print("\n[launch file] launch/launch_ros not importable: checked by parsing only")
         source = LAUNCH_FILE.read_text()
