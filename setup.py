@@ -29,6 +29,7 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
         (f"share/{PACKAGE}/config/examples", sorted(glob("config/examples/*"))),
+        (f"share/{PACKAGE}/launch", sorted(glob("launch/*.launch.py"))),
         (f"lib/{PACKAGE}", [f"scripts/ros2run/{name}" for name in sorted(EXECUTABLES)]),
     ],
     install_requires=["numpy", "scipy", "numba", "PyYAML", "mcap", "mcap-ros2-support"],

@@ -99,7 +99,10 @@ def builtin_dir() -> Optional[Path]:
 def builtin_names() -> list[str]:
     """Names of the built-in mechanisms (file stems), sorted; empty if none are found."""
     folder = builtin_dir()
-    return sorted(p.stem for p in folder.glob("*.yaml")) if folder is not None else []
+    if folder is None:
+        return []
+    # *.params.yaml next to the mechanisms are node parameter files, not mechanisms.
+    return sorted(p.stem for p in folder.glob("*.yaml") if not p.stem.endswith(".params"))
 
 
 def find_builtin(name: str) -> Optional[Path]:

@@ -298,7 +298,7 @@ def _bodies(ctx: _Ctx, raw: Any) -> list[Body]:
     for i, spec in enumerate(raw):
         key = f"bodies[{i}]"
         spec = _mapping(ctx, key, spec)
-        _no_unknown(ctx, key, spec, {"name", "mass", "inertia", "pose", "description"})
+        _no_unknown(ctx, key, spec, {"name", "mass", "inertia", "pose", "shape", "description"})
         name = _name(ctx, f"{key}.name", _require(ctx, key, spec, "name"))
         if name in seen:
             raise ctx.fail(f"{key}.name", f"duplicate body name {name!r}")
@@ -308,8 +308,30 @@ def _bodies(ctx: _Ctx, raw: Any) -> list[Body]:
         pose = _vector(ctx, f"{key}.pose", spec.get("pose", [0, 0, 0]), (2, 3))
         if len(pose) == 2:
             pose.append(0.0)
-        bodies.append(Body(name, mass, inertia, (pose[0], pose[1], pose[2])))
+        shape = _shape(ctx, f"{key}.shape", spec["shape"]) if "shape" in spec else None
+        bodies.append(Body(name, mass, inertia, (pose[0], pose[1], pose[2]), shape))
     return bodies
+
+
+def _shape(ctx: _Ctx, key: str, spec: Any) -> tuple[tuple[float, float], ...]:
+    """
+    Read a body's display outline: ``{rectangle: [x0, y0, x1, y1]}`` or ``{polygon: [[x, y]...]}``.
+
+    Coordinates are in the body frame (m); a rectangle becomes its four corners.
+    """
+    spec = _mapping(ctx, key, spec)
+    if len(spec) != 1 or next(iter(spec)) not in ("rectangle", "polygon"):
+        raise ctx.fail(key, "expected {rectangle: [x0, y0, x1, y1]} or {polygon: [[x, y], ...]}")
+    if "rectangle" in spec:
+        x0, y0, x1, y1 = _vector(ctx, f"{key}.rectangle", spec["rectangle"], (4,))
+        if x0 == x1 or y0 == y1:
+            raise ctx.fail(f"{key}.rectangle", "has no area (x0 == x1 or y0 == y1)")
+        return ((x0, y0), (x1, y0), (x1, y1), (x0, y1))
+    raw = spec["polygon"]
+    if not isinstance(raw, list) or len(raw) < 3:
+        raise ctx.fail(f"{key}.polygon", "expected a list of at least 3 points [x, y]")
+    points = tuple(tuple(_vector(ctx, f"{key}.polygon[{i}]", v, (2,))) for i, v in enumerate(raw))
+    return points
 
 
 def _body_ref(ctx: _Ctx, key: str, spec: dict, by_name: dict[str, Body]) -> str:

@@ -28,6 +28,8 @@ class Body:
     mass: float
     inertia: float
     pose: tuple[float, float, float]
+    #: Outline for displays: polygon vertices (x, y) in the body frame, m; None: no shape given.
+    shape: Optional[tuple[tuple[float, float], ...]] = None
 
 
 @dataclass(frozen=True)
