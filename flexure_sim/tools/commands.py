@@ -16,6 +16,7 @@ TOOL_MODULES: tuple[str, ...] = (
     "tools.export",
     "node.replay",
     "tools.bench",
+    "tools.sweep",
 )
 
 
