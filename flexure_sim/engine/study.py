@@ -226,7 +226,7 @@ def _replace(doc: Any, path: Sequence, value: Any) -> Any:
 def load_study(path: str | Path, output_names: Iterable[str]) -> Study:
     """Read and validate a study file; ``output_names``: the outputs the runner provides."""
     path = Path(path)
-    data = read_yaml(path, StudyError)
+    data = _read(path, StudyError)
     return study_from_dict(data, str(path), output_names, base_dir=path.parent)
 
 
@@ -249,8 +249,8 @@ def study_from_dict(data: Any, source: str, output_names: Iterable[str],
     if not isinstance(raw, list) or not raw:
         raise fail("parameters", "expected a non-empty list of parameters")
     params = [_parameter(spec, f"parameters[{i}]", base, fail) for i, spec in enumerate(raw)]
-    _unique_columns(params, outputs, fail)
     _unique_paths(params, fail)
+    _unique_columns(params, outputs, fail)
     kinds = {p.kind == "values" for p in params}
     if len(kinds) > 1:
         raise fail("parameters", "mixes grid values/range with distributions: a study is "
@@ -280,6 +280,14 @@ def study_from_dict(data: Any, source: str, output_names: Iterable[str],
     return study
 
 
+def _read(path: Path, error: type[Exception]) -> Any:
+    """read_yaml, with a file that is not UTF-8 text refused by name too."""
+    try:
+        return read_yaml(path, error)
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not a text file ({exc.reason} at byte {exc.start})") from None
+
+
 def _base_mechanism(ref: Any, base_dir: Optional[Path], fail) -> tuple[Path, dict]:
     if not isinstance(ref, str) or not ref:
         raise fail("mechanism", f"expected a built-in name or a YAML path, got {ref!r}")
@@ -288,7 +296,7 @@ def _base_mechanism(ref: Any, base_dir: Optional[Path], fail) -> tuple[Path, dic
         candidate = str(base_dir / ref) if not Path(ref).is_absolute() else ref
     try:
         path = resolve_mechanism_path(candidate)
-        doc = read_yaml(path, ConfigError)
+        doc = _read(path, ConfigError)
     except ConfigError as exc:
         raise fail("mechanism", str(exc)) from None
     if not isinstance(doc, dict):
