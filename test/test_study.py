@@ -48,7 +48,8 @@ def _hinge_K(mech, name):
     ({"parameters": [{"path": "stiffness_models.notch.h", "uniform": {"low": 2, "high": 1}}],
       "samples": 5, "seed": 1}, "s.yaml: parameters[0].uniform.high: must be above low"),
     ({"batch_size": 0}, "s.yaml: batch_size: expected a positive integer, got 0"),
-    ({"step": {"dt": 0.1, "duration": 0.01}}, "s.yaml: step.dt: 0.1 s is longer than the duration"),
+    ({"step": {"dt": 0.1, "duration": 0.01}},
+     "s.yaml: step.dt: 0.1 s is longer than the duration"),
 ])
 def test_a_bad_study_is_refused_with_a_message_naming_the_key(change, key):
     with pytest.raises(StudyError) as err:
@@ -115,7 +116,8 @@ def test_samples_follow_the_distributions_and_depend_on_seed_and_index_only():
     # The same index gives the same values whatever the batching or the study size.
     other = _study(samples=10, seed=7, batch_size=100, parameters=study_spec(study))
     np.testing.assert_array_equal(other.sample(9), x[9])
-    assert not np.array_equal(_study(samples=10, seed=8, parameters=study_spec(study)).sample(9), x[9])
+    reseeded = _study(samples=10, seed=8, parameters=study_spec(study))
+    assert not np.array_equal(reseeded.sample(9), x[9])
 
 
 def study_spec(study):
@@ -137,7 +139,8 @@ def test_the_shipped_stage_study_loads(tmp_path):
     study = load_study(path, OUTPUTS)
     assert study.samples == 10000 and study.monte_carlo
     assert [p.name for p in study.parameters] == [f"h_{c}" for c in "abcdefg"]
-    assert all(p.kind == "normal" and p.scale == 5e-6 and p.loc == 2.5e-4 for p in study.parameters)
+    assert all(p.kind == "normal" and p.scale == 5e-6 and p.loc == 2.5e-4
+               for p in study.parameters)
     # a relative mechanism path is taken relative to the study file
     mech_file = tmp_path / "my_stage.yaml"
     mech_file.write_text((path.parents[1] / "microstage.yaml").read_text())
@@ -146,4 +149,5 @@ def test_the_shipped_stage_study_loads(tmp_path):
     study_file.write_text(yaml.safe_dump({"mechanism": "../my_stage.yaml", "outputs": ["gain"],
                                           "parameters": [{"path": "hinges.b.stiffness.h",
                                                           "values": [2e-4]}]}))
-    assert load_study(study_file, OUTPUTS).mechanism_source == str(tmp_path / "sub" / "../my_stage.yaml")
+    expected = str(tmp_path / "sub" / "../my_stage.yaml")
+    assert load_study(study_file, OUTPUTS).mechanism_source == expected

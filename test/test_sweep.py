@@ -17,7 +17,7 @@ import yaml
 from flexure_sim.engine.config import load_mechanism
 from flexure_sim.engine.solver import Simulation
 from flexure_sim.engine.study import load_study, study_from_dict
-from flexure_sim.tools import analysis, sweep, sweep_summary
+from flexure_sim.tools import analysis, sweep_run as sweep, sweep_summary
 from flexure_sim.tools.sweep_outputs import OUTPUTS, evaluate_batch
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -35,13 +35,14 @@ def _small_stage_study(tmp_path: Path, samples=200, batch_size=20, **over) -> Pa
 
 def _cli(*args, cwd: Path, **kw) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
-    return subprocess.run([sys.executable, "-m", "flexure_sim.cli", "sweep", *map(str, args)], cwd=cwd,
-                          env=env, capture_output=True, text=True, timeout=300, **kw)
+    return subprocess.run([sys.executable, "-m", "flexure_sim.cli", "sweep", *map(str, args)],
+                          cwd=cwd, env=env, capture_output=True, text=True, timeout=300, **kw)
 
 
 def _grid(values, outputs=("gain", "compression", "drive_force"), input=1.35e-6, **over):
     data = {"mechanism": "microstage", "input": input, "outputs": list(outputs),
-            "parameters": [{"name": "h", "path": "stiffness_models.notch.h", "values": values}], **over}
+            "parameters": [{"name": "h", "path": "stiffness_models.notch.h", "values": values}],
+            **over}
     return study_from_dict(data, "grid.yaml", OUTPUTS)
 
 
@@ -55,7 +56,8 @@ def test_nominal_stage_outputs_match_the_reference_figures():
     assert cols["gain"][0] == pytest.approx(27.628, rel=1e-4)
     assert cols["compression"][0] == pytest.approx(192.2e-9, rel=1e-3)
     sim, du = Simulation(load_mechanism("microstage")), 1e-9
-    dU = sim.static(1.35e-6 + du).snapshot.potential_energy - sim.static(1.35e-6 - du).snapshot.potential_energy
+    U = [sim.static(1.35e-6 + s * du).snapshot.potential_energy for s in (1, -1)]
+    dU = U[0] - U[1]
     assert cols["drive_force"][0] == pytest.approx(dU / (2 * du), rel=1e-5)
 
 
@@ -64,7 +66,8 @@ def test_step_outputs_agree_with_an_independent_integrator():
     integrated by scipy's Radau (rtol 1e-9, exact Jacobian), sampled at the same instants."""
     from scipy.integrate import solve_ivp
 
-    study = _grid([2.5e-4], outputs=("settling_time", "overshoot"), step={"duration": 0.02, "dt": 1e-4})
+    study = _grid([2.5e-4], outputs=("settling_time", "overshoot"),
+                  step={"duration": 0.02, "dt": 1e-4})
     cols = evaluate_batch(study, 0, 1)
     sim = Simulation(load_mechanism("microstage"), dt=1e-4)
     sim.set_command(1.35e-6)
@@ -104,7 +107,8 @@ def test_monte_carlo_spread_of_the_gain_agrees_with_the_first_order_prediction(t
 # ------------------------------------------------------------------------------ the command
 def test_a_design_that_fails_is_recorded_and_the_study_goes_on(tmp_path):
     study = tmp_path / "grid.yaml"
-    study.write_text(yaml.safe_dump({"mechanism": "microstage", "outputs": ["gain"], "batch_size": 2,
+    study.write_text(yaml.safe_dump({"mechanism": "microstage", "outputs": ["gain"],
+                                     "batch_size": 2,
                                      "parameters": [{"path": "stiffness_models.notch.h",
                                                      "values": [2.5e-4, -1e-4, 3e-4]}]}))
     res = _cli(study, "-o", tmp_path / "out.parquet", "--workers", "1", "--json", cwd=tmp_path)
@@ -123,11 +127,13 @@ def test_a_design_that_fails_is_recorded_and_the_study_goes_on(tmp_path):
 def test_a_bad_study_file_gets_one_line_naming_the_key(tmp_path):
     study = tmp_path / "bad.yaml"
     study.write_text("mechanism: microstage\noutputs: [gain]\nparameters:\n"
-                     "  - {path: stiffness_models.notch.h, normal: {std: 1.0e-6}}\nseed: 1\nsample: 10\n")
+                     "  - {path: stiffness_models.notch.h, normal: {std: 1.0e-6}}\n"
+                     "seed: 1\nsample: 10\n")
     res = _cli(study, "-o", tmp_path / "out.parquet", cwd=tmp_path)
     assert res.returncode == 1
     assert res.stderr.strip().splitlines() == [
-        f"flexure-sim sweep: error: {study}: sample: unknown key (allowed: batch_size, description, "
+        f"flexure-sim sweep: error: {study}: sample: unknown key (allowed: batch_size, "
+        "description, "
         "input, mechanism, name, outputs, parameters, samples, seed, step)"]
 
 
@@ -136,8 +142,9 @@ def test_ctrl_c_keeps_finished_batches_and_resume_completes_the_study(tmp_path):
     reference = sweep.run_study(load_study(study, OUTPUTS), tmp_path / "ref.parquet", workers=1)
     out = tmp_path / "out.parquet"
     env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
-    proc = subprocess.Popen([sys.executable, "-m", "flexure_sim.cli", "sweep", str(study), "-o", str(out),
-                             "--workers", "1"], cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, "-m", "flexure_sim.cli", "sweep", str(study),
+                             "-o", str(out), "--workers", "1"], cwd=tmp_path, env=env,
+                            stderr=subprocess.PIPE, text=True)
     first = proc.stderr.readline()  # printed once the first batch is stored
     assert first.startswith("flexure-sim sweep: 10/120 designs"), first
     proc.send_signal(signal.SIGINT)
@@ -181,7 +188,8 @@ def test_same_seed_gives_bit_identical_parquet_with_one_and_two_workers(tmp_path
 def client():
     from distributed import Client, LocalCluster
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster:
         with Client(cluster) as c:
             yield c
 
@@ -200,7 +208,8 @@ def test_a_worker_killed_mid_study_loses_and_duplicates_no_rows(tmp_path, client
         killed.update(tasks=list(processing[victim]), pid=pids[victim])
         os.kill(pids[victim], signal.SIGKILL)
 
-    table = sweep.run_study(study, tmp_path / "out.parquet", client=client, on_batch=kill_a_busy_worker)
+    table = sweep.run_study(study, tmp_path / "out.parquet", client=client,
+                            on_batch=kill_a_busy_worker)
     assert killed["tasks"], "the killed worker had no unfinished batch"
     assert killed["pid"] not in client.run(os.getpid).values()
     assert table.column("sample").to_pylist() == list(range(200))
@@ -221,7 +230,8 @@ def test_an_existing_scheduler_by_address(tmp_path, client):
 # ------------------------------------------------------------------------------ summary
 def test_summary_statistics_and_correlation_ranking():
     """Against numpy's corrcoef and percentiles on a table made here: y = 3 x1 - x2 + noise."""
-    study = study_from_dict({"mechanism": "microstage", "outputs": ["gain"], "samples": 3, "seed": 0,
+    study = study_from_dict({"mechanism": "microstage", "outputs": ["gain"], "samples": 3,
+                             "seed": 0,
                              "parameters": [{"name": "x1", "path": "stiffness_models.notch.h",
                                              "normal": {"std": 1e-6}},
                                             {"name": "x2", "path": "stiffness_models.notch.D",
@@ -236,7 +246,8 @@ def test_summary_statistics_and_correlation_ranking():
     s = sweep_summary.summarize(table, study)
     g = s["outputs"]["gain"]
     assert s["failed"] == 1 and g["count"] == 499
-    assert g["mean"] == pytest.approx(np.mean(y[:-1])) and g["std"] == pytest.approx(np.std(y[:-1], ddof=1))
+    assert g["mean"] == pytest.approx(np.mean(y[:-1]))
+    assert g["std"] == pytest.approx(np.std(y[:-1], ddof=1))
     assert g["p01"] == pytest.approx(np.percentile(y[:-1], 1))
     assert [c["parameter"] for c in g["correlation"]] == ["x1", "x2"]
     assert g["correlation"][1]["r"] == pytest.approx(np.corrcoef(x2[:-1], y[:-1])[0, 1], rel=1e-12)

@@ -260,7 +260,8 @@ def study_from_dict(data: Any, source: str, output_names: Iterable[str],
         samples = _count(data, "samples", fail, required=True)
         seed = data.get("seed")
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-            raise fail("seed", f"a Monte Carlo study needs a non-negative integer seed, got {seed!r}")
+            raise fail("seed", "a Monte Carlo study needs a non-negative integer seed, "
+                       f"got {seed!r}")
     else:
         for key in ("samples", "seed"):
             if key in data:
@@ -309,7 +310,8 @@ def _outputs(raw: Any, known: set[str], fail) -> tuple[str, ...]:
         raise fail("outputs", f"expected a non-empty list of outputs ({', '.join(sorted(known))})")
     for i, name in enumerate(raw):
         if name not in known:
-            raise fail(f"outputs[{i}]", f"unknown output {name!r} (known: {', '.join(sorted(known))})")
+            raise fail(f"outputs[{i}]",
+                       f"unknown output {name!r} (known: {', '.join(sorted(known))})")
     if len(set(raw)) != len(raw):
         raise fail("outputs", f"lists an output twice: {raw}")
     return tuple(raw)
@@ -365,7 +367,8 @@ def _parameter(spec: Any, key: str, doc: dict, fail) -> Parameter:
         raise fail(key, f"expected a mapping (path and values/range/normal/uniform), got {spec!r}")
     unknown = sorted(set(spec) - _PARAM_KEYS)
     if unknown:
-        raise fail(f"{key}.{unknown[0]}", f"unknown key (allowed: {', '.join(sorted(_PARAM_KEYS))})")
+        raise fail(f"{key}.{unknown[0]}",
+                   f"unknown key (allowed: {', '.join(sorted(_PARAM_KEYS))})")
     if ("path" in spec) == ("paths" in spec):
         raise fail(key, "give either path or paths")
     texts = [spec["path"]] if "path" in spec else spec["paths"]
@@ -397,7 +400,8 @@ def _source(kind: str, raw: Any, key: str, centre: float, fail) -> tuple:
     if kind == "values":
         if not isinstance(raw, list) or not raw:
             raise fail(key, f"expected a non-empty list of numbers, got {raw!r}")
-        return "values", tuple(_number(v, f"{key}[{i}]", fail) for i, v in enumerate(raw)), 0.0, 0.0
+        values = tuple(_number(v, f"{key}[{i}]", fail) for i, v in enumerate(raw))
+        return "values", values, 0.0, 0.0
     if not isinstance(raw, dict):
         raise fail(key, f"expected a mapping, got {raw!r}")
     allowed = {"range": {"start", "stop", "num"}, "normal": {"mean", "std"},
@@ -415,7 +419,8 @@ def _source(kind: str, raw: Any, key: str, centre: float, fail) -> tuple:
         num = need("num")
         if isinstance(num, bool) or not isinstance(num, int) or num < 1:
             raise fail(f"{key}.num", f"expected a positive integer, got {num!r}")
-        a, b = _number(need("start"), f"{key}.start", fail), _number(need("stop"), f"{key}.stop", fail)
+        a = _number(need("start"), f"{key}.start", fail)
+        b = _number(need("stop"), f"{key}.stop", fail)
         return "values", tuple(float(x) for x in np.linspace(a, b, num)), 0.0, 0.0
     if kind == "normal":
         mean = _number(raw.get("mean", centre), f"{key}.mean", fail)
@@ -425,7 +430,8 @@ def _source(kind: str, raw: Any, key: str, centre: float, fail) -> tuple:
             raise fail(f"{key}.half_width", "give low and high, or half_width, not both")
         w = _number(raw["half_width"], f"{key}.half_width", fail, positive=True)
         return "uniform", (), centre - w, 2.0 * w
-    low, high = _number(need("low"), f"{key}.low", fail), _number(need("high"), f"{key}.high", fail)
+    low = _number(need("low"), f"{key}.low", fail)
+    high = _number(need("high"), f"{key}.high", fail)
     if not low < high:
         raise fail(f"{key}.high", f"must be above low ({low}), got {high}")
     return "uniform", (), low, high - low

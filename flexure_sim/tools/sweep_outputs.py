@@ -68,7 +68,8 @@ def output_displacement(sim: Simulation) -> float:
     if mech.output is None:
         raise ValueError(f"mechanism {mech.name!r} names no output body")
     i = mech.body_index(mech.output.body)
-    return float((sim.state.z[3 * i:3 * i + 2] - sim.z0[3 * i:3 * i + 2]) @ np.array(mech.output.axis))
+    moved = sim.state.z[3 * i:3 * i + 2] - sim.z0[3 * i:3 * i + 2]
+    return float(moved @ np.array(mech.output.axis))
 
 
 @dataclass(frozen=True)

@@ -55,8 +55,9 @@ def summarize(table: pa.Table, study: Study) -> dict:
 def print_summary(result: dict, study: Study) -> None:
     print(f"study {study.name}: {result['designs']} designs "
           f"({'Monte Carlo, seed ' + str(study.seed) if study.monte_carlo else 'grid'}), "
-          f"{result['failed']} failed, {result['wall_s']:.1f} s "
-          f"({result['designs_per_s']:.0f} designs/s)")
+          f"{result['failed']} failed; {result['computed']} computed in {result['wall_s']:.1f} s "
+          f"({result['designs_per_s']:.0f} designs/s)"
+          + (f", {result['resumed']} resumed" if result["resumed"] else ""))
     print(f"results: {result['output']}")
     for name, s in result["outputs"].items():
         unit = f" {s['unit']}" if s["unit"] else ""
@@ -87,8 +88,8 @@ def plot(table: pa.Table, study: Study, summary: dict, output: Path) -> list[Pat
     ok = np.array(table.column("status").to_pylist()) == OK
     paths = []
     top = 12
-    fig, axes = plt.subplots(len(names), 1, figsize=(7, 1.2 + 0.35 * min(top, len(study.parameters)) * len(names)),
-                             squeeze=False)
+    height = 1.2 + 0.35 * min(top, len(study.parameters)) * len(names)
+    fig, axes = plt.subplots(len(names), 1, figsize=(7, height), squeeze=False)
     for ax, name in zip(axes[:, 0], names):
         ranks = summary["outputs"][name].get("correlation", [])[:top][::-1]
         r = [c["r"] for c in ranks]
@@ -118,7 +119,8 @@ def plot(table: pa.Table, study: Study, summary: dict, output: Path) -> list[Pat
         ax.set_title(f"mean {s['mean']:.5g}, std {s['std']:.3g}", fontsize=9)
         ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4), useOffset=False)
     axes[0, 0].set_ylabel("designs")
-    paths.append(_save(fig, output, "histograms", f"{study.name}: histograms (mean, 1st/99th percentile)"))
+    paths.append(_save(fig, output, "histograms",
+                       f"{study.name}: histograms (mean, 1st/99th percentile)"))
     plt.close(fig)
     return paths
 
