@@ -33,8 +33,8 @@ def _small_stage_study(tmp_path: Path, samples=200, batch_size=20, **over) -> Pa
     return path
 
 
-def _cli(*args, cwd: Path, **kw) -> subprocess.CompletedProcess:
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
+def _cli(*args, cwd: Path, env=None, **kw) -> subprocess.CompletedProcess:
+    env = {**(env or os.environ), "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
     return subprocess.run([sys.executable, "-m", "flexure_sim.cli", "sweep", *map(str, args)],
                           cwd=cwd, env=env, capture_output=True, text=True, timeout=300, **kw)
 
@@ -160,6 +160,25 @@ def test_ctrl_c_keeps_finished_batches_and_resume_completes_the_study(tmp_path):
     resumed = _cli(study, "-o", out, "--workers", "1", "--resume", "--json", cwd=tmp_path)
     assert resumed.returncode == 0, resumed.stderr
     assert pq.read_table(out).equals(reference)
+
+
+def test_unreachable_scheduler_and_a_directory_as_output_get_one_line(tmp_path):
+    study = _small_stage_study(tmp_path, samples=20, batch_size=10)
+    env = {**os.environ, "DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "2s"}
+    res = _cli(study, "-o", tmp_path / "out.parquet", "--scheduler", "tcp://127.0.0.1:1",
+               cwd=tmp_path, env=env)
+    assert res.returncode == 1
+    assert res.stderr.strip().splitlines() == [
+        "flexure-sim sweep: error: Timed out trying to connect to tcp://127.0.0.1:1 after 2 s"]
+    # the run that never got a batch leaves nothing that would need --resume
+    again = _cli(study, "-o", tmp_path / "out.parquet", "--workers", "1", "--no-plots",
+                 cwd=tmp_path)
+    assert again.returncode == 0, again.stderr
+    (tmp_path / "adir").mkdir()
+    res = _cli(study, "-o", tmp_path / "adir", "--workers", "1", cwd=tmp_path)
+    assert res.returncode == 2
+    assert res.stderr == (f"flexure-sim sweep: error: {tmp_path / 'adir'}: is a directory "
+                          "(the output is one Parquet file)\n")
 
 
 def test_resume_refuses_the_parts_of_another_study(tmp_path):

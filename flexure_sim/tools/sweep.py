@@ -49,6 +49,8 @@ def handle(args: argparse.Namespace) -> int:
     output = Path(args.output)
     if not output.parent.is_dir():
         return _fail(f"{output.parent}: no such directory for the output", EXIT_USAGE)
+    if output.is_dir():
+        return _fail(f"{output}: is a directory (the output is one Parquet file)", EXIT_USAGE)
     from ..engine.study import StudyError, load_study
     from . import sweep_summary
     from .sweep_outputs import OUTPUTS
@@ -65,6 +67,10 @@ def handle(args: argparse.Namespace) -> int:
                           on_batch=report.batch)
     except SweepError as exc:
         return _fail(str(exc), EXIT_USAGE)
+    except OSError as exc:  # unwritable output, unreachable scheduler
+        report.close()
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        return _fail(f"{where}{exc.strerror or exc}", EXIT_BAD_FILE)
     except KeyboardInterrupt:
         report.close()
         parts = output.with_name(output.name + ".parts")

@@ -54,6 +54,12 @@ class PartStore:
         self.study = study
         self.schema = schema(study)
         manifest = self.dir / MANIFEST
+        if self.dir.exists() and not self.done() and not resume:
+            # only a manifest (a run that stopped before its first batch): nothing to keep
+            manifest.unlink(missing_ok=True)
+            for tmp in self.dir.glob("*.tmp"):
+                tmp.unlink()
+            self.dir.rmdir()
         if self.dir.exists():
             if not resume:
                 raise SweepError(f"{self.dir} holds batches of an earlier run: continue it with "
@@ -98,8 +104,11 @@ class PartStore:
             raise SweepError(f"{self.dir}: the parts do not hold samples "
                              f"0..{self.study.samples - 1} once each")
         tmp = output.with_name(output.name + ".tmp")
-        pq.write_table(table, tmp)
-        os.replace(tmp, output)
+        try:
+            pq.write_table(table, tmp)
+            os.replace(tmp, output)
+        finally:
+            tmp.unlink(missing_ok=True)
         for k in range(n):
             self.path(k).unlink()
         (self.dir / MANIFEST).unlink()
