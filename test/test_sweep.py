@@ -181,6 +181,26 @@ def test_unreachable_scheduler_and_a_directory_as_output_get_one_line(tmp_path):
                           "(the output is one Parquet file)\n")
 
 
+def test_ctrl_c_at_a_terminal_stops_a_local_cluster_study_cleanly(tmp_path):
+    """Ctrl-C at a terminal signals the whole foreground process group: the workers of the
+    LocalCluster ignore it (no KeyboardInterrupt tracebacks), the command stops the study
+    and keeps the finished batches."""
+    study = _small_stage_study(tmp_path, samples=400, batch_size=10)
+    out = tmp_path / "out.parquet"
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
+    proc = subprocess.Popen([sys.executable, "-m", "flexure_sim.cli", "sweep", str(study),
+                             "-o", str(out), "--workers", "2"], cwd=tmp_path, env=env,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    first = proc.stderr.readline()  # printed once the first batch is stored
+    assert first.startswith("flexure-sim sweep: 10/400 designs"), first
+    os.killpg(proc.pid, signal.SIGINT)  # what the terminal does
+    rest = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 130
+    assert "Traceback" not in rest and "KeyboardInterrupt" not in rest, rest
+    assert rest.strip().endswith("continue with --resume")
+    assert list((tmp_path / "out.parquet.parts").glob("part-*.parquet"))
+
+
 def test_resume_refuses_the_parts_of_another_study(tmp_path):
     study = _small_stage_study(tmp_path, samples=20, batch_size=10)
     out = tmp_path / "out.parquet"

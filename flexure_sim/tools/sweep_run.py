@@ -182,10 +182,14 @@ def _run_distributed(study, todo, batches, stored, prog, client, scheduler, work
             if scheduler is not None:
                 client = Client(scheduler)
             else:
+                # Dask's own logs stay quiet (a worker busy in a batch when the study stops
+                # misses heartbeats and would log tracebacks): what matters reaches the user
+                # as a failed design or batch.
                 with _sigint_ignored():  # inherited by the worker processes spawned now
                     cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
                                            threads_per_worker=1, processes=True,
-                                           dashboard_address=None, silence_logs=logging.ERROR)
+                                           dashboard_address=None,
+                                           silence_logs=logging.CRITICAL)
                 own.append(cluster)
                 client = Client(cluster)
                 client.register_plugin(IgnoreSigint(), name="flexure-sweep-ignore-sigint")
