@@ -120,6 +120,9 @@ def test_a_design_that_fails_is_recorded_and_the_study_goes_on(tmp_path):
     assert "stiffness_models.notch.h: must be positive" in table["error"][1]
     assert math.isnan(table["gain"][1]) and table["gain"][0] == pytest.approx(27.628, rel=1e-4)
     assert not (tmp_path / "out.parquet.parts").exists()
+    about = json.loads(pq.read_schema(tmp_path / "out.parquet").metadata[b"flexure_sim.study"])
+    assert about["units"] == {"gain": ""} and about["samples"] == 3 and about["seed"] is None
+    assert about["parameters"][0]["paths"] == ["stiffness_models.notch.h"]
     for png in ("out_tornado.png", "out_histograms.png"):
         assert (tmp_path / png).stat().st_size > 1000
 

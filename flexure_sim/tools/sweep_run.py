@@ -27,7 +27,7 @@ import pyarrow.parquet as pq
 from distributed import WorkerPlugin
 
 from ..engine.study import Study
-from .sweep_outputs import FAILED, evaluate_batch
+from .sweep_outputs import FAILED, OUTPUTS, evaluate_batch
 
 MANIFEST = "study.json"
 
@@ -36,12 +36,30 @@ class SweepError(Exception):
     """The sweep cannot go on (the message says why and what to do)."""
 
 
+#: Key of the schema metadata that describes the study (JSON).
+METADATA_KEY = "flexure_sim.study"
+
+
 def schema(study: Study) -> pa.Schema:
-    """Columns of the results: sample, parameters, outputs (float64), status, error."""
+    """Columns of the results: sample, parameters, outputs (float64), status, error; the
+    schema's metadata ``flexure_sim.study`` holds what produced them (JSON: study, mechanism,
+    seed, samples, batch size, input, parameters with their paths and distributions, output
+    units, the study's fingerprint)."""
+    about = {
+        "name": study.name, "study": study.source, "mechanism": study.mechanism_source,
+        "monte_carlo": study.monte_carlo, "seed": study.seed, "samples": study.samples,
+        "batch_size": study.batch_size, "input": study.input, "step": study.step,
+        "parameters": [{"name": p.name, "paths": [".".join(map(str, q)) for q in p.paths],
+                        "offset": p.offset, "kind": p.kind, "loc": p.loc, "scale": p.scale}
+                       for p in study.parameters],
+        "units": {o: OUTPUTS[o].unit for o in study.outputs},
+        "fingerprint": study.fingerprint(),
+    }
     return pa.schema([("sample", pa.int64())]
                      + [(p.name, pa.float64()) for p in study.parameters]
                      + [(o, pa.float64()) for o in study.outputs]
-                     + [("status", pa.string()), ("error", pa.string())])
+                     + [("status", pa.string()), ("error", pa.string())],
+                     metadata={METADATA_KEY: json.dumps(about)})
 
 
 # ------------------------------------------------------------------------------ parts
