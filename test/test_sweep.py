@@ -85,6 +85,15 @@ def test_step_outputs_agree_with_an_independent_integrator():
     assert cols["overshoot"][0] == pytest.approx(ref.overshoot, rel=1e-3, abs=1e-7)
 
 
+def test_outputs_do_not_depend_on_their_order():
+    """The static and the dynamic outputs share one simulation per design."""
+    names = ["gain", "settling_time", "drive_force", "overshoot"]
+    a = evaluate_batch(_grid([2.4e-4, 2.5e-4], outputs=names), 0, 2)
+    b = evaluate_batch(_grid([2.4e-4, 2.5e-4], outputs=names[::-1]), 0, 2)
+    for name in names:
+        assert a[name].tobytes() == b[name].tobytes()
+
+
 def test_monte_carlo_spread_of_the_gain_agrees_with_the_first_order_prediction(tmp_path):
     """2000 designs of the stage study (h +- 5 um on all seven hinges): the standard deviation
     of the gain is sqrt(sum (dg/dh_i)^2) * 5 um, with dg/dh_i by central differences (the

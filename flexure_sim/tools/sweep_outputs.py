@@ -23,8 +23,10 @@ from . import analysis
 
 
 class Design:
-    """One design: its simulation, the drive input of the study, and results computed once
-    and shared by the outputs that need them (the static solve, the step response)."""
+    """One design: its simulation (one model for the static solve and the dynamic run), the
+    drive input of the study, and results computed once and shared by the outputs that need
+    them (the static solve, the step response). The static solve starts from the unstressed
+    pose whatever the state, so the outputs do not depend on their order."""
 
     def __init__(self, mechanism: Mechanism, study: Study):
         self.mechanism = mechanism
@@ -50,7 +52,7 @@ class Design:
         if self._step is None:
             dt, duration = self.study.step["dt"], self.study.step["duration"]
             n = int(round(duration / dt))
-            sim = Simulation(self.mechanism, dt=dt)
+            sim = self.sim  # the static solve leaves its state at rest; this run moves it
             sim.set_command(self.input)
             y = np.empty(n)
             for k in range(n):
