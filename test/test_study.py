@@ -132,7 +132,7 @@ def test_batches_cover_every_sample_once():
     assert covered == list(range(1001)) and len(study.batches()) == 11
 
 
-def test_the_shipped_stage_study_loads(tmp_path):
+def test_the_shipped_studies_load(tmp_path):
     from pathlib import Path
 
     path = Path(__file__).resolve().parent.parent / "config" / "studies" / "stage_tolerance.yaml"
@@ -141,6 +141,9 @@ def test_the_shipped_stage_study_loads(tmp_path):
     assert [p.name for p in study.parameters] == [f"h_{c}" for c in "abcdefg"]
     assert all(p.kind == "normal" and p.scale == 5e-6 and p.loc == 2.5e-4
                for p in study.parameters)
+    grid = load_study(path.with_name("stage_notch_grid.yaml"),
+                      OUTPUTS + ("settling_time", "overshoot"))
+    assert grid.samples == 20 and not grid.monte_carlo
     # a relative mechanism path is taken relative to the study file
     mech_file = tmp_path / "my_stage.yaml"
     mech_file.write_text((path.parents[1] / "microstage.yaml").read_text())
