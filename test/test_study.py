@@ -48,6 +48,9 @@ def _hinge_K(mech, name):
     ({"parameters": [{"path": "stiffness_models.notch.h", "uniform": {"low": 2, "high": 1}}],
       "samples": 5, "seed": 1}, "s.yaml: parameters[0].uniform.high: must be above low"),
     ({"batch_size": 0}, "s.yaml: batch_size: expected a positive integer, got 0"),
+    ({"input": 3e-6}, "s.yaml: input: 3e-06 m is outside the drive's stroke [0.0, 2e-06] m"),
+    ({"mechanism": "fourbar_mixed", "parameters": [{"path": "bodies.link2.mass", "values": [1]}]},
+     "s.yaml: mechanism: 'fourbar_mixed' has no drive constraint"),
     ({"step": {"dt": 0.1, "duration": 0.01}},
      "s.yaml: step.dt: 0.1 s is longer than the duration"),
 ])

@@ -199,9 +199,16 @@ def study_from_dict(data: Any, source: str, output_names: Iterable[str],
         batch_size=batch, input=_input(data, fail), step=_step(data.get("step"), fail),
     )
     try:
-        study.mechanism([0.0 if p.offset else p.base[0] for p in params])
+        base_mech = study.mechanism([0.0 if p.offset else p.base[0] for p in params])
     except ConfigError as exc:
         raise fail("mechanism", f"the base mechanism does not load: {exc}") from None
+    drive = base_mech.drive
+    if drive is None:  # every output is a response to the drive input
+        raise fail("mechanism", f"{base_mech.name!r} has no drive constraint: the outputs are "
+                   "responses to the drive input")
+    if study.input is not None and not drive.stroke[0] <= study.input <= drive.stroke[1]:
+        raise fail("input", f"{study.input} m is outside the drive's stroke "
+                   f"[{drive.stroke[0]}, {drive.stroke[1]}] m")
     return study
 
 
