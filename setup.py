@@ -29,12 +29,15 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
         (f"share/{PACKAGE}/config/examples", sorted(glob("config/examples/*"))),
+        (f"share/{PACKAGE}/config/studies", sorted(glob("config/studies/*.yaml"))),
         (f"share/{PACKAGE}/launch", sorted(glob("launch/*.launch.py"))),
         (f"lib/{PACKAGE}", [f"scripts/ros2run/{name}" for name in sorted(EXECUTABLES)]),
     ],
     install_requires=["numpy", "scipy", "numba", "PyYAML", "mcap", "mcap-ros2-support"],
     extras_require={
         "plot": ["matplotlib"],
+        # flexure-sim sweep (Dask, Parquet, progress bar); imported only when a sweep runs.
+        "sweep": ["dask", "distributed", "pyarrow", "tqdm"],
         "test": ["pytest", "rosbags"],
     },
     zip_safe=True,

@@ -112,3 +112,14 @@ def test_builtins_come_from_the_install_the_code_belongs_to(tmp_path):
     assert builtins.builtin_dir() == ROOT / "config"
     assert builtins.find_builtin("microstage") == ROOT / "config" / "microstage.yaml"
     assert builtins.find_builtin("no_such_mechanism") is None
+
+
+def test_sweep_without_dask_names_the_missing_extra(tmp_path):
+    hide = ("import sys; sys.modules['distributed'] = None; from flexure_sim.cli import main; "
+            f"sys.exit(main(['sweep', 'config/studies/stage_notch_grid.yaml', '-o', "
+            f"{str(tmp_path / 'r.parquet')!r}]))")
+    p = subprocess.run([sys.executable, "-c", hide], capture_output=True, text=True, timeout=120,
+                       cwd=ROOT)
+    assert p.returncode == 1 and "Traceback" not in p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and "distributed" in lines[0] and "extra 'sweep'" in lines[0], p.stderr

@@ -11,6 +11,9 @@ Wall times are medians of several runs (7 for flexure_sim, 3 for the baseline).
 - static_sweep: 1000 drive levels from 0 to the stroke.
 - analyses: the stage's exact linearisation + modes + FRF at 1000 frequencies (goal < 0.1 s),
   and hyper-dual sensitivities of 4 outputs to 20 parameters (goal < 1 s).
+- sweep (with --sweep): flexure-sim sweep's scaling on the stage tolerance study: designs
+  per second in this process without Dask, on a LocalCluster of 1 and of 2 worker processes,
+  the parallel efficiency and the overhead of a batch (a task).
 - node (with --node): stage_node in fast mode (real-time factor) and real-time mode
   (missed ticks, tick jitter) at 1 kHz with all topics and recording on.
 """
@@ -233,6 +236,65 @@ def bench_analyses(frequencies: int = 1000) -> dict:
     }
 
 
+def _stage_tolerance_study(designs: int, batch_size: int):
+    """The shipped stage tolerance study (config/studies/stage_tolerance.yaml) with
+    ``designs`` designs: the seven hinges' h with a normal error of 5 um each."""
+    from ..engine.study import study_from_dict
+    from .sweep_outputs import OUTPUTS
+
+    data = {"mechanism": "microstage", "samples": designs, "seed": 20261124,
+            "batch_size": batch_size, "input": 2.0e-6,
+            "outputs": ["gain", "compression", "drive_force"],
+            "parameters": [{"name": f"h_{c}", "path": f"hinges.{c}.stiffness.h",
+                            "normal": {"std": 5e-6}} for c in "abcdefg"]}
+    return study_from_dict(data, "stage_tolerance (bench)", OUTPUTS)
+
+
+def bench_sweep(designs: int = 1000, batch_size: int = 50, overhead_tasks: int = 100) -> dict:
+    """Designs per second of the stage tolerance study: in this process without Dask
+    (``evaluate_batch``), and through ``run_study`` (tasks, Parquet parts, merge) on a
+    LocalCluster of 1 and of 2 single-threaded worker processes, each started and warmed up
+    (kernels loaded) outside the timing. Parallel efficiency: rate(2) / (2 rate(1)). Batch
+    overhead: wall time per task of ``overhead_tasks`` one-design batches on the 1-worker
+    cluster, minus the in-process time per design."""
+    import logging
+    import tempfile
+
+    from distributed import Client, LocalCluster
+
+    from .sweep_outputs import evaluate_batch
+    from .sweep_run import run_study
+
+    study = _stage_tolerance_study(designs, batch_size)
+    evaluate_batch(study, 0, 5)  # warm-up
+    start = time.perf_counter()
+    evaluate_batch(study, 0, designs)
+    serial = time.perf_counter() - start
+    res: dict = {"designs": designs, "batch_size": batch_size,
+                 "in_process_designs_per_s": designs / serial}
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in (1, 2):
+            start = time.perf_counter()
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR)
+            with cluster, Client(cluster) as client:
+                client.wait_for_workers(n)
+                res[f"cluster_start_s_{n}"] = time.perf_counter() - start
+                client.run(evaluate_batch, study, 0, 2)  # every worker loads its kernels
+                start = time.perf_counter()
+                run_study(study, Path(tmp) / f"w{n}.parquet", client=client)
+                res[f"designs_per_s_{n}_workers"] = designs / (time.perf_counter() - start)
+                if n == 1:
+                    one = _stage_tolerance_study(overhead_tasks, 1)
+                    start = time.perf_counter()
+                    run_study(one, Path(tmp) / "overhead.parquet", client=client)
+                    per_task = (time.perf_counter() - start) / overhead_tasks
+                    res["batch_overhead_s"] = per_task - serial / designs
+    res["parallel_efficiency_2_workers"] = (res["designs_per_s_2_workers"]
+                                            / (2 * res["designs_per_s_1_workers"]))
+    return res
+
+
 #: wake_spin of the second real-time run: the CPU / punctuality trade-off of a short spin.
 LOW_WAKE_SPIN_S = 2e-4
 #: Rate of the drive-command flood of the last real-time run (another process, tools/flood.py).
@@ -317,6 +379,15 @@ def print_table(res: dict) -> None:
               f"{a['modes_frf_wall_s'] * 1e3:.1f} ms (goal < 100 ms); sensitivities of "
               f"{a['sensitivity_outputs']} outputs to {a['sensitivity_parameters']} parameters "
               f"{a['sensitivity_wall_s'] * 1e3:.0f} ms (goal < 1000 ms)")
+    if "sweep" in res:
+        sw = res["sweep"]
+        print(f"\nsweep, stage tolerance study, {sw['designs']} designs in batches of "
+              f"{sw['batch_size']}: in-process {sw['in_process_designs_per_s']:.0f} designs/s")
+        print(f"  LocalCluster, 1 worker {sw['designs_per_s_1_workers']:.0f} designs/s, 2 workers "
+              f"{sw['designs_per_s_2_workers']:.0f} designs/s (parallel efficiency "
+              f"{sw['parallel_efficiency_2_workers']:.2f})")
+        print(f"  batch overhead {sw['batch_overhead_s'] * 1e3:.1f} ms per task; cluster start "
+              f"{sw['cluster_start_s_2']:.1f} s (2 workers)")
     if "node" in res:
         nd = res["node"]
         print(f"\nstage_node at 1 kHz, all topics, recording on: fast-mode RTF {nd.get('fast_rtf', float('nan')):.2f}; "
@@ -344,6 +415,8 @@ def run(args: argparse.Namespace) -> dict:
     res["steps_per_s"] = res["step_cost"]["steps_per_s"]
     res["static_sweep"] = bench_static_sweep()
     res["analyses"] = bench_analyses()
+    if args.sweep:
+        res["sweep"] = bench_sweep(args.sweep_designs)
     if args.node:
         res["node"] = bench_node(args.node_seconds)
     return res
@@ -354,6 +427,10 @@ def build_parser(parser: Optional[argparse.ArgumentParser] = None) -> argparse.A
     parser.add_argument("--dt", type=float, default=DEFAULT_STEP, help=f"step (s), default {DEFAULT_STEP:g}")
     parser.add_argument("--json", type=Path, default=Path("bench.json"), help="where to write the JSON (default bench.json)")
     parser.add_argument("--no-baseline", action="store_true", help="skip the scipy Radau baseline")
+    parser.add_argument("--sweep", action="store_true",
+                        help="also measure flexure-sim sweep on LocalClusters of 1 and 2 workers")
+    parser.add_argument("--sweep-designs", type=int, default=1000,
+                        help="designs of the sweep measurement (default 1000)")
     parser.add_argument("--node", action="store_true", help="also measure stage_node (needs ROS 2)")
     parser.add_argument("--node-seconds", type=float, default=30.0, help="real-time node measurement length (s)")
     return parser

@@ -18,6 +18,7 @@ TOOL_MODULES: tuple[str, ...] = (
     "tools.dynamics",
     "tools.sensitivity",
     "tools.bench",
+    "tools.sweep",
 )
 
 
