@@ -26,8 +26,9 @@ import sys
 import time
 from typing import Any, Optional, Sequence
 
-from ..recording import LogMessage
-from ..tools.runlog import EXIT_OK, EXIT_USAGE, RunError, check_path, open_log, report_recovered, tool_errors, warn
+from ..recording import LogMessage, read_log
+from ..recording.command_line import check_path, report_reading, tool_errors, warn
+from ..recording.errors import EXIT_OK, EXIT_USAGE, RunError
 
 PROG = "flexure-sim replay"
 NODE_NAME = "flexure_sim_replay"
@@ -153,10 +154,10 @@ def _qos(topic_info: Any) -> Any:
 # ---------------------------------------------------------------------------- playing
 def play(args: argparse.Namespace) -> int:
     _check(args)
-    check_path(args.run)
-    log = open_log(args.run, recover=args.recover, decode=False)
-    if args.recover:
-        report_recovered(PROG, log)
+    log = read_log(check_path(args.run), recover=args.recover, decode=False)
+    if not log.complete and not log.messages:
+        raise RunError(f"{args.run}: nothing readable: {log.note}")
+    report_reading(PROG, log)
     chosen, messages, generate_clock = plan(log, args.topics, args.exclude, args.start_offset, args.no_clock)
 
     import rclpy

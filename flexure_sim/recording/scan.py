@@ -1,15 +1,20 @@
 """Validated reading of MCAP files at the record level (no ROS semantics).
 
-`scan_file` reads a file linearly, checking chunk CRCs, the data section CRC and the summary
-CRC, and stops at the first problem, keeping what was read intact before it: messages of
-complete chunks only. `read_summary` reads just the header, footer and summary section.
-Neither raises on damage; they report it in ``problem`` for the caller to word.
+`iter_file` reads a file linearly, in bounded memory (one chunk at a time), yielding the
+Message records of every intact chunk while it fills a `FileScan` with what it saw. It checks
+every CRC the file carries: each chunk's (a chunk that fails it, or does not parse, is skipped
+and listed in ``FileScan.damaged``, and reading goes on with the next record), the data
+section's and the summary's. It stops at the first damage it cannot step over (a record whose
+framing is broken, a file cut short), keeping what was read intact before it.
+`scan_file` runs that pass to the end; `read_summary` reads just the header, footer and summary
+section. None of them raises on damage: they report it for the caller to word.
 """
 from __future__ import annotations
 
 import io
 import struct
 import zlib
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,6 +27,7 @@ from mcap.records import (
     Footer,
     Header,
     Message,
+    MessageIndex,
     Metadata,
     MetadataIndex,
     Schema,
@@ -35,25 +41,78 @@ _FOOTER_OPCODE = 0x02
 
 
 @dataclass
+class DamagedChunk:
+    """A chunk whose contents fail their CRC or do not parse: its messages are lost.
+
+    ``offset``/``end``: bytes of the chunk record; ``start_ns``/``end_ns``: the log times its
+    record header declares; ``messages``: how many its message index lists (-1 if unknown).
+    """
+
+    index: int
+    offset: int
+    end: int
+    reason: str
+    start_ns: int
+    end_ns: int
+    messages: int = -1
+
+    def describe(self) -> str:
+        lost = f"its {self.messages} message(s)" if self.messages >= 0 else "its messages"
+        return (
+            f"chunk {self.index + 1} (bytes {self.offset}-{self.end}, log time "
+            f"{self.start_ns / 1e9:.9g}-{self.end_ns / 1e9:.9g} s): {self.reason}; {lost} lost"
+        )
+
+
+@dataclass
 class FileScan:
-    """Everything a linear pass read before its first problem (``problem`` is None if none)."""
+    """What a linear pass read; ``problem`` is None for an intact, complete file.
+
+    ``counts``: messages read per channel id (damaged chunks excluded); ``stopped``: why the
+    pass ended before the end of the file; ``damaged``: chunks skipped; ``inconsistent``: a
+    summary, index or data-section CRC problem found after reading every record.
+    """
 
     total_bytes: int
     header: Header | None = None
     schemas: dict[int, Schema] = field(default_factory=dict)
     channels: dict[int, Channel] = field(default_factory=dict)
-    messages: list[Message] = field(default_factory=list)
+    counts: dict[int, int] = field(default_factory=dict)
     metadata: list[Metadata] = field(default_factory=list)
     chunk_offsets: list[int] = field(default_factory=list)
+    damaged: list[DamagedChunk] = field(default_factory=list)
     statistics: Statistics | None = None
     chunk_indexes: list[ChunkIndex] = field(default_factory=list)
     metadata_indexes: list[MetadataIndex] = field(default_factory=list)
     data_end: bool = False
     footer: Footer | None = None
     intact_bytes: int = 0
-    problem: str | None = None
+    stopped: str | None = None
+    inconsistent: str | None = None
     truncated: bool = False
     cause: BaseException | None = None
+    start_ns: int | None = None
+    end_ns: int | None = None
+
+    @property
+    def message_count(self) -> int:
+        """Messages read (those of damaged chunks excluded)."""
+        return sum(self.counts.values())
+
+    @property
+    def problem(self) -> str | None:
+        """Everything wrong with the file, in one line (None if nothing)."""
+        parts = []
+        if self.stopped:
+            parts.append(self.stopped)
+        if self.damaged:
+            shown = [d.describe() for d in self.damaged[:3]]
+            if len(self.damaged) > 3:
+                shown.append(f"and {len(self.damaged) - 3} more damaged chunk(s)")
+            parts.append("damaged " + "; ".join(shown))
+        if self.inconsistent:
+            parts.append(self.inconsistent)
+        return "; ".join(parts) or None
 
 
 @dataclass
@@ -72,69 +131,95 @@ class SummarySection:
 
 
 def scan_file(path: Path) -> FileScan:
-    """Read ``path`` record by record, validating CRCs; stop at the first problem."""
-    total = path.stat().st_size
-    scan = FileScan(total_bytes=total)
+    """Read ``path`` record by record, validating CRCs, keeping no messages (`iter_file`)."""
+    scan = FileScan(total_bytes=path.stat().st_size)
+    for _ in iter_file(path, scan):
+        pass
+    return scan
+
+
+def iter_file(path: Path, scan: FileScan) -> Iterator[Message]:
+    """Yield the Message records of ``path`` in file order, filling ``scan`` as it goes.
+
+    Messages of damaged chunks are not yielded; the pass stops at damage it cannot step over.
+    ``scan.problem`` is final once the generator is exhausted.
+    """
+    total = scan.total_bytes = path.stat().st_size
     if total == 0:
-        scan.problem = "the file is empty (0 bytes)"
+        scan.stopped = "the file is empty (0 bytes)"
         scan.truncated = True
-        return scan
+        return
     with path.open("rb") as stream:
         magic = stream.read(len(MAGIC))
         if magic != MAGIC:
             scan.truncated = MAGIC.startswith(magic)
-            scan.problem = (
+            scan.stopped = (
                 f"truncated: the file ends inside the MCAP magic ({total} bytes)"
                 if scan.truncated
                 else "not an MCAP file (bad magic at the start)"
             )
-            return scan
+            return
         stream.seek(0)
-        reader = StreamReader(
+        records = StreamReader(
             stream, emit_chunks=True, validate_crcs=True, record_size_limit=total
-        )
+        ).records
         start = len(MAGIC)
-        try:
-            for record in reader.records:
-                end = stream.tell()
-                _take(scan, record, start)
-                start = scan.intact_bytes = end
-        except EndOfFile as exc:
-            scan.truncated = True
-            scan.cause = exc
-            scan.problem = (
-                f"truncated: the file ({total} bytes) ends inside the record that starts at "
-                f"byte {start}; the recording was not closed properly"
-            )
-        except InvalidMagic as exc:
-            scan.cause = exc
-            scan.problem = (
-                "not an MCAP file (bad magic at the start)"
-                if scan.header is None
-                else "damaged: bad magic after the footer"
-            )
-        except CRCValidationError as exc:
-            scan.cause = exc
-            scan.problem = f"damaged: {exc} (record at byte {start})"
-        except RecordLengthLimitExceeded as exc:
-            scan.cause = exc
-            scan.problem = f"damaged: the record at byte {start} is longer than the file ({exc})"
-        except Exception as exc:  # any parse failure of damaged bytes
-            scan.cause = exc
-            scan.problem = (
-                "damaged: the closing magic after the footer is missing or wrong"
-                if scan.footer is not None
-                else f"damaged: cannot parse the record at byte {start} "
-                f"({type(exc).__name__}: {exc})"
-            )
-    if scan.problem is None:
-        scan.problem = _check_complete(path, scan)
-        if scan.problem is None:
-            scan.intact_bytes = total
-    return scan
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                break
+            except CRCValidationError as exc:  # the data section CRC, checked at DataEnd
+                scan.data_end = True
+                start = scan.intact_bytes = stream.tell()
+                if not scan.damaged:
+                    scan.inconsistent = (
+                        f"damaged: the data section fails its CRC ({exc}) though every chunk "
+                        "passes its own: a record outside the chunks (metadata, message "
+                        "index) is damaged"
+                    )
+                records = StreamReader(stream, skip_magic=True, record_size_limit=total).records
+                continue
+            except Exception as exc:  # noqa: BLE001 - any failure to parse damaged bytes
+                _stop(scan, exc, start, total)
+                return
+            end = stream.tell()
+            try:
+                yield from _take(scan, record, start, end)
+            except ValueError as exc:
+                _stop(scan, exc, start, total)
+                return
+            start = scan.intact_bytes = end
+    scan.intact_bytes = total  # every record parsed, up to the closing magic
+    scan.inconsistent = scan.inconsistent or _check_complete(path, scan)
 
 
-def _take(scan: FileScan, record: object, start: int) -> None:
+def _stop(scan: FileScan, exc: BaseException, start: int, total: int) -> None:
+    scan.cause = exc
+    if isinstance(exc, EndOfFile):
+        scan.truncated = True
+        scan.stopped = (
+            f"truncated: the file ({total} bytes) ends inside the record that starts at "
+            f"byte {start}; the recording was not closed properly"
+        )
+    elif isinstance(exc, InvalidMagic):
+        scan.stopped = (
+            "not an MCAP file (bad magic at the start)"
+            if scan.header is None
+            else "damaged: bad magic after the footer"
+        )
+    elif isinstance(exc, RecordLengthLimitExceeded):
+        scan.stopped = f"damaged: the record at byte {start} is longer than the file ({exc})"
+    elif scan.footer is not None:
+        scan.stopped = "damaged: the closing magic after the footer is missing or wrong"
+    else:
+        scan.stopped = (
+            f"damaged: cannot parse the record at byte {start} ({type(exc).__name__}: {exc})"
+        )
+
+
+def _take(scan: FileScan, record: object, start: int, end: int) -> Iterator[Message]:
+    """Account for one top-level record; yield the messages it holds."""
     if scan.header is None and not isinstance(record, Header):
         raise ValueError(f"the first record is a {type(record).__name__}, not a Header")
     if isinstance(record, Header):
@@ -142,18 +227,21 @@ def _take(scan: FileScan, record: object, start: int) -> None:
             raise ValueError("a second Header record")
         scan.header = record
     elif isinstance(record, Chunk):
-        messages: list[Message] = []
-        for inner in breakup_chunk(record, validate_crc=True):
-            if isinstance(inner, Schema):
-                scan.schemas[inner.id] = inner
-            elif isinstance(inner, Channel):
-                scan.channels[inner.id] = inner
-            elif isinstance(inner, Message):
-                if inner.channel_id not in scan.channels:
-                    raise ValueError(f"a message on unknown channel id {inner.channel_id}")
-                messages.append(inner)
-        scan.messages.extend(messages)
         scan.chunk_offsets.append(start)
+        inner = _chunk_records(scan, record, start, end)
+        for item in inner:
+            if isinstance(item, Schema):
+                scan.schemas[item.id] = item
+            elif isinstance(item, Channel):
+                scan.channels[item.id] = item
+        for item in inner:
+            if isinstance(item, Message):
+                _count(scan, item)
+                yield item
+    elif isinstance(record, MessageIndex):
+        if scan.damaged and scan.damaged[-1].offset == scan.chunk_offsets[-1]:
+            damaged = scan.damaged[-1]
+            damaged.messages = max(damaged.messages, 0) + len(record.records)
     elif isinstance(record, Schema):
         scan.schemas[record.id] = record
     elif isinstance(record, Channel):
@@ -161,7 +249,8 @@ def _take(scan: FileScan, record: object, start: int) -> None:
     elif isinstance(record, Message):
         if record.channel_id not in scan.channels:
             raise ValueError(f"a message on unknown channel id {record.channel_id}")
-        scan.messages.append(record)
+        _count(scan, record)
+        yield record
     elif isinstance(record, Metadata):
         if not scan.data_end:
             scan.metadata.append(record)
@@ -177,6 +266,35 @@ def _take(scan: FileScan, record: object, start: int) -> None:
         scan.footer = record
 
 
+def _chunk_records(scan: FileScan, chunk: Chunk, start: int, end: int) -> list[object]:
+    """The records of an intact chunk; [] (and an entry in ``scan.damaged``) otherwise."""
+    try:
+        inner = breakup_chunk(chunk, validate_crc=True)
+        channels = set(scan.channels) | {r.id for r in inner if isinstance(r, Channel)}
+        for item in inner:
+            if isinstance(item, Message) and item.channel_id not in channels:
+                raise ValueError(f"a message on unknown channel id {item.channel_id}")
+        return inner
+    except CRCValidationError as exc:
+        reason = f"CRC mismatch: expected {exc.expected}, computed {exc.actual}"
+    except Exception as exc:  # noqa: BLE001 - decompression or parse failure of damaged bytes
+        reason = f"its records do not parse: {type(exc).__name__}: {exc}"
+    scan.damaged.append(
+        DamagedChunk(len(scan.chunk_offsets) - 1, start, end, reason,
+                     chunk.message_start_time, chunk.message_end_time)
+    )
+    return []
+
+
+def _count(scan: FileScan, message: Message) -> None:
+    scan.counts[message.channel_id] = scan.counts.get(message.channel_id, 0) + 1
+    t = message.log_time
+    if scan.start_ns is None or t < scan.start_ns:
+        scan.start_ns = t
+    if scan.end_ns is None or t > scan.end_ns:
+        scan.end_ns = t
+
+
 def _check_complete(path: Path, scan: FileScan) -> str | None:
     """Consistency of a file that parsed to its end: footer, summary CRC, statistics, index."""
     if scan.footer is None or not scan.data_end:
@@ -187,15 +305,13 @@ def _check_complete(path: Path, scan: FileScan) -> str | None:
     stats = scan.statistics
     if stats is None:
         return "incomplete: the summary has no Statistics record"
-    counted: dict[int, int] = {}
-    for message in scan.messages:
-        counted[message.channel_id] = counted.get(message.channel_id, 0) + 1
-    if stats.message_count != len(scan.messages) or {
-        k: v for k, v in stats.channel_message_counts.items() if v
-    } != counted:
+    if not scan.damaged and (
+        stats.message_count != scan.message_count
+        or {k: v for k, v in stats.channel_message_counts.items() if v} != scan.counts
+    ):
         return (
             f"inconsistent: the Statistics record counts {stats.message_count} messages, "
-            f"the chunks hold {len(scan.messages)}"
+            f"the chunks hold {scan.message_count}"
         )
     indexed = sorted(ci.chunk_start_offset for ci in scan.chunk_indexes)
     if indexed != scan.chunk_offsets:
