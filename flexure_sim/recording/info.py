@@ -27,7 +27,8 @@ class LogInfo(TopicTable):
     """Summary of a log; times in ns (``start_ns``/``end_ns`` are first/last log times).
 
     ``metadata``: last Metadata record of each name; ``metadata_records``: all, in file order;
-    ``undecodable``: messages per topic that do not decode as the topic's type.
+    ``undecodable``: messages per topic that do not decode as the topic's type;
+    ``unchecked_chunks``: chunks without a CRC (damage inside them cannot be detected).
     """
 
     path: Path
@@ -45,6 +46,7 @@ class LogInfo(TopicTable):
     note: str = ""
     metadata_records: tuple[tuple[str, dict[str, str]], ...] = ()
     undecodable: dict[str, int] = field(default_factory=dict)
+    unchecked_chunks: int = 0
 
     @property
     def duration_ns(self) -> int:
@@ -119,4 +121,5 @@ def log_info(
         note=reader.note,
         metadata_records=reader.metadata_records,
         undecodable=dict(reader.undecodable),
+        unchecked_chunks=reader.unchecked_chunks,
     )

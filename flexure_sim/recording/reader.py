@@ -224,6 +224,11 @@ class LogReader:
         return len(self.scan.chunk_offsets) if self.scan is not None else 0
 
     @property
+    def unchecked_chunks(self) -> int:
+        """Chunks the file gives no CRC for (their damage cannot be detected)."""
+        return self.scan.unchecked_chunks if self.scan is not None else 0
+
+    @property
     def start_ns(self) -> int:
         """First log time of the messages read (0 if none)."""
         return self.scan.start_ns or 0 if self.scan is not None else 0

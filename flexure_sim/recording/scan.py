@@ -68,7 +68,8 @@ class DamagedChunk:
 class FileScan:
     """What a linear pass read; ``problem`` is None for an intact, complete file.
 
-    ``counts``: messages read per channel id (damaged chunks excluded); ``stopped``: why the
+    ``counts``: messages read per channel id (damaged chunks excluded); ``unchecked_chunks``:
+    chunks written without a CRC (some writers, e.g. rosbags, write none); ``stopped``: why the
     pass ended before the end of the file; ``damaged``: chunks skipped; ``inconsistent``: a
     summary, index or data-section CRC problem found after reading every record.
     """
@@ -80,6 +81,7 @@ class FileScan:
     counts: dict[int, int] = field(default_factory=dict)
     metadata: list[Metadata] = field(default_factory=list)
     chunk_offsets: list[int] = field(default_factory=list)
+    unchecked_chunks: int = 0
     damaged: list[DamagedChunk] = field(default_factory=list)
     statistics: Statistics | None = None
     chunk_indexes: list[ChunkIndex] = field(default_factory=list)
@@ -228,6 +230,8 @@ def _take(scan: FileScan, record: object, start: int, end: int) -> Iterator[Mess
         scan.header = record
     elif isinstance(record, Chunk):
         scan.chunk_offsets.append(start)
+        if record.uncompressed_crc == 0:
+            scan.unchecked_chunks += 1
         inner = _chunk_records(scan, record, start, end)
         for item in inner:
             if isinstance(item, Schema):

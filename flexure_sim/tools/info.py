@@ -81,6 +81,7 @@ def summarize(info: LogInfo) -> dict:
         "complete": info.complete,
         "note": info.note,
         "chunk_count": info.chunk_count,
+        "unchecked_chunks": info.unchecked_chunks,
         "message_count": info.message_count,
         "start": info.start_ns / 1e9 if info.message_count else None,
         "end": info.end_ns / 1e9 if info.message_count else None,
@@ -124,6 +125,11 @@ def format_summary(s: dict, show_yaml: bool = False) -> str:
     else:
         lines.append("Duration:     0 s (no messages)")
     lines.append(f"Messages:     {s['message_count']}")
+    if s["unchecked_chunks"]:
+        lines.append(f"Integrity:    no CRC in {s['unchecked_chunks']} of {s['chunk_count']} chunk(s) "
+                     f"(not written by the writer): damage inside them cannot be detected")
+    elif s["chunk_count"]:
+        lines.append(f"Integrity:    the CRCs of all {s['chunk_count']} chunk(s) match")
     if s["dropped_messages"] not in (None, "0"):
         lines.append(f"Dropped:      {s['dropped_messages']} message(s) could not be recorded")
     if s["undecodable"]:
