@@ -85,14 +85,11 @@ class FileScan:
     damaged: list[DamagedChunk] = field(default_factory=list)
     statistics: Statistics | None = None
     chunk_indexes: list[ChunkIndex] = field(default_factory=list)
-    metadata_indexes: list[MetadataIndex] = field(default_factory=list)
     data_end: bool = False
     footer: Footer | None = None
     intact_bytes: int = 0
     stopped: str | None = None
     inconsistent: str | None = None
-    truncated: bool = False
-    cause: BaseException | None = None
     start_ns: int | None = None
     end_ns: int | None = None
 
@@ -126,10 +123,8 @@ class SummarySection:
     schemas: dict[int, Schema] = field(default_factory=dict)
     channels: dict[int, Channel] = field(default_factory=dict)
     statistics: Statistics | None = None
-    chunk_indexes: list[ChunkIndex] = field(default_factory=list)
     metadata: list[Metadata] = field(default_factory=list)
     problem: str | None = None
-    cause: BaseException | None = None
 
 
 def scan_file(path: Path) -> FileScan:
@@ -149,15 +144,13 @@ def iter_file(path: Path, scan: FileScan) -> Iterator[Message]:
     total = scan.total_bytes = path.stat().st_size
     if total == 0:
         scan.stopped = "the file is empty (0 bytes)"
-        scan.truncated = True
         return
     with path.open("rb") as stream:
         magic = stream.read(len(MAGIC))
         if magic != MAGIC:
-            scan.truncated = MAGIC.startswith(magic)
             scan.stopped = (
                 f"truncated: the file ends inside the MCAP magic ({total} bytes)"
-                if scan.truncated
+                if MAGIC.startswith(magic)
                 else "not an MCAP file (bad magic at the start)"
             )
             return
@@ -197,9 +190,7 @@ def iter_file(path: Path, scan: FileScan) -> Iterator[Message]:
 
 
 def _stop(scan: FileScan, exc: BaseException, start: int, total: int) -> None:
-    scan.cause = exc
     if isinstance(exc, EndOfFile):
-        scan.truncated = True
         scan.stopped = (
             f"truncated: the file ({total} bytes) ends inside the record that starts at "
             f"byte {start}; the recording was not closed properly"
@@ -262,8 +253,6 @@ def _take(scan: FileScan, record: object, start: int, end: int) -> Iterator[Mess
         scan.statistics = record
     elif isinstance(record, ChunkIndex):
         scan.chunk_indexes.append(record)
-    elif isinstance(record, MetadataIndex):
-        scan.metadata_indexes.append(record)
     elif isinstance(record, DataEnd):
         scan.data_end = True
     elif isinstance(record, Footer):
@@ -375,8 +364,6 @@ def read_summary(path: Path) -> SummarySection:
                     section.channels[record.id] = record
                 elif isinstance(record, Statistics):
                     section.statistics = record
-                elif isinstance(record, ChunkIndex):
-                    section.chunk_indexes.append(record)
                 elif isinstance(record, MetadataIndex):
                     metadata_indexes.append(record)
             for index in sorted(metadata_indexes, key=lambda i: i.offset):  # file order
@@ -387,7 +374,6 @@ def read_summary(path: Path) -> SummarySection:
                     raise ValueError(f"no Metadata record {index.name!r} at byte {index.offset}")
                 section.metadata.append(record)
     except Exception as exc:  # any parse failure of damaged bytes
-        section.cause = exc
         section.problem = f"damaged: cannot parse the summary ({type(exc).__name__}: {exc})"
     if section.problem is None and section.statistics is None:
         section.problem = "incomplete: the summary has no Statistics record"

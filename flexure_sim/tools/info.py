@@ -126,8 +126,8 @@ def format_summary(s: dict, show_yaml: bool = False) -> str:
         lines.append("Duration:     0 s (no messages)")
     lines.append(f"Messages:     {s['message_count']}")
     if s["unchecked_chunks"]:
-        lines.append(f"Integrity:    no CRC in {s['unchecked_chunks']} of {s['chunk_count']} chunk(s) "
-                     f"(not written by the writer): damage inside them cannot be detected")
+        lines.append(f"Integrity:    no CRC in {s['unchecked_chunks']} of {s['chunk_count']} "
+                     "chunk(s) (the writer wrote none): damage inside them cannot be detected")
     elif s["chunk_count"]:
         lines.append(f"Integrity:    the CRCs of all {s['chunk_count']} chunk(s) match")
     if s["dropped_messages"] not in (None, "0"):

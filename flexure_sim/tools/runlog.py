@@ -29,8 +29,8 @@ from ..recording import TopicInfo
 from ..recording.command_line import check_readable, open_log
 from ..recording.errors import EXIT_USAGE, RunError
 from ..topics import (
-    CLOCK, COMMAND, DRIVE_FORCE, DRIVE_INPUT, METADATA_NAME, OUTPUT, PARAMETER_CHANGE_NAME,
-    POSE_ARRAY, body_pose, hinge_compression, hinge_wrench,
+    CLOCK, COMMAND, DRIVE_FORCE, DRIVE_INPUT, METADATA_NAME, OUTPUT, POSE_ARRAY, body_pose,
+    hinge_compression, hinge_wrench,
 )
 from .mechanism_reload import hinge_frame_displacements, load_recorded_mechanism
 from .series import CLOCK_TYPE, FLOAT64, Series, SeriesBuilder
@@ -69,11 +69,6 @@ class Run:
         """The ``flexure_sim`` metadata record (mechanism, parameters), empty if absent."""
         records = [d for name, d in self.metadata_records if name == METADATA_NAME]
         return dict(records[-1]) if records else {}
-
-    @property
-    def parameter_changes(self) -> list[dict[str, str]]:
-        """Parameter changes recorded during the run (each with its sim time ``t``)."""
-        return [dict(d) for name, d in self.metadata_records if name == PARAMETER_CHANGE_NAME]
 
     @property
     def mechanism_name(self) -> str:
