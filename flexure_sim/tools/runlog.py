@@ -249,31 +249,32 @@ def find_namespace(log: Any, requested: Optional[str] = None) -> str:
     return found.pop() if found else ""
 
 
-def _relative(name: str, namespace: Optional[str]) -> Optional[str]:
-    """``name`` relative to ``namespace`` (any namespace when None), or None if outside."""
-    if namespace is None:
-        return name.lstrip("/")
-    prefix = namespace + "/"
-    return name[len(prefix):] if name.startswith(prefix) else None
-
-
 def _wanted(name: str, namespace: Optional[str], poses: bool) -> bool:
-    """Whether the series of topic ``name`` are needed (with an unknown namespace, any
-    stage's)."""
+    """Whether the series of topic ``name`` are needed: /clock, the signals, hinge wrenches
+    and compressions and (``poses``) body poses of the stage in ``namespace`` (of any stage
+    when the namespace is not known yet)."""
     if name == CLOCK:
         return True
-    rel = _relative(name, namespace)
-    if rel is None:
-        return False
+    if namespace is None:
+        parts = name.lstrip("/").split("/")  # any prefix of the name may be the namespace
+        candidates = ["/".join(parts[k:]) for k in range(len(parts))]
+    else:
+        prefix = namespace + "/"
+        if not name.startswith(prefix):
+            return False
+        candidates = [name[len(prefix):]]
+    return any(_needed(rel, poses) for rel in candidates)
+
+
+def _needed(rel: str, poses: bool) -> bool:
+    """Whether ``rel``, a topic name relative to a stage's namespace, is read."""
     parts = rel.split("/")
-    if any(rel == s or rel.endswith("/" + s) for s in _SIGNALS):
+    if rel in _SIGNALS:
         return True
-    if len(parts) >= 3 and parts[-3] == "hinges" and parts[-1] in ("wrench", "compression"):
+    if len(parts) == 3 and parts[0] == "hinges" and parts[2] in ("wrench", "compression"):
         return True
-    if poses and (rel == POSE_ARRAY or rel.endswith("/" + POSE_ARRAY)
-                  or (len(parts) >= 3 and parts[-3] == "bodies" and parts[-1] == "pose")):
-        return True
-    return False
+    return poses and (rel == POSE_ARRAY or (len(parts) == 3 and parts[0] == "bodies"
+                                            and parts[2] == "pose"))
 
 
 def load_run(
