@@ -881,6 +881,41 @@ def test_every_flipped_byte_is_detected(reference_bytes: bytes, tmp_path: Path) 
     assert skipped_over > 10  # flips inside chunks: the chunks after them were still read
 
 
+def test_chunks_after_a_damaged_chunk_holding_the_channels_are_recovered(tmp_path: Path) -> None:
+    """mcap's own Writer puts Schema and Channel records inside the first chunk that uses
+    them: when that chunk is damaged, the summary's copies still give the later chunks'
+    messages their topic."""
+    path = tmp_path / "mcap_writer.mcap"
+    with path.open("wb") as stream:
+        writer = Writer(stream, compression=CompressionType.NONE, chunk_size=512)
+        writer.start(profile="ros2", library="test")
+        schema_id = writer.register_schema(
+            "std_msgs/msg/Float64", "ros2msg", load_schema("std_msgs/msg/Float64").text.encode()
+        )
+        qos = qos_profiles_yaml([QosDescription.sensor_data()])
+        channel_id = writer.register_channel(
+            "/x", "cdr", schema_id, metadata={"offered_qos_profiles": qos}
+        )
+        for k in range(200):
+            writer.add_message(channel_id, log_time=k, data=serialize_message(Float64(data=float(k))),
+                               publish_time=k)
+        writer.finish()
+    data = path.read_bytes()
+    by_chunk = chunk_payloads(data)
+    first = min(by_chunk)
+    damaged = bytearray(data)
+    damaged[first + 200] ^= 0x01
+    path.write_bytes(bytes(damaged))
+    with pytest.raises(CorruptLogError, match="chunk 1 "):
+        read_log(path)
+    log = read_log(path, recover=True)
+    assert [m.message.data for m in log.messages] == [
+        deserialize_message(d, Float64).data
+        for offset in sorted(by_chunk) if offset != first for d in by_chunk[offset]
+    ]
+    assert len(by_chunk) > 5 and log.message_count == 200 - len(by_chunk[first])
+
+
 def test_mcap_with_another_profile_is_rejected(tmp_path: Path) -> None:
     path = tmp_path / "ros1.mcap"
     with path.open("wb") as stream:

@@ -82,6 +82,7 @@ class LogReader:
         self.header: Header = section.header
         check_profile(self.path, self.header)
         self.summary_ok = section.problem is None
+        self._section = section
         counts = section.statistics.channel_message_counts if section.statistics else {}
         self.topics: dict[str, TopicInfo] = {}
         if self.summary_ok:
@@ -107,6 +108,9 @@ class LogReader:
         if self.scan is not None:
             raise RuntimeError("LogReader.messages: a log is read in one pass only")
         scan = self.scan = FileScan(total_bytes=0)
+        if self.summary_ok:  # a damaged chunk may hold the only Channel record of a topic
+            scan.schemas.update(self._section.schemas)
+            scan.channels.update(self._section.channels)
         plans: dict[int, tuple[TopicInfo, Callable[[bytes], Any] | None, bool]] = {}
         decoders = DecoderFactory()
         for record in iter_file(self.path, scan):
