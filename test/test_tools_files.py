@@ -15,7 +15,7 @@ import pytest
 from mcap.records import Chunk, Message
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from mcap.writer import Writer
-from rclpy.serialization import serialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Float64, String
 
 from flexure_sim import cli
@@ -488,16 +488,68 @@ def peak_rss_kib(*args: str) -> int:
     return int(rss)
 
 
-def test_analyse_and_info_keep_memory_bounded_on_a_ten_times_longer_recording(tmp_path):
+@pytest.fixture(scope="module")
+def long_runs(tmp_path_factory):
+    """A run of the stage's topics and one ten times longer, both of several 256 KiB chunks:
+    (paths, message counts)."""
+    root = tmp_path_factory.mktemp("long")
+    short, long = root / "short.mcap", root / "long.mcap"
+    counts = (record_long_run(short, 0.3, chunk_size=1 << 18),
+              record_long_run(long, 3.0, chunk_size=1 << 18))
+    return (short, long), counts
+
+
+def test_analyse_and_info_keep_memory_bounded_on_a_ten_times_longer_recording(long_runs):
     """Streaming: the peak memory of analyse (and info) on a run 10 x longer stays within
     1.2 x (the numeric series of the analysed topics grow, 8 bytes a value; no decoded
     messages are kept)."""
-    short, long = tmp_path / "short.mcap", tmp_path / "long.mcap"
-    n_short = record_long_run(short, 0.3)
-    n_long = record_long_run(long, 3.0)
+    (short, long), (n_short, n_long) = long_runs
     assert n_long > 9 * n_short
     for tool in (("analyse", "--json"), ("info", "--json")):
         small = peak_rss_kib(tool[0], str(short), *tool[1:])
         large = peak_rss_kib(tool[0], str(long), *tool[1:])
         print(f"{tool[0]}: peak RSS {small} KiB ({n_short} messages), {large} KiB ({n_long})")
         assert large <= 1.2 * small, (tool, small, large)
+
+
+def test_replay_reads_an_intact_file_in_log_time_order_in_bounded_memory(long_runs, tmp_path):
+    """What replay plays: every message of the chosen topics in log-time order (file order on
+    ties), also when the file holds them out of order. Reading a run ten times longer adds to
+    the peak of Python allocations less than a tenth of the payload bytes it adds (holding
+    the payloads, as replay did, would add all of them; what grows is mcap's chunk index)."""
+    import tracemalloc
+
+    from flexure_sim.recording.ordered import OrderedLog
+
+    path = tmp_path / "shuffled.mcap"
+    stamps = [5, 3, 3, 9, 1, 7, 3]
+    with McapRecorder(path, chunk_size=64) as rec:
+        rec.add_topic("/a", "std_msgs/msg/Float64")
+        rec.add_topic("/b", "std_msgs/msg/Float64")
+        for k, t in enumerate(stamps):
+            rec.write("/a" if k % 2 else "/b", serialize_message(Float64(data=float(k))), t)
+    for recover in (False, True):
+        log = OrderedLog(path, recover=recover)
+        played = [(t, topic, _float64(data)) for t, topic, data in log.messages(["/a", "/b"], 0)]
+        expected = sorted(((t, "/a" if k % 2 else "/b", float(k)) for k, t in enumerate(stamps)),
+                          key=lambda item: item[0])
+        assert played == expected
+        assert [_float64(d) for _, _, d in log.messages(["/a"], 4)] == [5.0, 3.0]
+    peaks, payload = [], []
+    for run in long_runs[0]:
+        tracemalloc.start()
+        log = OrderedLog(run)
+        count = size = 0
+        for _, _, data in log.messages(list(log.topics), log.start_ns):
+            count, size = count + 1, size + len(data)
+        peaks.append(tracemalloc.get_traced_memory()[1])
+        tracemalloc.stop()
+        assert count == log.message_count
+        payload.append(size)
+    print(f"replay reading: peak Python allocations {peaks[0]} B, {peaks[1]} B; payloads "
+          f"{payload[0]} B, {payload[1]} B")
+    assert peaks[1] - peaks[0] < 0.1 * (payload[1] - payload[0]), (peaks, payload)
+
+
+def _float64(data: bytes) -> float:
+    return deserialize_message(data, Float64).data
