@@ -52,6 +52,7 @@ class OrderedLog:
         with self.path.open("rb") as stream:
             reader = make_reader(stream, validate_crcs=True)
             for _, channel, message in reader.iter_messages(
-                topics=sorted(wanted), start_time=start_ns, log_time_order=True
-            ):
-                yield message.log_time, channel.topic, message.data
+                topics=sorted(wanted), log_time_order=True
+            ):  # (no time bound: its keyword changed between mcap versions)
+                if message.log_time >= start_ns:
+                    yield message.log_time, channel.topic, message.data
