@@ -371,6 +371,46 @@ def test_the_installed_command_prints_no_traceback_for_a_damaged_file(stage, tmp
 
 
 
+# ------------------------------------------------------------------------------ undecodable
+def test_a_message_that_does_not_decode_is_skipped_counted_and_kept(capsys, tmp_path):
+    """A run whose command at 15 ms was recorded as the 2 bytes another node published: the
+    tools skip it and say so, info counts it, the bytes stay in the file, --strict refuses."""
+    path = tmp_path / "odd.mcap"
+    record_stage_run(path, extra_commands=[(0.015, 1e-6)], chunk_size=32 * 1024)
+    odd = tmp_path / "odd_bytes.mcap"
+    log = read_log(path)
+    with McapRecorder(odd, chunk_size=32 * 1024) as rec:
+        for name, topic in log.topics.items():
+            rec.add_topic(name, topic.type)
+        rec.add_metadata("flexure_sim", log.metadata["flexure_sim"])
+        for m in log.messages:
+            data = m.data
+            if m.topic == "/drive/displacement" and m.log_time_ns == 15_000_000:
+                data = bytes.fromhex("0001")  # what a misbehaving node may publish
+            rec.write(m.topic, data, m.log_time_ns)
+    note = "1 undecodable message on /drive/displacement"
+    code, out, err = flexure_sim(capsys, "analyse", odd, "--json")
+    assert code == 0 and err.count(note) == 1, err
+    # The steps are those of the demo levels alone (every 20 ms from 10 ms): the 1 um at
+    # 15 ms is unknown to the analysis.
+    assert [round(s["t"], 9) for s in json.loads(out)] == [
+        round(0.01 + 0.02 * k, 9) for k in range(len(DEMO_LEVELS))]
+    code, out, err = flexure_sim(capsys, "info", odd, "--json")
+    assert code == 0 and json.loads(out)["undecodable"] == {"/drive/displacement": 1}, err
+    code, out, err = flexure_sim(capsys, "info", odd, "--json", "--no-decode")
+    assert code == 0 and json.loads(out)["undecodable"] is None, err
+    code, out, err = flexure_sim(capsys, "export", odd, "--csv", tmp_path / "csv")
+    assert code == 0 and note in err
+    with open(tmp_path / "csv" / "drive.displacement.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == log.counts["/drive/displacement"] - 1
+    raw = read_log(odd, decode=False).messages_on("/drive/displacement")
+    assert bytes.fromhex("0001") in [m.data for m in raw]  # kept in the file
+    for tool in TOOLS:
+        code, out, err = run_tool(capsys, tool, odd, tmp_path, "--strict")
+        assert_clean_failure(code, out, err, odd, "does not decode", "--strict")
+
+
 # ------------------------------------------------------------------------------ damaged chunks
 def flip_bit_in_chunk(data: bytes, chunk_offset: int, where: int = 500) -> bytes:
     """``data`` with one bit flipped ``where`` bytes into the chunk record at ``chunk_offset``

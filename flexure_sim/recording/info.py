@@ -28,7 +28,8 @@ class LogInfo(TopicTable):
 
     ``metadata``: last Metadata record of each name; ``metadata_records``: all, in file order;
     ``undecodable``: messages per topic that do not decode as the topic's type;
-    ``unchecked_chunks``: chunks without a CRC (damage inside them cannot be detected).
+    ``unchecked_chunks``: chunks without a CRC (damage inside them cannot be detected);
+    ``decoded``: whether messages were decoded (else ``undecodable`` is not known).
     """
 
     path: Path
@@ -47,6 +48,7 @@ class LogInfo(TopicTable):
     metadata_records: tuple[tuple[str, dict[str, str]], ...] = ()
     undecodable: dict[str, int] = field(default_factory=dict)
     unchecked_chunks: int = 0
+    decoded: bool = True
 
     @property
     def duration_ns(self) -> int:
@@ -122,4 +124,5 @@ def log_info(
         metadata_records=reader.metadata_records,
         undecodable=dict(reader.undecodable),
         unchecked_chunks=reader.unchecked_chunks,
+        decoded=decode,
     )

@@ -1,7 +1,7 @@
 """``flexure-sim info RUN.mcap``: topics, types, counts, rates, duration, and the mechanism and
 parameters of the run (the ``flexure_sim`` metadata record stage_node writes when recording).
 
-    flexure-sim info runs/stage.mcap [--json] [--yaml] [--recover] [--strict]
+    flexure-sim info runs/stage.mcap [--json] [--yaml] [--recover] [--strict] [--no-decode]
 
 The whole file is read once: every chunk's CRC is checked and every message decoded, so that
 damage and messages that do not decode are reported.
@@ -39,6 +39,9 @@ def register(subparsers: Any) -> None:
     add_file_arguments(p, namespace=False)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--yaml", action="store_true", help="also print the recorded mechanism YAML")
+    p.add_argument("--no-decode", action="store_true",
+                   help="check the CRCs but decode no message (faster on long recordings; "
+                   "messages that do not decode are then not counted)")
     p.set_defaults(handler=run)
 
 
@@ -47,7 +50,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    info = log_info(check_path(args.run), recover=args.recover, strict=args.strict)
+    info = log_info(check_path(args.run), recover=args.recover, strict=args.strict,
+                    decode=not args.no_decode)
     report_reading(PROG, info)
     summary = summarize(info)
     if args.json:
@@ -101,7 +105,7 @@ def summarize(info: LogInfo) -> dict:
         "parameter_changes": changes,
         "other_metadata_records": other_records,
         "dropped_messages": info.dropped_messages,
-        "undecodable": dict(sorted(info.undecodable.items())),
+        "undecodable": dict(sorted(info.undecodable.items())) if info.decoded else None,
     }
 
 
