@@ -78,7 +78,7 @@ def _run(args: argparse.Namespace) -> int:
             for topic in topics:
                 path = out_dir / csv_name(topic)
                 spool = spools.get(topic)
-                rows = spool.write_csv(path) if spool else write_csv(path, ())
+                rows = spool.write_csv(path) if spool else _write_rows(path, {}, ())
                 written.append((path, rows, topic))
         finally:
             for spool in spools.values():
@@ -192,12 +192,3 @@ def _cell(value: Any) -> Any:
     if isinstance(value, float):
         return repr(value)
     return value
-
-
-def write_csv(path: Path, messages: Iterable[tuple[int, Any]]) -> int:
-    """Write (log time ns, decoded message) rows, in the order given; returns the row count."""
-    rows: list[tuple[int, dict]] = []
-    columns: dict[str, None] = {}
-    for ns, msg in messages:
-        rows.append((ns, _row(msg, columns)))
-    return _write_rows(path, columns, rows)
