@@ -462,6 +462,27 @@ def test_a_bit_flipped_inside_a_chunk_is_reported_by_every_tool(capsys, stage, c
         assert steps[t]["gain"] == reference[t]["gain"] is not None
 
 
+def test_a_chunk_whose_length_is_damaged_is_stepped_over_with_the_chunk_index(
+        capsys, stage, chunk_offsets, tmp_path):
+    """A flipped bit in a chunk record's length field breaks the framing: the next record
+    cannot be found by reading on, but the summary's chunk index says where the next chunk
+    starts, so --recover still reads every chunk after the damaged one."""
+    data = bytearray(stage[0].read_bytes())
+    data[chunk_offsets[2] + 1 + 2] ^= 0x10  # opcode, then the u64 length: +1 MiB
+    bad = tmp_path / "length.mcap"
+    bad.write_bytes(bytes(data))
+    for tool in TOOLS:
+        code, out, err = run_tool(capsys, tool, bad, tmp_path)
+        assert_clean_failure(code, out, err, bad, "chunk 3 ", "does not parse", "--recover")
+    code, out, err = flexure_sim(capsys, "analyse", bad, "--recover", "--json")
+    assert code == 0 and f"reading resumed at byte {chunk_offsets[3]}" in err, err
+    steps = {round(s["t"], 9): s["gain"] for s in json.loads(out)}
+    code, out, _ = flexure_sim(capsys, "analyse", stage[0], "--json")
+    reference = {round(s["t"], 9): s["gain"] for s in json.loads(out)}
+    assert sorted(steps) == [t for t in sorted(reference) if t != 0.03]  # 30 ms: in chunk 3
+    assert all(steps[t] == reference[t] for t in (0.05, 0.07, 0.09))
+
+
 # ------------------------------------------------------------------------------ other writers
 @pytest.fixture(scope="module")
 def rosbags_files(stage, tmp_path_factory):

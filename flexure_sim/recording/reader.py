@@ -31,7 +31,7 @@ from mcap_ros2.decoder import DecoderFactory
 from .bag_metadata import METADATA_RECORD_KEY, METADATA_RECORD_NAME, parse_serialized_metadata
 from .channels import TopicInfo, TopicTable, check_profile, topic_infos
 from .errors import CorruptLogError, UndecodableMessageError
-from .scan import FileScan, iter_file, read_summary, scan_file
+from .scan import FileScan, iter_file, read_summary, scan_file, start_scan
 
 
 @dataclass(frozen=True)
@@ -107,13 +107,11 @@ class LogReader:
         """
         if self.scan is not None:
             raise RuntimeError("LogReader.messages: a log is read in one pass only")
-        scan = self.scan = FileScan(total_bytes=0)
-        if self.summary_ok:  # a damaged chunk may hold the only Channel record of a topic
-            scan.schemas.update(self._section.schemas)
-            scan.channels.update(self._section.channels)
+        scan = self.scan = start_scan(self._section)
         plans: dict[int, tuple[TopicInfo, Callable[[bytes], Any] | None, bool]] = {}
         decoders = DecoderFactory()
-        for record in iter_file(self.path, scan):
+        index = self._section.chunk_indexes if self.summary_ok else ()
+        for record in iter_file(self.path, scan, index):
             plan = plans.get(record.channel_id)
             if plan is None:
                 plan = plans[record.channel_id] = self._plan(

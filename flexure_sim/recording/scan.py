@@ -14,7 +14,7 @@ from __future__ import annotations
 import io
 import struct
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -45,7 +45,8 @@ class DamagedChunk:
     """A chunk whose contents fail their CRC or do not parse: its messages are lost.
 
     ``offset``/``end``: bytes of the chunk record; ``start_ns``/``end_ns``: the log times its
-    record header declares; ``messages``: how many its message index lists (-1 if unknown).
+    record header (or the chunk index) declares; ``messages``: how many its message index
+    lists (-1 if unknown). ``index`` -1: damaged bytes between chunks (message indexes).
     """
 
     index: int
@@ -57,6 +58,8 @@ class DamagedChunk:
     messages: int = -1
 
     def describe(self) -> str:
+        if self.index < 0:
+            return f"bytes {self.offset}-{self.end} between chunks: {self.reason}; no message lost"
         lost = f"its {self.messages} message(s)" if self.messages >= 0 else "its messages"
         return (
             f"chunk {self.index + 1} (bytes {self.offset}-{self.end}, log time "
@@ -123,23 +126,39 @@ class SummarySection:
     schemas: dict[int, Schema] = field(default_factory=dict)
     channels: dict[int, Channel] = field(default_factory=dict)
     statistics: Statistics | None = None
+    chunk_indexes: list[ChunkIndex] = field(default_factory=list)
     metadata: list[Metadata] = field(default_factory=list)
     problem: str | None = None
 
 
 def scan_file(path: Path) -> FileScan:
     """Read ``path`` record by record, validating CRCs, keeping no messages (`iter_file`)."""
-    scan = FileScan(total_bytes=path.stat().st_size)
-    for _ in iter_file(path, scan):
+    section = read_summary(path)
+    scan = start_scan(section)
+    for _ in iter_file(path, scan, section.chunk_indexes if section.problem is None else ()):
         pass
     return scan
 
 
-def iter_file(path: Path, scan: FileScan) -> Iterator[Message]:
+def start_scan(section: SummarySection) -> FileScan:
+    """An empty `FileScan`, knowing the schemas and channels of ``section`` if it is intact:
+    a damaged chunk may hold the only Schema or Channel record of a topic."""
+    scan = FileScan(total_bytes=section.total_bytes)
+    if section.problem is None:
+        scan.schemas.update(section.schemas)
+        scan.channels.update(section.channels)
+    return scan
+
+
+def iter_file(
+    path: Path, scan: FileScan, chunk_index: Sequence[ChunkIndex] = ()
+) -> Iterator[Message]:
     """Yield the Message records of ``path`` in file order, filling ``scan`` as it goes.
 
-    Messages of damaged chunks are not yielded; the pass stops at damage it cannot step over.
-    ``scan.problem`` is final once the generator is exhausted.
+    Messages of damaged chunks are not yielded. ``chunk_index`` (the summary's, when it is
+    intact) lets the pass step over a record whose framing is broken, to the next chunk it
+    lists; without it, the pass stops there. ``scan.problem`` is final once the generator is
+    exhausted.
     """
     total = scan.total_bytes = path.stat().st_size
     if total == 0:
@@ -176,8 +195,16 @@ def iter_file(path: Path, scan: FileScan) -> Iterator[Message]:
                 records = StreamReader(stream, skip_magic=True, record_size_limit=total).records
                 continue
             except Exception as exc:  # noqa: BLE001 - any failure to parse damaged bytes
-                _stop(scan, exc, start, total)
-                return
+                resume = _step_over(scan, exc, start, chunk_index)
+                if resume is None:
+                    _stop(scan, exc, start, total)
+                    return
+                stream.seek(resume)
+                records = StreamReader(
+                    stream, skip_magic=True, emit_chunks=True, record_size_limit=total
+                ).records
+                start = resume
+                continue
             end = stream.tell()
             try:
                 yield from _take(scan, record, start, end)
@@ -187,6 +214,30 @@ def iter_file(path: Path, scan: FileScan) -> Iterator[Message]:
             start = scan.intact_bytes = end
     scan.intact_bytes = total  # every record parsed, up to the closing magic
     scan.inconsistent = scan.inconsistent or _check_complete(path, scan)
+
+
+def _step_over(
+    scan: FileScan, exc: BaseException, start: int, chunk_index: Sequence[ChunkIndex]
+) -> int | None:
+    """Where to resume after a record at ``start`` that does not parse: the next chunk the
+    index lists (the damage is recorded), or None (stop)."""
+    later = sorted(
+        (ci for ci in chunk_index if ci.chunk_start_offset > start),
+        key=lambda ci: ci.chunk_start_offset,
+    )
+    if not later or scan.data_end:
+        return None
+    resume = later[0].chunk_start_offset
+    reason = f"does not parse ({type(exc).__name__}: {exc}); reading resumed at byte {resume}"
+    here = [ci for ci in chunk_index if ci.chunk_start_offset == start]
+    if here:
+        scan.chunk_offsets.append(start)
+        scan.damaged.append(DamagedChunk(
+            len(scan.chunk_offsets) - 1, start, resume, reason,
+            here[0].message_start_time, here[0].message_end_time))
+    else:
+        scan.damaged.append(DamagedChunk(-1, start, resume, reason, 0, 0, 0))
+    return resume
 
 
 def _stop(scan: FileScan, exc: BaseException, start: int, total: int) -> None:
@@ -364,6 +415,8 @@ def read_summary(path: Path) -> SummarySection:
                     section.channels[record.id] = record
                 elif isinstance(record, Statistics):
                     section.statistics = record
+                elif isinstance(record, ChunkIndex):
+                    section.chunk_indexes.append(record)
                 elif isinstance(record, MetadataIndex):
                     metadata_indexes.append(record)
             for index in sorted(metadata_indexes, key=lambda i: i.offset):  # file order
