@@ -899,8 +899,8 @@ def test_chunks_after_a_damaged_chunk_holding_the_channels_are_recovered(tmp_pat
             "/x", "cdr", schema_id, metadata={"offered_qos_profiles": qos}
         )
         for k in range(200):
-            writer.add_message(channel_id, log_time=k, data=serialize_message(Float64(data=float(k))),
-                               publish_time=k)
+            payload = serialize_message(Float64(data=float(k)))
+            writer.add_message(channel_id, log_time=k, data=payload, publish_time=k)
         writer.finish()
     data = path.read_bytes()
     by_chunk = chunk_payloads(data)

@@ -131,7 +131,8 @@ def test_export_rows_equal_message_counts(capsys, recorded, tmp_path):
 
 
 # ------------------------------------------------------------------------------ other nodes' input
-def test_a_malformed_command_from_another_node_is_skipped_and_counted_by_every_tool(capsys, tmp_path):
+def test_a_malformed_command_from_another_node_is_skipped_and_counted_by_every_tool(capsys,
+                                                                                   tmp_path):
     """A 2-byte payload published on drive/displacement (rclpy publishes raw bytes as they
     are) is rejected by the node and recorded as received; the tools skip it, say so in one
     line, and read the rest of the run with exit 0; --strict refuses the file."""

@@ -427,7 +427,8 @@ def independent_crc_check(path: Path) -> None:
             pass
 
 
-def test_a_bit_flipped_inside_a_chunk_is_reported_by_every_tool(capsys, stage, chunk_offsets, tmp_path):
+def test_a_bit_flipped_inside_a_chunk_is_reported_by_every_tool(capsys, stage, chunk_offsets,
+                                                                 tmp_path):
     data = stage[0].read_bytes()
     bad = tmp_path / "flipped.mcap"
     bad.write_bytes(flip_bit_in_chunk(data, chunk_offsets[2]))
@@ -447,7 +448,8 @@ def test_a_bit_flipped_inside_a_chunk_is_reported_by_every_tool(capsys, stage, c
         chunks = [r for r in StreamReader(f, emit_chunks=True).records if isinstance(r, Chunk)]
     lost = sum(1 for r in breakup_chunk(chunks[2]) if isinstance(r, Message))
     assert info["message_count"] == full.message_count - lost > 0
-    assert info["end"] == pytest.approx(json.loads(flexure_sim(capsys, "info", stage[0], "--json")[1])["end"])
+    intact = json.loads(flexure_sim(capsys, "info", stage[0], "--json")[1])
+    assert info["end"] == pytest.approx(intact["end"])
     for tool in TOOLS[1:]:
         code, out, err = run_tool(capsys, tool, bad, tmp_path, "--recover")
         assert code == 0 and "chunk 3 " in err and "Traceback" not in err, (tool, err)
@@ -504,7 +506,8 @@ def rosbags_files(stage, tmp_path_factory):
 
 
 @pytest.mark.parametrize("route", ["via sqlite3", "zstd"])
-def test_every_tool_reads_a_rosbag2_mcap_written_by_rosbags(capsys, stage, rosbags_files, route, tmp_path):
+def test_every_tool_reads_a_rosbag2_mcap_written_by_rosbags(capsys, stage, rosbags_files, route,
+                                                            tmp_path):
     path = rosbags_files[route]
     assert "custom_data: null" in read_log(path).metadata["rosbag2"]["serialized_metadata"]
     code, out, err = flexure_sim(capsys, "info", path, "--json")
@@ -538,7 +541,8 @@ def peak_rss_kib(*args: str) -> int:
     /proc/self/status (ru_maxrss would carry the peak of the forking test process over)."""
     code = ("import contextlib, io, sys\n"
             "from flexure_sim import cli\n"
-            "with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):\n"
+            "with contextlib.redirect_stdout(io.StringIO()), \\\n"
+            "        contextlib.redirect_stderr(io.StringIO()):\n"
             "    rc = cli.main(sys.argv[1:])\n"
             "hwm = [l.split()[1] for l in open('/proc/self/status') if l.startswith('VmHWM')][0]\n"
             "print(rc, hwm)\n")

@@ -201,7 +201,8 @@ def record_long_run(path: Path, seconds: float, publish_rate: float = 1000.0,
     wrench). Returns the number of messages written."""
     bodies = [f"body{k}" for k in range(1, 8)]
     hinges = list("abcdefg")
-    topics = [("/clock", "rosgraph_msgs/msg/Clock"), ("/bodies/poses", "geometry_msgs/msg/PoseArray")]
+    topics = [("/clock", "rosgraph_msgs/msg/Clock"),
+              ("/bodies/poses", "geometry_msgs/msg/PoseArray")]
     topics += [(f"/bodies/{b}/pose", "geometry_msgs/msg/PoseStamped") for b in bodies]
     for h in hinges:
         topics += [(f"/hinges/{h}/wrench", "geometry_msgs/msg/WrenchStamped"),
@@ -246,7 +247,8 @@ def record_long_run(path: Path, seconds: float, publish_rate: float = 1000.0,
                 recorder.write(f"/bodies/{b}/pose", payload, stamp)
             wrench.wrench.force.x, wrench.wrench.torque.z = 2e7 * u, 1e3 * u
             deflection.transform.translation.x = u
-            wrench_payload, deflection_payload = serialize_message(wrench), serialize_message(deflection)
+            wrench_payload = serialize_message(wrench)
+            deflection_payload = serialize_message(deflection)
             for h in hinges:
                 recorder.write(f"/hinges/{h}/wrench", wrench_payload, stamp)
                 recorder.write(f"/hinges/{h}/deflection", deflection_payload, stamp)

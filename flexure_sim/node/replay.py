@@ -298,7 +298,8 @@ class _Player:
                 self.max_late_s = late
             if not ok():
                 return
-            if self.clock_pub is not None and (self._last_clock is None or log_time_ns > self._last_clock):
+            if self.clock_pub is not None and (
+                    self._last_clock is None or log_time_ns > self._last_clock):
                 self._clock(log_time_ns)
             self.publishers[topic].publish(data)
             self.published += 1

@@ -31,7 +31,8 @@ from mcap_ros2.decoder import DecoderFactory
 from .bag_metadata import METADATA_RECORD_KEY, METADATA_RECORD_NAME, parse_serialized_metadata
 from .channels import TopicInfo, TopicTable, check_profile, topic_infos
 from .errors import CorruptLogError, UndecodableMessageError
-from .scan import FileScan, iter_file, read_summary, scan_file, start_scan
+from .scan import FileScan, iter_file, scan_file, start_scan
+from .summary import read_summary
 
 
 @dataclass(frozen=True)
