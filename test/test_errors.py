@@ -41,7 +41,7 @@ def test_every_package_error_derives_from_the_root():
         "flexure_sim.engine.fitting.DataError",
         "flexure_sim.engine.fitting.FitError",
         "flexure_sim.engine.polynomial_files.PolynomialFileError",
-        "flexure_sim.tools.runlog.RunError",
+        "flexure_sim.recording.errors.RunError",
         "flexure_sim.cli.UsageError",
         "flexure_sim.node.demo_drive.DriveError",
         "flexure_sim.node.shell.StartupError",

@@ -5,6 +5,7 @@ Files written by `McapRecorder` are read back with mcap + mcap-ros2-support, wit
 """
 from __future__ import annotations
 
+import io
 import json
 import os
 import select
@@ -22,6 +23,8 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Pose, PoseArray, WrenchStamped
 from mcap.reader import make_reader
+from mcap.records import Chunk, Message
+from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 from mcap_ros2.decoder import DecoderFactory
 from rclpy.duration import Duration
@@ -56,6 +59,7 @@ from flexure_sim.recording import (
     qos_profiles_yaml,
     read_log,
 )
+from flexure_sim.recording.scan import scan_file
 from flexure_sim.recording.schema import SEPARATOR
 
 REPO = Path(__file__).resolve().parents[1]
@@ -876,9 +880,26 @@ def flip_positions(size: int) -> list[int]:
     return sorted(set(evenly + edges))
 
 
+def chunk_payloads(data: bytes) -> dict[int, list[bytes]]:
+    """Chunk offset -> payloads of its messages, read with the mcap library's StreamReader."""
+    out: dict[int, list[bytes]] = {}
+    stream = io.BytesIO(data)
+    reader = StreamReader(stream, emit_chunks=True)
+    start = 8
+    for record in reader.records:
+        if isinstance(record, Chunk):
+            out[start] = [r.data for r in breakup_chunk(record) if isinstance(r, Message)]
+        start = stream.tell()
+    return out
+
+
 def test_every_flipped_byte_is_detected(reference_bytes: bytes, tmp_path: Path) -> None:
-    full = read_log_bytes(reference_bytes, tmp_path)
+    """Strict reading refuses every flip; recovery keeps every intact chunk, also those after
+    a chunk that fails its CRC or whose framing is broken (the summary's chunk index says
+    where the next chunk starts), and exactly their messages."""
+    by_chunk = chunk_payloads(reference_bytes)
     path = tmp_path / "flipped.mcap"
+    skipped_over = 0
     for position in flip_positions(len(reference_bytes)):
         damaged = bytearray(reference_bytes)
         damaged[position] ^= 0xFF
@@ -890,9 +911,52 @@ def test_every_flipped_byte_is_detected(reference_bytes: bytes, tmp_path: Path) 
             partial = read_log(path, recover=True, decode=False)
         except CorruptLogError:
             continue  # header or profile destroyed
-        assert [m.data for m in partial.messages] == [
-            m.data for m in full.messages[: partial.message_count]
-        ], position
+        scan = scan_file(path)
+        for chunk in scan.damaged:
+            if "CRC mismatch" in chunk.reason:
+                assert chunk.offset <= position < chunk.end, position
+        lost = {chunk.offset for chunk in scan.damaged}
+        expected = [d for offset in scan.chunk_offsets if offset not in lost
+                    for d in by_chunk[offset]]
+        assert [m.data for m in partial.messages] == expected, position
+        if lost and scan.chunk_offsets[-1] not in lost and not scan.stopped:
+            skipped_over += 1
+    assert skipped_over > 10  # flips inside chunks: the chunks after them were still read
+
+
+def test_chunks_after_a_damaged_chunk_holding_the_channels_are_recovered(tmp_path: Path) -> None:
+    """mcap's own Writer puts Schema and Channel records inside the first chunk that uses
+    them: when that chunk is damaged, the summary's copies still give the later chunks'
+    messages their topic."""
+    path = tmp_path / "mcap_writer.mcap"
+    with path.open("wb") as stream:
+        writer = Writer(stream, compression=CompressionType.NONE, chunk_size=512)
+        writer.start(profile="ros2", library="test")
+        schema_id = writer.register_schema(
+            "std_msgs/msg/Float64", "ros2msg", load_schema("std_msgs/msg/Float64").text.encode()
+        )
+        qos = qos_profiles_yaml([QosDescription.sensor_data()])
+        channel_id = writer.register_channel(
+            "/x", "cdr", schema_id, metadata={"offered_qos_profiles": qos}
+        )
+        for k in range(200):
+            payload = serialize_message(Float64(data=float(k)))
+            writer.add_message(channel_id, log_time=k, data=payload, publish_time=k)
+        writer.finish()
+    data = path.read_bytes()
+    by_chunk = chunk_payloads(data)
+    first = min(by_chunk)
+    damaged = bytearray(data)
+    damaged[first + 200] ^= 0x01
+    path.write_bytes(bytes(damaged))
+    with pytest.raises(CorruptLogError, match="chunk 1 "):
+        read_log(path)
+    log = read_log(path, recover=True)
+    assert [m.message.data for m in log.messages] == [
+        deserialize_message(d, Float64).data
+        for offset in sorted(by_chunk) if offset != first for d in by_chunk[offset]
+    ]
+    assert len(by_chunk) > 5 and log.message_count == 200 - len(by_chunk[first])
 
 
 def test_mcap_with_another_profile_is_rejected(tmp_path: Path) -> None:

@@ -18,7 +18,9 @@ import time
 from pathlib import Path
 
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.serialization import deserialize_message
+from std_msgs.msg import Float64
 
 from flexure_sim import cli
 from flexure_sim.engine.config import load_mechanism
@@ -28,7 +30,7 @@ from flexure_sim.tools.export import csv_name
 from flexure_sim.tools.plot import figure_title
 from flexure_sim.node.replay import _message_class
 
-from node_harness import ROOT, NodeProcess, Peer, next_domain_id, node_env
+from node_harness import ROOT, NodeProcess, Peer, diagnostics_values, next_domain_id, node_env
 
 LEVELS_UM = (0.5, 1.0, 1.5, 2.0, 0.0)
 RATE = 2000.0
@@ -126,6 +128,56 @@ def test_export_rows_equal_message_counts(capsys, recorded, tmp_path):
     for topic, t in info.topics.items():
         with open(tmp_path / "csv" / csv_name(topic), newline="") as f:
             assert sum(1 for _ in csv.DictReader(f)) == t.message_count, topic
+
+
+# ------------------------------------------------------------------------------ other nodes' input
+def test_a_malformed_command_from_another_node_is_skipped_and_counted_by_every_tool(capsys,
+                                                                                   tmp_path):
+    """A 2-byte payload published on drive/displacement (rclpy publishes raw bytes as they
+    are) is rejected by the node and recorded as received; the tools skip it, say so in one
+    line, and read the rest of the run with exit 0; --strict refuses the file."""
+    domain = next_domain_id()
+    path = tmp_path / "malformed.mcap"
+    node = NodeProcess(tmp_path / "node", domain, {"time_mode": "realtime", "publish_rate": 200.0,
+                                                   "record": True, "record_path": str(path)})
+    peer = Peer(domain)
+    peer.watch = node
+    try:
+        peer.subscribe("/diagnostics", DiagnosticArray)
+        drive = peer.publisher("/drive/displacement", Float64)
+        peer.wait_for_subscribers(drive)
+        for k, command in enumerate((Float64(data=1.0e-6), bytes.fromhex("0001"),
+                                     Float64(data=0.5e-6)), start=1):
+            drive.publish(command)  # one at a time: each lands on a tick of its own
+            peer.spin_until(lambda: peer.last("/diagnostics") is not None and diagnostics_values(
+                peer.last("/diagnostics")).get("commands_received") == str(k), 20,
+                f"{k} command(s) received")
+        n = len(peer.received["/diagnostics"])
+        peer.spin_until(lambda: len(peer.received["/diagnostics"]) > n + 1, 20, "diagnostics")
+    finally:
+        peer.close()
+        rc = node.stop(signal.SIGINT)
+    assert rc == 0, node.stderr
+    # The received bytes are in the file, as the record of what arrived.
+    raw = read_log(path, decode=False).messages_on("/drive/displacement")
+    assert len(raw) == 3 and len(raw[1].data) < 12 and raw[1].data[:2] == b"\x00\x01"
+    note = "1 undecodable message on /drive/displacement"
+    code, out, err = flexure_sim(capsys, "analyse", path, "--json", "--no-static")
+    assert code == 0 and note in err and err.count("\n") == 1, err
+    assert [round(s["input"] * 1e6, 9) for s in json.loads(out)] == [1.0, 0.5]
+    code, out, err = flexure_sim(capsys, "info", path)
+    assert code == 0 and note in out, err
+    assert "/drive/displacement" in out
+    code, _, err = flexure_sim(capsys, "plot", path, "-o", tmp_path / "plots")
+    assert code == 0 and note in err, err
+    code, _, err = flexure_sim(capsys, "export", path, "--csv", tmp_path / "csv")
+    assert code == 0 and note in err, err
+    with open(tmp_path / "csv" / "drive.displacement.csv", newline="") as f:
+        assert [float(r["data"]) for r in csv.DictReader(f)] == [1.0e-6, 0.5e-6]
+    for tool in (("analyse",), ("info",), ("export", "--csv", tmp_path / "csv2")):
+        code, out, err = flexure_sim(capsys, tool[0], path, *tool[1:], "--strict")
+        assert code == 1 and "does not decode as std_msgs/msg/Float64" in err, (tool, err)
+        assert "Traceback" not in err and err.count("\n") == 1
 
 
 # ------------------------------------------------------------------------------ replay

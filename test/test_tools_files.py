@@ -12,8 +12,10 @@ import types
 from pathlib import Path
 
 import pytest
+from mcap.records import Chunk, Message
+from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from mcap.writer import Writer
-from rclpy.serialization import serialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Float64, String
 
 from flexure_sim import cli
@@ -22,7 +24,7 @@ from flexure_sim.tools.export import csv_name
 from flexure_sim.tools.plot import figure_title
 from flexure_sim.tools.runlog import RunError, find_namespace
 
-from tools_fixtures import DEMO_LEVELS, live_gains, record_stage_run
+from tools_fixtures import DEMO_LEVELS, live_gains, record_long_run, record_stage_run
 
 ROOT = Path(__file__).resolve().parent.parent
 STAGE_GAIN = 27.628
@@ -367,3 +369,252 @@ def test_the_installed_command_prints_no_traceback_for_a_damaged_file(stage, tmp
         assert "Traceback" not in proc.stderr and proc.stderr.count("\n") == 1
         assert "truncated" in proc.stderr and "readable" in proc.stderr
 
+
+
+# ------------------------------------------------------------------------------ undecodable
+def test_a_message_that_does_not_decode_is_skipped_counted_and_kept(capsys, tmp_path):
+    """A run whose command at 15 ms was recorded as the 2 bytes another node published: the
+    tools skip it and say so, info counts it, the bytes stay in the file, --strict refuses."""
+    path = tmp_path / "odd.mcap"
+    record_stage_run(path, extra_commands=[(0.015, 1e-6)], chunk_size=32 * 1024)
+    odd = tmp_path / "odd_bytes.mcap"
+    log = read_log(path)
+    with McapRecorder(odd, chunk_size=32 * 1024) as rec:
+        for name, topic in log.topics.items():
+            rec.add_topic(name, topic.type)
+        rec.add_metadata("flexure_sim", log.metadata["flexure_sim"])
+        for m in log.messages:
+            data = m.data
+            if m.topic == "/drive/displacement" and m.log_time_ns == 15_000_000:
+                data = bytes.fromhex("0001")  # what a misbehaving node may publish
+            rec.write(m.topic, data, m.log_time_ns)
+    note = "1 undecodable message on /drive/displacement"
+    code, out, err = flexure_sim(capsys, "analyse", odd, "--json")
+    assert code == 0 and err.count(note) == 1, err
+    # The steps are those of the demo levels alone (every 20 ms from 10 ms): the 1 um at
+    # 15 ms is unknown to the analysis.
+    assert [round(s["t"], 9) for s in json.loads(out)] == [
+        round(0.01 + 0.02 * k, 9) for k in range(len(DEMO_LEVELS))]
+    code, out, err = flexure_sim(capsys, "info", odd, "--json")
+    assert code == 0 and json.loads(out)["undecodable"] == {"/drive/displacement": 1}, err
+    code, out, err = flexure_sim(capsys, "info", odd, "--json", "--no-decode")
+    assert code == 0 and json.loads(out)["undecodable"] is None, err
+    code, out, err = flexure_sim(capsys, "export", odd, "--csv", tmp_path / "csv")
+    assert code == 0 and note in err
+    with open(tmp_path / "csv" / "drive.displacement.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == log.counts["/drive/displacement"] - 1
+    raw = read_log(odd, decode=False).messages_on("/drive/displacement")
+    assert bytes.fromhex("0001") in [m.data for m in raw]  # kept in the file
+    for tool in TOOLS:
+        code, out, err = run_tool(capsys, tool, odd, tmp_path, "--strict")
+        assert_clean_failure(code, out, err, odd, "does not decode", "--strict")
+
+
+# ------------------------------------------------------------------------------ damaged chunks
+def flip_bit_in_chunk(data: bytes, chunk_offset: int, where: int = 500) -> bytes:
+    """``data`` with one bit flipped ``where`` bytes into the chunk record at ``chunk_offset``
+    (past the record's header fields: inside its records)."""
+    b = bytearray(data)
+    b[chunk_offset + where] ^= 0x04
+    return bytes(b)
+
+
+def independent_crc_check(path: Path) -> None:
+    """Raise CRCValidationError if the mcap library's own reader finds a CRC mismatch."""
+    with open(path, "rb") as f:
+        for _ in StreamReader(f, validate_crcs=True).records:
+            pass
+
+
+def test_a_bit_flipped_inside_a_chunk_is_reported_by_every_tool(capsys, stage, chunk_offsets,
+                                                                 tmp_path):
+    data = stage[0].read_bytes()
+    bad = tmp_path / "flipped.mcap"
+    bad.write_bytes(flip_bit_in_chunk(data, chunk_offsets[2]))
+    with pytest.raises(CRCValidationError):
+        independent_crc_check(bad)
+    full = read_log(stage[0])
+    for tool in TOOLS:
+        code, out, err = run_tool(capsys, tool, bad, tmp_path)
+        assert_clean_failure(code, out, err, bad, "chunk 3 ", "CRC mismatch", "readable",
+                             "--recover")
+    # --recover reads every other chunk, the ones after the damaged chunk included.
+    code, out, err = flexure_sim(capsys, "info", bad, "--recover", "--json")
+    assert code == 0, err
+    info = json.loads(out)
+    assert not info["complete"] and "chunk 3 " in info["note"] and "CRC mismatch" in info["note"]
+    with open(stage[0], "rb") as f:
+        chunks = [r for r in StreamReader(f, emit_chunks=True).records if isinstance(r, Chunk)]
+    lost = sum(1 for r in breakup_chunk(chunks[2]) if isinstance(r, Message))
+    assert info["message_count"] == full.message_count - lost > 0
+    intact = json.loads(flexure_sim(capsys, "info", stage[0], "--json")[1])
+    assert info["end"] == pytest.approx(intact["end"])
+    for tool in TOOLS[1:]:
+        code, out, err = run_tool(capsys, tool, bad, tmp_path, "--recover")
+        assert code == 0 and "chunk 3 " in err and "Traceback" not in err, (tool, err)
+    code, out, _ = flexure_sim(capsys, "analyse", bad, "--recover", "--json")
+    steps = {s["t"]: s for s in json.loads(out)}
+    code, out, _ = flexure_sim(capsys, "analyse", stage[0], "--json")
+    reference = {s["t"]: s for s in json.loads(out)}
+    # Chunk 3 held 23-34 ms, with the command of the step at 30 ms: every step but that one
+    # is found, those after the damage with the gains of the intact file.
+    assert sorted(steps) == [t for t in sorted(reference) if not 0.023 <= t <= 0.034]
+    for t in (0.05, 0.07, 0.09):
+        assert steps[t]["gain"] == reference[t]["gain"] is not None
+
+
+def test_a_chunk_whose_length_is_damaged_is_stepped_over_with_the_chunk_index(
+        capsys, stage, chunk_offsets, tmp_path):
+    """A flipped bit in a chunk record's length field breaks the framing: the next record
+    cannot be found by reading on, but the summary's chunk index says where the next chunk
+    starts, so --recover still reads every chunk after the damaged one."""
+    data = bytearray(stage[0].read_bytes())
+    data[chunk_offsets[2] + 1 + 2] ^= 0x10  # opcode, then the u64 length: +1 MiB
+    bad = tmp_path / "length.mcap"
+    bad.write_bytes(bytes(data))
+    for tool in TOOLS:
+        code, out, err = run_tool(capsys, tool, bad, tmp_path)
+        assert_clean_failure(code, out, err, bad, "chunk 3 ", "does not parse", "--recover")
+    code, out, err = flexure_sim(capsys, "analyse", bad, "--recover", "--json")
+    assert code == 0 and f"reading resumed at byte {chunk_offsets[3]}" in err, err
+    steps = {round(s["t"], 9): s["gain"] for s in json.loads(out)}
+    code, out, _ = flexure_sim(capsys, "analyse", stage[0], "--json")
+    reference = {round(s["t"], 9): s["gain"] for s in json.loads(out)}
+    assert sorted(steps) == [t for t in sorted(reference) if t != 0.03]  # 30 ms: in chunk 3
+    assert all(steps[t] == reference[t] for t in (0.05, 0.07, 0.09))
+
+
+# ------------------------------------------------------------------------------ other writers
+@pytest.fixture(scope="module")
+def rosbags_files(stage, tmp_path_factory):
+    """The stage run converted by rosbags-convert: to a sqlite3 bag and back to MCAP, and
+    directly to an MCAP bag with zstd-compressed chunks (both rosbag2 MCAP written by rosbags,
+    with ``custom_data: null`` in their metadata)."""
+    root = tmp_path_factory.mktemp("rosbags")
+    convert = [sys.executable, "-m", "rosbags.convert"]
+
+    def run(*args: str) -> None:
+        proc = subprocess.run([*convert, *args], capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr
+
+    run("--src", str(stage[0]), "--dst", str(root / "db3"), "--dst-storage", "sqlite3")
+    run("--src", str(root / "db3"), "--dst", str(root / "back"), "--dst-storage", "mcap")
+    run("--src", str(stage[0]), "--dst", str(root / "zstd"), "--dst-storage", "mcap",
+        "--compress", "zstd", "--compress-mode", "storage")
+    return {"via sqlite3": root / "back" / "back.mcap", "zstd": root / "zstd" / "zstd.mcap"}
+
+
+@pytest.mark.parametrize("route", ["via sqlite3", "zstd"])
+def test_every_tool_reads_a_rosbag2_mcap_written_by_rosbags(capsys, stage, rosbags_files, route,
+                                                            tmp_path):
+    path = rosbags_files[route]
+    assert "custom_data: null" in read_log(path).metadata["rosbag2"]["serialized_metadata"]
+    code, out, err = flexure_sim(capsys, "info", path, "--json")
+    assert code == 0 and "Traceback" not in err, err
+    info = json.loads(out)
+    assert info["library"].startswith("rosbags") and info["complete"]
+    original = read_log(stage[0])
+    assert {t["name"]: t["count"] for t in info["topics"]} == original.counts
+    assert info["dropped_messages"] is None and info["undecodable"] == {}
+    assert info["unchecked_chunks"] == info["chunk_count"] == 1  # rosbags writes no CRCs
+    code, out, err = flexure_sim(capsys, "info", path)
+    assert code == 0 and "/output/displacement" in out, err
+    assert "no CRC" in out
+    code, out, err = flexure_sim(capsys, "analyse", path, "--json")
+    assert code == 0, err
+    code, ref, _ = flexure_sim(capsys, "analyse", stage[0], "--json")
+    gains = [s["gain"] for s in json.loads(out)]
+    assert gains == [s["gain"] for s in json.loads(ref)] and all(g is not None for g in gains)
+    code, out, err = flexure_sim(capsys, "plot", path, "-o", tmp_path / "plots")
+    assert code == 0 and (tmp_path / "plots" / "input_output.png").exists(), err
+    code, out, err = flexure_sim(capsys, "export", path, "--csv", tmp_path / "csv")
+    assert code == 0, err
+    for topic, count in original.counts.items():
+        with open(tmp_path / "csv" / csv_name(topic), newline="") as f:
+            assert sum(1 for _ in csv.DictReader(f)) == count, topic
+
+
+# ------------------------------------------------------------------------------ memory
+def peak_rss_kib(*args: str) -> int:
+    """Peak resident memory (KiB) of ``flexure-sim ARGS`` in a fresh interpreter: VmHWM of
+    /proc/self/status (ru_maxrss would carry the peak of the forking test process over)."""
+    code = ("import contextlib, io, sys\n"
+            "from flexure_sim import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()), \\\n"
+            "        contextlib.redirect_stderr(io.StringIO()):\n"
+            "    rc = cli.main(sys.argv[1:])\n"
+            "hwm = [l.split()[1] for l in open('/proc/self/status') if l.startswith('VmHWM')][0]\n"
+            "print(rc, hwm)\n")
+    proc = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True,
+                          cwd=ROOT, timeout=600)
+    rc, rss = proc.stdout.split()
+    assert rc == "0", proc.stderr
+    return int(rss)
+
+
+@pytest.fixture(scope="module")
+def long_runs(tmp_path_factory):
+    """A run of the stage's topics and one ten times longer, both of several 256 KiB chunks:
+    (paths, message counts)."""
+    root = tmp_path_factory.mktemp("long")
+    short, long = root / "short.mcap", root / "long.mcap"
+    counts = (record_long_run(short, 0.3, chunk_size=1 << 18),
+              record_long_run(long, 3.0, chunk_size=1 << 18))
+    return (short, long), counts
+
+
+def test_analyse_and_info_keep_memory_bounded_on_a_ten_times_longer_recording(long_runs):
+    """Streaming: the peak memory of analyse (and info) on a run 10 x longer stays within
+    1.2 x (the numeric series of the analysed topics grow, 8 bytes a value; no decoded
+    messages are kept)."""
+    (short, long), (n_short, n_long) = long_runs
+    assert n_long > 9 * n_short
+    for tool in (("analyse", "--json"), ("info", "--json")):
+        small = peak_rss_kib(tool[0], str(short), *tool[1:])
+        large = peak_rss_kib(tool[0], str(long), *tool[1:])
+        print(f"{tool[0]}: peak RSS {small} KiB ({n_short} messages), {large} KiB ({n_long})")
+        assert large <= 1.2 * small, (tool, small, large)
+
+
+def test_replay_reads_an_intact_file_in_log_time_order_in_bounded_memory(long_runs, tmp_path):
+    """What replay plays: every message of the chosen topics in log-time order (file order on
+    ties), also when the file holds them out of order. Reading a run ten times longer adds to
+    the peak of Python allocations less than a tenth of the payload bytes it adds (holding
+    the payloads, as replay did, would add all of them; what grows is mcap's chunk index)."""
+    import tracemalloc
+
+    from flexure_sim.recording.ordered import OrderedLog
+
+    path = tmp_path / "shuffled.mcap"
+    stamps = [5, 3, 3, 9, 1, 7, 3]
+    with McapRecorder(path, chunk_size=64) as rec:
+        rec.add_topic("/a", "std_msgs/msg/Float64")
+        rec.add_topic("/b", "std_msgs/msg/Float64")
+        for k, t in enumerate(stamps):
+            rec.write("/a" if k % 2 else "/b", serialize_message(Float64(data=float(k))), t)
+    for recover in (False, True):
+        log = OrderedLog(path, recover=recover)
+        played = [(t, topic, _float64(data)) for t, topic, data in log.messages(["/a", "/b"], 0)]
+        expected = sorted(((t, "/a" if k % 2 else "/b", float(k)) for k, t in enumerate(stamps)),
+                          key=lambda item: item[0])
+        assert played == expected
+        assert [_float64(d) for _, _, d in log.messages(["/a"], 4)] == [5.0, 3.0]
+    peaks, payload = [], []
+    for run in long_runs[0]:
+        tracemalloc.start()
+        log = OrderedLog(run)
+        count = size = 0
+        for _, _, data in log.messages(list(log.topics), log.start_ns):
+            count, size = count + 1, size + len(data)
+        peaks.append(tracemalloc.get_traced_memory()[1])
+        tracemalloc.stop()
+        assert count == log.message_count
+        payload.append(size)
+    print(f"replay reading: peak Python allocations {peaks[0]} B, {peaks[1]} B; payloads "
+          f"{payload[0]} B, {payload[1]} B")
+    assert peaks[1] - peaks[0] < 0.1 * (payload[1] - payload[0]), (peaks, payload)
+
+
+def _float64(data: bytes) -> float:
+    return deserialize_message(data, Float64).data

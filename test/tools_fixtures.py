@@ -190,3 +190,76 @@ def live_gains(live: dict) -> list[Optional[float]]:
         du = after["input"] - before["input"]
         gains.append((after["output"] - before["output"]) / du if du else None)
     return gains
+
+
+def record_long_run(path: Path, seconds: float, publish_rate: float = 1000.0,
+                    step_every: float = 0.05, chunk_size: int = 1 << 20) -> int:
+    """A run of the stage's topics (seven bodies and hinges, /clock, diagnostics at 10 Hz),
+    ``seconds`` long, written fast: the values are those of a first-order lag (tau 0.5 ms)
+    following a command that alternates between 1 and 2 um every ``step_every`` s, scaled by
+    the stage's gain, without stepping the engine (all bodies share a pose, all hinges a
+    wrench). Returns the number of messages written."""
+    bodies = [f"body{k}" for k in range(1, 8)]
+    hinges = list("abcdefg")
+    topics = [("/clock", "rosgraph_msgs/msg/Clock"),
+              ("/bodies/poses", "geometry_msgs/msg/PoseArray")]
+    topics += [(f"/bodies/{b}/pose", "geometry_msgs/msg/PoseStamped") for b in bodies]
+    for h in hinges:
+        topics += [(f"/hinges/{h}/wrench", "geometry_msgs/msg/WrenchStamped"),
+                   (f"/hinges/{h}/deflection", "geometry_msgs/msg/TransformStamped")]
+    scalars = ("/hinges/a/compression", "/output/displacement", "/drive/input", "/drive/force")
+    topics += [(t, "std_msgs/msg/Float64") for t in scalars]
+    topics += [("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"),
+               ("/drive/displacement", "std_msgs/msg/Float64")]
+    period_ns = round(1e9 / publish_rate)
+    ticks = round(seconds * publish_rate)
+    ticks_per_step = round(step_every * publish_rate)
+    tau, gain = 0.5e-3, 27.628
+    decay = math.exp(-1.0 / (publish_rate * tau))
+    u, target, count = 0.0, 0.0, 0
+    pose, wrench, deflection = PoseStamped(), WrenchStamped(), TransformStamped()
+    pose.header.frame_id = "stage"
+    array_msg = PoseArray()
+    array_msg.header.frame_id = "stage"
+    array_msg.poses = [Pose() for _ in bodies]
+    with McapRecorder(path, chunk_size=chunk_size) as recorder:
+        for name, type_name in topics:
+            recorder.add_topic(name, type_name)
+        for k in range(ticks):
+            stamp = (k + 1) * period_ns
+            if k % ticks_per_step == 0:
+                target = 1e-6 if (k // ticks_per_step) % 2 == 0 else 2e-6
+                recorder.write("/drive/displacement", serialize_message(Float64(data=target)),
+                               k * period_ns)
+                count += 1
+            u = target + (u - target) * decay
+            st = _stamp(stamp)
+            recorder.write("/clock", serialize_message(Clock(clock=st)), stamp)
+            for i, p in enumerate(array_msg.poses):
+                p.position.x = gain * u * i / 7
+            array_msg.header.stamp = st
+            recorder.write("/bodies/poses", serialize_message(array_msg), stamp)
+            pose.header.stamp = deflection.header.stamp = wrench.header.stamp = st
+            # One payload per type and tick, shared by the bodies and hinges (fast to write).
+            pose.pose.position.x = gain * u
+            payload = serialize_message(pose)
+            for b in bodies:
+                recorder.write(f"/bodies/{b}/pose", payload, stamp)
+            wrench.wrench.force.x, wrench.wrench.torque.z = 2e7 * u, 1e3 * u
+            deflection.transform.translation.x = u
+            wrench_payload = serialize_message(wrench)
+            deflection_payload = serialize_message(deflection)
+            for h in hinges:
+                recorder.write(f"/hinges/{h}/wrench", wrench_payload, stamp)
+                recorder.write(f"/hinges/{h}/deflection", deflection_payload, stamp)
+            for topic, value in zip(scalars, (0.142 * u, gain * u, u, 2.26e7 * u)):
+                recorder.write(topic, serialize_message(Float64(data=value)), stamp)
+            count += 1 + 1 + len(bodies) + 2 * len(hinges) + len(scalars)
+            if k % round(publish_rate / 10) == 0:
+                diag = DiagnosticArray(status=[DiagnosticStatus(
+                    name="stage_node: simulation", message="running", level=b"\x00",
+                    values=[KeyValue(key="sim_time", value=repr(stamp / 1e9))])])
+                diag.header.stamp = st
+                recorder.write("/diagnostics", serialize_message(diag), stamp)
+                count += 1
+    return count

@@ -24,10 +24,11 @@ import argparse
 import importlib
 import sys
 import time
-from typing import Any, Optional, Sequence
+from typing import Any, Iterator, Optional, Sequence
 
-from ..recording import LogMessage
-from ..tools.runlog import EXIT_OK, EXIT_USAGE, RunError, check_path, open_log, report_recovered, tool_errors, warn
+from ..recording.command_line import check_path, report_reading, tool_errors, warn
+from ..recording.ordered import OrderedLog
+from ..recording.errors import EXIT_OK, EXIT_USAGE, RunError
 
 PROG = "flexure-sim replay"
 NODE_NAME = "flexure_sim_replay"
@@ -100,9 +101,9 @@ def _check(args: argparse.Namespace) -> None:
             raise RunError(f"--{name.replace('_', '-')} {getattr(args, name)!r}: must be >= 0 seconds", EXIT_USAGE)
 
 
-def plan(log: Any, topics: Optional[Sequence[str]], exclude: Sequence[str], start_offset: float,
-         no_clock: bool) -> tuple[list[str], list[LogMessage], bool]:
-    """Topics to publish, the messages in playing order and whether /clock is generated."""
+def plan(log: OrderedLog, topics: Optional[Sequence[str]], exclude: Sequence[str],
+         start_offset: float, no_clock: bool) -> tuple[list[str], int, bool]:
+    """Topics to publish, the log time to start at and whether /clock is generated."""
     available = sorted(log.topics)
     for option, names in (("--topics", topics or []), ("--exclude", exclude)):
         unknown = [t for t in names if t not in log.topics]
@@ -113,16 +114,13 @@ def plan(log: Any, topics: Optional[Sequence[str]], exclude: Sequence[str], star
     if no_clock:
         chosen = [t for t in chosen if t != CLOCK_TOPIC]
     generate_clock = not no_clock and CLOCK_TOPIC not in chosen
-    if not log.messages:
+    if not log.message_count:
         raise RunError(f"{log.path}: no messages to replay")
-    first = min(m.log_time_ns for m in log.messages)
-    start = first + round(start_offset * 1e9)
-    wanted = set(chosen)
-    messages = sorted((m for m in log.messages if m.topic in wanted and m.log_time_ns >= start),
-                      key=lambda m: m.log_time_ns)
-    if not messages:
-        raise RunError(f"{log.path}: no messages on the chosen topics after --start-offset {start_offset:g} s")
-    return chosen, messages, generate_clock
+    start = log.start_ns + round(start_offset * 1e9)
+    if next(log.messages(chosen, start), None) is None:
+        raise RunError(f"{log.path}: no messages on the chosen topics after --start-offset "
+                       f"{start_offset:g} s")
+    return chosen, start, generate_clock
 
 
 def _message_class(type_name: str) -> Any:
@@ -153,11 +151,12 @@ def _qos(topic_info: Any) -> Any:
 # ---------------------------------------------------------------------------- playing
 def play(args: argparse.Namespace) -> int:
     _check(args)
-    check_path(args.run)
-    log = open_log(args.run, recover=args.recover, decode=False)
-    if args.recover:
-        report_recovered(PROG, log)
-    chosen, messages, generate_clock = plan(log, args.topics, args.exclude, args.start_offset, args.no_clock)
+    log = OrderedLog(check_path(args.run), recover=args.recover)
+    if not log.complete and not log.message_count:
+        raise RunError(f"{args.run}: nothing readable: {log.note}")
+    report_reading(PROG, log)
+    chosen, start_ns, generate_clock = plan(log, args.topics, args.exclude, args.start_offset,
+                                            args.no_clock)
 
     import rclpy
     from rclpy.executors import ExternalShutdownException
@@ -180,7 +179,6 @@ def play(args: argparse.Namespace) -> int:
             publishers[topic] = node.create_publisher(cls, topic, _qos(log.topics[topic]))
         if not publishers:
             raise RunError(f"{args.run}: none of the chosen topics has an installed message type")
-        messages = [m for m in messages if m.topic in publishers]
         clock_pub = None
         if generate_clock:
             clock_pub = node.create_publisher(
@@ -196,7 +194,7 @@ def play(args: argparse.Namespace) -> int:
         passes = 0
         wall0 = time.monotonic()
         while True:
-            player.play(messages)
+            player.play(log.messages(list(publishers), start_ns))
             passes += 1
             if not args.loop or not node.context.ok():
                 break
@@ -206,7 +204,7 @@ def play(args: argparse.Namespace) -> int:
                 if pub.qos_profile.reliability == ReliabilityPolicy.RELIABLE:
                     pub.wait_for_all_acked(rclpy.duration.Duration(seconds=ACK_TIMEOUT_S))
         if not args.quiet:
-            span = (messages[-1].log_time_ns - messages[0].log_time_ns) / 1e9
+            span = player.span_s
             clock = ("/clock generated" if clock_pub else
                      "/clock as recorded" if CLOCK_TOPIC in publishers else "no /clock")
             print(f"replayed {player.published} message(s) on {len(publishers)} topic(s), {span:.6g} s of "
@@ -256,6 +254,7 @@ class _Player:
         self.clock_period_ns = round(1e9 / clock_rate) if clock_rate > 0 else 0
         self.published = 0
         self.max_late_s = 0.0
+        self.span_s = 0.0
         self._clock_msg = Clock()
         self._last_clock: Optional[int] = None
 
@@ -265,14 +264,18 @@ class _Player:
         self.clock_pub.publish(self._clock_msg)
         self._last_clock = ns
 
-    def play(self, messages: list[LogMessage]) -> None:
-        t_first = messages[0].log_time_ns
+    def play(self, messages: Iterator[tuple[int, str, bytes]]) -> None:
+        """Publish (log time ns, topic, payload) items, given in log-time order, on time."""
+        t_first: Optional[int] = None
         wall0 = time.monotonic()
         rate = self.rate
         ok = self.node.context.ok
         self._last_clock = None
-        for m in messages:
-            target = wall0 + (m.log_time_ns - t_first) / 1e9 / rate
+        for log_time_ns, topic, data in messages:
+            if t_first is None:
+                t_first, wall0 = log_time_ns, time.monotonic()
+            self.span_s = max(self.span_s, (log_time_ns - t_first) / 1e9)
+            target = wall0 + (log_time_ns - t_first) / 1e9 / rate
             while True:
                 now = time.monotonic()
                 if now >= target:
@@ -283,7 +286,7 @@ class _Player:
                 if self.clock_pub is not None and self.clock_period_ns and self._last_clock is not None:
                     # Fill the gap with clock ticks of the replayed time.
                     next_ns = self._last_clock + self.clock_period_ns
-                    if next_ns < m.log_time_ns:
+                    if next_ns < log_time_ns:
                         due = wall0 + (next_ns - t_first) / 1e9 / rate
                         if due <= now:
                             self._clock(next_ns)
@@ -295,9 +298,10 @@ class _Player:
                 self.max_late_s = late
             if not ok():
                 return
-            if self.clock_pub is not None and (self._last_clock is None or m.log_time_ns > self._last_clock):
-                self._clock(m.log_time_ns)
-            self.publishers[m.topic].publish(m.data)
+            if self.clock_pub is not None and (
+                    self._last_clock is None or log_time_ns > self._last_clock):
+                self._clock(log_time_ns)
+            self.publishers[topic].publish(data)
             self.published += 1
 
 

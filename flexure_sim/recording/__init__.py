@@ -1,5 +1,6 @@
 """MCAP recording in the rosbag2 (ROS 2 Jazzy) format: write with `McapRecorder`, read back
-with `read_log` / `log_info`. Needs mcap and mcap-ros2-support; never imports rclpy.
+streaming with `LogReader` (or whole with `read_log`), summarise with `log_info`. Needs mcap
+and mcap-ros2-support; never imports rclpy.
 """
 from .bag_metadata import (
     TopicRecord,
@@ -12,11 +13,13 @@ from .errors import (
     RecorderClosedError,
     RecorderFailedError,
     RecordingError,
+    RunError,
     SchemaNotFoundError,
+    UndecodableMessageError,
 )
 from .info import LogInfo, log_info
 from .qos import QosDescription, parse_qos_profiles_yaml, qos_profiles_yaml
-from .reader import LogMessage, McapLog, TopicInfo, read_log
+from .reader import LogMessage, LogReader, McapLog, TopicInfo, read_log, undecodable_note
 from .schema import MessageSchema, SchemaResolver, ament_prefixes, load_schema
 from .writer import McapRecorder, RecordingStats
 
@@ -24,6 +27,7 @@ __all__ = [
     "CorruptLogError",
     "LogInfo",
     "LogMessage",
+    "LogReader",
     "McapLog",
     "McapRecorder",
     "MessageSchema",
@@ -32,10 +36,12 @@ __all__ = [
     "RecorderFailedError",
     "RecordingError",
     "RecordingStats",
+    "RunError",
     "SchemaNotFoundError",
     "SchemaResolver",
     "TopicInfo",
     "TopicRecord",
+    "UndecodableMessageError",
     "ament_prefixes",
     "build_bag_metadata",
     "load_schema",
@@ -45,4 +51,5 @@ __all__ = [
     "parse_serialized_metadata",
     "qos_profiles_yaml",
     "read_log",
+    "undecodable_note",
 ]

@@ -1,30 +1,35 @@
-"""`log_info`: what ``ros2 bag info`` shows of a log, plus the ``flexure_sim`` metadata record.
+"""`log_info`: what ``ros2 bag info`` shows of a log, plus the ``flexure_sim`` metadata record,
+checked against the file's contents.
 
-A properly closed file is summarised from its summary section (CRC-checked) without reading
-the chunks, so damage inside chunks is found by `read_log`, not here. A file without a valid
-summary raises `CorruptLogError`, unless ``recover=True``: then it is scanned and summarised
-from its readable part.
+The summary section alone cannot tell a damaged chunk from an intact one, so `log_info` reads
+the whole file once (streaming, one chunk in memory): every chunk CRC is checked and, with
+``decode`` (the default), every message is decoded, so that messages that do not decode are
+counted per topic (``undecodable``). A damaged or incomplete file raises `CorruptLogError`
+saying what is damaged and how much is readable, unless ``recover=True``: then the readable
+part is summarised and ``note`` says what was lost.
 """
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping, Optional
 
-from .bag_metadata import METADATA_RECORD_KEY, METADATA_RECORD_NAME, parse_serialized_metadata
-from .errors import CorruptLogError
-from .reader import TopicInfo, TopicTable, check_profile, corrupt, metadata_records, read_log, topic_infos
-from .scan import read_summary, scan_file
+from .reader import LogReader, TopicInfo, TopicTable, undecodable_note
 
 RECORD_NAME = "flexure_sim"
+#: Key of the rosbag2 ``custom_data`` entry in which the recorder counts dropped messages.
+DROPPED_KEY = "flexure_sim.dropped_messages"
 
 
 @dataclass(frozen=True)
 class LogInfo(TopicTable):
     """Summary of a log; times in ns (``start_ns``/``end_ns`` are first/last log times).
 
-    ``metadata``: last Metadata record of each name; ``metadata_records``: all, in file order.
+    ``metadata``: last Metadata record of each name; ``metadata_records``: all, in file order;
+    ``undecodable``: messages per topic that do not decode as the topic's type;
+    ``unchecked_chunks``: chunks without a CRC (damage inside them cannot be detected);
+    ``decoded``: whether messages were decoded (else ``undecodable`` is not known).
     """
 
     path: Path
@@ -41,6 +46,9 @@ class LogInfo(TopicTable):
     complete: bool
     note: str = ""
     metadata_records: tuple[tuple[str, dict[str, str]], ...] = ()
+    undecodable: dict[str, int] = field(default_factory=dict)
+    unchecked_chunks: int = 0
+    decoded: bool = True
 
     @property
     def duration_ns(self) -> int:
@@ -50,6 +58,11 @@ class LogInfo(TopicTable):
     def flexure_sim(self) -> dict[str, str]:
         """The ``flexure_sim`` metadata record (mechanism and parameters), empty if absent."""
         return dict(self.metadata.get(RECORD_NAME, {}))
+
+    @property
+    def dropped_messages(self) -> Optional[str]:
+        """Messages the recorder counted as dropped (None if the file does not say)."""
+        return dropped_messages(self.bag_metadata)
 
     def format(self) -> str:
         """Human-readable summary in the spirit of ``ros2 bag info``."""
@@ -68,71 +81,48 @@ class LogInfo(TopicTable):
             lines.append(f"  {name:<{width}}  {topic.type}  count {topic.message_count}")
         for key, value in sorted(self.flexure_sim.items()):
             lines.append(f"{RECORD_NAME}.{key}: {value}")
+        if self.undecodable:
+            lines.append(f"Undecodable:    {undecodable_note(self.undecodable)}")
         if not self.complete:
             lines.append(f"Recovered:      {self.note}")
         return "\n".join(lines)
 
 
-def log_info(path: str | os.PathLike[str], recover: bool = False) -> LogInfo:
-    """Summarise ``path``; see the module docstring for incomplete files."""
+def dropped_messages(bag_metadata: Optional[Mapping[str, Any]]) -> Optional[str]:
+    """The recorder's count of dropped messages in rosbag2 metadata, tolerating files of other
+    writers (no metadata, ``custom_data: null``)."""
+    custom = (bag_metadata or {}).get("custom_data")
+    if not isinstance(custom, Mapping):
+        return None
+    value = custom.get(DROPPED_KEY)
+    return None if value is None else str(value)
+
+
+def log_info(
+    path: str | os.PathLike[str], recover: bool = False, decode: bool = True,
+    strict: bool = False,
+) -> LogInfo:
+    """Summarise ``path`` after reading it through; see the module docstring (``strict``:
+    raise `UndecodableMessageError` for a message that does not decode)."""
     path = Path(path)
-    section = read_summary(path)
-    if section.header is not None:
-        check_profile(path, section.header)
-    if section.problem is not None:
-        if recover:
-            return _from_log(path)
-        scan = scan_file(path)
-        if scan.header is not None:
-            check_profile(path, scan.header, scan)
-        raise corrupt(
-            path, scan, scan.problem or section.problem,
-            hint="log_info(path, recover=True) summarises the readable part",
-        )
-    assert section.header is not None and section.statistics is not None
-    stats = section.statistics
-    topics = topic_infos(path, section.schemas, section.channels, stats.channel_message_counts)
-    metadata = metadata_records(section.metadata)
-    bag_metadata = None
-    if METADATA_RECORD_KEY in metadata.get(METADATA_RECORD_NAME, {}):
-        try:
-            text = metadata[METADATA_RECORD_NAME][METADATA_RECORD_KEY]
-            bag_metadata = parse_serialized_metadata(text)
-        except ValueError as exc:
-            raise CorruptLogError(path, f"the rosbag2 metadata record is invalid: {exc}") from exc
-    return LogInfo(
-        path=path,
-        size_bytes=section.total_bytes,
-        profile=section.header.profile,
-        library=section.header.library,
-        topics={t.name: t for t in topics.values()},
-        message_count=stats.message_count,
-        start_ns=stats.message_start_time,
-        end_ns=stats.message_end_time,
-        chunk_count=stats.chunk_count,
-        metadata=metadata,
-        bag_metadata=bag_metadata,
-        complete=True,
-        metadata_records=tuple((r.name, dict(r.metadata)) for r in section.metadata),
-    )
-
-
-def _from_log(path: Path) -> LogInfo:
-    log = read_log(path, recover=True, decode=False)
-    times = [m.log_time_ns for m in log.messages]
+    reader = LogReader(path, recover=recover, strict=strict)
+    reader.read_through(decode=decode)
     return LogInfo(
         path=path,
         size_bytes=path.stat().st_size,
-        profile=log.profile,
-        library=log.library,
-        topics=log.topics,
-        message_count=log.message_count,
-        start_ns=min(times, default=0),
-        end_ns=max(times, default=0),
-        chunk_count=log.chunk_count,
-        metadata=log.metadata,
-        bag_metadata=log.bag_metadata,
-        complete=log.complete,
-        note=log.note,
-        metadata_records=log.metadata_records,
+        profile=reader.header.profile,
+        library=reader.header.library,
+        topics=reader.topics,
+        message_count=reader.message_count,
+        start_ns=reader.start_ns,
+        end_ns=reader.end_ns,
+        chunk_count=reader.chunk_count,
+        metadata=reader.metadata,
+        bag_metadata=reader.bag_metadata,
+        complete=reader.complete,
+        note=reader.note,
+        metadata_records=reader.metadata_records,
+        undecodable=dict(reader.undecodable),
+        unchecked_chunks=reader.unchecked_chunks,
+        decoded=decode,
     )

@@ -1,15 +1,17 @@
 """Validated reading of MCAP files at the record level (no ROS semantics).
 
-`scan_file` reads a file linearly, checking chunk CRCs, the data section CRC and the summary
-CRC, and stops at the first problem, keeping what was read intact before it: messages of
-complete chunks only. `read_summary` reads just the header, footer and summary section.
-Neither raises on damage; they report it in ``problem`` for the caller to word.
+`iter_file` reads a file linearly, in bounded memory (one chunk at a time), yielding the
+Message records of every intact chunk while it fills a `FileScan` with what it saw. It checks
+every CRC the file carries: each chunk's (a chunk that fails it, or does not parse, is skipped
+and listed in ``FileScan.damaged``, and reading goes on with the next record), the data
+section's and the summary's. It stops at the first damage it cannot step over (a record whose
+framing is broken, a file cut short), keeping what was read intact before it.
+`scan_file` runs that pass to the end (the summary is read by `summary.read_summary`).
+Neither raises on damage: they report it for the caller to word.
 """
 from __future__ import annotations
 
-import io
-import struct
-import zlib
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,123 +24,226 @@ from mcap.records import (
     Footer,
     Header,
     Message,
+    MessageIndex,
     Metadata,
-    MetadataIndex,
     Schema,
     Statistics,
 )
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 
-MAGIC = b"\x89MCAP0\r\n"
-_FOOTER_LENGTH = 1 + 8 + 20  # opcode, record length, summary_start, offset_start, crc
-_FOOTER_OPCODE = 0x02
+from .summary import MAGIC, SummarySection, read_summary, summary_crc_problem
+
+
+@dataclass
+class DamagedChunk:
+    """A chunk whose contents fail their CRC or do not parse: its messages are lost.
+
+    ``offset``/``end``: bytes of the chunk record; ``start_ns``/``end_ns``: the log times its
+    record header (or the chunk index) declares; ``messages``: how many its message index
+    lists (-1 if unknown). ``index`` -1: damaged bytes between chunks (message indexes).
+    """
+
+    index: int
+    offset: int
+    end: int
+    reason: str
+    start_ns: int
+    end_ns: int
+    messages: int = -1
+
+    def describe(self) -> str:
+        if self.index < 0:
+            return f"bytes {self.offset}-{self.end} between chunks: {self.reason}; no message lost"
+        lost = f"its {self.messages} message(s)" if self.messages >= 0 else "its messages"
+        return (
+            f"chunk {self.index + 1} (bytes {self.offset}-{self.end}, log time "
+            f"{self.start_ns / 1e9:.9g}-{self.end_ns / 1e9:.9g} s): {self.reason}; {lost} lost"
+        )
 
 
 @dataclass
 class FileScan:
-    """Everything a linear pass read before its first problem (``problem`` is None if none)."""
+    """What a linear pass read; ``problem`` is None for an intact, complete file.
+
+    ``counts``: messages read per channel id (damaged chunks excluded); ``unchecked_chunks``:
+    chunks written without a CRC (some writers, e.g. rosbags, write none); ``stopped``: why the
+    pass ended before the end of the file; ``damaged``: chunks skipped; ``inconsistent``: a
+    summary, index or data-section CRC problem found after reading every record.
+    """
 
     total_bytes: int
     header: Header | None = None
     schemas: dict[int, Schema] = field(default_factory=dict)
     channels: dict[int, Channel] = field(default_factory=dict)
-    messages: list[Message] = field(default_factory=list)
+    counts: dict[int, int] = field(default_factory=dict)
     metadata: list[Metadata] = field(default_factory=list)
     chunk_offsets: list[int] = field(default_factory=list)
+    unchecked_chunks: int = 0
+    damaged: list[DamagedChunk] = field(default_factory=list)
     statistics: Statistics | None = None
     chunk_indexes: list[ChunkIndex] = field(default_factory=list)
-    metadata_indexes: list[MetadataIndex] = field(default_factory=list)
     data_end: bool = False
     footer: Footer | None = None
     intact_bytes: int = 0
-    problem: str | None = None
-    truncated: bool = False
-    cause: BaseException | None = None
+    stopped: str | None = None
+    inconsistent: str | None = None
+    start_ns: int | None = None
+    end_ns: int | None = None
 
+    @property
+    def message_count(self) -> int:
+        """Messages read (those of damaged chunks excluded)."""
+        return sum(self.counts.values())
 
-@dataclass
-class SummarySection:
-    """Header and summary of a file that was closed properly (``problem`` is None)."""
-
-    total_bytes: int
-    header: Header | None = None
-    schemas: dict[int, Schema] = field(default_factory=dict)
-    channels: dict[int, Channel] = field(default_factory=dict)
-    statistics: Statistics | None = None
-    chunk_indexes: list[ChunkIndex] = field(default_factory=list)
-    metadata: list[Metadata] = field(default_factory=list)
-    problem: str | None = None
-    cause: BaseException | None = None
+    @property
+    def problem(self) -> str | None:
+        """Everything wrong with the file, in one line (None if nothing)."""
+        parts = []
+        if self.stopped:
+            parts.append(self.stopped)
+        if self.damaged:
+            shown = [d.describe() for d in self.damaged[:3]]
+            if len(self.damaged) > 3:
+                shown.append(f"and {len(self.damaged) - 3} more damaged chunk(s)")
+            parts.append("damaged " + "; ".join(shown))
+        if self.inconsistent:
+            parts.append(self.inconsistent)
+        return "; ".join(parts) or None
 
 
 def scan_file(path: Path) -> FileScan:
-    """Read ``path`` record by record, validating CRCs; stop at the first problem."""
-    total = path.stat().st_size
-    scan = FileScan(total_bytes=total)
-    if total == 0:
-        scan.problem = "the file is empty (0 bytes)"
-        scan.truncated = True
-        return scan
-    with path.open("rb") as stream:
-        magic = stream.read(len(MAGIC))
-        if magic != MAGIC:
-            scan.truncated = MAGIC.startswith(magic)
-            scan.problem = (
-                f"truncated: the file ends inside the MCAP magic ({total} bytes)"
-                if scan.truncated
-                else "not an MCAP file (bad magic at the start)"
-            )
-            return scan
-        stream.seek(0)
-        reader = StreamReader(
-            stream, emit_chunks=True, validate_crcs=True, record_size_limit=total
-        )
-        start = len(MAGIC)
-        try:
-            for record in reader.records:
-                end = stream.tell()
-                _take(scan, record, start)
-                start = scan.intact_bytes = end
-        except EndOfFile as exc:
-            scan.truncated = True
-            scan.cause = exc
-            scan.problem = (
-                f"truncated: the file ({total} bytes) ends inside the record that starts at "
-                f"byte {start}; the recording was not closed properly"
-            )
-        except InvalidMagic as exc:
-            scan.cause = exc
-            scan.problem = (
-                "not an MCAP file (bad magic at the start)"
-                if scan.header is None
-                else "damaged: bad magic after the footer"
-            )
-        except CRCValidationError as exc:
-            scan.cause = exc
-            scan.problem = f"damaged: {exc} (record at byte {start})"
-        except RecordLengthLimitExceeded as exc:  # a cut file, or a damaged length field
-            scan.truncated = True
-            scan.cause = exc
-            scan.problem = (
-                f"truncated: the file ({total} bytes) ends inside the record that starts at "
-                f"byte {start} (or its length field is damaged: {exc})"
-            )
-        except Exception as exc:  # any parse failure of damaged bytes
-            scan.cause = exc
-            scan.problem = (
-                "damaged: the closing magic after the footer is missing or wrong"
-                if scan.footer is not None
-                else f"damaged: cannot parse the record at byte {start} "
-                f"({type(exc).__name__}: {exc})"
-            )
-    if scan.problem is None:
-        scan.problem = _check_complete(path, scan)
-        if scan.problem is None:
-            scan.intact_bytes = total
+    """Read ``path`` record by record, validating CRCs, keeping no messages (`iter_file`)."""
+    section = read_summary(path)
+    scan = start_scan(section)
+    for _ in iter_file(path, scan, section.chunk_indexes if section.problem is None else ()):
+        pass
     return scan
 
 
-def _take(scan: FileScan, record: object, start: int) -> None:
+def start_scan(section: SummarySection) -> FileScan:
+    """An empty `FileScan`, knowing the schemas and channels of ``section`` if it is intact:
+    a damaged chunk may hold the only Schema or Channel record of a topic."""
+    scan = FileScan(total_bytes=section.total_bytes)
+    if section.problem is None:
+        scan.schemas.update(section.schemas)
+        scan.channels.update(section.channels)
+    return scan
+
+
+def iter_file(
+    path: Path, scan: FileScan, chunk_index: Sequence[ChunkIndex] = ()
+) -> Iterator[Message]:
+    """Yield the Message records of ``path`` in file order, filling ``scan`` as it goes.
+
+    Messages of damaged chunks are not yielded. ``chunk_index`` (the summary's, when it is
+    intact) lets the pass step over a record whose framing is broken, to the next chunk it
+    lists; without it, the pass stops there. ``scan.problem`` is final once the generator is
+    exhausted.
+    """
+    total = scan.total_bytes = path.stat().st_size
+    if total == 0:
+        scan.stopped = "the file is empty (0 bytes)"
+        return
+    with path.open("rb") as stream:
+        magic = stream.read(len(MAGIC))
+        if magic != MAGIC:
+            scan.stopped = (
+                f"truncated: the file ends inside the MCAP magic ({total} bytes)"
+                if MAGIC.startswith(magic)
+                else "not an MCAP file (bad magic at the start)"
+            )
+            return
+        stream.seek(0)
+        records = StreamReader(
+            stream, emit_chunks=True, validate_crcs=True, record_size_limit=total
+        ).records
+        start = len(MAGIC)
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                break
+            except CRCValidationError as exc:  # the data section CRC, checked at DataEnd
+                scan.data_end = True
+                start = scan.intact_bytes = stream.tell()
+                if not scan.damaged:
+                    scan.inconsistent = (
+                        f"damaged: the data section fails its CRC ({exc}) though every chunk "
+                        "passes its own: a record outside the chunks (metadata, message "
+                        "index) is damaged"
+                    )
+                records = StreamReader(stream, skip_magic=True, record_size_limit=total).records
+                continue
+            except Exception as exc:  # noqa: BLE001 - any failure to parse damaged bytes
+                resume = _step_over(scan, exc, start, chunk_index)
+                if resume is None:
+                    _stop(scan, exc, start, total)
+                    return
+                stream.seek(resume)
+                records = StreamReader(
+                    stream, skip_magic=True, emit_chunks=True, record_size_limit=total
+                ).records
+                start = resume
+                continue
+            end = stream.tell()
+            try:
+                yield from _take(scan, record, start, end)
+            except ValueError as exc:
+                _stop(scan, exc, start, total)
+                return
+            start = scan.intact_bytes = end
+    scan.intact_bytes = total  # every record parsed, up to the closing magic
+    scan.inconsistent = scan.inconsistent or _check_complete(path, scan)
+
+
+def _step_over(
+    scan: FileScan, exc: BaseException, start: int, chunk_index: Sequence[ChunkIndex]
+) -> int | None:
+    """Where to resume after a record at ``start`` that does not parse: the next chunk the
+    index lists (the damage is recorded), or None (stop)."""
+    later = sorted(
+        (ci for ci in chunk_index if ci.chunk_start_offset > start),
+        key=lambda ci: ci.chunk_start_offset,
+    )
+    if not later or scan.data_end:
+        return None
+    resume = later[0].chunk_start_offset
+    reason = f"does not parse ({type(exc).__name__}: {exc}); reading resumed at byte {resume}"
+    here = [ci for ci in chunk_index if ci.chunk_start_offset == start]
+    if here:
+        scan.chunk_offsets.append(start)
+        scan.damaged.append(DamagedChunk(
+            len(scan.chunk_offsets) - 1, start, resume, reason,
+            here[0].message_start_time, here[0].message_end_time))
+    else:
+        scan.damaged.append(DamagedChunk(-1, start, resume, reason, 0, 0, 0))
+    return resume
+
+
+def _stop(scan: FileScan, exc: BaseException, start: int, total: int) -> None:
+    if isinstance(exc, EndOfFile):
+        scan.stopped = (
+            f"truncated: the file ({total} bytes) ends inside the record that starts at "
+            f"byte {start}; the recording was not closed properly"
+        )
+    elif isinstance(exc, InvalidMagic):
+        scan.stopped = (
+            "not an MCAP file (bad magic at the start)"
+            if scan.header is None
+            else "damaged: bad magic after the footer"
+        )
+    elif isinstance(exc, RecordLengthLimitExceeded):
+        scan.stopped = f"damaged: the record at byte {start} is longer than the file ({exc})"
+    elif scan.footer is not None:
+        scan.stopped = "damaged: the closing magic after the footer is missing or wrong"
+    else:
+        scan.stopped = (
+            f"damaged: cannot parse the record at byte {start} ({type(exc).__name__}: {exc})"
+        )
+
+
+def _take(scan: FileScan, record: object, start: int, end: int) -> Iterator[Message]:
+    """Account for one top-level record; yield the messages it holds."""
     if scan.header is None and not isinstance(record, Header):
         raise ValueError(f"the first record is a {type(record).__name__}, not a Header")
     if isinstance(record, Header):
@@ -146,18 +251,23 @@ def _take(scan: FileScan, record: object, start: int) -> None:
             raise ValueError("a second Header record")
         scan.header = record
     elif isinstance(record, Chunk):
-        messages: list[Message] = []
-        for inner in breakup_chunk(record, validate_crc=True):
-            if isinstance(inner, Schema):
-                scan.schemas[inner.id] = inner
-            elif isinstance(inner, Channel):
-                scan.channels[inner.id] = inner
-            elif isinstance(inner, Message):
-                if inner.channel_id not in scan.channels:
-                    raise ValueError(f"a message on unknown channel id {inner.channel_id}")
-                messages.append(inner)
-        scan.messages.extend(messages)
         scan.chunk_offsets.append(start)
+        if record.uncompressed_crc == 0:
+            scan.unchecked_chunks += 1
+        inner = _chunk_records(scan, record, start, end)
+        for item in inner:
+            if isinstance(item, Schema):
+                scan.schemas[item.id] = item
+            elif isinstance(item, Channel):
+                scan.channels[item.id] = item
+        for item in inner:
+            if isinstance(item, Message):
+                _count(scan, item)
+                yield item
+    elif isinstance(record, MessageIndex):
+        if scan.damaged and scan.damaged[-1].offset == scan.chunk_offsets[-1]:
+            damaged = scan.damaged[-1]
+            damaged.messages = max(damaged.messages, 0) + len(record.records)
     elif isinstance(record, Schema):
         scan.schemas[record.id] = record
     elif isinstance(record, Channel):
@@ -165,7 +275,8 @@ def _take(scan: FileScan, record: object, start: int) -> None:
     elif isinstance(record, Message):
         if record.channel_id not in scan.channels:
             raise ValueError(f"a message on unknown channel id {record.channel_id}")
-        scan.messages.append(record)
+        _count(scan, record)
+        yield record
     elif isinstance(record, Metadata):
         if not scan.data_end:
             scan.metadata.append(record)
@@ -173,106 +284,60 @@ def _take(scan: FileScan, record: object, start: int) -> None:
         scan.statistics = record
     elif isinstance(record, ChunkIndex):
         scan.chunk_indexes.append(record)
-    elif isinstance(record, MetadataIndex):
-        scan.metadata_indexes.append(record)
     elif isinstance(record, DataEnd):
         scan.data_end = True
     elif isinstance(record, Footer):
         scan.footer = record
 
 
+def _chunk_records(scan: FileScan, chunk: Chunk, start: int, end: int) -> list[object]:
+    """The records of an intact chunk; [] (and an entry in ``scan.damaged``) otherwise."""
+    try:
+        inner = breakup_chunk(chunk, validate_crc=True)
+        channels = set(scan.channels) | {r.id for r in inner if isinstance(r, Channel)}
+        for item in inner:
+            if isinstance(item, Message) and item.channel_id not in channels:
+                raise ValueError(f"a message on unknown channel id {item.channel_id}")
+        return inner
+    except CRCValidationError as exc:
+        reason = f"CRC mismatch: expected {exc.expected}, computed {exc.actual}"
+    except Exception as exc:  # noqa: BLE001 - decompression or parse failure of damaged bytes
+        reason = f"its records do not parse: {type(exc).__name__}: {exc}"
+    scan.damaged.append(
+        DamagedChunk(len(scan.chunk_offsets) - 1, start, end, reason,
+                     chunk.message_start_time, chunk.message_end_time)
+    )
+    return []
+
+
+def _count(scan: FileScan, message: Message) -> None:
+    scan.counts[message.channel_id] = scan.counts.get(message.channel_id, 0) + 1
+    t = message.log_time
+    if scan.start_ns is None or t < scan.start_ns:
+        scan.start_ns = t
+    if scan.end_ns is None or t > scan.end_ns:
+        scan.end_ns = t
+
+
 def _check_complete(path: Path, scan: FileScan) -> str | None:
     """Consistency of a file that parsed to its end: footer, summary CRC, statistics, index."""
     if scan.footer is None or not scan.data_end:
         return "incomplete: no DataEnd/Footer record"
-    crc_problem = _summary_crc_problem(path, scan.footer, scan.total_bytes)
+    crc_problem = summary_crc_problem(path, scan.footer, scan.total_bytes)
     if crc_problem:
         return crc_problem
     stats = scan.statistics
     if stats is None:
         return "incomplete: the summary has no Statistics record"
-    counted: dict[int, int] = {}
-    for message in scan.messages:
-        counted[message.channel_id] = counted.get(message.channel_id, 0) + 1
-    if stats.message_count != len(scan.messages) or {
-        k: v for k, v in stats.channel_message_counts.items() if v
-    } != counted:
+    if not scan.damaged and (
+        stats.message_count != scan.message_count
+        or {k: v for k, v in stats.channel_message_counts.items() if v} != scan.counts
+    ):
         return (
             f"inconsistent: the Statistics record counts {stats.message_count} messages, "
-            f"the chunks hold {len(scan.messages)}"
+            f"the chunks hold {scan.message_count}"
         )
     indexed = sorted(ci.chunk_start_offset for ci in scan.chunk_indexes)
     if indexed != scan.chunk_offsets:
         return "inconsistent: the chunk index does not match the chunks in the file"
     return None
-
-
-def _summary_crc_problem(path: Path, footer: Footer, total: int) -> str | None:
-    if footer.summary_crc == 0:
-        return None
-    summary_end = total - len(MAGIC) - 4  # the CRC covers up to the footer's crc field
-    if not 0 < footer.summary_start <= summary_end:
-        return "damaged: the footer points outside the file"
-    with path.open("rb") as stream:
-        stream.seek(footer.summary_start)
-        crc = zlib.crc32(stream.read(summary_end - footer.summary_start))
-    if crc != footer.summary_crc:
-        return f"damaged: summary CRC mismatch (expected {footer.summary_crc}, computed {crc})"
-    return None
-
-
-def read_summary(path: Path) -> SummarySection:
-    """Header, summary records and indexed Metadata records, without reading the chunks."""
-    total = path.stat().st_size
-    section = SummarySection(total_bytes=total)
-    try:
-        with path.open("rb") as stream:
-            header_records = StreamReader(stream, record_size_limit=total).records
-            header = next(header_records)
-            if not isinstance(header, Header):
-                raise ValueError(f"the first record is a {type(header).__name__}")
-            section.header = header
-            if total < 2 * len(MAGIC) + _FOOTER_LENGTH:
-                section.problem = "incomplete: too short for a footer"
-                return section
-            stream.seek(total - len(MAGIC) - _FOOTER_LENGTH)
-            tail = stream.read()
-            if tail[-len(MAGIC):] != MAGIC or tail[:9] != bytes([_FOOTER_OPCODE, 20]) + bytes(7):
-                section.problem = "incomplete: no footer (the recording was not closed)"
-                return section
-            summary_start, _, summary_crc = struct.unpack_from("<QQI", tail, 9)
-            footer = Footer(summary_start, 0, summary_crc)
-            if summary_start == 0:
-                section.problem = "incomplete: the file has no summary section"
-                return section
-            crc_problem = _summary_crc_problem(path, footer, total)
-            if crc_problem:
-                section.problem = crc_problem
-                return section
-            stream.seek(summary_start)
-            summary = io.BytesIO(stream.read())  # summary, footer and the closing magic
-            metadata_indexes: list[MetadataIndex] = []
-            for record in StreamReader(summary, skip_magic=True, record_size_limit=total).records:
-                if isinstance(record, Schema):
-                    section.schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    section.channels[record.id] = record
-                elif isinstance(record, Statistics):
-                    section.statistics = record
-                elif isinstance(record, ChunkIndex):
-                    section.chunk_indexes.append(record)
-                elif isinstance(record, MetadataIndex):
-                    metadata_indexes.append(record)
-            for index in sorted(metadata_indexes, key=lambda i: i.offset):  # file order
-                stream.seek(index.offset)
-                records = StreamReader(stream, skip_magic=True, record_size_limit=total).records
-                record = next(records)
-                if not isinstance(record, Metadata) or record.name != index.name:
-                    raise ValueError(f"no Metadata record {index.name!r} at byte {index.offset}")
-                section.metadata.append(record)
-    except Exception as exc:  # any parse failure of damaged bytes
-        section.cause = exc
-        section.problem = f"damaged: cannot parse the summary ({type(exc).__name__}: {exc})"
-    if section.problem is None and section.statistics is None:
-        section.problem = "incomplete: the summary has no Statistics record"
-    return section

@@ -3,7 +3,7 @@ overshoot, steady-state joint-a compression, peak wrench per hinge, peak drive f
 peak hinge stress ratio sigma / sigma_y (engine/stress.py, from the recorded wrenches and the
 recorded mechanism's hinge geometry).
 
-    flexure-sim analyse runs/stage.mcap [--json] [--recover] [--band 0.02] [--no-static]
+    flexure-sim analyse runs/stage.mcap [--json] [--recover] [--strict] [--band 0.02] [--no-static]
 
 The gain of each step is compared with the engine's static solve of the recorded mechanism
 at the same inputs (column ``static gain``). Definitions: `flexure_sim.tools.analysis`.
@@ -17,25 +17,13 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ..recording.command_line import report_reading, tool_errors, warn
+from ..recording.errors import EXIT_OK, EXIT_USAGE, RunError
+from ..topics import COMMAND, DRIVE_FORCE, DRIVE_INPUT, OUTPUT
 from . import analysis
-from .runlog import (
-    COMMAND,
-    DRIVE_FORCE,
-    DRIVE_INPUT,
-    EXIT_OK,
-    EXIT_USAGE,
-    OUTPUT,
-    Run,
-    RunError,
-    add_file_arguments,
-    columns,
-    format_si,
-    load_run,
-    report_recovered,
-    require_stage_run,
-    tool_errors,
-    warn,
-)
+from .options import add_file_arguments
+from .runlog import Run, load_run, require_stage_run
+from .tables import columns, format_si
 
 PROG = "flexure-sim analyse"
 
@@ -62,9 +50,9 @@ def run(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     if not (0.0 < args.band < 1.0):
         raise RunError(f"--band {args.band!r}: must be between 0 and 1 (0.02 is 2 %)", EXIT_USAGE)
-    run_ = load_run(args.run, recover=args.recover, namespace=args.namespace)
-    if args.recover:
-        report_recovered(PROG, run_)
+    run_ = load_run(args.run, recover=args.recover, namespace=args.namespace, strict=args.strict,
+                    poses=False)
+    report_reading(PROG, run_)
     result = analyse_run(run_, band=args.band, static=not args.no_static)
     for note in result["notes"]:
         warn(PROG, note)

@@ -1,7 +1,8 @@
 """``flexure-sim export RUN.mcap --csv DIR``: one CSV file per topic, for PlotJuggler,
 spreadsheets and pandas.
 
-    flexure-sim export runs/stage.mcap --csv runs/csv [--topics /output/displacement ...] [--recover]
+    flexure-sim export runs/stage.mcap --csv runs/csv [--topics /output/displacement ...]
+                       [--recover] [--strict]
 
 Each file is named after its topic with ``.`` for ``/`` (``/hinges/a/wrench`` ->
 ``hinges.a.wrench.csv``; ROS names cannot contain dots, so names never clash) and has one row
@@ -17,19 +18,31 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
+import tempfile
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any, Iterable, Iterator, TextIO
 
-from .runlog import EXIT_OK, RunError, add_file_arguments, check_path, open_log, report_recovered, tool_errors
+from ..recording.command_line import (
+    check_path,
+    check_readable,
+    open_log,
+    report_reading,
+    tool_errors,
+)
+from ..recording.errors import EXIT_OK, RunError
+from .options import add_file_arguments
 
 PROG = "flexure-sim export"
 
 
 def register(subparsers: Any) -> None:
-    p = subparsers.add_parser("export", help="one CSV per topic (time column in seconds, flattened fields)",
-                              description=__doc__.split("\n\n")[0].replace("``", ""))
+    p = subparsers.add_parser(
+        "export", help="one CSV per topic (time column in seconds, flattened fields)",
+        description=__doc__.split("\n\n")[0].replace("``", ""))
     add_file_arguments(p, namespace=False)
-    p.add_argument("--csv", metavar="DIR", required=True, help="directory for the CSV files (created)")
+    p.add_argument("--csv", metavar="DIR", required=True,
+                   help="directory for the CSV files (created)")
     p.add_argument("--topics", nargs="+", metavar="TOPIC", help="export only these topics")
     p.set_defaults(handler=run)
 
@@ -43,30 +56,101 @@ def _run(args: argparse.Namespace) -> int:
     out_dir = Path(args.csv)
     if out_dir.exists() and not out_dir.is_dir():
         raise RunError(f"--csv {out_dir}: exists and is not a directory", 2)
-    log = open_log(args.run, recover=args.recover)
-    if args.recover:
-        report_recovered(PROG, log)
-    topics = sorted(log.topics)
-    if args.topics:
-        unknown = [t for t in args.topics if t not in log.topics]
-        if unknown:
-            raise RunError(f"--topics: {', '.join(unknown)} not in {args.run} "
-                           f"(topics: {', '.join(topics)})", 2)
-        topics = [t for t in topics if t in set(args.topics)]
-    out_dir.mkdir(parents=True, exist_ok=True)
-    by_topic: dict[str, list] = {t: [] for t in topics}
-    for m in log.messages:
-        if m.topic in by_topic:
-            by_topic[m.topic].append(m)
-    written = []
-    for topic in topics:
-        msgs = sorted(by_topic[topic], key=lambda m: m.log_time_ns)  # stable: file order on ties
-        path = out_dir / csv_name(topic)
-        written.append((path, write_csv(path, ((m.log_time_ns, m.message) for m in msgs)), topic))
+    reader = open_log(args.run, recover=args.recover, strict=args.strict)
+    if args.topics and reader.summary_ok:  # checked before the pass when the summary says
+        _check_topics(args.topics, reader.topics, args.run)
+    wanted = set(args.topics or ())
+    with tempfile.TemporaryDirectory(prefix="flexure_export_") as spool_dir:
+        spools: dict[str, _Spool] = {}
+        try:
+            for m in reader.messages(lambda t: not wanted or t.name in wanted):
+                spool = spools.get(m.topic)
+                if spool is None:
+                    spool = spools[m.topic] = _Spool(Path(spool_dir) / f"{len(spools)}.jsonl")
+                spool.add(m.log_time_ns, m.message)
+            check_readable(reader)
+            if args.topics:
+                _check_topics(args.topics, reader.topics, args.run)
+            report_reading(PROG, reader)
+            topics = sorted(t for t in reader.topics if not wanted or t in wanted)
+            out_dir.mkdir(parents=True, exist_ok=True)
+            written = []
+            for topic in topics:
+                path = out_dir / csv_name(topic)
+                spool = spools.get(topic)
+                rows = spool.write_csv(path) if spool else _write_rows(path, {}, ())
+                written.append((path, rows, topic))
+        finally:
+            for spool in spools.values():
+                spool.close()
     print(f"wrote {len(written)} CSV file(s) to {out_dir}/:")
     for path, rows, topic in written:
-        print(f"  {path.name:34s} {rows:7d} rows  {log.topics[topic].type}")
+        print(f"  {path.name:34s} {rows:7d} rows  {reader.topics[topic].type}")
     return EXIT_OK
+
+
+def _check_topics(requested: list[str], topics: dict[str, Any], run_path: str) -> None:
+    unknown = [t for t in requested if t not in topics]
+    if unknown:
+        raise RunError(f"--topics: {', '.join(unknown)} not in {run_path} "
+                       f"(topics: {', '.join(sorted(topics))})", 2)
+
+
+class _Spool:
+    """The rows of one topic, flattened as they stream past and kept on disk (one JSON line
+    each), with the union of their columns, until the CSV can be written with all columns."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.file: TextIO = path.open("w")
+        self.columns: dict[str, None] = {}
+        self.rows = 0
+        self.in_order = True
+        self.last_ns = -(1 << 63)
+
+    def add(self, log_time_ns: int, message: Any) -> None:
+        row = _row(message, self.columns)
+        self.file.write(json.dumps([log_time_ns, row], default=str) + "\n")
+        self.rows += 1
+        self.in_order = self.in_order and log_time_ns >= self.last_ns
+        self.last_ns = max(self.last_ns, log_time_ns)
+
+    def close(self) -> None:
+        self.file.close()
+
+    def write_csv(self, path: Path) -> int:
+        self.file.close()
+        with self.path.open() as f:
+            items: Iterable[tuple[int, dict]] = (json.loads(line) for line in f)
+            if not self.in_order:  # rare (merged bags): sort this topic alone, by log time
+                items = sorted(items, key=lambda item: item[0])  # stable: file order on ties
+            return _write_rows(path, self.columns, items)
+
+
+def _row(msg: Any, columns: dict[str, None]) -> dict[str, Any]:
+    row: dict[str, Any] = {}
+    for key, value in flatten(msg):
+        key = key or "data"
+        if key == "time":  # a field called time must not hide the time column
+            key = "/time"
+        columns.setdefault(key, None)
+        row[key] = _cell(value)
+    return row
+
+
+def _time_cell(ns: int) -> str:
+    return f"{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}"
+
+
+def _write_rows(path: Path, columns: dict[str, None], items: Iterable[tuple[int, dict]]) -> int:
+    count = 0
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=["time", *columns], restval="", extrasaction="raise")
+        writer.writeheader()
+        for ns, row in items:
+            writer.writerow({"time": _time_cell(ns), **row})
+            count += 1
+    return count
 
 
 def csv_name(topic: str) -> str:
@@ -108,23 +192,3 @@ def _cell(value: Any) -> Any:
     if isinstance(value, float):
         return repr(value)
     return value
-
-
-def write_csv(path: Path, messages: Iterable[tuple[int, Any]]) -> int:
-    """Write (log time ns, decoded message) rows; returns the number of rows."""
-    rows: list[dict[str, Any]] = []
-    columns: dict[str, None] = {}
-    for ns, msg in messages:
-        row = {"time": f"{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}"}
-        for key, value in flatten(msg):
-            key = key or "data"
-            if key == "time":  # a field called time must not hide the time column
-                key = "/time"
-            columns.setdefault(key, None)
-            row[key] = _cell(value)
-        rows.append(row)
-    with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=["time", *columns], restval="", extrasaction="raise")
-        writer.writeheader()
-        writer.writerows(rows)
-    return len(rows)

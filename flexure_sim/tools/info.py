@@ -1,9 +1,10 @@
 """``flexure-sim info RUN.mcap``: topics, types, counts, rates, duration, and the mechanism and
 parameters of the run (the ``flexure_sim`` metadata record stage_node writes when recording).
 
-    flexure-sim info runs/stage.mcap [--json] [--yaml] [--recover]
+    flexure-sim info runs/stage.mcap [--json] [--yaml] [--recover] [--strict] [--no-decode]
 
-A properly closed file is summarised from its summary section, without reading the chunks.
+The whole file is read once: every chunk's CRC is checked and every message decoded, so that
+damage and messages that do not decode are reported.
 """
 from __future__ import annotations
 
@@ -12,16 +13,12 @@ import json
 from typing import Any
 
 from ..recording import LogInfo, log_info
-from .runlog import (
-    EXIT_OK,
-    METADATA_NAME,
-    PARAMETER_CHANGE_NAME,
-    add_file_arguments,
-    check_path,
-    columns,
-    report_recovered,
-    tool_errors,
-)
+from ..recording.command_line import check_path, report_reading, tool_errors
+from ..recording.errors import EXIT_OK
+from ..recording.reader import undecodable_note
+from ..topics import METADATA_NAME, PARAMETER_CHANGE_NAME
+from .options import add_file_arguments
+from .tables import columns
 
 PROG = "flexure-sim info"
 
@@ -42,6 +39,9 @@ def register(subparsers: Any) -> None:
     add_file_arguments(p, namespace=False)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--yaml", action="store_true", help="also print the recorded mechanism YAML")
+    p.add_argument("--no-decode", action="store_true",
+                   help="check the CRCs but decode no message (faster on long recordings; "
+                   "messages that do not decode are then not counted)")
     p.set_defaults(handler=run)
 
 
@@ -50,9 +50,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    info = log_info(check_path(args.run), recover=args.recover)
-    if args.recover:
-        report_recovered(PROG, info)
+    info = log_info(check_path(args.run), recover=args.recover, strict=args.strict,
+                    decode=not args.no_decode)
+    report_reading(PROG, info)
     summary = summarize(info)
     if args.json:
         print(json.dumps(summary, indent=1))
@@ -85,6 +85,7 @@ def summarize(info: LogInfo) -> dict:
         "complete": info.complete,
         "note": info.note,
         "chunk_count": info.chunk_count,
+        "unchecked_chunks": info.unchecked_chunks,
         "message_count": info.message_count,
         "start": info.start_ns / 1e9 if info.message_count else None,
         "end": info.end_ns / 1e9 if info.message_count else None,
@@ -103,7 +104,8 @@ def summarize(info: LogInfo) -> dict:
                            if k not in PARAMETER_UNITS and k not in RUN_KEYS and k not in MECHANISM_KEYS},
         "parameter_changes": changes,
         "other_metadata_records": other_records,
-        "dropped_messages": (info.bag_metadata or {}).get("custom_data", {}).get("flexure_sim.dropped_messages"),
+        "dropped_messages": info.dropped_messages,
+        "undecodable": dict(sorted(info.undecodable.items())) if info.decoded else None,
     }
 
 
@@ -127,8 +129,16 @@ def format_summary(s: dict, show_yaml: bool = False) -> str:
     else:
         lines.append("Duration:     0 s (no messages)")
     lines.append(f"Messages:     {s['message_count']}")
+    if s["unchecked_chunks"]:
+        lines.append(f"Integrity:    no CRC in {s['unchecked_chunks']} of {s['chunk_count']} "
+                     "chunk(s) (the writer wrote none): damage inside them cannot be detected")
+    elif s["chunk_count"]:
+        lines.append(f"Integrity:    the CRCs of all {s['chunk_count']} chunk(s) match")
     if s["dropped_messages"] not in (None, "0"):
         lines.append(f"Dropped:      {s['dropped_messages']} message(s) could not be recorded")
+    if s["undecodable"]:
+        lines.append(f"Undecodable:  {undecodable_note(s['undecodable'])} (skipped by the tools; "
+                     "the bytes are kept in the file)")
     if not s["complete"] and s["note"]:
         lines.append(f"Recovered:    {s['note']}")
     lines.append("")

@@ -200,14 +200,13 @@ def run_node(
             command_time_mean_us=(sum(n * us for n, us in per_window) / taken
                                   if taken else None))
     if record:
-        from ..recording import read_log
+        from ..recording import log_info
 
         path = workdir / "measure.mcap"
-        log = read_log(path, decode=False)  # ~1e6 messages: check them, keep no decoded objects
+        log = log_info(path, decode=False)  # ~1e6 messages: check the CRCs, decode none
         result.update(recording_complete=log.complete, recorded_messages=log.message_count,
                       recording_bytes=path.stat().st_size,
-                      recording_dropped=int((log.bag_metadata or {}).get("custom_data", {})
-                                            .get("flexure_sim.dropped_messages", 0)))
+                      recording_dropped=int(log.dropped_messages or 0))
         result["topics_per_tick"] = sum(1 for t in log.topics if t not in ("/diagnostics", "/drive/displacement"))
     if keep_dir:
         result["workdir"] = str(workdir)

@@ -1,6 +1,6 @@
 """``flexure-sim plot RUN.mcap -o DIR``: PNG figures of a recorded run.
 
-    flexure-sim plot runs/stage.mcap -o runs/plots [--recover] [--dpi 120]
+    flexure-sim plot runs/stage.mcap -o runs/plots [--recover] [--strict] [--dpi 120]
 
 Figures (those the run's topics allow):
 
@@ -25,20 +25,12 @@ from typing import Any, Optional
 
 import numpy as np
 
-from .runlog import (
-    COMMAND,
-    DRIVE_FORCE,
-    DRIVE_INPUT,
-    EXIT_OK,
-    OUTPUT,
-    Run,
-    RunError,
-    add_file_arguments,
-    load_run,
-    report_recovered,
-    time_unit,
-    tool_errors,
-)
+from ..recording.command_line import report_reading, tool_errors
+from ..recording.errors import EXIT_OK, RunError
+from ..topics import COMMAND, DRIVE_FORCE, DRIVE_INPUT, OUTPUT
+from .options import add_file_arguments
+from .runlog import Run, load_run
+from .tables import time_unit
 
 PROG = "flexure-sim plot"
 TITLES = {
@@ -66,16 +58,15 @@ def _run(args: argparse.Namespace) -> int:
     if args.dpi <= 0:
         raise RunError(f"--dpi {args.dpi}: must be positive", 2)
     _pyplot()
-    run_ = load_run(args.run, recover=args.recover, namespace=args.namespace)
-    if args.recover:
-        report_recovered(PROG, run_)
+    run_ = load_run(args.run, recover=args.recover, namespace=args.namespace, strict=args.strict)
+    report_reading(PROG, run_)
     out_dir = Path(args.output)
     if out_dir.exists() and not out_dir.is_dir():
         raise RunError(f"-o {out_dir}: exists and is not a directory", 2)
     written = plot_run(run_, out_dir, dpi=args.dpi)
     if not written:
         raise RunError(f"{run_.path}: nothing to plot: none of the stage's topics are in the file "
-                       f"(topics: {', '.join(sorted(run_.log.topics)) or 'none'})")
+                       f"(topics: {', '.join(sorted(run_.topics)) or 'none'})")
     print(f"wrote {len(written)} figure(s) to {out_dir}/:")
     for path, title in written:
         print(f"  {path.name:22s} {title}")
