@@ -8,12 +8,16 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import as_array
+from .hyperdual import HyperDual
 
 
 def _numbers(**named):
     """The named arguments as NumPy scalars (arithmetic overflows to inf, which callers
-    check, instead of raising); arrays or non-numbers raise a ValueError naming the argument."""
-    return [as_array(name, value, ())[()] for name, value in named.items()]
+    check, instead of raising); arrays or non-numbers raise a ValueError naming the argument.
+    Hyper-dual numbers pass unchanged: the formulas are plain arithmetic, so exact design
+    sensitivities (engine/sensitivity.py) flow through them."""
+    return [value if isinstance(value, HyperDual) else as_array(name, value, ())[()]
+            for name, value in named.items()]
 
 
 def shear_modulus(E: float, nu: float) -> float:

@@ -79,7 +79,7 @@ class CommandIntake:
             for _ in problems:
                 filt.reject_malformed()
             if problems:
-                self.warn("malformed", f"drive command rejected: {problems[-1]}", len(problems))
+                self.warn("malformed", f"drive command rejected: {problems[0]}", len(problems))
             rejected, clamped, bad, outside = filt.submit_many(values)
             if rejected:
                 self.warn("rejected", f"drive command {bad!r} rejected (not finite)", rejected)

@@ -35,7 +35,7 @@ from .declare import coerce_integer_overrides, declare
 from .diagnostics import Diagnostics
 from .drive_input import CommandFilter, DriveLimits
 from .engine_guard import StrokeProbe
-from .params import parameter_specs, validate
+from .params import as_declared_type, parameter_specs, validate
 from .polled import PolledGroup, never_called
 from .qos_watch import QosWatch
 from .requests import REQUEST_TIMEOUT_S
@@ -160,6 +160,7 @@ class StageNode(Node):
             except RecordingError as exc:
                 raise StartupError(f"cannot record: {exc}") from exc
         self._sync_record_param = False
+        self.add_pre_set_parameters_callback(self._coerce_parameters)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
 
@@ -197,6 +198,14 @@ class StageNode(Node):
                 if problem:
                     return problem
         return None
+
+    def _coerce_parameters(self, params: list[Parameter]) -> list[Parameter]:
+        """Pre-set callback: ``ros2 param set ... 1e-6`` or ``2`` sets a double parameter."""
+        out = []
+        for p in params:
+            value = as_declared_type(self._specs.get(p.name), p.value)
+            out.append(p if value is p.value else Parameter(p.name, Parameter.Type.DOUBLE, value))
+        return out
 
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
         """On-set callback: check the whole resulting set of values; no side effects."""

@@ -232,8 +232,11 @@ def _stop(scan: FileScan, exc: BaseException, start: int, total: int) -> None:
             if scan.header is None
             else "damaged: bad magic after the footer"
         )
-    elif isinstance(exc, RecordLengthLimitExceeded):
-        scan.stopped = f"damaged: the record at byte {start} is longer than the file ({exc})"
+    elif isinstance(exc, RecordLengthLimitExceeded):  # a cut file, or a damaged length field
+        scan.stopped = (
+            f"truncated: the file ({total} bytes) ends inside the record that starts at "
+            f"byte {start} (or its length field is damaged: {exc})"
+        )
     elif scan.footer is not None:
         scan.stopped = "damaged: the closing magic after the footer is missing or wrong"
     else:
