@@ -35,7 +35,7 @@ def test_every_package_error_derives_from_the_root():
     # The walk must see the errors the package is known to raise (a guard against a walk
     # that silently imports nothing).
     expected = {
-        "flexure_sim.engine.config.ConfigError",
+        "flexure_sim.engine.config_values.ConfigError",
         "flexure_sim.engine.solver.SolverError",
         "flexure_sim.recording.errors.RecordingError",
         "flexure_sim.engine.fitting.DataError",
@@ -54,7 +54,7 @@ def test_every_package_error_derives_from_the_root():
 @pytest.mark.parametrize(
     "name,builtin",
     [
-        ("flexure_sim.engine.config.ConfigError", ValueError),
+        ("flexure_sim.engine.config_values.ConfigError", ValueError),
         ("flexure_sim.engine.polynomial_files.PolynomialFileError", ValueError),
         ("flexure_sim.engine.fitting.DataError", ValueError),
         ("flexure_sim.engine.fitting.FitError", ValueError),

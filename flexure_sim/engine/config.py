@@ -38,9 +38,18 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..errors import FlexureSimError
 from . import stiffness as stiffness_models
 from .builtins import builtin_names, find_builtin
+from .config_values import ConfigError  # noqa: F401  (raised by the loader; re-exported)
+from .config_values import Ctx as _Ctx
+from .config_values import key_text as _key_text
+from .config_values import mapping as _mapping
+from .config_values import name as _name
+from .config_values import no_unknown as _no_unknown
+from .config_values import number as _number
+from .config_values import require as _require
+from .config_values import shown as _shown
+from .config_values import vector as _vector
 from .builtins import searched as builtin_search_places
 from .yaml_files import read_yaml
 from .hinge_laws import COORDINATES, QuadraticLaw
@@ -61,94 +70,6 @@ from .polynomial_files import load_law as load_polynomial_law
 
 #: Largest mismatch (m) allowed between a hinge's two frames in the unstressed pose.
 COINCIDENCE_TOLERANCE = 1e-9
-
-
-class ConfigError(FlexureSimError, ValueError):
-    """A mechanism file is invalid; the message names the file, the key and the problem."""
-
-
-class _Ctx:
-    """Builds error messages that name the file and the key path."""
-
-    def __init__(self, source: str):
-        self.source = source
-
-    def fail(self, key: str, problem: str) -> ConfigError:
-        return ConfigError(f"{self.source}: {key}: {problem}")
-
-
-# ---------------------------------------------------------------- primitive checks
-
-def _number(ctx: _Ctx, key: str, value: Any, *, positive=False, nonnegative=False) -> float:
-    if isinstance(value, str):
-        # PyYAML (YAML 1.1) reads 69.0e9 (no exponent sign) as a string: accept it.
-        try:
-            value = float(value)
-        except ValueError:
-            pass
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ctx.fail(key, f"expected a number, got {_shown(value)}")
-    try:
-        v = float(value)
-    except OverflowError:  # an integer beyond the double range
-        raise ctx.fail(key, f"must be finite, got {_shown(value)}") from None
-    if not math.isfinite(v):
-        raise ctx.fail(key, f"must be finite, got {_shown(value)}")
-    if positive and v <= 0:
-        raise ctx.fail(key, f"must be positive, got {_shown(value)}")
-    if nonnegative and v < 0:
-        raise ctx.fail(key, f"must not be negative, got {_shown(value)}")
-    return v
-
-
-def _vector(ctx: _Ctx, key: str, value: Any, lengths: tuple[int, ...]) -> list[float]:
-    if not isinstance(value, (list, tuple)) or len(value) not in lengths:
-        want = " or ".join(str(n) for n in lengths)
-        raise ctx.fail(key, f"expected a list of {want} numbers, got {_shown(value)}")
-    return [_number(ctx, f"{key}[{i}]", v) for i, v in enumerate(value)]
-
-
-def _mapping(ctx: _Ctx, key: str, value: Any) -> dict:
-    if not isinstance(value, dict):
-        raise ctx.fail(key, f"expected a mapping, got {type(value).__name__}")
-    return value
-
-
-def _require(ctx: _Ctx, key: str, data: dict, name: str) -> Any:
-    if name not in data:
-        raise ctx.fail(f"{key}.{name}" if key else name, "missing required key")
-    return data[name]
-
-
-def _no_unknown(ctx: _Ctx, key: str, data: dict, allowed: set[str]) -> None:
-    unknown = sorted(set(data) - allowed, key=str)  # YAML keys need not be strings
-    if unknown:
-        where = f"{key}.{_key_text(unknown[0])}" if key else _key_text(unknown[0])
-        raise ctx.fail(where, f"unknown key (allowed: {', '.join(sorted(allowed))})")
-
-
-def _shown(value: Any, limit: int = 60) -> str:
-    """repr of a value from the file, shortened so that a message stays one readable line."""
-    text = repr(value)
-    return text if len(text) <= limit else text[:limit - 3] + "..."
-
-
-def _key_text(key: Any) -> str:
-    """A mapping key of the file as it appears in a key path (quoted unless a plain word)."""
-    return key if isinstance(key, str) and key.isidentifier() else _shown(key, 30)
-
-
-def _name(ctx: _Ctx, key: str, value: Any) -> str:
-    if not isinstance(value, str) or not value:
-        raise ctx.fail(key, f"expected a non-empty name, got {_shown(value)}")
-    word = all(ch.isalnum() or ch == "_" for ch in value)
-    if not (value.isascii() and value[0].isalpha() and word):
-        raise ctx.fail(
-            key, f"{_shown(value)} is not a valid name (ASCII letters, digits, '_', starting "
-            "with a letter;"
-            " names become ROS topic and frame names)"
-        )
-    return value
 
 
 # ---------------------------------------------------------------------- stiffness

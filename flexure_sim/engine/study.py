@@ -38,6 +38,7 @@ from typing import Any, Iterable, Optional, Sequence
 
 import numpy as np
 
+from ..errors import FlexureSimError
 from .config import ConfigError, mechanism_from_dict, resolve_mechanism_path
 from .doc_paths import own_stiffness, resolve_path, set_path
 from .mechanism import Mechanism
@@ -56,7 +57,7 @@ _PARAM_KEYS = {"name", "path", "paths", "offset", "values", "range", "normal", "
 _SOURCES = ("values", "range", "normal", "uniform")
 
 
-class StudyError(ValueError):
+class StudyError(FlexureSimError, ValueError):
     """A study file is invalid; the message names the file, the key and the problem."""
 
 

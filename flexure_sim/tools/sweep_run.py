@@ -27,12 +27,13 @@ import pyarrow.parquet as pq
 from distributed import WorkerPlugin
 
 from ..engine.study import Study
+from ..errors import FlexureSimError
 from .sweep_outputs import FAILED, OUTPUTS, evaluate_batch
 
 MANIFEST = "study.json"
 
 
-class SweepError(Exception):
+class SweepError(FlexureSimError):
     """The sweep cannot go on (the message says why and what to do)."""
 
 
