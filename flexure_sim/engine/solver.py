@@ -436,11 +436,13 @@ class Simulation:
 
         Newton's method on Q_F(z_F) = 0 from the unstressed pose with the exact tangent
         stiffness dQ_F/dz_F (see ``_newton``); converged when the update is below tol
-        (relative to the mechanism's size).
+        (relative to the mechanism's size). Without free coordinates (every body fixed or
+        driven) the prescribed pose is the equilibrium: 0 iterations, forces as reported.
         """
         zF, iterations = self._newton(u, t, self.z0[self.part.free].copy(), None, tol, max_iter)[:2]
         z = self._z_static(zF, t, u)
-        residual = float(np.max(np.abs(self.assembly.generalized_forces(z, np.zeros_like(z))[0][self.part.free])))
+        Q = self.assembly.generalized_forces(z, np.zeros_like(z))[0]
+        residual = float(np.max(np.abs(Q[self.part.free]), initial=0.0))
         state = State(t, z, np.zeros_like(z), u, u)
         return StaticResult(self.snapshot(state), iterations, residual, z)
 
@@ -483,6 +485,8 @@ class Simulation:
         if not np.isfinite(u):
             raise ValueError(f"drive input must be finite, got {u!r}")
         free = self.part.free
+        if len(free) == 0:
+            return zF, 0, None  # every coordinate prescribed: the equilibrium is the prescription
         lengths = np.where(np.isin(free % 3, (0, 1)), self.length_scale, 1.0)
         previous = np.inf
         for it in range(1, max_iter + 1):
