@@ -116,8 +116,9 @@ class Output:
 @dataclass(frozen=True)
 class Mechanism:
     """A planar flexure mechanism. ``compression_hinge`` names the hinge whose compression
-    (displacement of its frame on body B minus that on body A, along the drive axis) is
-    reported, as joint a of the micropositioning stage (Figure 6.4)."""
+    (along the drive axis, at its centre of stiffness: its drive side's displacement minus
+    its far side's; see ``solver.compression_points``) is reported, as joint a of the
+    micropositioning stage (Figure 6.4)."""
 
     name: str
     bodies: tuple[Body, ...]

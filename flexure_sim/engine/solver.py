@@ -43,6 +43,8 @@ import scipy.linalg
 from . import stepping
 
 from .assembly import Assembly
+from .hinge_laws import LawBatch
+from .kinematics import J, rot
 from .mechanism import COORDINATE_NAMES, Drive, Fixed, Mechanism, SineRate
 
 #: Default fixed step (s): 10 steps per millisecond.
@@ -83,8 +85,9 @@ class Snapshot:
     in frame b, moment about b's origin.
     drive_force: force the actuator applies to the driven body along the drive axis (N).
     output: output body's displacement along the output axis from rest (m) or None.
-    compression: displacement of the compression hinge's frame on body B minus that on
-    body A, along the drive axis (m), or None.
+    compression: of the compression hinge (``Simulation.hinge_compression``): along the drive
+    axis, at its centre of stiffness, its drive side's displacement minus its far side's (m),
+    or None.
     """
 
     t: float
@@ -188,6 +191,7 @@ class Simulation:
         self.z0 = np.array([b.pose for b in mechanism.bodies], dtype=float).ravel()
         self.part = self._partition(mechanism, nb)
         self._motion = self._motion_arrays()
+        self._compression = compression_points(mechanism)
         self.length_scale = max(1e-3, float(np.ptp(self.z0.reshape(nb, 3)[:, :2]))) if nb > 1 else 1.0
         self.stats = StepStats()
         self._lin: Optional[_Linearization] = None
@@ -467,9 +471,9 @@ class Simulation:
             if mech.output is not None:
                 i = mech.body_index(mech.output.body)
                 out[k] = (z[3 * i:3 * i + 2] - self.z0[3 * i:3 * i + 2]) @ np.array(mech.output.axis)
+            if self._compression is not None:
+                comp[k] = self.hinge_compression(z)
             if self.drive is not None:
-                if mech.compression_hinge is not None:
-                    comp[k] = self.frame_displacement_difference(mech.compression_hinge, z) @ np.array(self.drive.axis)
                 lam = -self.assembly.generalized_forces(z, np.zeros_like(z))[0][P]
                 force[k] = lam @ self.part.du
         return StaticSweep(inputs, out, comp, force, total)
@@ -525,11 +529,8 @@ class Simulation:
         mech = self.mechanism
         nb = len(mech.bodies)
         drive_force = 0.0
-        compression = None
         if self.drive:
             drive_force = float(lam @ self.part.du)  # along the drive axis
-            if mech.compression_hinge is not None:
-                compression = self.frame_displacement_difference(mech.compression_hinge, s.z) @ np.array(self.drive.axis)
         output = None
         if mech.output is not None:
             i = mech.body_index(mech.output.body)
@@ -544,26 +545,86 @@ class Simulation:
             drive_command=s.command,
             drive_force=drive_force,
             output=output,
-            compression=compression,
+            compression=self.hinge_compression(s.z),
             kinetic_energy=float(0.5 * np.sum(self.mass * s.v**2)),
             potential_energy=energy,
             dissipated=s.dissipated,
             drive_work=s.drive_work,
         )
 
-    def frame_displacement_difference(self, hinge_name: str, z: np.ndarray) -> np.ndarray:
-        """Displacement from rest of a hinge's frame on body B minus that of its frame on A
-        (root frame, m)."""
-        h = self.mechanism.hinges[self.mechanism.hinge_index(hinge_name)]
-        return self._frame_displacement(h.b, z) - self._frame_displacement(h.a, z)
+    def hinge_compression(self, z: np.ndarray) -> Optional[float]:
+        """Compression of the mechanism's compression hinge at coordinates z (m), or None.
 
-    def _frame_displacement(self, frame, z: np.ndarray) -> np.ndarray:
-        i = self.mechanism.body_index(frame.body)
-        c = np.array(frame.position)
+        Measured at the hinge's centre of stiffness (``compression_points``), along the
+        drive axis: the displacement from rest of the centre as carried by the hinge's
+        drive side minus as carried by its other side. Positive when the hinge takes up
+        drive motion (its far side advances less than its drive side). It does not depend
+        on which body is called A, nor on where the hinge frames are put.
+        """
+        if self._compression is None:
+            return None
+        (i_drive, c_drive), (i_far, c_far), axis = self._compression
+        return float((_point_displacement(i_drive, c_drive, z, self.z0)
+                      - _point_displacement(i_far, c_far, z, self.z0)) @ axis)
 
-        def at(zz):
-            th = zz[3 * i + 2]
-            cs, sn = np.cos(th), np.sin(th)
-            return zz[3 * i:3 * i + 2] + np.array([cs * c[0] - sn * c[1], sn * c[0] + cs * c[1]])
 
-        return at(z) - at(self.z0)
+def _point_displacement(i: int, c: np.ndarray, z: np.ndarray, z0: np.ndarray) -> np.ndarray:
+    """Displacement from rest (root frame) of the point at c (body coordinates) on body i."""
+    def at(zz):
+        th = zz[3 * i + 2]
+        cs, sn = np.cos(th), np.sin(th)
+        return zz[3 * i:3 * i + 2] + np.array([cs * c[0] - sn * c[1], sn * c[0] + cs * c[1]])
+
+    return at(z) - at(z0)
+
+
+def stiffness_centre(K: np.ndarray) -> np.ndarray:
+    """Centre of stiffness of a hinge in its frame's coordinates: the point where the
+    stiffness at rest K = [[Ko, Kc^T], [Kc, Kt]] (moment first) decouples. Moving the frame
+    by p turns the coupling into Kc + Kt (-J p) (``kinematics.transform_stiffness``), which
+    vanishes at p = -J Kt^-1 Kc."""
+    K = np.asarray(K, dtype=float)
+    return -J @ np.linalg.solve(K[1:, 1:], K[1:, 0])
+
+
+def compression_points(mech: Mechanism):
+    """((drive body, centre in its coordinates), (far body, centre), drive axis) for the
+    mechanism's compression hinge, or None.
+
+    The drive side is the hinge's body fewer hinges away from the driven body; when both
+    are equally far, the one whose rest centre lies further back along the drive axis.
+    The centre of stiffness comes from the law's Hessian at rest (any law).
+    """
+    drive = mech.drive
+    if mech.compression_hinge is None or drive is None:
+        return None
+    h = mech.hinges[mech.hinge_index(mech.compression_hinge)]
+    law = LawBatch([h.law]).evaluate(np.zeros(1), np.zeros((1, 2)), np.zeros((1, 3)))
+    centre = stiffness_centre(law.hess[0])
+    axis = np.array(drive.axis, dtype=float)
+    hops = _hinge_distance(mech, mech.body_index(drive.body))
+    sides = []
+    for frame in (h.a, h.b):
+        i = mech.body_index(frame.body)
+        local = np.array(frame.position) + rot(frame.angle) @ centre
+        back = float(np.array(mech.bodies[i].pose[:2]) @ axis)
+        sides.append(((hops[i], back), (i, local)))
+    sides.sort(key=lambda side: side[0])
+    return sides[0][1], sides[1][1], axis
+
+
+def _hinge_distance(mech: Mechanism, start: int) -> list:
+    """Number of hinges between each body and body ``start`` (inf where unconnected)."""
+    dist = [np.inf] * len(mech.bodies)
+    dist[start] = 0
+    frontier = [start]
+    while frontier:
+        nxt = []
+        for h in mech.hinges:
+            ia, ib = mech.body_index(h.a.body), mech.body_index(h.b.body)
+            for i, j in ((ia, ib), (ib, ia)):
+                if i in frontier and dist[j] == np.inf:
+                    dist[j] = dist[i] + 1
+                    nxt.append(j)
+        frontier = nxt
+    return dist
