@@ -139,12 +139,15 @@ class StepStats:
 
 @dataclass(frozen=True)
 class _Linearization:
-    """Where and what: configuration z, Jacobian A, h phi_1(hA), h phi_2(hA)."""
+    """Where and what: configuration z, Jacobian A, h phi_1(hA), h phi_2(hA), and the drive
+    work's rows (g, g^T Psi_1, g^T Psi_2) and scalars (``stepping.step_energy``)."""
 
     z: np.ndarray
     A: np.ndarray
     phi1: np.ndarray
     phi2: np.ndarray
+    erows: np.ndarray
+    escal: np.ndarray
 
 
 @dataclass
@@ -195,7 +198,7 @@ class Simulation:
         self.length_scale = max(1e-3, float(np.ptp(self.z0.reshape(nb, 3)[:, :2]))) if nb > 1 else 1.0
         self.stats = StepStats()
         self._lin: Optional[_Linearization] = None
-        self._cache: Optional[tuple] = None  # (state, command, F, drive power, dissipation)
+        self._cache: Optional[tuple] = None  # (state, command, F, energy rates)
         self._clock: Optional[tuple] = None  # (state, origin t, steps since origin): see step()
         self._mass_free = self.mass[self.part.free]
         self.state = self.initial_state()
@@ -273,9 +276,10 @@ class Simulation:
         return z, v, aP
 
     # ------------------------------------------------------------- dynamics
-    def _jacobian(self, y: np.ndarray, t: float, command: float) -> np.ndarray:
+    def _jacobian(self, y: np.ndarray, t: float, command: float, load_gradient: bool = False):
         """Exact A = dF/dy for y = (z_F, v_F, u): rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v),
-        du/dt = (command - u)/tau, with z_P, v_P depending on u through the drive axis."""
+        du/dt = (command - u)/tau, with z_P, v_P depending on u through the drive axis.
+        With ``load_gradient`` also g = dq/dy of the drive load q = du^T Q_P: (A, g)."""
         part = self.part
         nF = len(part.free)
         u = y[2 * nF] if self.drive else 0.0
@@ -294,7 +298,15 @@ class Simulation:
             FP = np.ix_(part.free, part.prescribed)
             A[nF:2 * nF, 2 * nF] = (Kzz[FP] @ part.du - Kvv[FP] @ part.du / tau) / mF
             A[2 * nF, 2 * nF] = -1.0 / tau
-        return A
+        if not load_gradient:
+            return A
+        g = np.zeros(m)
+        if self.drive:
+            PF, PP = np.ix_(part.prescribed, part.free), np.ix_(part.prescribed, part.prescribed)
+            g[:nF] = part.du @ Kzz[PF]
+            g[nF:2 * nF] = part.du @ Kvv[PF]
+            g[2 * nF] = part.du @ (Kzz[PP] @ part.du - Kvv[PP] @ part.du / self.drive.response_time)
+        return A, g
 
     def _pack(self, state: State) -> np.ndarray:
         part = self.part
@@ -308,15 +320,35 @@ class Simulation:
 
         Both come from one exponential of the block matrix [[hA, I, 0], [0, 0, I], [0, 0, 0]]
         (its first block row is [e^{hA}, h phi_1(hA), h^2 phi_2(hA)] up to the powers of h).
+        With a drive, also the rows of its exact work (``stepping.step_energy``): g = dq/dy
+        of the drive load q = du^T Q_P and h phi_1(h (A - I/tau)) from one more exponential.
         """
-        A = self._jacobian(y, t, command)
+        A, g = self._jacobian(y, t, command, load_gradient=True)
         m, h = A.shape[0], self.dt
         aug = np.zeros((3 * m, 3 * m))
         aug[:m, :m] = h * A
         aug[:m, m:2 * m] = np.eye(m)
         aug[m:2 * m, 2 * m:] = np.eye(m)
         E = scipy.linalg.expm(aug)
-        self._lin = _Linearization(self._z_of(y, t, command), A, h * E[:m, m:2 * m], h * E[:m, 2 * m:])
+        phi1, phi2 = h * E[:m, m:2 * m], h * E[:m, 2 * m:]
+        erows = np.zeros((3, m))
+        escal = np.zeros(6)
+        escal[stepping.E_BALANCE] = float(not self.part.timed)
+        if self.drive:
+            tau = self.drive.response_time
+            shifted = np.zeros((2 * m, 2 * m))
+            shifted[:m, :m] = h * A - (h / tau) * np.eye(m)
+            shifted[:m, m:] = np.eye(m)
+            shifted_phi1 = h * scipy.linalg.expm(shifted)[:m, m:]
+            psi1, psi2 = stepping.weighted_phi(A, phi1, phi2, h, tau, shifted_phi1)
+            erows[0], erows[1], erows[2] = g, g @ psi1, g @ psi2
+            du = self.part.du
+            escal[stepping.E_PSI0] = tau * -np.expm1(-h / tau)
+            escal[stepping.E_DECAY] = np.exp(-h / tau)
+            escal[stepping.E_DRIVE_MASS] = float(du @ (self.mass[self.part.prescribed] * du))
+            escal[stepping.E_TAU] = tau
+            escal[stepping.E_HAS_DRIVE] = 1.0
+        self._lin = _Linearization(self._z_of(y, t, command), A, phi1, phi2, erows, escal)
         self.stats.linearizations += 1
 
     def _moved_too_far(self, z: np.ndarray) -> bool:
@@ -329,19 +361,20 @@ class Simulation:
         return bool(np.max(moved) > tol)
 
     def _rhs_python(self, y: np.ndarray, t: float, command: float, _args=None):
-        """F(y, t), drive power and dissipated power through Assembly (any hinge law)."""
+        """F(y, t) and the energy rates (``stepping.energy_rates``) through Assembly (any law)."""
         part = self.part
         nF = len(part.free)
         u = y[2 * nF] if self.drive else 0.0
         z, v, aP = self._full(y[:nF], y[nF:2 * nF], t, u, command)
-        Q, _, dissipation = self.assembly.generalized_forces(z, v)
+        Q, potential, dissipation = self.assembly.generalized_forces(z, v)
         F = np.empty_like(y)
         F[:nF] = y[nF:2 * nF]
         F[nF:2 * nF] = Q[part.free] / self._mass_free
         if self.drive:
             F[2 * nF] = (command - u) / self.drive.response_time
-        P = part.prescribed
-        return F, float((self.mass[P] * aP - Q[P]) @ v[P]), float(dissipation)
+        sine_index = self._motion[4]
+        return F, stepping.energy_rates(Q, v, potential, dissipation, part.prescribed, self.mass, part.du.astype(float),
+                                        sine_index, aP)
 
     def _kernel_args(self) -> tuple:
         a = self.assembly
@@ -353,14 +386,13 @@ class Simulation:
 
     def _rhs(self, y: np.ndarray, t: float, command: float):
         if self.assembly.compiled:
-            F, p, d = stepping.kernel_rhs(y, t, command, self._args)
-            return F, float(p), float(d)
+            return stepping.kernel_rhs(y, t, command, self._args)
         return self._rhs_python(y, t, command)
 
-    def _advance(self, n, y, t, command, F0, p0, d0):
+    def _advance(self, n, y, t, command, F0, aux0):
         lin = self._lin
         common = (n, y, t, self.dt, command, lin.A, lin.phi1, lin.phi2, self.iteration_rtol, self._atol,
-                  self.max_iterations, self.relinearize_after, F0, p0, d0)
+                  self.max_iterations, self.relinearize_after, F0, aux0, lin.erows, lin.escal)
         if self.assembly.compiled:
             return stepping.advance(*common, self._args)
         return stepping.advance_interpreted(*common, self)
@@ -382,10 +414,10 @@ class Simulation:
         y, t = self._pack(s), s.t
         cache = self._cache
         if cache is not None and cache[0] is s and cache[1] == command:
-            F0, p0, d0 = cache[2:5]
+            F0, aux0 = cache[2:4]
         else:
-            F0, p0, d0 = self._rhs(y, t, command)
-        dissipated, work = s.dissipated, s.drive_work
+            F0, aux0 = self._rhs(y, t, command)
+        dissipated, work = s.dissipated, s.drive_work + self._jump_work(s, command)
         remaining = int(n)
         fresh = False
         while remaining > 0:
@@ -393,7 +425,7 @@ class Simulation:
                 self._linearize(y, t, command)
                 fresh = True
             chunk = 1 if self.relinearize_tol is not None else remaining
-            y, F0, p0, d0, dd, dw, steps, iterations, status = self._advance(chunk, y, t, command, F0, p0, d0)
+            y, F0, aux0, dd, dw, steps, iterations, status = self._advance(chunk, y, t, command, F0, aux0)
             dissipated += dd
             work += dw
             remaining -= steps
@@ -419,7 +451,16 @@ class Simulation:
         self.state = State(t, z, v, u, command, dissipated, work)
         self._clock = (self.state, origin, k)
         # F at the new state seeds the next call while the command is unchanged.
-        self._cache = (self.state, command, F0, p0, d0)
+        self._cache = (self.state, command, F0, aux0)
+
+    def _jump_work(self, s: State, command: float) -> float:
+        """Work of the drive's velocity jump when the command changes: the prescribed
+        velocities jump from those of ``s`` to those of the new command, which takes the
+        kinetic energy 1/2 M_P (v_P+^2 - v_P-^2) from the actuator (an impulse M_P dv_P
+        acting at the mean velocity)."""
+        P = self.part.prescribed
+        vP = self._prescribed(s.t, s.u, command)[1]
+        return float(0.5 * self.mass[P] @ (vP * vP - s.v[P] * s.v[P]))
 
     def _z_of(self, y, t, command):
         nF = len(self.part.free)
