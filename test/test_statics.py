@@ -55,8 +55,9 @@ def test_static_without_free_coordinates_is_the_prescribed_pose(u):
 def test_cli_static_without_free_coordinates_prints_the_answer(tmp_path):
     path = tmp_path / "driven.yaml"
     path.write_text(yaml.safe_dump(DRIVEN_PLATFORM))
-    p = subprocess.run([sys.executable, "-m", "flexure_sim.cli", "simulate", str(path), "--drive", "step:1e-6",
-                        "--static", "--json"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    p = subprocess.run([sys.executable, "-m", "flexure_sim.cli", "simulate", str(path),
+                        "--drive", "step:1e-6", "--static", "--json"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     assert "Traceback" not in p.stderr
     out = json.loads(p.stdout)

@@ -12,7 +12,7 @@ sweep; it has converged when its last change is below rtol |U| + atol in every c
 ``advance`` runs up to n steps and stops early with a status when the iteration does not
 contract (1) or contracts slowly (2), so the caller can re-linearize. The loop calls
 ``rhs(y, t, command, args)`` -> (F, energy rates ``energy_rates``): compiled with the force
-kernel for quadratic laws (``advance``), or as plain Python with ``Simulation._rhs_python``
+kernel for quadratic laws (``advance``), or as plain Python with ``Model.rhs_python``
 for any law (``advance_interpreted``); one source, two bindings of ``rhs``.
 """
 from __future__ import annotations
@@ -27,7 +27,7 @@ from .kernels import njit, quadratic_forces
 CONVERGED, NOT_CONTRACTING, SLOW = 0, 1, 2
 #: Entries of the energy vector ``rhs`` returns next to F (see ``energy_rates``).
 AUX_LOAD, AUX_TIMED_POWER, AUX_DISSIPATION, AUX_ENERGY = 0, 1, 2, 3
-#: Entries of the per-linearization energy scalars (see ``Simulation._linearize``).
+#: Entries of the per-linearization energy scalars (see ``dynamics.linearize``).
 E_PSI0, E_DECAY, E_DRIVE_MASS, E_TAU, E_HAS_DRIVE, E_BALANCE = 0, 1, 2, 3, 4, 5
 
 
@@ -53,7 +53,7 @@ def kernel_rhs(y, t, command, args):
     """F(y, t) and the energy rates (``AUX_*``) with the compiled quadratic-law forces.
 
     args = (free, prescribed, mass, zP0, du, tau, has_drive, sine_index, sine_amp, sine_w,
-    sine_phase, ia, ib, ca, cb, phia, phib, kind, W, C) -- see Simulation._kernel_args.
+    sine_phase, ia, ib, ca, cb, phia, phib, kind, W, C) -- see Model._kernel_args.
     """
     (free, prescribed, mass, zP0, du, tau, has_drive, sine_index, sine_amp, sine_w, sine_phase,
      ia, ib, ca, cb, phia, phib, kind, W, C) = args
@@ -221,11 +221,11 @@ rhs = kernel_rhs
 advance = njit(cache=True)(_advance)
 
 
-def _interpreted_rhs(y, t, command, simulation):
-    return simulation._rhs_python(y, t, command)
+def _interpreted_rhs(y, t, command, model):
+    return model.rhs_python(y, t, command)
 
 
-#: The same loop as plain Python, calling ``Simulation._rhs_python`` (any hinge law);
-#: pass the Simulation as ``args``.
+#: The same loop as plain Python, calling ``Model.rhs_python`` (any hinge law); pass the
+#: Model as ``args``.
 advance_interpreted = types.FunctionType(
     _advance.__code__, {**globals(), "rhs": _interpreted_rhs}, "advance_interpreted")
