@@ -69,3 +69,14 @@ def test_compiled_law_coordinates_are_the_reference(kind, coords):
         c_ref, dc_ref = ref.c[k, off:], ref.dc[k, off:]
         assert np.allclose(c, c_ref, rtol=0, atol=8 * EPS * np.abs(c_ref).max())
         assert np.allclose(dv, dc_ref, rtol=0, atol=8 * EPS * np.abs(dc_ref).max())
+
+
+def test_hinge_stiffness_and_damping_live_in_the_law_only():
+    """No unread Hinge.K / Hinge.B copies next to the law's own (issue 10 item 5)."""
+    import dataclasses
+
+    from flexure_sim.engine.mechanism import Hinge
+
+    assert {f.name for f in dataclasses.fields(Hinge)} == {"name", "a", "b", "law", "stiffness_source"}
+    hinge = load_mechanism("microstage").hinges[0]
+    assert hinge.law.K[1, 1] == pytest.approx(1.588e8, rel=1e-3)

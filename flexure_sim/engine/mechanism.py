@@ -42,14 +42,13 @@ class Frame:
 @dataclass(frozen=True)
 class Hinge:
     """An elastic element joining frame ``a`` on body A and frame ``b`` on body B, which
-    coincide in the unstressed pose. ``K`` and ``B`` are 3x3 (moment first) in the hinge
-    frame; ``law`` evaluates potential and dissipation (see hinge_laws)."""
+    coincide in the unstressed pose. ``law`` evaluates potential and dissipation (see
+    hinge_laws; its stiffness and damping are 3x3, moment first, in the hinge frame);
+    ``stiffness_source`` says where the stiffness came from (model name, matrix, file)."""
 
     name: str
     a: Frame
     b: Frame
-    K: np.ndarray
-    B: np.ndarray
     law: HingeLaw
     stiffness_source: str = "matrix"
 
