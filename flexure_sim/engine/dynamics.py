@@ -32,7 +32,10 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command: float)
     Both come from one exponential of the block matrix [[hA, I, 0], [0, 0, I], [0, 0, 0]]
     (its first block row is [e^{hA}, h phi_1(hA), h^2 phi_2(hA)] up to the powers of h).
     With a drive, also the rows of its exact work (``stepping.step_energy``): g = dq/dy
-    of the drive load q = du^T Q_P and h phi_1(h (A - I/tau)) from one more exponential.
+    of the drive load q = du^T Q_P and h phi_1(h (A - I/tau)) = (A - I/tau)^-1
+    (e^{-h/tau} e^{hA} - I), one linear solve with the e^{hA} already at hand (A - I/tau
+    is regular: A's eigenvalues have no positive real part for a damped mechanism; an
+    exponential is the fallback).
     """
     A, g = model.jacobian(y, t, command, load_gradient=True)
     m, h = A.shape[0], model.dt
@@ -47,10 +50,7 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command: float)
     escal[stepping.E_BALANCE] = float(not model.part.timed)
     if model.drive:
         tau = model.drive.response_time
-        shifted = np.zeros((2 * m, 2 * m))
-        shifted[:m, :m] = h * A - (h / tau) * np.eye(m)
-        shifted[:m, m:] = np.eye(m)
-        shifted_phi1 = h * scipy.linalg.expm(shifted)[:m, m:]
+        shifted_phi1 = _shifted_phi1(A, E[:m, :m], h, tau)
         psi1, psi2 = stepping.weighted_phi(A, phi1, phi2, h, tau, shifted_phi1)
         erows[0], erows[1], erows[2] = g, g @ psi1, g @ psi2
         du = model.part.du
@@ -61,6 +61,21 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command: float)
         escal[stepping.E_HAS_DRIVE] = 1.0
     data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, erows, escal)
     data.stats.linearizations += 1
+
+
+def _shifted_phi1(A: np.ndarray, expA: np.ndarray, h: float, tau: float) -> np.ndarray:
+    """h phi_1(h (A - I/tau)) from e^{hA} by one solve (see ``linearize``)."""
+    m = A.shape[0]
+    shifted = A - np.eye(m) / tau
+    try:
+        out = np.linalg.solve(shifted, np.exp(-h / tau) * expA - np.eye(m))
+        if np.all(np.isfinite(out)):
+            return out
+    except np.linalg.LinAlgError:
+        pass
+    aug = np.zeros((2 * m, 2 * m))
+    aug[:m, :m], aug[:m, m:] = h * shifted, np.eye(m)
+    return h * scipy.linalg.expm(aug)[:m, m:]
 
 
 def moved_too_far(model: Model, data: Data, z: np.ndarray) -> bool:

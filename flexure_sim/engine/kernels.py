@@ -39,7 +39,7 @@ TWISTOR, TWIST = 0, 1
 _half_cot = njit(cache=True)(half_cot_scalar)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def hinge_relative(xA, yA, thA, xB, yB, thB, ca1, ca2, cb1, cb2, phia, phib, dr):
     """r = (alpha, p1, p2) of one hinge and dr/dzz into dr (3, 6), zz = (x_A, y_A, theta_A,
     x_B, y_B, theta_B): the compiled twin of ``Assembly.relative`` (eq. 2.81 with the poses
@@ -79,7 +79,7 @@ def hinge_relative(xA, yA, thA, xB, yB, thB, ca1, ca2, cb1, cb2, phia, phib, dr)
     return alpha, p1, p2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def law_coordinates(kind, alpha, p1, p2, dv):
     """Law coordinates (twistor vector part (xi, x1, x2), or twist (tau, t1, t2)) of
     r = (alpha, p1, p2) and their derivative dv/dr into dv (3, 3): the compiled twin of

@@ -82,12 +82,11 @@ def kernel_rhs(y, t, command, args):
     return F, energy_rates(Q, v, potential, dissipation, prescribed, mass, du, sine_index, aP)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def energy_rates(Q, v, potential, dissipation, prescribed, mass, du, sine_index, aP):
     """The per-state energy figures the stepping loop integrates (indices ``AUX_*``):
     drive load du . Q_P, power of the timed (sine-rate) constraints sum v_P (M a_P - Q_P),
-    dissipated power, and mechanical energy T + U."""
-    aux = np.empty(4)
+    dissipated power, and mechanical energy T + U (a tuple: no allocation per step)."""
     load = 0.0
     for i in range(prescribed.shape[0]):
         load += du[i] * Q[prescribed[i]]
@@ -98,11 +97,7 @@ def energy_rates(Q, v, potential, dissipation, prescribed, mass, du, sine_index,
     kinetic = 0.0
     for j in range(mass.shape[0]):
         kinetic += 0.5 * mass[j] * v[j] * v[j]
-    aux[AUX_LOAD] = load
-    aux[AUX_TIMED_POWER] = timed
-    aux[AUX_DISSIPATION] = dissipation
-    aux[AUX_ENERGY] = kinetic + potential
-    return aux
+    return load, timed, dissipation, kinetic + potential
 
 
 def _advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_after, F0, aux0, erows, escal, args):
@@ -128,7 +123,7 @@ def _advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_aft
         converged = False
         k = 0
         F1, aux1 = F0, aux0
-        N1 = np.zeros_like(y)
+        N1 = F0  # replaced in the first iteration
         for k in range(1, max_iter + 1):
             F1, aux1 = rhs(y1, t1, command, args)
             N1 = F1 - F0 - A @ (y1 - y)
@@ -162,7 +157,7 @@ def _advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_aft
     return y, F0, aux0, dissipated, work, steps, iterations, status
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def step_energy(y0, y1, F0, N1, aux0, aux1, command, h, erows, escal):
     """Dissipated energy and drive work over one step of the exponential trapezoidal rule.
 
@@ -188,9 +183,13 @@ def step_energy(y0, y1, F0, N1, aux0, aux1, command, h, erows, escal):
         nF = (y0.shape[0] - 1) // 2
         ud0 = (command - y0[2 * nF]) / escal[E_TAU]
         decay = escal[E_DECAY]
-        g = erows[0]
-        rest = aux1[AUX_LOAD] - aux0[AUX_LOAD] - g @ (y1 - y0)
-        linear = (aux0[AUX_LOAD] * escal[E_PSI0] + erows[1] @ F0 + erows[2] @ N1 + 0.5 * h * decay * rest)
+        gw = 0.0
+        psi = 0.0
+        for j in range(y0.shape[0]):
+            gw += erows[0, j] * (y1[j] - y0[j])
+            psi += erows[1, j] * F0[j] + erows[2, j] * N1[j]
+        rest = aux1[AUX_LOAD] - aux0[AUX_LOAD] - gw
+        linear = aux0[AUX_LOAD] * escal[E_PSI0] + psi + 0.5 * h * decay * rest
         work += 0.5 * escal[E_DRIVE_MASS] * ud0 * ud0 * (decay * decay - 1.0) - ud0 * linear
     if escal[E_BALANCE] > 0.5:
         dissipated = work - (aux1[AUX_ENERGY] - aux0[AUX_ENERGY])
