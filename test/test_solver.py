@@ -40,9 +40,9 @@ def test_stage_static_gain_and_joint_a_compression(stage_static):
 def test_rigid_lever_gain_when_hinges_do_not_stretch(stage):
     """Translationally rigid hinges recover the lever-arm gain (41/9)(24/3) = 36.4."""
     def stiff(h):
-        K = h.K.copy()
+        K = h.law.K.copy()
         K[1:, 1:] *= 1e4
-        return dataclasses.replace(h, K=K, B=1e-3 * K, law=QuadraticLaw(h.law.coordinates, K, 1e-3 * K))
+        return dataclasses.replace(h, law=QuadraticLaw(h.law.coordinates, K, 1e-3 * K))
     rigid = dataclasses.replace(stage, hinges=tuple(stiff(h) for h in stage.hinges))
     gain = Simulation(rigid).static(U_IN).snapshot.output / U_IN
     assert gain == pytest.approx(41 / 9 * 24 / 3, rel=2e-3)
@@ -113,15 +113,15 @@ def _move_frames(h, R, p, transform_K=True):
     def moved(f):
         pos = np.array(f.position) + kin.rot(f.angle) @ p
         return dataclasses.replace(f, position=(pos[0], pos[1]), angle=f.angle + kin.angle_of(R))
-    K = kin.transform_stiffness(h.K, R, p) if transform_K else h.K
-    B = kin.transform_stiffness(h.B, R, p) if transform_K else h.B
-    return dataclasses.replace(h, a=moved(h.a), b=moved(h.b), K=K, B=B, law=QuadraticLaw(h.law.coordinates, K, B))
+    K = kin.transform_stiffness(h.law.K, R, p) if transform_K else h.law.K
+    B = kin.transform_stiffness(h.law.B, R, p) if transform_K else h.law.B
+    return dataclasses.replace(h, a=moved(h.a), b=moved(h.b), law=QuadraticLaw(h.law.coordinates, K, B))
 
 
 @pytest.mark.parametrize("law", ["twistor", "twist"])
 def test_whole_stage_is_body_and_frame_independent(stage, law):
     def with_law(h):
-        return dataclasses.replace(h, law=QuadraticLaw(law, h.K, h.B))
+        return dataclasses.replace(h, law=QuadraticLaw(law, h.law.K, h.law.B))
     base_mech = dataclasses.replace(stage, hinges=tuple(with_law(h) for h in stage.hinges))
     base = Simulation(base_mech).static(U_IN)
     rng = np.random.default_rng(2)
@@ -177,7 +177,7 @@ def test_compiled_forces_equal_the_reference_path(name, law):
     mech = load_mechanism(name)
     if law:
         mech = dataclasses.replace(mech, hinges=tuple(
-            dataclasses.replace(h, law=QuadraticLaw(law, h.K, h.B)) for h in mech.hinges))
+            dataclasses.replace(h, law=QuadraticLaw(law, h.law.K, h.law.B)) for h in mech.hinges))
     sim = Simulation(mech)
     assert sim.assembly.compiled
     rng = np.random.default_rng(4)

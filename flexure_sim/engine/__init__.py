@@ -9,6 +9,10 @@ No ROS here. Layers, each importing only the ones above it:
 - ``mechanism``: bodies, hinges, constraints and drives as plain data; ``config`` loads and
   validates them from YAML (``yaml_files`` reads the files);
 - ``assembly`` (+ the compiled ``kernels``): hinge forces on the bodies with exact Jacobians;
-- ``solver`` (+ the compiled ``stepping`` loop): constrained dynamics, statics, snapshots;
+- ``model`` (constants of a mechanism prepared for stepping, as MuJoCo's mjModel) and
+  ``data`` (state and integrator caches, as mjData); ``compression`` (where a hinge's
+  compression is measured); ``dynamics`` (+ the compiled ``stepping`` loop), ``statics``,
+  ``snapshot``: stepping, equilibria and reports, reading the model and updating the data;
+  ``solver``: the ``Simulation`` facade over them;
 - ``fitting``, ``datasets``: polynomial laws fitted to measured wrenches, and the data sets.
 """

@@ -347,7 +347,7 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
                                "or {polynomial: FILE})")
         B = _damping(ctx, f"{key}.damping", spec.get("damping", defaults.get("damping")), K)
         law = poly.with_damping(B) if poly is not None else QuadraticLaw(law_name, K, B)
-        hinges.append(Hinge(name, fa, fb, K, B, law, source))
+        hinges.append(Hinge(name, fa, fb, law, source))
     return hinges
 
 

@@ -37,7 +37,7 @@ from typing import Protocol, Sequence
 import numpy as np
 
 from ..errors import as_array
-from .kinematics import J, half_cot, rot
+from .kinematics import J, half_cot_derivatives, rot
 
 # ------------------------------------------------------------------ law coordinates
 
@@ -109,7 +109,7 @@ def twist_coordinates(alpha: np.ndarray, p: np.ndarray, second: bool = True) -> 
     """
     alpha, p = deflections(alpha, p)
     n = alpha.shape[0]
-    f, f1, f2 = _half_cot_derivatives(alpha)
+    f, f1, f2 = half_cot_derivatives(alpha)
     Jp = p @ J.T
     t = f[:, None] * p - 0.5 * alpha[:, None] * Jp
     c = np.column_stack([alpha, t])
@@ -125,23 +125,6 @@ def twist_coordinates(alpha: np.ndarray, p: np.ndarray, second: bool = True) -> 
     d2c[:, 1:, 0, 1:] = mixed
     d2c[:, 1:, 1:, 0] = mixed
     return CoordinateMap(c, dc, d2c)
-
-
-def _half_cot_derivatives(alpha: np.ndarray):
-    """f = (a/2) cot(a/2) and its first two derivatives, with series near a = 0."""
-    small = np.abs(alpha) < 1e-2
-    a = np.where(small, 1.0, alpha)
-    s, co = np.sin(0.5 * a), np.cos(0.5 * a)
-    f_exact = half_cot(a)
-    f1_exact = 0.5 * co / s - 0.25 * a / s**2
-    # f'' = -1/(2 s^2) + a cos / (4 s^3)
-    f2_exact = -0.5 / s**2 + 0.25 * a * co / s**3
-    a2 = alpha * alpha
-    a4 = a2 * a2
-    f = np.where(small, 1.0 - a2 / 12.0 - a4 / 720.0 - a4 * a2 / 30240.0, f_exact)
-    f1 = np.where(small, -alpha * (1.0 / 6.0 + a2 / 180.0 + a4 / 5040.0), f1_exact)
-    f2 = np.where(small, -1.0 / 6.0 - a2 / 60.0 - a4 / 1008.0, f2_exact)
-    return f, f1, f2
 
 
 COORDINATES = {"twistor": twistor_coordinates, "twist": twist_coordinates}

@@ -18,6 +18,8 @@ import math
 
 import numpy as np
 
+from .kinematics import half_cot_scalar
+
 try:  # Numba is a declared dependency; the fallback keeps the engine importable without it.
     from numba import njit
 
@@ -33,15 +35,69 @@ except ImportError:  # pragma: no cover - exercised only where Numba is missing
 
 TWISTOR, TWIST = 0, 1
 
+#: (a/2) cot(a/2) and its derivatives: kinematics.half_cot_scalar, compiled (one source).
+_half_cot = njit(cache=True)(half_cot_scalar)
 
-@njit(cache=True)
-def _half_cot(a):
-    """f = (a/2) cot(a/2) and f' (series near 0), as in hinge_laws._half_cot_derivatives."""
-    if abs(a) < 1e-2:
-        a2 = a * a
-        return 1.0 - a2 / 12.0 - a2 * a2 / 720.0 - a2 * a2 * a2 / 30240.0, -a * (1.0 / 6.0 + a2 / 180.0 + a2 * a2 / 5040.0)
-    s, c = math.sin(0.5 * a), math.cos(0.5 * a)
-    return 0.5 * a * c / s, 0.5 * c / s - 0.25 * a / (s * s)
+
+@njit(cache=True, inline="always")
+def hinge_relative(xA, yA, thA, xB, yB, thB, ca1, ca2, cb1, cb2, phia, phib, dr):
+    """r = (alpha, p1, p2) of one hinge and dr/dzz into dr (3, 6), zz = (x_A, y_A, theta_A,
+    x_B, y_B, theta_B): the compiled twin of ``Assembly.relative`` (eq. 2.81 with the poses
+    of eq. 6.1; a test pins the two together at random inputs)."""
+    cA, sA = math.cos(thA), math.sin(thA)
+    cB, sB = math.cos(thB), math.sin(thB)
+    beta = thA + phia
+    cb_, sb_ = math.cos(beta), math.sin(beta)
+    wa1 = cA * ca1 - sA * ca2
+    wa2 = sA * ca1 + cA * ca2
+    wb1 = cB * cb1 - sB * cb2
+    wb2 = sB * cb1 + cB * cb2
+    d1 = xB + wb1 - xA - wa1
+    d2 = yB + wb2 - yA - wa2
+    p1 = cb_ * d1 + sb_ * d2
+    p2 = -sb_ * d1 + cb_ * d2
+    alpha = thB + phib - beta
+    ta1 = -cb_ * wa2 + sb_ * wa1
+    ta2 = sb_ * wa2 + cb_ * wa1
+    tb1 = -cb_ * wb2 + sb_ * wb1
+    tb2 = sb_ * wb2 + cb_ * wb1
+    dr[:, :] = 0.0
+    dr[0, 2] = -1.0
+    dr[0, 5] = 1.0
+    dr[1, 0] = -cb_
+    dr[1, 1] = -sb_
+    dr[2, 0] = sb_
+    dr[2, 1] = -cb_
+    dr[1, 3] = cb_
+    dr[1, 4] = sb_
+    dr[2, 3] = -sb_
+    dr[2, 4] = cb_
+    dr[1, 2] = p2 - ta1
+    dr[2, 2] = -p1 - ta2
+    dr[1, 5] = tb1
+    dr[2, 5] = tb2
+    return alpha, p1, p2
+
+
+@njit(cache=True, inline="always")
+def law_coordinates(kind, alpha, p1, p2, dv):
+    """Law coordinates (twistor vector part (xi, x1, x2), or twist (tau, t1, t2)) of
+    r = (alpha, p1, p2) and their derivative dv/dr into dv (3, 3): the compiled twin of
+    ``hinge_laws.twistor_coordinates`` / ``twist_coordinates`` (pinned by a test)."""
+    if kind == TWISTOR:
+        sg, xi = math.cos(0.5 * alpha), math.sin(0.5 * alpha)
+        x1 = 0.5 * (sg * p1 + xi * p2)
+        x2 = 0.5 * (-xi * p1 + sg * p2)
+        dv[0, 0], dv[0, 1], dv[0, 2] = 0.5 * sg, 0.0, 0.0
+        dv[1, 0], dv[1, 1], dv[1, 2] = 0.5 * x2, 0.5 * sg, 0.5 * xi
+        dv[2, 0], dv[2, 1], dv[2, 2] = -0.5 * x1, -0.5 * xi, 0.5 * sg
+        return xi, x1, x2
+    f, f1, _ = _half_cot(alpha)
+    dv[0, 0], dv[0, 1], dv[0, 2] = 1.0, 0.0, 0.0
+    dv[1, 0], dv[1, 1], dv[1, 2] = f1 * p1 + 0.5 * p2, f, 0.5 * alpha
+    dv[2, 0], dv[2, 1], dv[2, 2] = f1 * p2 - 0.5 * p1, -0.5 * alpha, f
+    # t = f p - (alpha/2) J p, J p = (-p2, p1)
+    return alpha, f * p1 + 0.5 * alpha * p2, f * p2 - 0.5 * alpha * p1
 
 
 @njit(cache=True)
@@ -60,39 +116,8 @@ def quadratic_forces(z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q, r_out, wre
     vv = np.zeros(6)
     for h in range(ia.shape[0]):
         A, B = 3 * ia[h], 3 * ib[h]
-        thA, thB = z[A + 2], z[B + 2]
-        cA, sA = math.cos(thA), math.sin(thA)
-        cB, sB = math.cos(thB), math.sin(thB)
-        beta = thA + phia[h]
-        cb_, sb_ = math.cos(beta), math.sin(beta)
-        wa1 = cA * ca[h, 0] - sA * ca[h, 1]
-        wa2 = sA * ca[h, 0] + cA * ca[h, 1]
-        wb1 = cB * cb[h, 0] - sB * cb[h, 1]
-        wb2 = sB * cb[h, 0] + cB * cb[h, 1]
-        d1 = z[B] + wb1 - z[A] - wa1
-        d2 = z[B + 1] + wb2 - z[A + 1] - wa2
-        p1 = cb_ * d1 + sb_ * d2
-        p2 = -sb_ * d1 + cb_ * d2
-        alpha = thB + phib[h] - beta
-        ta1 = -cb_ * wa2 + sb_ * wa1
-        ta2 = sb_ * wa2 + cb_ * wa1
-        tb1 = -cb_ * wb2 + sb_ * wb1
-        tb2 = sb_ * wb2 + cb_ * wb1
-        dr[:, :] = 0.0
-        dr[0, 2] = -1.0
-        dr[0, 5] = 1.0
-        dr[1, 0] = -cb_
-        dr[1, 1] = -sb_
-        dr[2, 0] = sb_
-        dr[2, 1] = -cb_
-        dr[1, 3] = cb_
-        dr[1, 4] = sb_
-        dr[2, 3] = -sb_
-        dr[2, 4] = cb_
-        dr[1, 2] = p2 - ta1
-        dr[2, 2] = -p1 - ta2
-        dr[1, 5] = tb1
-        dr[2, 5] = tb2
+        alpha, p1, p2 = hinge_relative(z[A], z[A + 1], z[A + 2], z[B], z[B + 1], z[B + 2],
+                                       ca[h, 0], ca[h, 1], cb[h, 0], cb[h, 1], phia[h], phib[h], dr)
         for j in range(3):
             vv[j] = v[A + j]
             vv[3 + j] = v[B + j]
@@ -103,22 +128,7 @@ def quadratic_forces(z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q, r_out, wre
             rdot0 += dr[0, j] * vv[j]
             rdot1 += dr[1, j] * vv[j]
             rdot2 += dr[2, j] * vv[j]
-        if kind[h] == TWISTOR:
-            sg, xi = math.cos(0.5 * alpha), math.sin(0.5 * alpha)
-            x1 = 0.5 * (sg * p1 + xi * p2)
-            x2 = 0.5 * (-xi * p1 + sg * p2)
-            c0, c1, c2 = xi, x1, x2
-            dv[0, 0], dv[0, 1], dv[0, 2] = 0.5 * sg, 0.0, 0.0
-            dv[1, 0], dv[1, 1], dv[1, 2] = 0.5 * x2, 0.5 * sg, 0.5 * xi
-            dv[2, 0], dv[2, 1], dv[2, 2] = -0.5 * x1, -0.5 * xi, 0.5 * sg
-        else:
-            f, f1 = _half_cot(alpha)
-            c0 = alpha
-            c1 = f * p1 + 0.5 * alpha * p2      # t = f p - (alpha/2) J p, J p = (-p2, p1)
-            c2 = f * p2 - 0.5 * alpha * p1
-            dv[0, 0], dv[0, 1], dv[0, 2] = 1.0, 0.0, 0.0
-            dv[1, 0], dv[1, 1], dv[1, 2] = f1 * p1 + 0.5 * p2, f, 0.5 * alpha
-            dv[2, 0], dv[2, 1], dv[2, 2] = f1 * p2 - 0.5 * p1, -0.5 * alpha, f
+        c0, c1, c2 = law_coordinates(kind[h], alpha, p1, p2, dv)
         # Law forces in law coordinates: W v + C v_dot.
         vd0 = dv[0, 0] * rdot0 + dv[0, 1] * rdot1 + dv[0, 2] * rdot2
         vd1 = dv[1, 0] * rdot0 + dv[1, 1] * rdot1 + dv[1, 2] * rdot2

@@ -15,6 +15,7 @@ of shape (n,) (with vectors of shape (n, 2)) to act on many hinges at once.
 """
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -26,6 +27,10 @@ J = np.array([[0.0, -1.0], [1.0, 0.0]])
 
 #: Below this |alpha| the series branches of the twist formulas are used.
 _SMALL_ANGLE = 1e-4
+#: Below this |alpha| (alpha/2) cot(alpha/2) and its derivatives come from their series
+#: (the exact first derivative loses ~eps/alpha^2 to cancellation; the series' first
+#: omitted terms are below 1e-21 here).
+HALF_COT_SERIES = 1e-2
 
 
 class Twistor(NamedTuple):
@@ -81,14 +86,36 @@ def displacement_from_twist(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return rot(alpha), exp_translation_matrix(alpha) @ d[1:]
 
 
+def half_cot_scalar(a: float) -> tuple[float, float, float]:
+    """f(a) = (a/2) cot(a/2) (f(0) = 1), f'(a) and f''(a) at one angle: the one definition.
+
+    f' = cot(a/2)/2 - a / (4 sin^2(a/2)), f'' = -1/(2 sin^2(a/2)) + a cos(a/2) / (4 sin^3(a/2));
+    below ``HALF_COT_SERIES`` the series f = 1 - a^2/12 - a^4/720 - a^6/30240 and its
+    derivatives. Plain Python on floats, so Numba compiles this same function for the
+    force kernel (kernels.py) and ``half_cot_derivatives`` maps it over arrays.
+    """
+    if abs(a) < HALF_COT_SERIES:
+        a2 = a * a
+        a4 = a2 * a2
+        return (1.0 - a2 / 12.0 - a4 / 720.0 - a4 * a2 / 30240.0,
+                -a * (1.0 / 6.0 + a2 / 180.0 + a4 / 5040.0),
+                -1.0 / 6.0 - a2 / 60.0 - a4 / 1008.0)
+    s, c = math.sin(0.5 * a), math.cos(0.5 * a)
+    s2 = s * s
+    return 0.5 * a * c / s, 0.5 * c / s - 0.25 * a / s2, -0.5 / s2 + 0.25 * a * c / (s2 * s)
+
+
+def half_cot_derivatives(alpha):
+    """``half_cot_scalar`` over an array of angles: (f, f', f''), each of alpha's shape."""
+    alpha = np.asarray(alpha, dtype=float)
+    values = [half_cot_scalar(x) for x in alpha.ravel().tolist()]
+    out = np.array(values, dtype=float).reshape(alpha.shape + (3,))
+    return out[..., 0], out[..., 1], out[..., 2]
+
+
 def half_cot(alpha):
     """f(alpha) = (alpha/2) cot(alpha/2), with its series near 0 (f(0) = 1)."""
-    alpha = np.asarray(alpha, dtype=float)
-    small = np.abs(alpha) < _SMALL_ANGLE
-    a = np.where(small, 1.0, alpha)
-    exact = 0.5 * a / np.tan(0.5 * a)
-    a2 = alpha * alpha
-    return np.where(small, 1.0 - a2 / 12.0 - a2 * a2 / 720.0, exact)
+    return half_cot_derivatives(alpha)[0]
 
 
 def log_translation_matrix(alpha) -> np.ndarray:

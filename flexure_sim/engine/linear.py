@@ -43,9 +43,8 @@ WRENCH_COMPONENTS = ("moment", "force_x", "force_y")
 
 
 def jacobian_at(sim: Simulation, y: np.ndarray, t: float, command: float) -> np.ndarray:
-    """Exact A = dF/dy of the engine's first-order system at y (the one access to the
-    solver's private Jacobian; re-point here if the solver's API changes)."""
-    return sim._jacobian(y, t, command)
+    """Exact A = dF/dy of the engine's first-order system at y (`Model.jacobian`)."""
+    return sim.model.jacobian(y, t, command)
 
 
 @dataclass(frozen=True)

@@ -44,14 +44,13 @@ class Frame:
 @dataclass(frozen=True)
 class Hinge:
     """An elastic element joining frame ``a`` on body A and frame ``b`` on body B, which
-    coincide in the unstressed pose. ``K`` and ``B`` are 3x3 (moment first) in the hinge
-    frame; ``law`` evaluates potential and dissipation (see hinge_laws)."""
+    coincide in the unstressed pose. ``law`` evaluates potential and dissipation (see
+    hinge_laws; its stiffness and damping are 3x3, moment first, in the hinge frame);
+    ``stiffness_source`` says where the stiffness came from (model name, matrix, file)."""
 
     name: str
     a: Frame
     b: Frame
-    K: np.ndarray
-    B: np.ndarray
     law: HingeLaw
     stiffness_source: str = "matrix"
 
@@ -118,8 +117,9 @@ class Output:
 @dataclass(frozen=True)
 class Mechanism:
     """A planar flexure mechanism. ``compression_hinge`` names the hinge whose compression
-    (displacement of its frame on body B minus that on body A, along the drive axis) is
-    reported, as joint a of the micropositioning stage (Figure 6.4)."""
+    (along the drive axis, at its centre of stiffness: its drive side's displacement minus
+    its far side's; see ``solver.compression_points``) is reported, as joint a of the
+    micropositioning stage (Figure 6.4)."""
 
     name: str
     bodies: tuple[Body, ...]

@@ -11,8 +11,8 @@ sweep; it has converged when its last change is below rtol |U| + atol in every c
 
 ``advance`` runs up to n steps and stops early with a status when the iteration does not
 contract (1) or contracts slowly (2), so the caller can re-linearize. The loop calls
-``rhs(y, t, command, args)`` -> (F, drive power, dissipated power): compiled with the force
-kernel for quadratic laws (``advance``), or as plain Python with ``Simulation._rhs_python``
+``rhs(y, t, command, args)`` -> (F, energy rates ``energy_rates``): compiled with the force
+kernel for quadratic laws (``advance``), or as plain Python with ``Model.rhs_python``
 for any law (``advance_interpreted``); one source, two bindings of ``rhs``.
 """
 from __future__ import annotations
@@ -25,6 +25,10 @@ import numpy as np
 from .kernels import njit, quadratic_forces
 
 CONVERGED, NOT_CONTRACTING, SLOW = 0, 1, 2
+#: Entries of the energy vector ``rhs`` returns next to F (see ``energy_rates``).
+AUX_LOAD, AUX_TIMED_POWER, AUX_DISSIPATION, AUX_ENERGY = 0, 1, 2, 3
+#: Entries of the per-linearization energy scalars (see ``dynamics.linearize``).
+E_PSI0, E_DECAY, E_DRIVE_MASS, E_TAU, E_HAS_DRIVE, E_BALANCE = 0, 1, 2, 3, 4, 5
 
 
 @njit(cache=True)
@@ -46,10 +50,10 @@ def prescribed_motion(t, u, command, tau, has_drive, zP0, du, sine_index, sine_a
 
 @njit(cache=True)
 def kernel_rhs(y, t, command, args):
-    """F(y, t), drive power and dissipated power with the compiled quadratic-law forces.
+    """F(y, t) and the energy rates (``AUX_*``) with the compiled quadratic-law forces.
 
     args = (free, prescribed, mass, zP0, du, tau, has_drive, sine_index, sine_amp, sine_w,
-    sine_phase, ia, ib, ca, cb, phia, phib, kind, W, C) -- see Simulation._kernel_args.
+    sine_phase, ia, ib, ca, cb, phia, phib, kind, W, C) -- see Model._kernel_args.
     """
     (free, prescribed, mass, zP0, du, tau, has_drive, sine_index, sine_amp, sine_w, sine_phase,
      ia, ib, ca, cb, phia, phib, kind, W, C) = args
@@ -67,29 +71,43 @@ def kernel_rhs(y, t, command, args):
         v[prescribed[i]] = vP[i]
     Q = np.empty(N)
     n = ia.shape[0]
-    _, dissipation = quadratic_forces(z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q, np.empty((n, 3)),
-                                      np.empty((n, 3)))
+    potential, dissipation = quadratic_forces(z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q, np.empty((n, 3)),
+                                              np.empty((n, 3)))
     F = np.empty_like(y)
     for i in range(nF):
         F[i] = y[nF + i]
         F[nF + i] = Q[free[i]] / mass[free[i]]
     if has_drive:
         F[2 * nF] = (command - u) / tau
-    power = 0.0
+    return F, energy_rates(Q, v, potential, dissipation, prescribed, mass, du, sine_index, aP)
+
+
+@njit(cache=True, inline="always")
+def energy_rates(Q, v, potential, dissipation, prescribed, mass, du, sine_index, aP):
+    """The per-state energy figures the stepping loop integrates (indices ``AUX_*``):
+    drive load du . Q_P, power of the timed (sine-rate) constraints sum v_P (M a_P - Q_P),
+    dissipated power, and mechanical energy T + U (a tuple: no allocation per step)."""
+    load = 0.0
     for i in range(prescribed.shape[0]):
-        j = prescribed[i]
-        power += (mass[j] * aP[i] - Q[j]) * vP[i]
-    return F, power, dissipation
+        load += du[i] * Q[prescribed[i]]
+    timed = 0.0
+    for i in range(sine_index.shape[0]):
+        j = prescribed[sine_index[i]]
+        timed += (mass[j] * aP[sine_index[i]] - Q[j]) * v[j]
+    kinetic = 0.0
+    for j in range(mass.shape[0]):
+        kinetic += 0.5 * mass[j] * v[j] * v[j]
+    return load, timed, dissipation, kinetic + potential
 
 
-def _advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_after, F0, p0, d0, args):
-    """Up to n steps from (y, t) with F0 = F(y, t), p0, d0 the powers there.
+def _advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_after, F0, aux0, erows, escal, args):
+    """Up to n steps from (y, t) with F0 = F(y, t) and aux0 its energy rates.
 
-    Returns (y, F, p, d, dissipated, work, steps, iterations, status): the state and its
-    F and powers after the steps taken (at t + steps dt; the caller keeps time), the
-    trapezoidal integrals of the dissipated and drive powers over them, and why it stopped. ``rhs`` is a global of the function (see
-    the end of this module), not an argument: Numba cannot cache functions that take
-    compiled functions as arguments.
+    Returns (y, F, aux, dissipated, work, steps, iterations, status): the state, its F and
+    energy rates after the steps taken (at t + steps dt; the caller keeps time), the
+    dissipated energy and drive work over them (``step_energy``), and why it stopped.
+    ``rhs`` is a global of the function (see the end of this module), not an argument:
+    Numba cannot cache functions that take compiled functions as arguments.
     """
     dissipated = 0.0
     work = 0.0
@@ -104,10 +122,12 @@ def _advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_aft
         previous = np.inf
         converged = False
         k = 0
-        F1, p1, d1 = F0, p0, d0
+        F1, aux1 = F0, aux0
+        N1 = F0  # replaced in the first iteration
         for k in range(1, max_iter + 1):
-            F1, p1, d1 = rhs(y1, t1, command, args)
-            y_next = U + phi2 @ (F1 - F0 - A @ (y1 - y))
+            F1, aux1 = rhs(y1, t1, command, args)
+            N1 = F1 - F0 - A @ (y1 - y)
+            y_next = U + phi2 @ N1
             change = np.max(np.abs(y_next - y1) / weight)
             if not math.isfinite(change):
                 break
@@ -124,16 +144,73 @@ def _advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_aft
         if not converged:
             status = NOT_CONTRACTING
             break
-        dissipated += 0.5 * dt * (d0 + d1)
-        work += 0.5 * dt * (p0 + p1)
+        dd, dw = step_energy(y, y1, F0, N1, aux0, aux1, command, dt, erows, escal)
+        dissipated += dd
+        work += dw
         y = y1
-        F0, p0, d0 = F1, p1, d1
+        F0, aux0 = F1, aux1
         steps += 1
         iterations += k
         if k > slow_after:
             status = SLOW
             break
-    return y, F0, p0, d0, dissipated, work, steps, iterations, status
+    return y, F0, aux0, dissipated, work, steps, iterations, status
+
+
+@njit(cache=True, inline="always")
+def step_energy(y0, y1, F0, N1, aux0, aux1, command, h, erows, escal):
+    """Dissipated energy and drive work over one step of the exponential trapezoidal rule.
+
+    The drive's power is ud (du^T M_P a_P - q) with ud = (command - u)/tau its rate, which
+    decays exactly as e^{-s/tau} over the step, and q = du^T Q_P(y) the drive load, which
+    the step's linear model follows as q_0 + g^T w(s), w(s) = s phi_1(sA) F_0 + s^2/h
+    phi_2(sA) N_1 (g = dq/dy at the linearization). So
+
+        W = 1/2 m_d ud_0^2 (e^{-2h/tau} - 1)
+            - ud_0 (q_0 tau (1 - e^{-h/tau}) + g^T Psi_1 F_0 + g^T Psi_2 N_1 + rest),
+
+    Psi_k = int_0^h e^{-s/tau} (phi_k-term of w) ds (rows ``erows`` = (g, g^T Psi_1,
+    g^T Psi_2), see ``weighted_phi``), m_d = du^T M_P du; ``rest`` is the trapezoidal rule on
+    what the linear model leaves of q (zero at the start of the step, tiny at its end).
+    The stiff, sub-microsecond transients after a command step are thereby integrated as
+    exactly as the motion. Timed (sine-rate) constraints' power: trapezoidal rule.
+    Dissipated energy: with only drive and fixed constraints, the energy theorem
+    W - Delta(T + U) (exact to the motion's accuracy), else the trapezoidal rule on the
+    dissipated power.
+    """
+    work = 0.5 * h * (aux0[AUX_TIMED_POWER] + aux1[AUX_TIMED_POWER])
+    if escal[E_HAS_DRIVE] > 0.5:
+        nF = (y0.shape[0] - 1) // 2
+        ud0 = (command - y0[2 * nF]) / escal[E_TAU]
+        decay = escal[E_DECAY]
+        gw = 0.0
+        psi = 0.0
+        for j in range(y0.shape[0]):
+            gw += erows[0, j] * (y1[j] - y0[j])
+            psi += erows[1, j] * F0[j] + erows[2, j] * N1[j]
+        rest = aux1[AUX_LOAD] - aux0[AUX_LOAD] - gw
+        linear = aux0[AUX_LOAD] * escal[E_PSI0] + psi + 0.5 * h * decay * rest
+        work += 0.5 * escal[E_DRIVE_MASS] * ud0 * ud0 * (decay * decay - 1.0) - ud0 * linear
+    if escal[E_BALANCE] > 0.5:
+        dissipated = work - (aux1[AUX_ENERGY] - aux0[AUX_ENERGY])
+    else:
+        dissipated = 0.5 * h * (aux0[AUX_DISSIPATION] + aux1[AUX_DISSIPATION])
+    return dissipated, work
+
+
+def weighted_phi(A, phi1, phi2, h, tau, shifted_phi1):
+    """Psi_1, Psi_2 = int_0^h e^{-s/tau} (s phi_1(sA), s^2/h phi_2(sA)) ds, from
+    phi1 = h phi_1(hA), phi2 = h phi_2(hA) and shifted_phi1 = h phi_1(h (A - I/tau)):
+    swapping the order of integration in the variation-of-constants integrals gives
+
+        Psi_1 = tau (h phi_1(h(A - I/tau)) - e^{-h/tau} h phi_1(hA)),
+        Psi_2 = (tau^2 h phi_1(h(A - I/tau))
+                 - tau e^{-h/tau} ((h + tau) h phi_1(hA) - h^2 (phi_1(hA) - phi_2(hA)))) / h.
+    """
+    decay = math.exp(-h / tau)
+    psi1 = tau * (shifted_phi1 - decay * phi1)
+    psi2 = (tau * tau * shifted_phi1 - tau * decay * ((h + tau) * phi1 - h * (phi1 - phi2))) / h
+    return psi1, psi2
 
 
 #: The right-hand side the compiled loop calls (resolved when Numba compiles ``advance``).
@@ -143,11 +220,11 @@ rhs = kernel_rhs
 advance = njit(cache=True)(_advance)
 
 
-def _interpreted_rhs(y, t, command, simulation):
-    return simulation._rhs_python(y, t, command)
+def _interpreted_rhs(y, t, command, model):
+    return model.rhs_python(y, t, command)
 
 
-#: The same loop as plain Python, calling ``Simulation._rhs_python`` (any hinge law);
-#: pass the Simulation as ``args``.
+#: The same loop as plain Python, calling ``Model.rhs_python`` (any hinge law); pass the
+#: Model as ``args``.
 advance_interpreted = types.FunctionType(
     _advance.__code__, {**globals(), "rhs": _interpreted_rhs}, "advance_interpreted")

@@ -32,6 +32,7 @@ import numpy as np
 
 from .. import topics
 from ..engine.config import load_mechanism
+from ..engine import dynamics
 from ..engine.solver import DEFAULT_STEP, Simulation
 
 U_STEP = 1.35e-6
@@ -44,12 +45,9 @@ BASELINE_REPEATS = 3
 def _output_trajectory(sim: Simulation, every: int, n_samples: int) -> np.ndarray:
     """Output displacement after every ``every`` steps, n_samples times."""
     out = np.empty(n_samples)
-    mech = sim.mechanism
-    i = mech.body_index(mech.output.body)
-    axis = np.array(mech.output.axis)
     for k in range(n_samples):
         sim.step(every)
-        out[k] = (sim.state.z[3 * i:3 * i + 2] - sim.z0[3 * i:3 * i + 2]) @ axis
+        out[k] = sim.model.output_displacement(sim.state.z)
     return out
 
 
@@ -112,7 +110,8 @@ def _radau_baseline(mech, dt: float, n: int, ref: np.ndarray) -> dict:
 
     sim = Simulation(mech, dt=dt)
     sim.set_command(U_STEP)
-    y0 = sim._pack(sim.state)
+    model = sim.model
+    y0 = model.pack(sim.state)
     # atol: 1e-8 of each component's scale of motion in this run.
     scale = np.concatenate([np.where(sim.part.free % 3 == 2, 1e-3, 1e-5), np.where(sim.part.free % 3 == 2, 1.0, 1e-2)])
     if sim.drive is not None:
@@ -120,10 +119,10 @@ def _radau_baseline(mech, dt: float, n: int, ref: np.ndarray) -> dict:
     atol = 1e-8 * scale
 
     def fun(t, y):
-        return sim._rhs(y, t, U_STEP)[0]
+        return model.rhs(y, t, U_STEP)[0]
 
     def jac(t, y):
-        return sim._jacobian(y, t, U_STEP)
+        return model.jacobian(y, t, U_STEP)
 
     grid = dt * np.arange(1, n + 1)
     walls = []
@@ -132,9 +131,7 @@ def _radau_baseline(mech, dt: float, n: int, ref: np.ndarray) -> dict:
         sol = solve_ivp(fun, (0.0, DURATION), y0, method="Radau", jac=jac, rtol=1e-8, atol=atol, t_eval=grid)
         walls.append(time.perf_counter() - start)
     wall = float(np.median(walls))
-    i = mech.body_index(mech.output.body)
-    col = list(sim.part.free).index(3 * i)
-    out = sol.y[col] - sim.z0[3 * i]
+    out = np.array([model.output_displacement(model.unpack(y, t, U_STEP)[0]) for y, t in zip(sol.y.T, sol.t)])
     return {
         "baseline": "scipy solve_ivp Radau, rtol 1e-8, exact Jacobian",
         "baseline_wall_s": wall,
@@ -157,12 +154,13 @@ def bench_step_cost(dt: float = DEFAULT_STEP, sim_seconds: float = 1.0) -> dict:
     wall = time.perf_counter() - start
     stats = sim.stats
     sim.stats = type(stats)()  # the timings below must not count as the run's work
-    y = sim._pack(sim.state)
+    model = sim.model
+    y = model.pack(sim.state)
     t, cmd = sim.state.t, sim.state.command
     reps = 2000
-    force = timeit.timeit(lambda: sim._rhs(y, t, cmd), number=reps) / reps
-    jac = timeit.timeit(lambda: sim._jacobian(y, t, cmd), number=50) / 50
-    lin = timeit.timeit(lambda: sim._linearize(y, t, cmd), number=20) / 20
+    force = timeit.timeit(lambda: model.rhs(y, t, cmd), number=reps) / reps
+    jac = timeit.timeit(lambda: model.jacobian(y, t, cmd, load_gradient=True), number=50) / 50
+    lin = timeit.timeit(lambda: dynamics.linearize(model, sim.data, y, t, cmd), number=20) / 20
     return {
         "steps_per_s": n / wall,
         "dt": dt,
@@ -170,7 +168,7 @@ def bench_step_cost(dt: float = DEFAULT_STEP, sim_seconds: float = 1.0) -> dict:
         "step_us": wall / n * 1e6,
         "force_evaluation_us": force * 1e6,
         "jacobian_us": jac * 1e6,
-        "matrix_exponential_us": (lin - jac) * 1e6,
+        "matrix_exponential_us": (lin - jac) * 1e6,  # both exponentials (phi-functions, drive work)
         "iterations_per_step": stats.iterations / stats.steps,
         "linearizations": stats.linearizations,
         "note": "a step is one force evaluation per remainder iteration plus 3 small matrix-vector products; the "

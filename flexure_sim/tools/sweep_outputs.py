@@ -69,9 +69,7 @@ def output_displacement(sim: Simulation) -> float:
     mech = sim.mechanism
     if mech.output is None:
         raise ValueError(f"mechanism {mech.name!r} names no output body")
-    i = mech.body_index(mech.output.body)
-    moved = sim.state.z[3 * i:3 * i + 2] - sim.z0[3 * i:3 * i + 2]
-    return float(moved @ np.array(mech.output.axis))
+    return float(sim.model.output_displacement(sim.state.z))
 
 
 @dataclass(frozen=True)

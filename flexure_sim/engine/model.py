@@ -1,0 +1,267 @@
+"""A mechanism prepared for stepping: the constants (as MuJoCo's mjModel), no state.
+
+Constraints are handled by **exact elimination of prescribed coordinates**: every
+constraint of a mechanism prescribes whole coordinates (a fixed body; the driven body's
+displacement along its axis with its other coordinates held; a prescribed rate of one
+coordinate), so the coordinates split into free ones z_F and prescribed ones z_P(t).
+With the diagonal mass matrix of body frames at mass centres (eqs. 6.4-6.13) the equations
+of motion (5.25, 6.4) reduce exactly to
+
+    M_F dv_F/dt = Q_F(z, v),        lambda_P = M_P a_P - Q_P(z, v),
+
+where lambda_P are the constraint forces (the Lagrange multipliers of eq. 6.4, so the
+force the drive must supply is the drive-axis component of lambda). Unlike the
+dissertation's Baumgarte-stabilised multipliers (6.21-6.23), nothing drifts.
+
+The driven coordinate follows the actuator output u, a first-order lag of the command
+(``Drive``); u is part of the integrated state y = (z_F, v_F, u). A ``Model`` holds the
+partition, masses, the hinge assembly and the compiled kernel's arguments, and evaluates
+F(y, t), its exact Jacobian and the reported measures (output, drive force, compression).
+It never changes after construction, so any number of ``Data`` may share it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from ..errors import FlexureSimError
+from . import stepping
+from .assembly import Assembly
+from .compression import compression_points, point_displacement
+from .mechanism import COORDINATE_NAMES, Drive, Fixed, Mechanism, SineRate
+
+#: Default fixed step (s): 10 steps per millisecond.
+DEFAULT_STEP = 1e-4
+
+
+class SolverError(FlexureSimError, RuntimeError):
+    """The solver could not produce a finite answer (names the cause)."""
+
+
+@dataclass
+class Partition:
+    """Free and prescribed coordinate indices; per prescribed coordinate dz_P/du (the drive
+    axis component); the sine-rate constraints as (index into prescribed, constraint)."""
+
+    free: np.ndarray
+    prescribed: np.ndarray
+    du: np.ndarray
+    timed: list = field(default_factory=list)
+
+
+def partition(mech: Mechanism) -> Partition:
+    """Split the 3 n_bodies coordinates of ``mech`` by its constraints."""
+    prescribed: dict[int, float] = {}
+    timed = []
+    for c in mech.constraints:
+        i = mech.body_index(c.body)
+        if isinstance(c, Fixed):
+            for k in range(3):
+                prescribed[3 * i + k] = 0.0
+        elif isinstance(c, Drive):
+            prescribed[3 * i] = c.axis[0]
+            prescribed[3 * i + 1] = c.axis[1]
+            prescribed[3 * i + 2] = 0.0
+        elif isinstance(c, SineRate):
+            prescribed[3 * i + COORDINATE_NAMES.index(c.coordinate)] = 0.0
+            timed.append((3 * i + COORDINATE_NAMES.index(c.coordinate), c))
+    P = np.array(sorted(prescribed), dtype=int)
+    F = np.array([k for k in range(3 * len(mech.bodies)) if k not in prescribed], dtype=int)
+    pos = {k: j for j, k in enumerate(P)}
+    du = np.array([prescribed[k] for k in P], dtype=float)
+    return Partition(F, P, du, [(pos[k], c) for k, c in timed])
+
+
+class Model:
+    """The constants of a mechanism prepared for stepping with fixed step ``dt`` (s).
+
+    ``relinearize_tol``: recompute the Jacobian when the configuration has moved by more
+    than that (rad for angles, metres / ``length_scale`` for positions) since the last
+    linearization (0: every step; None: only when the remainder iteration stops
+    contracting). The answer does not depend on where the Jacobian was taken.
+    """
+
+    #: The remainder iteration has converged when its last change is below
+    #: iteration_rtol |y| + atol in every component (atol: 1e-12 of the mechanism's size in
+    #: positions, 1e-12 rad in angles, those per step in rates, 1e-12 of the stroke in u).
+    iteration_rtol = 1e-10
+    #: Largest number of remainder iterations before re-linearizing within the step.
+    max_iterations = 8
+    #: A step that needed more iterations than this re-linearizes before the next one.
+    relinearize_after = 3
+
+    def __init__(self, mechanism: Mechanism, dt: float = DEFAULT_STEP,
+                 relinearize_tol: Optional[float] = None):
+        if not (dt > 0 and np.isfinite(dt)):
+            raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+        if relinearize_tol is not None and not relinearize_tol >= 0:
+            raise ValueError(f"relinearize_tol must be None or >= 0, got {relinearize_tol!r}")
+        self.mechanism = mechanism
+        self.assembly = Assembly(mechanism)
+        self.dt = float(dt)
+        self.relinearize_tol = relinearize_tol
+        self.drive: Optional[Drive] = mechanism.drive
+        nb = len(mechanism.bodies)
+        self.mass = np.array([[b.mass, b.mass, b.inertia]
+                             for b in mechanism.bodies], dtype=float).ravel()
+        self.z0 = np.array([b.pose for b in mechanism.bodies], dtype=float).ravel()
+        self.part = partition(mechanism)
+        self.mass_free = self.mass[self.part.free]
+        self.motion = self._motion_arrays()
+        self.compression = compression_points(mechanism)
+        self.length_scale = max(
+            1e-3, float(np.ptp(self.z0.reshape(nb, 3)[:, :2]))) if nb > 1 else 1.0
+        self.atol = self._iteration_atol()
+        self.kernel_args = self._kernel_args() if self.assembly.compiled else None
+        out = mechanism.output
+        self._output_index = None if out is None else mechanism.body_index(out.body)
+        self.output_axis = None if out is None else np.array(out.axis, dtype=float)
+
+    @property
+    def compiled(self) -> bool:
+        """Whether stepping runs the compiled kernel (every law quadratic)."""
+        return self.assembly.compiled
+
+    def _motion_arrays(self) -> tuple:
+        """Arguments of stepping.prescribed_motion after (t, u, command)."""
+        part = self.part
+        sines = [c for _, c in part.timed]
+        return (
+            self.drive.response_time if self.drive else 1.0,
+            self.drive is not None,
+            self.z0[part.prescribed].copy(),
+            part.du.astype(float),
+            np.array([j for j, _ in part.timed], dtype=np.int64),
+            np.array([c.amplitude for c in sines], dtype=float),
+            np.array([2.0 * np.pi * c.frequency for c in sines], dtype=float),
+            np.array([c.phase for c in sines], dtype=float),
+        )
+
+    def _iteration_atol(self) -> np.ndarray:
+        free = self.part.free
+        per_coord = np.where(free % 3 == 2, 1e-12, 1e-12 * self.length_scale)
+        parts = [per_coord, per_coord / self.dt]
+        if self.drive:
+            parts.append([1e-12 * (self.drive.stroke[1] - self.drive.stroke[0])])
+        return np.concatenate(parts)
+
+    def _kernel_args(self) -> tuple:
+        a = self.assembly
+        part = self.part
+        tau, has_drive, zP0, du, sine_index, sine_amp, sine_w, sine_phase = self.motion
+        return (part.free.astype(np.int64), part.prescribed.astype(np.int64), self.mass, zP0, du,
+                tau, has_drive, sine_index, sine_amp, sine_w, sine_phase, a._ia, a._ib, a._ca,
+                a._cb, a.phia, a.phib, a._kind, a._W, a._C)
+
+    # ------------------------------------------------------------- coordinates
+    def prescribed(self, t: float, u: float, command: float):
+        """z_P, v_P, a_P: prescribed coordinates, their rates and accelerations."""
+        return stepping.prescribed_motion(t, u, command, *self.motion)
+
+    def full(self, zF, vF, t, u, command):
+        """All coordinates z, velocities v (root frame) and a_P from the free ones."""
+        part = self.part
+        zP, vP, aP = self.prescribed(t, u, command)
+        z = np.empty(len(self.z0))
+        v = np.empty(len(self.z0))
+        z[part.free], z[part.prescribed] = zF, zP
+        v[part.free], v[part.prescribed] = vF, vP
+        return z, v, aP
+
+    def pack(self, state) -> np.ndarray:
+        """y = (z_F, v_F, u) of a state."""
+        part = self.part
+        parts = [state.z[part.free], state.v[part.free]]
+        if self.drive:
+            parts.append([state.u])
+        return np.concatenate(parts)
+
+    def unpack(self, y: np.ndarray, t: float, command: float):
+        """(z, v, u) of y at time t under ``command``."""
+        nF = len(self.part.free)
+        u = float(y[2 * nF]) if self.drive else 0.0
+        z, v, _ = self.full(y[:nF], y[nF:2 * nF], t, u, command)
+        return z, v, u
+
+    # --------------------------------------------------------------- dynamics
+    def rhs(self, y: np.ndarray, t: float, command: float):
+        """F(y, t) and the energy rates (``stepping.energy_rates``)."""
+        if self.compiled:
+            return stepping.kernel_rhs(y, t, command, self.kernel_args)
+        return self.rhs_python(y, t, command)
+
+    def rhs_python(self, y: np.ndarray, t: float, command: float, _args=None):
+        """F(y, t) and the energy rates through Assembly (any hinge law)."""
+        part = self.part
+        nF = len(part.free)
+        u = y[2 * nF] if self.drive else 0.0
+        z, v, aP = self.full(y[:nF], y[nF:2 * nF], t, u, command)
+        Q, potential, dissipation = self.assembly.generalized_forces(z, v)
+        F = np.empty_like(y)
+        F[:nF] = y[nF:2 * nF]
+        F[nF:2 * nF] = Q[part.free] / self.mass_free
+        if self.drive:
+            F[2 * nF] = (command - u) / self.drive.response_time
+        return F, stepping.energy_rates(Q, v, potential, dissipation, part.prescribed, self.mass,
+                                        part.du, self.motion[4], aP)
+
+    def jacobian(self, y: np.ndarray, t: float, command: float, load_gradient: bool = False):
+        """Exact A = dF/dy for y = (z_F, v_F, u): rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v),
+        du/dt = (command - u)/tau, with z_P, v_P depending on u through the drive axis.
+        With ``load_gradient`` also g = dq/dy of the drive load q = du^T Q_P: (A, g)."""
+        part = self.part
+        nF = len(part.free)
+        z, v, _ = self.unpack(y, t, command)
+        hf = self.assembly.forces(z, v, jacobian=True)
+        mF = self.mass_free
+        m = len(y)
+        A = np.zeros((m, m))
+        A[:nF, nF:2 * nF] = np.eye(nF)
+        Kzz, Kvv = hf.dQ_dz, hf.dQ_dv
+        FF = np.ix_(part.free, part.free)
+        A[nF:2 * nF, :nF] = Kzz[FF] / mF[:, None]
+        A[nF:2 * nF, nF:2 * nF] = Kvv[FF] / mF[:, None]
+        g = np.zeros(m)
+        if self.drive:
+            tau = self.drive.response_time
+            FP = np.ix_(part.free, part.prescribed)
+            A[nF:2 * nF, 2 * nF] = (Kzz[FP] @ part.du - Kvv[FP] @ part.du / tau) / mF
+            A[2 * nF, 2 * nF] = -1.0 / tau
+            PF, PP = np.ix_(part.prescribed, part.free), np.ix_(part.prescribed, part.prescribed)
+            g[:nF] = part.du @ Kzz[PF]
+            g[nF:2 * nF] = part.du @ Kvv[PF]
+            g[2 * nF] = part.du @ (Kzz[PP] @ part.du - Kvv[PP] @ part.du / tau)
+        return (A, g) if load_gradient else A
+
+    # --------------------------------------------------------------- measures
+    def output_displacement(self, z: np.ndarray) -> Optional[float]:
+        """The output body's displacement from rest along the output axis (m), or None."""
+        axis = self.output_axis
+        if axis is None:
+            return None
+        i = self._output_index
+        return float((z[3 * i:3 * i + 2] - self.z0[3 * i:3 * i + 2]) @ axis)
+
+    def drive_force(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
+                    Q: Optional[np.ndarray] = None) -> float:
+        """Force the actuator applies to the driven body along the drive axis (N): the
+        drive-axis component of the constraint forces lambda_P = M_P a_P - Q_P (eq. 6.4);
+        0 without a drive. ``Q``: the generalized forces at (z, v), if already known."""
+        if self.drive is None:
+            return 0.0
+        if Q is None:
+            Q = self.assembly.generalized_forces(z, v)[0]
+        P = self.part.prescribed
+        return float((self.mass[P] * aP - Q[P]) @ self.part.du)
+
+    def hinge_compression(self, z: np.ndarray) -> Optional[float]:
+        """Compression of the compression hinge at z (m, ``compression.compression_points``):
+        along the drive axis, at its centre of stiffness, its drive side's displacement
+        from rest minus its far side's; None without a compression hinge."""
+        if self.compression is None:
+            return None
+        (i_drive, c_drive), (i_far, c_far), axis = self.compression
+        return float((point_displacement(i_drive, c_drive, z, self.z0)
+                      - point_displacement(i_far, c_far, z, self.z0)) @ axis)

@@ -1,0 +1,65 @@
+"""What a simulation reports at one instant, read from a ``Model`` and a ``State``."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from .data import State
+from .model import Model
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """What the simulation reports at one instant (SI units throughout).
+
+    poses (n_bodies, 3): x, y (m), theta (rad) in the root frame; velocities likewise.
+    deflections (n_hinges, 3): (alpha, p_x, p_y) of frame b relative to frame a, in frame a
+    (rotation, axial, shear for the stage's unrotated hinge frames).
+    wrenches (n_hinges, 3): (moment, fx, fy), the wrench each hinge exerts on its body B,
+    in frame b, moment about b's origin.
+    drive_force: force the actuator applies to the driven body along the drive axis (N).
+    output: output body's displacement along the output axis from rest (m) or None.
+    compression: of the compression hinge (``Model.hinge_compression``): along the drive
+    axis, at its centre of stiffness, its drive side's displacement minus its far side's (m),
+    or None.
+    """
+
+    t: float
+    poses: np.ndarray
+    velocities: np.ndarray
+    deflections: np.ndarray
+    wrenches: np.ndarray
+    drive_input: float
+    drive_command: float
+    drive_force: float
+    output: Optional[float]
+    compression: Optional[float]
+    kinetic_energy: float
+    potential_energy: float
+    dissipated: float
+    drive_work: float
+
+
+def snapshot(model: Model, s: State) -> Snapshot:
+    """Everything the simulation reports at state ``s``."""
+    Q, deflections, wrenches, energy, _ = model.assembly.report(s.z, s.v)
+    _, _, aP = model.prescribed(s.t, s.u, s.command)
+    nb = len(model.mechanism.bodies)
+    return Snapshot(
+        t=s.t,
+        poses=s.z.reshape(nb, 3).copy(),
+        velocities=s.v.reshape(nb, 3).copy(),
+        deflections=deflections,
+        wrenches=wrenches,
+        drive_input=s.u,
+        drive_command=s.command,
+        drive_force=model.drive_force(s.z, s.v, aP, Q),
+        output=model.output_displacement(s.z),
+        compression=model.hinge_compression(s.z),
+        kinetic_energy=float(0.5 * np.sum(model.mass * s.v**2)),
+        potential_energy=energy,
+        dissipated=s.dissipated,
+        drive_work=s.drive_work,
+    )
