@@ -285,9 +285,9 @@ def _check_meaningful(mech: Mechanism) -> None:
         )
         assert all(math.isfinite(v) for v in body.pose)
     for hinge in mech.hinges:
-        assert np.all(np.isfinite(hinge.K)) and np.all(np.linalg.eigvalsh(hinge.K) > 0), hinge.name
-        assert np.all(np.isfinite(hinge.B)) and np.all(
-            np.linalg.eigvalsh(hinge.B) >= -1e-12 * np.abs(hinge.B).max()
+        assert np.all(np.isfinite(hinge.law.K)) and np.all(np.linalg.eigvalsh(hinge.law.K) > 0), hinge.name
+        assert np.all(np.isfinite(hinge.law.B)) and np.all(
+            np.linalg.eigvalsh(hinge.law.B) >= -1e-12 * np.abs(hinge.law.B).max()
         )
     if mech.drive is not None:
         assert math.hypot(*mech.drive.axis) == pytest.approx(1.0, rel=1e-12)

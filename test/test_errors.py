@@ -36,7 +36,7 @@ def test_every_package_error_derives_from_the_root():
     # that silently imports nothing).
     expected = {
         "flexure_sim.engine.config_values.ConfigError",
-        "flexure_sim.engine.solver.SolverError",
+        "flexure_sim.engine.model.SolverError",
         "flexure_sim.recording.errors.RecordingError",
         "flexure_sim.engine.fitting.DataError",
         "flexure_sim.engine.fitting.FitError",
@@ -59,7 +59,7 @@ def test_every_package_error_derives_from_the_root():
         ("flexure_sim.engine.fitting.DataError", ValueError),
         ("flexure_sim.engine.fitting.FitError", ValueError),
         ("flexure_sim.cli.UsageError", ValueError),
-        ("flexure_sim.engine.solver.SolverError", RuntimeError),
+        ("flexure_sim.engine.model.SolverError", RuntimeError),
         ("flexure_sim.node.demo_drive.DriveError", RuntimeError),
         ("flexure_sim.node.stage_node.UsageError", ValueError),
         ("flexure_sim.node.shell.StartupError", RuntimeError),

@@ -150,7 +150,7 @@ def test_mode_shapes_are_mass_orthonormal_and_diagonalise_the_stiffness(stage_mo
 
 def _scaled_damping(mech, s):
     hinges = tuple(
-        dataclasses.replace(h, B=h.B * s, law=QuadraticLaw(h.law.coordinates, h.K, h.B * s))
+        dataclasses.replace(h, law=QuadraticLaw(h.law.coordinates, h.law.K, h.law.B * s))
         for h in mech.hinges
     )
     return dataclasses.replace(mech, hinges=hinges)

@@ -20,7 +20,7 @@ def _study(**over):
 
 
 def _hinge_K(mech, name):
-    return mech.hinges[mech.hinge_index(name)].K
+    return mech.hinges[mech.hinge_index(name)].law.K
 
 
 @pytest.mark.parametrize("change, key", [

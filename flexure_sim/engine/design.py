@@ -160,7 +160,7 @@ class Parameters:
         for hinge, spec in zip(mech.hinges, data["hinges"]):
             sspec = spec.get("stiffness")
             sspec = models[sspec] if isinstance(sspec, str) else sspec
-            K = _stiffness(sspec) if sspec is not None else hinge.K
+            K = _stiffness(sspec) if sspec is not None else hinge.law.K
             damping = spec.get("damping", defaults.get("damping"))
             B = (
                 K * _num(damping["t_char"])
@@ -253,8 +253,8 @@ def design_of(mechanism: Mechanism) -> Design:
     hinges = mechanism.hinges
     mass = np.array([[b.mass, b.mass, b.inertia] for b in mechanism.bodies], dtype=float).ravel()
     return Design(
-        np.array([h.K for h in hinges], dtype=float),
-        np.array([h.B for h in hinges], dtype=float),
+        np.array([h.law.K for h in hinges], dtype=float),
+        np.array([h.law.B for h in hinges], dtype=float),
         np.array([h.a.position for h in hinges], dtype=float),
         np.array([h.b.position for h in hinges], dtype=float),
         np.array([h.a.angle for h in hinges], dtype=float),
