@@ -97,7 +97,7 @@ def run_simulate(args: argparse.Namespace) -> dict:
         out = summarize(sim, result.snapshot, amplitude)
         out.update(mechanism_file=str(path), mode="static", newton_iterations=result.iterations,
                    residual=result.residual, wall_s=wall)
-        out["hinge_stress"] = _stress(args, sim, result.snapshot)
+        out["hinge_stress"] = _stress(sim, result.snapshot)
         return out
     if sim.drive is not None:
         sim.set_command(amplitude)
@@ -119,17 +119,11 @@ def run_simulate(args: argparse.Namespace) -> dict:
     return out
 
 
-def _geometry(args) -> list:
-    from .engine.design import Parameters
-
-    return Parameters(args.mechanism).design().geometry
-
-
-def _stress(args, sim: Simulation, snap: Snapshot) -> dict:
+def _stress(sim: Simulation, snap: Snapshot) -> dict:
     """Peak stress and stress ratio per notch/leaf hinge (engine/stress.py)."""
     from .engine.stress import stress_table
 
-    return stress_table(snap.wrenches, _geometry(args), [h.name for h in sim.mechanism.hinges])
+    return stress_table(snap.wrenches, sim.mechanism)
 
 
 def _stroke_limit(args, sim: Simulation) -> dict:
@@ -139,7 +133,7 @@ def _stroke_limit(args, sim: Simulation) -> dict:
     if sim.drive is None:
         raise UsageError(f"--stroke-limit: mechanism {sim.mechanism.name!r} has no drive")
     try:
-        u, hinge = stroke_limit(sim, _geometry(args))
+        u, hinge = stroke_limit(sim)
     except ValueError as exc:
         raise UsageError(f"--stroke-limit: {exc}") from None
     return {"mechanism": sim.mechanism.name, "mechanism_file": str(resolve_mechanism_path(

@@ -7,6 +7,7 @@ import pytest
 
 from flexure_sim.cli import main
 from flexure_sim.engine import stress
+from flexure_sim.engine.config import load_mechanism, mechanism_from_dict
 from flexure_sim.engine.design import Parameters
 from flexure_sim.engine.solver import Simulation
 
@@ -55,17 +56,15 @@ def test_leaf_stress_adds_the_shear_force_lever_arm():
 
 
 def test_stage_stroke_limit_reaches_yield_exactly():
-    params = Parameters("microstage")
-    sim = Simulation(params.mechanism)
-    geometry = params.design().geometry
-    u, hinge = stress.stroke_limit(sim, geometry)
-    names = [h.name for h in params.mechanism.hinges]
-    table = stress.stress_table(sim.static(u).snapshot.wrenches, geometry, names)
+    mech = load_mechanism("microstage")
+    sim = Simulation(mech)
+    u, hinge = stress.stroke_limit(sim)
+    table = stress.stress_table(sim.static(u).snapshot.wrenches, mech)
     assert stress.peak_ratio(table) == (hinge, pytest.approx(1.0, abs=1e-8))
     assert u > sim.drive.stroke[1]  # the piezo's 2 um stroke is far from yield
     # Stress grows nearly linearly with the input: the ratio at full stroke times the limit.
     full = stress.peak_ratio(
-        stress.stress_table(sim.static(2e-6).snapshot.wrenches, geometry, names)
+        stress.stress_table(sim.static(2e-6).snapshot.wrenches, mech)
     )[1]
     assert u == pytest.approx(2e-6 / full, rel=1e-2)
 
@@ -95,10 +94,8 @@ def test_analyse_reports_the_peak_stress_ratio_of_each_step(tmp_path, capsys):
     assert main(["analyse", str(path), "--json"]) == 0
     steps = json.loads(capsys.readouterr().out)
 
-    params = Parameters("microstage")
-    geometry = params.design().geometry
-    names = [h.name for h in params.mechanism.hinges]
-    sim = Simulation(params.mechanism, dt=1e-4, relinearize_tol=1e-4)
+    mech = load_mechanism("microstage")
+    sim = Simulation(mech, dt=1e-4, relinearize_tol=1e-4)
     expected = [(0.0, None)] * len(DEMO_LEVELS)
     for tick in range(110):
         if tick >= 10 and (tick - 10) % 20 == 0:
@@ -106,7 +103,7 @@ def test_analyse_reports_the_peak_stress_ratio_of_each_step(tmp_path, capsys):
         sim.step(10)
         if tick >= 10:
             k = (tick - 10) // 20
-            table = stress.stress_table(sim.snapshot().wrenches, geometry, names)
+            table = stress.stress_table(sim.snapshot().wrenches, mech)
             hinge, ratio = stress.peak_ratio(table)
             if ratio > expected[k][0]:
                 expected[k] = (ratio, hinge)
@@ -114,7 +111,7 @@ def test_analyse_reports_the_peak_stress_ratio_of_each_step(tmp_path, capsys):
         assert s["peak_stress"]["hinge"] == hinge
         assert s["peak_stress"]["ratio"] == pytest.approx(ratio, rel=1e-9)
         static = stress.peak_ratio(
-            stress.stress_table(sim.static(level).snapshot.wrenches, geometry, names)
+            stress.stress_table(sim.static(level).snapshot.wrenches, mech)
         )[1]
         assert s["peak_stress"]["ratio"] >= static * (1 - 1e-6)
     assert main(["analyse", str(path)]) == 0
@@ -134,3 +131,65 @@ def test_static_stress_with_a_polynomial_hinge_covers_the_notch_hinges(capsys):
     assert set(out["hinge_stress"]) == set("bcdefg")
     assert main(["linearize", path, "-o", "model.npz"]) == 2
     assert "not fitted polynomial laws" in capsys.readouterr().err
+
+
+def _two_hinge_doc(sigma_y="250.0e6"):
+    """One body on a notch hinge (named model, sigma_y as PyYAML reads 250.0e6: a string) and
+    a leaf hinge (inline, no sigma_y), and a matrix hinge: no file behind it."""
+    return {
+        "name": "two_hinges",
+        "defaults": {"law": "twistor", "damping": {"t_char": 1e-4}},
+        "stiffness_models": {"n": {"model": "notch", "D": 0.002, "h": 3.0e-4, "t": 0.01,
+                                   "E": "69.0e9", "nu": 0.33, "sigma_y": sigma_y}},
+        "bodies": [{"name": "ground", "mass": 1.0, "inertia": 1.0, "pose": [0, 0, 0]},
+                   {"name": "m", "mass": 0.01, "inertia": 1e-6, "pose": [0.0, 0.0, 0.0]}],
+        "hinges": [
+            {"name": "n", "a": {"body": "ground", "at": [0.01, 0.0]},
+             "b": {"body": "m", "at": [0.01, 0.0]}, "stiffness": "n"},
+            {"name": "leaf", "a": {"body": "ground", "at": [-0.01, 0.0]},
+             "b": {"body": "m", "at": [-0.01, 0.0]},
+             "stiffness": {"model": "cantilever", "length": 0.01, "thickness": 0.001,
+                           "width": 0.005, "E": "69.0e9", "nu": 0.33}},
+            {"name": "k", "a": {"body": "ground", "at": [0.0, 0.01]},
+             "b": {"body": "m", "at": [0.0, 0.01]},
+             "stiffness": {"model": "matrix", "Ko": 1.0, "Kt": [1e5, 1e5]}},
+        ],
+        "constraints": [{"type": "fixed", "body": "ground"}],
+    }
+
+
+def test_stress_geometry_is_part_of_the_loaded_mechanism_with_the_stiffness_numbers():
+    """Each hinge's stress geometry comes with the mechanism (no file to re-read): the numbers
+    its stiffness formula used, sigma_y as a number; none for a matrix hinge."""
+    from flexure_sim.engine.stiffness import cantilever_stiffness, notch_stiffness
+
+    mech = mechanism_from_dict(_two_hinge_doc(), source="<no file>")
+    n, leaf, k = mech.hinges
+    assert n.stress == stress.StressGeometry("notch", (0.002, 3.0e-4, 0.01), 250e6)
+    assert leaf.stress == stress.StressGeometry("cantilever", (0.01, 0.001, 0.005), None)
+    assert k.stress is None
+    np.testing.assert_array_equal(notch_stiffness(*n.stress.dimensions, 69e9, 0.33), n.K)
+    np.testing.assert_array_equal(cantilever_stiffness(*leaf.stress.dimensions, 69e9, 0.33),
+                                  leaf.K)
+    # The stress table from the mechanism alone, against the formulas by hand: leaf
+    # 6 (|m| + |f_x| L / 2) / (w T^2) + |f_y| / (w T); notch K_t (6 |m| / (t h^2) + |f_x| / (t h)).
+    w = np.array([[0.02, -3.0, 40.0], [-0.01, 2.0, 5.0], [1.0, 1.0, 1.0]])
+    table = stress.stress_table(w, mech)
+    assert set(table) == {"n", "leaf"}
+    assert table["leaf"] == {"stress": pytest.approx(25e6, rel=1e-12), "sigma_y": None,
+                             "ratio": None}
+    kt = stress.notch_concentration(3.0e-4, 0.002)
+    s_n = kt * (6 * 0.02 / (0.01 * 9e-8) + 3.0 / (0.01 * 3e-4))
+    assert table["n"]["stress"] == pytest.approx(s_n, rel=1e-12)
+    assert table["n"]["ratio"] == pytest.approx(s_n / 250e6, rel=1e-12)
+    # The per-tick form of the ratios (node diagnostics) is the same formula.
+    names, idx, C = stress.ratio_map(mech)
+    assert names == ["n"] and idx.tolist() == [0]
+    assert (C * np.abs(w[idx])).sum(1)[0] == pytest.approx(table["n"]["ratio"], rel=1e-12)
+
+
+def test_design_geometry_is_the_mechanisms_stress_geometry():
+    """design.py (the sensitivities) and the loaded mechanism share one stress geometry."""
+    params = Parameters("microstage")
+    assert params.design().geometry == [h.stress for h in params.mechanism.hinges]
+    assert all(h.stress.sigma_y == 276e6 for h in params.mechanism.hinges)

@@ -67,6 +67,7 @@ from .mechanism import (
 from .polynomial import PolynomialLaw
 from .polynomial_files import PolynomialFileError
 from .polynomial_files import load_law as load_polynomial_law
+from .stress import StressGeometry
 
 #: Largest mismatch (m) allowed between a hinge's two frames in the unstressed pose.
 COINCIDENCE_TOLERANCE = 1e-9
@@ -74,21 +75,21 @@ COINCIDENCE_TOLERANCE = 1e-9
 
 # ---------------------------------------------------------------------- stiffness
 
-_STIFFNESS_KEYS: dict[str, tuple[Callable[..., np.ndarray], tuple[str, ...]]] = {
-    "notch": (stiffness_models.notch_stiffness, ("D", "h", "t", "E", "nu")),
-    "cantilever": (stiffness_models.cantilever_stiffness, ("length", "thickness", "width", "E", "nu")),
-}
+_STIFFNESS_KEYS: dict[str, tuple[Callable[..., np.ndarray], tuple[str, ...]]] = (
+    stiffness_models.MODELS)
 
 
-def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
+def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str, Any]:
+    """(K, model name, the hinge's StressGeometry or None) of a stiffness specification; the
+    stress geometry holds the same numbers the stiffness formula was given."""
     spec = _mapping(ctx, key, spec)
     model = _require(ctx, key, spec, "model")
     if not isinstance(model, str):
         raise ctx.fail(f"{key}.model",
                        f"expected a model name (notch, cantilever, matrix), got {_shown(model)}")
     # Material yield strength (Pa) for the hinge stress ratio (engine/stress.py); optional.
-    if "sigma_y" in spec:
-        _number(ctx, f"{key}.sigma_y", spec["sigma_y"], positive=True)
+    sigma_y = (_number(ctx, f"{key}.sigma_y", spec["sigma_y"], positive=True)
+               if "sigma_y" in spec else None)
     spec = {k: v for k, v in spec.items() if k != "sigma_y"}
     if model in _STIFFNESS_KEYS:
         fn, names = _STIFFNESS_KEYS[model]
@@ -104,7 +105,7 @@ def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
             values = ", ".join(f"{n}={a:g}" for n, a in zip(names, args))
             raise ctx.fail(key, f"the {model} formula gives a non-finite stiffness for these "
                            f"values ({values}): check the units")
-        return K, model
+        return K, model, StressGeometry.of(model, dict(zip(names, args)), sigma_y)
     if model == "matrix":
         _no_unknown(ctx, key, spec, {"model", "K", "Ko", "Kt", "Kc"})
         if "K" in spec:
@@ -117,7 +118,7 @@ def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
             kt = _vector(ctx, f"{key}.Kt", _require(ctx, key, spec, "Kt"), (2,))
             kc = _vector(ctx, f"{key}.Kc", spec.get("Kc", [0.0, 0.0]), (2,))
             K = np.array([[Ko, kc[0], kc[1]], [kc[0], kt[0], 0.0], [kc[1], 0.0, kt[1]]])
-        return K, "matrix"
+        return K, "matrix", None
     raise ctx.fail(f"{key}.model",
                    f"unknown stiffness model {_shown(model)} (notch, cantilever, matrix)")
 
@@ -329,7 +330,7 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
             if "stiffness" in spec:
                 raise ctx.fail(f"{key}.stiffness", "a polynomial law defines the stiffness (its Hessian at rest): "
                                "remove this key")
-            K, source = poly.stiffness_at_rest(), f"polynomial:{poly.source}"
+            K, source, geometry = poly.stiffness_at_rest(), f"polynomial:{poly.source}", None
             _check_spd(ctx, law_key, K, "stiffness at rest (Hessian of the polynomial law)")
         else:
             sspec = _require(ctx, key, spec, "stiffness")
@@ -337,9 +338,9 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
                 if sspec not in named_stiffness:
                     raise ctx.fail(f"{key}.stiffness",
                                    f"unknown stiffness model name {_shown(sspec)}")
-                K, source = named_stiffness[sspec]
+                K, source, geometry = named_stiffness[sspec]
             else:
-                K, source = _stiffness(ctx, f"{key}.stiffness", sspec)
+                K, source, geometry = _stiffness(ctx, f"{key}.stiffness", sspec)
             _check_spd(ctx, f"{key}.stiffness", K, "stiffness")
             if not isinstance(law_name, str) or law_name not in COORDINATES:
                 raise ctx.fail(law_key,
@@ -347,7 +348,7 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
                                "or {polynomial: FILE})")
         B = _damping(ctx, f"{key}.damping", spec.get("damping", defaults.get("damping")), K)
         law = poly.with_damping(B) if poly is not None else QuadraticLaw(law_name, K, B)
-        hinges.append(Hinge(name, fa, fb, law, source))
+        hinges.append(Hinge(name, fa, fb, law, source, stress=geometry))
     return hinges
 
 

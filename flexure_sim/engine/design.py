@@ -22,13 +22,10 @@ from ..errors import FlexureSimError
 from . import hyperdual as hd
 from .config import ConfigError, mechanism_from_dict, resolve_mechanism_path
 from .mechanism import Mechanism
-from .stiffness import cantilever_stiffness, notch_stiffness
+from .stiffness import MODELS as _MODELS
+from .stress import STRESS_KEYS, StressGeometry
 from .yaml_files import read_yaml
 
-_MODELS = {
-    "notch": (notch_stiffness, ("D", "h", "t", "E", "nu")),
-    "cantilever": (cantilever_stiffness, ("length", "thickness", "width", "E", "nu")),
-}
 _LISTS_BY_NAME = ("bodies", "hinges")
 
 
@@ -42,7 +39,8 @@ class Design:
 
     K, B (n, 3, 3): stiffness and damping in the hinge frame; ca, cb (n, 2), phia, phib
     (n,): frame a on body A and frame b on body B; mass (N,): diagonal mass matrix;
-    geometry: per hinge the stiffness model's numbers (dict, with ``model``)."""
+    geometry: per hinge its stress.StressGeometry (None without one), built as config.py
+    builds Hinge.stress, with the design's (hyper-dual) numbers."""
 
     K: Any
     B: Any
@@ -169,7 +167,7 @@ class Parameters:
             )
             Ks.append(K)
             Bs.append(B)
-            geometry.append(dict(sspec or {}))
+            geometry.append(_stress_geometry(sspec))
             a_at, b_at = _num(spec["a"]["at"]), _num(spec["b"]["at"])
             ca.append(a_at[:2])
             cb.append(b_at[:2])
@@ -237,6 +235,15 @@ def _stiffness(spec: dict):
     )
 
 
+def _stress_geometry(spec: Optional[dict]) -> Optional[StressGeometry]:
+    """The StressGeometry of a stiffness specification (as config.py: the formula's numbers)."""
+    if spec is None or spec.get("model") not in STRESS_KEYS:
+        return None
+    sigma_y = spec.get("sigma_y")
+    return StressGeometry.of(spec["model"], {k: _num(spec[k]) for k in STRESS_KEYS[spec["model"]]},
+                             None if sigma_y is None else _num(sigma_y))
+
+
 def _array(values):
     """A float array, or a HyperDual array if any entry is hyper-dual."""
     arr = np.asarray(values, dtype=object) if not isinstance(values, np.ndarray) else values
@@ -260,7 +267,7 @@ def design_of(mechanism: Mechanism) -> Design:
         np.array([h.a.angle for h in hinges], dtype=float),
         np.array([h.b.angle for h in hinges], dtype=float),
         mass,
-        [{"model": h.stiffness_source} for h in hinges],
+        [h.stress for h in hinges],
     )
 
 

@@ -14,6 +14,7 @@ from typing import Optional, Union
 import numpy as np
 
 from .hinge_laws import HingeLaw
+from .stress import StressGeometry
 
 #: Names of the three generalized coordinates of a planar body.
 COORDINATE_NAMES = ("x", "y", "theta")
@@ -46,13 +47,16 @@ class Hinge:
     """An elastic element joining frame ``a`` on body A and frame ``b`` on body B, which
     coincide in the unstressed pose. ``law`` evaluates potential and dissipation (see
     hinge_laws; its stiffness and damping are 3x3, moment first, in the hinge frame);
-    ``stiffness_source`` says where the stiffness came from (model name, matrix, file)."""
+    ``stiffness_source`` says where the stiffness came from (model name, matrix, file);
+    ``stress``: the geometry of its stress (engine/stress.py), None without a notch or
+    cantilever model."""
 
     name: str
     a: Frame
     b: Frame
     law: HingeLaw
     stiffness_source: str = "matrix"
+    stress: Optional[StressGeometry] = None
 
 
 @dataclass(frozen=True)

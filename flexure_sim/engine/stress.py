@@ -30,16 +30,24 @@ moment f_x L / 2 at either end, so the largest end moment is |m| + |f_x| L / 2:
     sigma = 6 (|m| + |f_x| L / 2) / (w T^2) + |f_y| / (w T)
 
 (straight beam, no concentration: the fillets at the clamps are not modelled).
-Hinges with a ``matrix`` stiffness have no geometry: no stress.
+Hinges with a ``matrix`` stiffness or a fitted polynomial law have no geometry: no stress.
+
+Each hinge's ``StressGeometry`` (model, dimensions, sigma_y) is part of the loaded mechanism
+(``Hinge.stress``, set by config.py from the very numbers the stiffness formula used), so any
+Mechanism -- loaded, swept or recorded -- has its stresses without its YAML file.
 """
 
 from __future__ import annotations
 
-from typing import Any, Optional
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Mapping, Optional
 
 import numpy as np
 
 from . import hyperdual as hd
+
+if TYPE_CHECKING:
+    from .mechanism import Mechanism
 
 #: Roark's Table 17.1, two U-notches in a rectangular member, in-plane bending: rows C1..C4,
 #: columns (constant, sqrt(a/r), a/r), for 0.25 <= a/r <= 2 and 2 < a/r <= 50.
@@ -93,32 +101,71 @@ def leaf_stress(wrench, length, thickness, width):
     ) + np.abs(fy) / (width * thickness)
 
 
-def _num(x):
-    return x if isinstance(x, hd.HyperDual) else float(x)
+#: Per stiffness model with a geometry: the keys of its stiffness formula the stress uses, in
+#: the order of the stress function's arguments.
+STRESS_KEYS = {"notch": ("D", "h", "t"), "cantilever": ("length", "thickness", "width")}
+_STRESS_FUNCTIONS = {"notch": notch_stress, "cantilever": leaf_stress}
 
 
-def hinge_stress(wrench, geometry: dict) -> Optional[Any]:
-    """Peak stress of one hinge from its stiffness model's numbers (``model`` and the keys of
-    the mechanism file), or None for a hinge without geometry."""
-    model = geometry.get("model")
-    if model == "notch":
-        return notch_stress(wrench, *(_num(geometry[k]) for k in ("D", "h", "t")))
-    if model == "cantilever":
-        return leaf_stress(wrench, *(_num(geometry[k]) for k in ("length", "thickness", "width")))
-    return None
+@dataclass(frozen=True)
+class StressGeometry:
+    """What one hinge's stress needs: its stiffness ``model`` (notch or cantilever), the
+    ``dimensions`` (m) of that model in the order of STRESS_KEYS[model], and the yield
+    strength ``sigma_y`` (Pa) or None. Floats in a loaded mechanism; HyperDual values where
+    design.py varies them."""
+
+    model: str
+    dimensions: tuple
+    sigma_y: Optional[Any] = None
+
+    @classmethod
+    def of(cls, model: str, values: Mapping[str, Any],
+           sigma_y: Optional[Any] = None) -> Optional["StressGeometry"]:
+        """From a stiffness model's numbers by key; None for a model without a geometry."""
+        keys = STRESS_KEYS.get(model)
+        if keys is None:
+            return None
+        return cls(model, tuple(values[k] for k in keys), sigma_y)
+
+    def stress(self, wrench):
+        """Peak stress (Pa) under wrench(es) (..., 3) (module docstring)."""
+        return _STRESS_FUNCTIONS[self.model](wrench, *self.dimensions)
+
+    def ratio_coefficients(self) -> np.ndarray:
+        """c (3,) with sigma / sigma_y = c . |wrench|: both formulas are sums of positive
+        factors times |m|, |f_x|, |f_y|, so c is the stress of unit wrenches over sigma_y."""
+        if self.sigma_y is None:
+            raise ValueError(f"a {self.model} hinge without sigma_y has no stress ratio")
+        return np.asarray(self.stress(np.eye(3)), dtype=float) / float(self.sigma_y)
 
 
-def stress_table(wrenches, geometry: list, names: list) -> dict:
-    """Per hinge: stress (Pa), yield strength (Pa or None) and their ratio (None without a
-    yield strength); wrenches (n, 3) floats."""
+def hinge_stress(wrench, geometry: Optional[StressGeometry]) -> Optional[Any]:
+    """Peak stress of one hinge (floats or HyperDual), or None for a hinge without geometry."""
+    return None if geometry is None else geometry.stress(wrench)
+
+
+def stress_table(wrenches, mechanism: "Mechanism") -> dict:
+    """Per notch/leaf hinge of the mechanism: stress (Pa), yield strength (Pa or None) and
+    their ratio (None without a yield strength); wrenches (n, 3) floats (Snapshot.wrenches)."""
     out = {}
-    for name, w, g in zip(names, np.asarray(wrenches, dtype=float), geometry):
-        s = hinge_stress(w, g)
-        if s is None:
+    for hinge, w in zip(mechanism.hinges, np.asarray(wrenches, dtype=float)):
+        g = hinge.stress
+        if g is None:
             continue
-        sy = float(g["sigma_y"]) if g.get("sigma_y") is not None else None
-        out[name] = {"stress": float(s), "sigma_y": sy, "ratio": float(s) / sy if sy else None}
+        s = float(g.stress(w))
+        sy = None if g.sigma_y is None else float(g.sigma_y)
+        out[hinge.name] = {"stress": s, "sigma_y": sy, "ratio": s / sy if sy else None}
     return out
+
+
+def ratio_map(mechanism: "Mechanism") -> tuple[list[str], np.ndarray, np.ndarray]:
+    """The hinges with a yield strength: (names, their indices, C (k, 3)) such that
+    (C * |wrenches[indices]|).sum(1) are their stress ratios -- a few microseconds per call,
+    for the node's per-tick diagnostics."""
+    rows = [(h.name, i, h.stress.ratio_coefficients()) for i, h in enumerate(mechanism.hinges)
+            if h.stress is not None and h.stress.sigma_y is not None]
+    return ([r[0] for r in rows], np.array([r[1] for r in rows], dtype=int),
+            np.array([r[2] for r in rows], dtype=float).reshape(-1, 3))
 
 
 def peak_ratio(table: dict) -> Optional[tuple[str, float]]:
@@ -127,15 +174,13 @@ def peak_ratio(table: dict) -> Optional[tuple[str, float]]:
     return max(ratios, key=lambda x: x[1]) if ratios else None
 
 
-def stroke_limit(sim, geometry: list, tol: float = 1e-9, max_iter: int = 30) -> tuple[float, str]:
+def stroke_limit(sim, tol: float = 1e-9, max_iter: int = 30) -> tuple[float, str]:
     """Drive input (m) at which the first hinge reaches yield: the secant method on
     max_h sigma_h / sigma_y,h (u) = 1 with static solves (``Simulation.static``), from the
     linear estimate u / ratio(u) at the drive's stroke. Returns (input, hinge)."""
-    names = [h.name for h in sim.mechanism.hinges]
-
     def ratio(u):
         snap = sim.static(u).snapshot
-        found = peak_ratio(stress_table(snap.wrenches, geometry, names))
+        found = peak_ratio(stress_table(snap.wrenches, sim.mechanism))
         if found is None:
             raise ValueError("no hinge has a yield strength (sigma_y in its stiffness model)")
         return found[1] - 1.0, found[0]

@@ -1,7 +1,7 @@
 """``flexure-sim analyse RUN.mcap``: per step of the drive, the gain, 2 % settling time,
 overshoot, steady-state joint-a compression, peak wrench per hinge, peak drive force and the
 peak hinge stress ratio sigma / sigma_y (engine/stress.py, from the recorded wrenches and the
-recorded mechanism's hinge geometry).
+recorded mechanism's Hinge.stress geometry).
 
     flexure-sim analyse runs/stage.mcap [--json] [--recover] [--strict] [--band 0.02] [--no-static]
 
@@ -176,24 +176,19 @@ def stress_peaks(run: Run, steps: list[dict]) -> tuple[dict[int, Optional[dict]]
     wrench samples, {"hinge", "stress" (Pa), "ratio"}, or None; and a note if there is none."""
     import yaml
 
-    from ..engine.config import ConfigError
-    from ..engine.design import ParameterError, Parameters
-    from ..engine.stress import hinge_stress
+    from ..engine.config import ConfigError, mechanism_from_dict
 
     text = run.metadata.get("mechanism_yaml", "")
     if not text:
         return {}, "no hinge stress: the run has no recorded mechanism YAML"
     try:
-        params = Parameters(run.mechanism_name or "<recorded YAML>", data=yaml.safe_load(text))
-        geometry = params.design().geometry
-    except (ConfigError, ParameterError, yaml.YAMLError, KeyError, TypeError, ValueError) as exc:
+        mech = mechanism_from_dict(yaml.safe_load(text),
+                                   source=run.mechanism_name or "<recorded YAML>")
+    except (ConfigError, yaml.YAMLError) as exc:
         return {}, f"no hinge stress: recorded mechanism: {exc}"
     wrenches = run.wrenches()
-    hinges = [
-        (h.name, g) for h, g in zip(params.mechanism.hinges, geometry)
-        if h.name in wrenches and g.get("sigma_y") is not None
-        and g.get("model") in ("notch", "cantilever")
-    ]
+    hinges = [(h.name, h.stress) for h in mech.hinges
+              if h.name in wrenches and h.stress is not None and h.stress.sigma_y is not None]
     if not hinges:
         return {}, "no hinge stress: no recorded notch or leaf hinge has a yield strength sigma_y"
     out: dict[int, Optional[dict]] = {}
@@ -205,8 +200,8 @@ def stress_peaks(run: Run, steps: list[dict]) -> tuple[dict[int, Optional[dict]]
             inside = (series.t > t0) & (series.t <= t1)  # the step's window, as analysis._window
             if not inside.any():
                 continue
-            peak = float(np.max(hinge_stress(series.values[inside], g)))
-            ratio = peak / float(g["sigma_y"])
+            peak = float(np.max(g.stress(series.values[inside])))
+            ratio = peak / g.sigma_y
             if best is None or ratio > best["ratio"]:
                 best = {"hinge": name, "stress": peak, "ratio": ratio}
         out[s["index"]] = best
