@@ -95,22 +95,107 @@ def test_outputs_do_not_depend_on_their_order():
 
 
 def test_monte_carlo_spread_of_the_gain_agrees_with_the_first_order_prediction(tmp_path):
-    """2000 designs of the stage study (h +- 5 um on all seven hinges): the standard deviation
-    of the gain is sqrt(sum (dg/dh_i)^2) * 5 um, with dg/dh_i by central differences (the
-    exact sensitivities will replace them), within 4 standard errors (1/sqrt(2n)) plus 1 %
-    for the neglected second-order terms."""
-    study = load_study(_small_stage_study(tmp_path, samples=2000, batch_size=2000), OUTPUTS)
+    """2000 designs of the stage study (h +- 5 um on all seven hinges, independent): to first
+    order the standard deviation of the gain is sqrt(sum (dg/dh_i)^2) * 5 um, with dg/dh_i the
+    exact sensitivities (engine/sensitivity.py, hyper-dual). The sample standard deviation of
+    n normal values has a relative standard error 1/sqrt(2 (n - 1)): agreement within 4 of
+    those, plus 1 % for the neglected second-order terms (the second derivatives times
+    (5 um)^2 are below 1e-3 of the first-order spread)."""
+    from flexure_sim.engine.design import Parameters
+    from flexure_sim.engine.sensitivity import sensitivities
+
+    study = load_study(_small_stage_study(tmp_path, samples=2000, batch_size=2000,
+                                          outputs=["gain"]), OUTPUTS)
     gain = evaluate_batch(study, 0, 2000)["gain"]
-    base = np.array([p.base[0] for p in study.parameters])
-    dh, slopes = 1e-7, []
-    for j in range(len(base)):
-        hi, lo = base.copy(), base.copy()
-        hi[j] += dh
-        lo[j] -= dh
-        g = [Simulation(study.mechanism(h)).static(2e-6).snapshot.output / 2e-6 for h in (hi, lo)]
-        slopes.append((g[0] - g[1]) / (2 * dh))
+    paths = [p["path"] for p in yaml.safe_load(STAGE_STUDY.read_text())["parameters"]]
+    assert paths == [f"hinges.{h}.stiffness.h" for h in "abcdefg"]
+    assert all(p.kind == "normal" and p.scale == 5e-6 for p in study.parameters)
+    sens = sensitivities(Parameters(study.mechanism_source, data=study.base), paths, ["gain"],
+                         study.input)
+    slopes = [sens["gradient"]["gain"][p] for p in paths]
     predicted = math.sqrt(sum(s * s for s in slopes)) * 5e-6
-    assert abs(gain.std(ddof=1) / predicted - 1) < 4 / math.sqrt(2 * 2000) + 0.01
+    assert abs(gain.std(ddof=1) / predicted - 1) < 4 / math.sqrt(2 * 1999) + 0.01
+
+
+def _rider_doc(mass=0.02, k=(2.0, 3e6, 5e5), inertia=4e-6, t_char=1e-5, sigma_y="276.0e6"):
+    """A driven body held to ground by a leaf along the drive axis (y), and a free body riding
+    on the driven one through a matrix hinge at its mass centre."""
+    leaf = {"model": "cantilever", "length": 0.01, "thickness": 0.001, "width": 0.005,
+            "E": "69.0e9", "nu": 0.33}
+    if sigma_y is not None:
+        leaf["sigma_y"] = sigma_y
+    return {
+        "name": "rider",
+        "defaults": {"law": "twistor", "damping": {"t_char": t_char}},
+        "bodies": [{"name": "ground", "mass": 1.0, "inertia": 1.0, "pose": [0, 0, 0]},
+                   {"name": "driver", "mass": 0.1, "inertia": 1e-5, "pose": [0, 0.02, 0]},
+                   {"name": "rider", "mass": mass, "inertia": inertia, "pose": [0.03, 0.02, 0]}],
+        "hinges": [
+            {"name": "leaf", "a": {"body": "ground", "at": [0, 0.01]},
+             "b": {"body": "driver", "at": [0, -0.01]}, "stiffness": leaf},
+            {"name": "ride", "a": {"body": "driver", "at": [0.03, 0]},
+             "b": {"body": "rider", "at": [0, 0]},
+             "stiffness": {"model": "matrix", "Ko": k[0], "Kt": [k[1], k[2]]}},
+        ],
+        "constraints": [{"type": "fixed", "body": "ground"},
+                        {"type": "drive", "body": "driver", "axis": [0, 1],
+                         "response_time": 1e-3, "stroke": [0, 2e-6], "slew_rate": 0.01}],
+    }
+
+
+def _rider_study(tmp_path, outputs, masses=(0.02, 0.05), **doc):
+    (tmp_path / "rider.yaml").write_text(yaml.safe_dump(_rider_doc(**doc)))
+    data = {"mechanism": "rider.yaml", "input": 2e-6, "outputs": list(outputs),
+            "parameters": [{"name": "m", "path": "bodies.rider.mass", "values": list(masses)}]}
+    return study_from_dict(data, str(tmp_path / "s.yaml"), OUTPUTS, base_dir=tmp_path)
+
+
+def test_first_mode_and_its_damping_ratio_of_a_mass_on_a_spring_are_the_closed_forms(tmp_path):
+    """The rider: first mode sqrt(k_min / m) / 2 pi of its three springs (k = 2 N m/rad on
+    I = 4e-6 kg m^2 for the light rider: 112.5 Hz; 5e5 N/m along y on the 2 kg one: 79.6 Hz);
+    damping ratio c / (2 sqrt(k m)) with c = t_char k."""
+    t_char = 1e-5
+    cols = evaluate_batch(_rider_study(tmp_path, ["first_mode", "first_mode_damping"],
+                                       masses=(0.02, 2.0), t_char=t_char), 0, 2)
+    assert cols["status"] == ["ok", "ok"]
+    for r, m in enumerate((0.02, 2.0)):
+        k, mass = min([(2.0, 4e-6), (5e5, m)], key=lambda km: km[0] / km[1])
+        omega = math.sqrt(k / mass)
+        assert cols["first_mode"][r] == pytest.approx(omega / (2 * math.pi), rel=1e-9)
+        c = t_char * k
+        assert cols["first_mode_damping"][r] == pytest.approx(c / (2 * math.sqrt(k * mass)),
+                                                               rel=1e-9)
+
+
+def test_peak_stress_ratio_of_a_leaf_stretched_along_its_axis_is_e_strain_over_yield(tmp_path):
+    """The drive stretches the leaf by u along its axis: sigma = E u / L (Hooke), no bending,
+    over sigma_y. 69 GPa * 2 um / 10 mm = 13.8 MPa; / 276 MPa = 0.05."""
+    cols = evaluate_batch(_rider_study(tmp_path, ["peak_stress_ratio"]), 0, 2)
+    assert cols["status"] == ["ok", "ok"]
+    np.testing.assert_allclose(cols["peak_stress_ratio"], 69e9 * 2e-6 / 0.01 / 276e6,
+                               rtol=1e-9)
+    # Without any sigma_y the study is refused at load, naming the output.
+    with pytest.raises(Exception, match="outputs: peak_stress_ratio: no hinge of 'rider'"):
+        _rider_study(tmp_path, ["gain", "peak_stress_ratio"], sigma_y=None)
+
+
+def test_stage_first_mode_outputs_are_what_the_modes_command_reports(tmp_path):
+    """first_mode and first_mode_damping of the nominal stage at 2 um equal `flexure-sim modes
+    microstage --input 2e-6 --json` (the command, run as a user runs it)."""
+    cols = evaluate_batch(_grid([2.5e-4], outputs=("first_mode", "first_mode_damping",
+                                                   "peak_stress_ratio"), input=2e-6), 0, 1)
+    out = subprocess.run([sys.executable, "-m", "flexure_sim.cli", "modes", "microstage",
+                          "--input", "2e-6", "--json"], capture_output=True, text=True,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120, check=True)
+    modes = json.loads(out.stdout)
+    assert cols["first_mode"][0] == modes["undamped_frequencies_hz"][0]
+    assert cols["first_mode_damping"][0] == modes["modal_damping_ratios"][0]
+    static = subprocess.run([sys.executable, "-m", "flexure_sim.cli", "simulate", "microstage",
+                             "--drive", "step:2e-6", "--static", "--json"],
+                            capture_output=True, text=True, timeout=120, check=True,
+                            env={**os.environ, "PYTHONPATH": str(ROOT)})
+    table = json.loads(static.stdout)["hinge_stress"]
+    assert cols["peak_stress_ratio"][0] == max(h["ratio"] for h in table.values())
 
 
 # ------------------------------------------------------------------------------ the command

@@ -34,7 +34,7 @@ from . import hyperdual as hd
 from .kinematics import J
 from .design import design_of, hinge_indices, twistor_flags
 from .parametric import forces
-from .solver import Simulation
+from .solver import Simulation, StaticResult
 
 WRENCH_COMPONENTS = ("moment", "force_x", "force_y")
 
@@ -110,10 +110,12 @@ class LinearModel:
         return self.output_names.index(name)
 
 
-def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True) -> LinearModel:
-    """The exact linear model about the static equilibrium at drive input u (module doc)."""
+def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True,
+              static: Optional[StaticResult] = None) -> LinearModel:
+    """The exact linear model about the static equilibrium at drive input u (module doc);
+    ``static``: that equilibrium if already solved (``sim.static(u)``)."""
     mech = sim.mechanism
-    st = sim.static(u)
+    st = static if static is not None else sim.static(u)
     z = st.z
     lay = layout(sim)
     F, P, du = lay.free, lay.prescribed, lay.du

@@ -207,6 +207,10 @@ def study_from_dict(data: Any, source: str, output_names: Iterable[str],
     if drive is None:  # every output is a response to the drive input
         raise fail("mechanism", f"{base_mech.name!r} has no drive constraint: the outputs are "
                    "responses to the drive input")
+    if "peak_stress_ratio" in outputs and not any(
+            h.stress is not None and h.stress.sigma_y is not None for h in base_mech.hinges):
+        raise fail("outputs", f"peak_stress_ratio: no hinge of {base_mech.name!r} has a yield "
+                   "strength (sigma_y in a notch or cantilever stiffness model)")
     if study.input is not None and not drive.stroke[0] <= study.input <= drive.stroke[1]:
         raise fail("input", f"{study.input} m is outside the drive's stroke "
                    f"[{drive.stroke[0]}, {drive.stroke[1]}] m")

@@ -16,8 +16,10 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from ..engine import linear
 from ..engine.mechanism import Mechanism
 from ..engine.solver import Simulation, StaticResult
+from ..engine.stress import peak_ratio, stress_table
 from ..engine.study import Study
 from . import analysis
 
@@ -39,12 +41,21 @@ class Design:
         self.input = study.input if study.input is not None else drive.stroke[1]
         self._static: Optional[StaticResult] = None
         self._step: Optional[analysis.Response] = None
+        self._modes: Optional[linear.Modes] = None
 
     def static(self) -> StaticResult:
         """Static equilibrium at the study's drive input."""
         if self._static is None:
             self._static = self.sim.static(self.input)
         return self._static
+
+    def modes(self) -> linear.Modes:
+        """Undamped modes and damped poles about the static equilibrium at the input
+        (engine/linear.py, as ``flexure-sim modes --input``)."""
+        if self._modes is None:
+            self._modes = linear.modes(linear.linearize(self.sim, self.input, wrenches=False,
+                                                        static=self.static()))
+        return self._modes
 
     def step_response(self) -> analysis.Response:
         """Output response to a step of the command from 0 to the input, from rest, over the
@@ -113,6 +124,24 @@ def _compression(d: Design) -> Optional[float]:
 @output("drive_force", "N", "static force of the drive at the input (full stroke by default)")
 def _drive_force(d: Design) -> Optional[float]:
     return d.static().snapshot.drive_force
+
+
+@output("first_mode", "Hz", "first undamped natural frequency about the static equilibrium "
+        "at the input")
+def _first_mode(d: Design) -> Optional[float]:
+    return float(d.modes().frequencies[0])
+
+
+@output("first_mode_damping", "", "modal damping ratio of the first mode (as flexure-sim modes)")
+def _first_mode_damping(d: Design) -> Optional[float]:
+    return float(d.modes().modal_damping[0])
+
+
+@output("peak_stress_ratio", "", "largest hinge stress / yield strength at the input (no "
+        "value if no hinge has sigma_y)")
+def _peak_stress_ratio(d: Design) -> Optional[float]:
+    found = peak_ratio(stress_table(d.static().snapshot.wrenches, d.mechanism))
+    return None if found is None else found[1]
 
 
 @output("settling_time", "s", "2 % settling time of the output after a step to the input")
