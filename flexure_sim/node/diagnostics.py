@@ -1,11 +1,15 @@
 """The stage node's ``diagnostics`` topic: one ``DiagnosticStatus`` per window of ticks (~10 Hz
 of simulated time) with timings, pacing, solver work, command counters, engine failures,
-recording state and QoS problems, at level OK, WARN or ERROR (README "Diagnostics")."""
+recording state, QoS problems and the largest hinge stress ratio, at level OK, WARN or ERROR
+(README "Diagnostics")."""
 from __future__ import annotations
 
 import time
 from typing import Any
 
+import numpy as np
+
+from ..engine.stress import ratio_map
 from . import interface as itf
 
 
@@ -57,7 +61,25 @@ class Diagnostics:
         self._name = name
         self._hardware_id = hardware_id
         self._extra = extra
+        #: Hinges with a yield strength: names, indices, sigma/sigma_y = C . |wrench|.
+        self._stress = ratio_map(loop.sim.mechanism)
         self.window = self.new_window()
+
+    def stress_ratio(self) -> tuple[list[tuple[str, Any]], list[str], int]:
+        """(values, notes, level): the largest hinge stress ratio sigma / sigma_y at the
+        window's last tick (engine/stress.py), WARN above 1; nothing if no hinge has sigma_y."""
+        names, index, coefficients = self._stress
+        snap = self.loop.snapshot
+        if not names or snap is None:
+            return [], [], itf.OK
+        ratios = (coefficients * np.abs(snap.wrenches[index])).sum(axis=1)
+        k = int(np.argmax(ratios))
+        ratio = float(ratios[k])
+        values = [("stress_ratio_max", ratio), ("stress_ratio_hinge", names[k])]
+        if ratio > 1.0:
+            return values, [f"hinge {names[k]} above its yield strength "
+                            f"(stress ratio {ratio:.3g})"], itf.WARN
+        return values, [], itf.OK
 
     def counters(self) -> dict[str, int]:
         filt = self.loop.filter
@@ -105,6 +127,9 @@ class Diagnostics:
             extra_values, extra_notes, extra_level = self._extra()
             notes += extra_notes
             level = max(level, extra_level)
+        stress_values, stress_notes, stress_level = self.stress_ratio()
+        notes += stress_notes
+        level = max(level, stress_level)
         hold = loop.hold
         failures = hold.failures - w.engine_failures0
         if failures:
@@ -163,7 +188,7 @@ class Diagnostics:
         if loop.filter is not None:
             values += [("drive_target", loop.filter.target),
                        ("drive_applied", loop.filter.applied)]
-        values += extra_values
+        values += extra_values + stress_values
         values += [
             ("recording", rec is not None),
             ("recording_path", str(rec.path) if rec is not None else ""),

@@ -60,6 +60,8 @@ class SteppingLoop:
         self.throttle = WarningThrottle(1.0)
         self.intake: Any = None
         self.diagnostics: Optional[Diagnostics] = None
+        #: The last published snapshot (the diagnostics' hinge stress ratio), None before.
+        self.snapshot: Any = None
         self.requests = RequestQueue(self.alive)
         self.run_wall0 = time.perf_counter()
         self.run_sim0 = sim.state.t
@@ -173,6 +175,7 @@ class SteppingLoop:
             self._count_tick(round(sim.state.t * 1e9))
             return False
         t2 = perf()
+        self.snapshot = snap
         stamp = round(snap.t * 1e9)
         payloads = self.interface.encode(snap, stamp)
         # Recorded first, so that the file holds every message a subscriber can have seen even
