@@ -47,9 +47,9 @@ def test_diagnostics_warn_when_full_stroke_exceeds_yield_with_the_engines_ratio(
         values = diagnostics_values(peer.last("/diagnostics"))
         assert float(values["stress_ratio_max"]) < 1e-9 and at_rest.level == DiagnosticStatus.OK
         drive.publish(Float64(data=FULL_STROKE))
-        peer.spin_until(lambda: peer.last("/drive/input").data == pytest.approx(FULL_STROKE,
-                                                                               rel=1e-12),
-                        30, "the actuator to reach full stroke")
+        at_full = pytest.approx(FULL_STROKE, rel=1e-12)
+        peer.spin_until(lambda: peer.last("/drive/input").data == at_full, 30,
+                        "the actuator to reach full stroke")
         reached = float(diagnostics_values(peer.last("/diagnostics"))["sim_time"])
         # Settled: 0.2 s of simulated time after the input reached the command (actuator lag
         # 1 ms, the modes faster still), as the node's step-response test.

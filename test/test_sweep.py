@@ -163,8 +163,8 @@ def test_first_mode_and_its_damping_ratio_of_a_mass_on_a_spring_are_the_closed_f
         omega = math.sqrt(k / mass)
         assert cols["first_mode"][r] == pytest.approx(omega / (2 * math.pi), rel=1e-9)
         c = t_char * k
-        assert cols["first_mode_damping"][r] == pytest.approx(c / (2 * math.sqrt(k * mass)),
-                                                               rel=1e-9)
+        zeta = c / (2 * math.sqrt(k * mass))
+        assert cols["first_mode_damping"][r] == pytest.approx(zeta, rel=1e-9)
 
 
 def test_peak_stress_ratio_of_a_leaf_stretched_along_its_axis_is_e_strain_over_yield(tmp_path):
