@@ -64,6 +64,12 @@ def test_non_symmetric_stiffness(tmp_path, stage_doc):
     _expect(tmp_path, stage_doc, "hinges[0].stiffness", "not symmetric")
 
 
+def test_yield_strength_of_a_matrix_stiffness_is_refused_not_ignored(tmp_path, stage_doc):
+    stage_doc["hinges"][0]["stiffness"] = {"model": "matrix", "Ko": 2.5, "Kt": [1.6e8, 1.7e7],
+                                           "sigma_y": 276e6}
+    _expect(tmp_path, stage_doc, "hinges[0].stiffness.sigma_y", "no geometry")
+
+
 def test_non_positive_definite_stiffness(tmp_path, stage_doc):
     stage_doc["hinges"][0]["stiffness"] = {"model": "matrix", "Ko": 2.5, "Kt": [1.6e8, -1.0]}
     _expect(tmp_path, stage_doc, "hinges[0].stiffness", "not positive definite")

@@ -109,6 +109,9 @@ def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str, Any]:
                            f"values ({values}): check the units")
         return K, model, StressGeometry.of(model, dict(zip(names, args)), sigma_y)
     if model == "matrix":
+        if sigma_y is not None:  # would be dropped silently: no geometry, no stress
+            raise ctx.fail(f"{key}.sigma_y", "a matrix stiffness has no geometry to compute "
+                           "stress from (sigma_y is for notch and cantilever models)")
         _no_unknown(ctx, key, spec, {"model", "K", "Ko", "Kt", "Kc"})
         if "K" in spec:
             rows = spec["K"]
