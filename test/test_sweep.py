@@ -167,6 +167,32 @@ def test_first_mode_and_its_damping_ratio_of_a_mass_on_a_spring_are_the_closed_f
         assert cols["first_mode_damping"][r] == pytest.approx(zeta, rel=1e-9)
 
 
+def test_first_mode_is_the_ringing_period_of_a_free_vibration_time_simulation(tmp_path):
+    """The 2 kg rider rings at its first mode after a step of the drive (base excitation):
+    once the actuator's 1 ms lag has died out the motion is a free damped vibration, whose
+    zero crossings (time-domain engine, dt = 10 us) are half a period 1 / (f sqrt(1 - zeta^2))
+    apart, with f and zeta the sweep's first_mode and first_mode_damping."""
+    study = _rider_study(tmp_path, ["first_mode", "first_mode_damping"], masses=(2.0,))
+    cols = evaluate_batch(study, 0, 1)
+    f, zeta = cols["first_mode"][0], cols["first_mode_damping"][0]
+    sim = Simulation(study.mechanism([2.0]), dt=1e-5)
+    i = sim.mechanism.body_index("rider")
+    sim.set_command(2e-6)
+    t, y = [], []
+    for _ in range(10000):  # 0.1 s
+        sim.step()
+        t.append(sim.state.t)
+        y.append(sim.state.z[3 * i + 1] - sim.z0[3 * i + 1] - 2e-6)
+    t, y = np.array(t), np.array(y)
+    late = t > 0.03  # actuator transient exp(-30) gone
+    t, y = t[late], y[late]
+    k = np.nonzero(np.sign(y[1:]) != np.sign(y[:-1]))[0]
+    crossings = t[k] - y[k] * (t[k + 1] - t[k]) / (y[k + 1] - y[k])
+    assert len(crossings) >= 8
+    period = 2 * np.mean(np.diff(crossings))
+    assert period == pytest.approx(1 / (f * math.sqrt(1 - zeta**2)), rel=1e-6)
+
+
 def test_peak_stress_ratio_of_a_leaf_stretched_along_its_axis_is_e_strain_over_yield(tmp_path):
     """The drive stretches the leaf by u along its axis: sigma = E u / L (Hooke), no bending,
     over sigma_y. 69 GPa * 2 um / 10 mm = 13.8 MPa; / 276 MPa = 0.05."""

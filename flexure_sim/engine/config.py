@@ -24,9 +24,9 @@ Format (SI units; see config/microstage.yaml for a complete example)::
     compression_hinge: a
 
 Stiffness models: ``notch`` (D, h, t, E, nu), ``cantilever`` (length, thickness, width, E,
-nu), ``matrix`` (K: 3x3, or Ko, Kt: [kx, ky] and optional Kc: [cx, cy]). Any model may give the
-yield strength ``sigma_y`` (Pa); a notch or cantilever hinge gets ``Hinge.stress`` (its
-dimensions as given to the stiffness formula, and sigma_y) for the stress analyses.
+nu), ``matrix`` (K: 3x3, or Ko, Kt: [kx, ky] and optional Kc: [cx, cy]). A notch or
+cantilever model may give the yield strength ``sigma_y`` (Pa); its hinges get ``Hinge.stress``
+(the dimensions given to the stiffness formula, and sigma_y) for the stress analyses.
 
 ``law: {polynomial: FILE}`` uses a polynomial law fitted by ``flexure-sim fit`` (FILE relative
 to the mechanism file); such a hinge has no ``stiffness`` key: K is the law's Hessian at rest,
