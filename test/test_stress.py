@@ -168,9 +168,9 @@ def test_stress_geometry_is_part_of_the_loaded_mechanism_with_the_stiffness_numb
     assert n.stress == stress.StressGeometry("notch", (0.002, 3.0e-4, 0.01), 250e6)
     assert leaf.stress == stress.StressGeometry("cantilever", (0.01, 0.001, 0.005), None)
     assert k.stress is None
-    np.testing.assert_array_equal(notch_stiffness(*n.stress.dimensions, 69e9, 0.33), n.K)
+    np.testing.assert_array_equal(notch_stiffness(*n.stress.dimensions, 69e9, 0.33), n.law.K)
     np.testing.assert_array_equal(cantilever_stiffness(*leaf.stress.dimensions, 69e9, 0.33),
-                                  leaf.K)
+                                  leaf.law.K)
     # The stress table from the mechanism alone, against the formulas by hand: leaf
     # 6 (|m| + |f_x| L / 2) / (w T^2) + |f_y| / (w T); notch K_t (6 |m| / (t h^2) + |f_x| / (t h)).
     w = np.array([[0.02, -3.0, 40.0], [-0.01, 2.0, 5.0], [1.0, 1.0, 1.0]])

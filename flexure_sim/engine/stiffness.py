@@ -59,3 +59,11 @@ def cantilever_stiffness(length: float, thickness: float, width: float, E: float
     area = width * thickness
     L = length
     return np.diag([E * inertia / L, 12.0 * E * inertia / L**3, area * E / L])
+
+
+#: Stiffness models with a geometry: the formula and the names of its arguments, as the
+#: mechanism file's keys (config.py loads them, design.py varies them).
+MODELS = {
+    "notch": (notch_stiffness, ("D", "h", "t", "E", "nu")),
+    "cantilever": (cantilever_stiffness, ("length", "thickness", "width", "E", "nu")),
+}
