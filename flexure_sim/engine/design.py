@@ -158,7 +158,7 @@ class Parameters:
         for hinge, spec in zip(mech.hinges, data["hinges"]):
             sspec = spec.get("stiffness")
             sspec = models[sspec] if isinstance(sspec, str) else sspec
-            K = _stiffness(sspec) if sspec is not None else hinge.law.K
+            K = _stiffness(sspec) if sspec is not None else _law_stiffness(hinge)
             damping = spec.get("damping", defaults.get("damping"))
             B = (
                 K * _num(damping["t_char"])
@@ -235,6 +235,13 @@ def _stiffness(spec: dict):
     )
 
 
+def _law_stiffness(hinge) -> np.ndarray:
+    """K (3x3) of a hinge's law: the quadratic laws hold it, a fitted polynomial law's is its
+    Hessian at rest (so that a mechanism with one still reaches the check that refuses it)."""
+    K = getattr(hinge.law, "K", None)
+    return np.asarray(K if K is not None else hinge.law.stiffness_at_rest(), dtype=float)
+
+
 def _stress_geometry(spec: Optional[dict]) -> Optional[StressGeometry]:
     """The StressGeometry of a stiffness specification (as config.py: the formula's numbers)."""
     if spec is None or spec.get("model") not in STRESS_KEYS:
@@ -260,7 +267,7 @@ def design_of(mechanism: Mechanism) -> Design:
     hinges = mechanism.hinges
     mass = np.array([[b.mass, b.mass, b.inertia] for b in mechanism.bodies], dtype=float).ravel()
     return Design(
-        np.array([h.law.K for h in hinges], dtype=float),
+        np.array([_law_stiffness(h) for h in hinges], dtype=float),
         np.array([h.law.B for h in hinges], dtype=float),
         np.array([h.a.position for h in hinges], dtype=float),
         np.array([h.b.position for h in hinges], dtype=float),
