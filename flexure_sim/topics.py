@@ -17,6 +17,10 @@ DRIVE_INPUT = "drive/input"
 DRIVE_FORCE = "drive/force"
 #: Displacement of the output body from rest along the output axis, m.
 OUTPUT = "output/displacement"
+#: The output as the mechanism's sensor reads it (noise, resolution, bandwidth, latency), m.
+MEASURED = "output/measured"
+#: Output setpoint the example controller (pi_controller) tracks, m.
+SETPOINT = "setpoint"
 #: Pose of every body frame, in body order.
 POSE_ARRAY = "bodies/poses"
 DIAGNOSTICS = "diagnostics"

@@ -22,6 +22,8 @@ Format (SI units; see config/microstage.yaml for a complete example)::
       - {type: sine_rate, body: link2, coordinate: theta, amplitude: 4.9348, frequency: 5.0}
     output: {body: body4, axis: [1, 0]}
     compression_hinge: a
+    sensor: {noise_rms: 2.0e-9, resolution: 1.0e-9, bandwidth: 5000.0, latency: 1, seed: 0}
+                                              # optional, needs output; see engine/sensor.py
 
 Stiffness models: ``notch`` (D, h, t, E, nu), ``cantilever`` (length, thickness, width, E,
 nu), ``matrix`` (K: 3x3, or Ko, Kt: [kx, ky] and optional Kc: [cx, cy]). A notch or
@@ -67,6 +69,7 @@ from .mechanism import (
     SineRate,
 )
 from .polynomial import PolynomialLaw
+from .sensor import SensorSpec
 from .polynomial_files import PolynomialFileError
 from .polynomial_files import load_law as load_polynomial_law
 from .stress import StressGeometry
@@ -174,7 +177,7 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
         raise ConfigError(f"{source}: the document must be a mapping, got {type(data).__name__}")
     _no_unknown(ctx, "", data, {
         "name", "description", "source", "defaults", "stiffness_models", "bodies", "hinges",
-        "constraints", "output", "compression_hinge", "metadata",
+        "constraints", "output", "compression_hinge", "metadata", "sensor",
     })
     name = _name(ctx, "name", _require(ctx, "", data, "name"))
     defaults = _mapping(ctx, "defaults", data.get("defaults", {}))
@@ -205,6 +208,7 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
     if compression is not None and not any(isinstance(c, Drive) for c in constraints):
         raise ctx.fail("compression_hinge", "needs a drive constraint (measured along the drive axis)")
     metadata = _mapping(ctx, "metadata", data.get("metadata", {}))
+    sensor = _sensor(ctx, data["sensor"], output) if "sensor" in data else None
     return Mechanism(
         name=name,
         bodies=tuple(bodies),
@@ -215,7 +219,25 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
         description=str(data.get("description", "")),
         source=str(data.get("source", source)),
         metadata=dict(metadata),
+        sensor=sensor,
     )
+
+
+def _sensor(ctx: _Ctx, raw: Any, output: Any) -> SensorSpec:
+    """The ``sensor:`` block (engine/sensor.py): every key optional, none negative."""
+    spec = _mapping(ctx, "sensor", raw)
+    _no_unknown(ctx, "sensor", spec, {"noise_rms", "resolution", "bandwidth", "latency", "seed"})
+    if output is None:
+        raise ctx.fail("sensor", "needs an output (the sensor reads output/displacement)")
+    values = {k: _number(ctx, f"sensor.{k}", spec[k], nonnegative=True)
+              for k in ("noise_rms", "resolution", "bandwidth") if k in spec}
+    for k in ("latency", "seed"):
+        if k in spec:
+            v = spec[k]
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ctx.fail(f"sensor.{k}", f"expected an integer >= 0, got {_shown(v)}")
+            values[k] = v
+    return SensorSpec(**values)
 
 
 def _bodies(ctx: _Ctx, raw: Any) -> list[Body]:

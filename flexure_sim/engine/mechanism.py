@@ -14,6 +14,7 @@ from typing import Optional, Union
 import numpy as np
 
 from .hinge_laws import HingeLaw
+from .sensor import SensorSpec
 from .stress import StressGeometry
 
 #: Names of the three generalized coordinates of a planar body.
@@ -134,6 +135,8 @@ class Mechanism:
     description: str = ""
     source: str = ""
     metadata: dict = field(default_factory=dict)
+    #: The sensor reading the output (published as ``output/measured``); None: no sensor.
+    sensor: Optional[SensorSpec] = None
 
     def body_index(self, name: str) -> int:
         """Index of a body by name (ValueError naming it if unknown)."""

@@ -130,6 +130,7 @@ class StageInterface:
         self.hinge_names = hinges
         self.has_drive = mech.drive is not None
         self.has_output = mech.output is not None
+        self.has_sensor = self.has_output and mech.sensor is not None
         self.compression_hinge: Optional[str] = mech.compression_hinge if self.has_drive else None
 
         specs: list[TopicSpec] = []
@@ -165,6 +166,11 @@ class StageInterface:
                 "output", topics.OUTPUT, Float64, "m", "",
                 f"displacement of the output body {mech.output.body} from rest along "
                 f"({mech.output.axis[0]:g}, {mech.output.axis[1]:g})"))
+        if self.has_sensor:
+            specs.append(_spec(
+                "measured", topics.MEASURED, Float64, "m", "",
+                "the output as the mechanism's sensor reads it (bandwidth, noise, resolution, "
+                "latency in ticks; engine/sensor.py)"))
         if self.has_drive:
             specs.append(_spec(
                 "drive_input", topics.DRIVE_INPUT, Float64, "m", "",
@@ -206,14 +212,16 @@ class StageInterface:
         out.extend(self._poses)
         for w, d in zip(self._wrenches, self._deflections):
             out.extend((w, d))
-        n_float = (self.compression_hinge is not None) + self.has_output + 2 * self.has_drive
+        n_float = ((self.compression_hinge is not None) + self.has_output + self.has_sensor
+                   + 2 * self.has_drive)
         out.extend([self._float] * n_float)
         return out
 
-    def encode(self, snap: Any, stamp_ns: int) -> list[bytes]:
-        """CDR payloads of every tick topic, in `tick_topics` order, stamped ``stamp_ns``."""
+    def encode(self, snap: Any, stamp_ns: int, measured: float = 0.0) -> list[bytes]:
+        """CDR payloads of every tick topic, in `tick_topics` order, stamped ``stamp_ns``;
+        ``measured`` is the sensor's reading of the tick (used if the mechanism has one)."""
         if not self.packed:
-            return [serialize_message(m) for m in self.messages(snap, stamp_ns)]
+            return [serialize_message(m) for m in self.messages(snap, stamp_ns, measured)]
         sec, nsec = split_stamp(stamp_ns)
         out: list[bytes] = []
         if self.publishes_clock:
@@ -239,13 +247,15 @@ class StageInterface:
             out.append(f(float(snap.compression)))
         if self.has_output:
             out.append(f(float(snap.output)))
+        if self.has_sensor:
+            out.append(f(float(measured)))
         if self.has_drive:
             out.append(f(float(snap.drive_input)))
             out.append(f(float(snap.drive_force)))
         return out
 
     # ------------------------------------------------------ reference messages
-    def messages(self, snap: Any, stamp_ns: int) -> list[Any]:
+    def messages(self, snap: Any, stamp_ns: int, measured: float = 0.0) -> list[Any]:
         """The same messages as `encode`, as rclpy message objects (the reference)."""
         stamp = stamp_msg(stamp_ns)
         out: list[Any] = []
@@ -291,6 +301,8 @@ class StageInterface:
             out.append(Float64(data=float(snap.compression)))
         if self.has_output:
             out.append(Float64(data=float(snap.output)))
+        if self.has_sensor:
+            out.append(Float64(data=float(measured)))
         if self.has_drive:
             out.append(Float64(data=float(snap.drive_input)))
             out.append(Float64(data=float(snap.drive_force)))

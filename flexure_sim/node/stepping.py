@@ -15,6 +15,7 @@ import threading
 import time
 from typing import Any, Optional, Sequence
 
+from ..engine.sensor import Sensor
 from ..engine.solver import Simulation, SolverError
 from .diagnostics import Diagnostics
 from .drive_input import CommandFilter, WarningThrottle
@@ -49,6 +50,9 @@ class SteppingLoop:
         self.dt = dt
         self.n_steps, _ = steps_per_tick(rate, dt)
         self.diag_every = max(1, round(rate / DIAGNOSTICS_RATE))
+        #: The output's sensor (``output/measured``), sampled once per published tick.
+        spec = interface.mechanism.sensor if interface.has_sensor else None
+        self.sensor: Optional[Sensor] = Sensor(spec, 1.0 / rate) if spec is not None else None
         self.pacer: Optional[Pacer] = (
             Pacer(1.0 / rate, spin_s=min(wake_spin, 1.0 / rate)) if time_mode == "realtime"
             else None)
@@ -177,7 +181,8 @@ class SteppingLoop:
         t2 = perf()
         self.snapshot = snap
         stamp = round(snap.t * 1e9)
-        payloads = self.interface.encode(snap, stamp)
+        measured = self.sensor.sample(float(snap.output)) if self.sensor is not None else 0.0
+        payloads = self.interface.encode(snap, stamp, measured)
         # Recorded first, so that the file holds every message a subscriber can have seen even
         # if a shutdown interrupts the publishing. Channels 0..n-1: the tick topics.
         if self.session.current is not None:
@@ -205,6 +210,8 @@ class SteppingLoop:
         self.rate = rate
         self.n_steps, _ = steps_per_tick(rate, self.dt)
         self.diag_every = max(1, round(rate / DIAGNOSTICS_RATE))
+        if self.sensor is not None:
+            self.sensor.set_period(1.0 / rate)
         if self.pacer is not None:
             self.pacer.set_period(1.0 / rate)
         self._log.info(f"publish_rate {rate:g} Hz: {self.n_steps} engine steps per tick")
@@ -212,6 +219,8 @@ class SteppingLoop:
     def reset(self) -> None:
         """Back to t = 0 and the initial command (stepping thread); counters are kept."""
         self.sim.reset()
+        if self.sensor is not None:
+            self.sensor.reset()
         if self.filter is not None:
             self.filter.reset()
             if self.filter.applied != 0.0:

@@ -1,0 +1,123 @@
+"""The output sensor in a real stage_node: `output/measured` published and recorded per tick
+next to the true `output/displacement`, measured back from the recording (fast mode).
+
+Statistical tolerances: the sample RMS s of N independent normal draws of RMS sigma has a
+relative standard deviation of 1/sqrt(2N) (var(s^2) = 2 sigma^4 / N, delta method); the
+bounds below are 5 of those. Quantisation error of a signal whose noise sigma is twice the
+step q is uniform on [-q/2, q/2] to within exp(-2 pi^2 sigma^2 / q^2) ~ 1e-34 (Widrow's
+quantisation theorem), independent of the noise, so measured - true has variance
+sigma^2 + q^2 / 12.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import yaml
+from rclpy.serialization import serialize_message
+from scipy import signal
+from std_msgs.msg import Float64
+
+from flexure_sim.engine.config import load_mechanism, resolve_mechanism_path
+from flexure_sim.engine.sensor import SensorSpec
+from flexure_sim.node.interface import StageInterface
+from flexure_sim.engine.solver import Simulation
+from flexure_sim.recording import read_log
+
+from node_harness import NodeProcess, Peer, next_domain_id
+
+TICKS = 3000
+
+
+@pytest.fixture
+def domain() -> int:
+    return next_domain_id()
+
+
+def stage_file(path, sensor: dict) -> str:
+    data = yaml.safe_load(resolve_mechanism_path("microstage").read_text())
+    data["sensor"] = sensor
+    path.write_text(yaml.safe_dump(data))
+    return str(path)
+
+
+def recorded_run(tmp_path, domain, sensor: dict, command: float = 1.0e-6):
+    """output/displacement and output/measured of one fast-mode run of TICKS ticks (with a
+    drive step early on), from the node's recording, as arrays aligned by log time."""
+    mech = stage_file(tmp_path / "stage.yaml", sensor)
+    node = NodeProcess(tmp_path / "node", domain, dict(
+        mechanism=mech, time_mode="fast", publish_rate=1000.0, sim_step=1e-4, record=True,
+        record_path="run.mcap"))
+    peer = Peer(domain)
+    peer.watch = node
+    try:
+        peer.subscribe("/output/measured", Float64, depth=100000)
+        drive = peer.publisher("/drive/displacement", Float64)
+        peer.wait_for_publishers(["/output/measured"])
+        peer.wait_for_subscribers(drive)
+        drive.publish(Float64(data=command))
+        peer.spin_until(lambda: len(peer.received["/output/measured"]) > TICKS, 120, "measurements")
+        peer.watch = None
+        assert node.stop() == 0, node.stderr
+    finally:
+        peer.close()
+        node.kill()
+    log = read_log(node.cwd / "run.mcap")
+    true = {m.log_time_ns: m.message.data for m in log.messages_on("/output/displacement")}
+    meas = {m.log_time_ns: m.message.data for m in log.messages_on("/output/measured")}
+    assert sorted(true) == sorted(meas)  # one reading per tick, at the tick's time
+    times = sorted(true)
+    assert len(times) >= TICKS
+    return np.array([true[t] for t in times]), np.array([meas[t] for t in times])
+
+
+def test_interface_publishes_measured_after_output_packed_like_serialize_message():
+    mech = dataclasses.replace(load_mechanism("microstage"), sensor=SensorSpec(noise_rms=1e-9))
+    snap = Simulation(mech).static(1.35e-6).snapshot
+    itf = StageInterface(mech, "fast")
+    names = [t.name for t in itf.tick_topics]
+    assert names.index("output/measured") == names.index("output/displacement") + 1
+    packed = itf.encode(snap, 12_345, measured=3.25e-6)
+    reference = itf.messages(snap, 12_345, measured=3.25e-6)
+    i = names.index("output/measured")
+    assert reference[i] == Float64(data=3.25e-6)
+    assert packed[i] == serialize_message(reference[i])
+    assert "output/measured" not in [t.name for t in StageInterface(load_mechanism("microstage")).tick_topics]
+
+
+def test_recorded_latency_is_exact_and_bandwidth_is_the_zoh_first_order_filter(tmp_path, domain):
+    f_c, latency = 200.0, 3
+    true, meas = recorded_run(tmp_path, domain, {"bandwidth": f_c, "latency": latency})
+    assert true[-1] > 1e-5  # the stage moved
+    # Independent reference: scipy's zero-order-hold discretisation of 1 / (tau s + 1).
+    tau = 1.0 / (2 * math.pi * f_c)
+    num, den, _ = signal.cont2discrete(([1.0], [tau, 1.0]), 1e-3, method="zoh")
+    # scipy: y_k = -a1 y_{k-1} + b1 x_{k-1}; the sensor filters x_k, the value at the end of
+    # tick k (held over it), so drop the leading zero of num. Started settled at x_0.
+    b = np.ravel(num)[1:]
+    zi = signal.lfiltic(b, den, y=[true[0]])
+    reference = signal.lfilter(b, den, true, zi=zi)[0]
+    expected = np.r_[np.full(latency, reference[0]), reference[:-latency]]
+    np.testing.assert_allclose(meas, expected, rtol=0, atol=1e-12 * abs(true).max())
+    # The step's first visible change comes exactly `latency` ticks after the true one.
+    first_true = int(np.argmax(np.abs(true - true[0]) > 1e-12))
+    first_meas = int(np.argmax(np.abs(meas - meas[0]) > 1e-15))
+    assert first_meas == first_true + latency
+
+
+def test_recorded_noise_rms_and_quantisation_equal_the_configured_values(tmp_path, domain):
+    sigma, q = 2.0e-9, 1.0e-9
+    true, meas = recorded_run(tmp_path, domain, {"noise_rms": sigma, "resolution": q, "seed": 5})
+    k = meas / q
+    assert np.all(np.abs(k - np.round(k)) < 1e-6)  # every reading a multiple of q
+    err = meas - true
+    n = len(err)
+    expected = math.sqrt(sigma**2 + q**2 / 12)
+    rms = math.sqrt(float(np.mean(err**2)))
+    assert abs(rms / expected - 1.0) < 5 / math.sqrt(2 * n), (rms, expected)
+    assert abs(float(np.mean(err))) < 5 * expected / math.sqrt(n)
+    # The quantisation step seen in the data: the smallest non-zero difference of readings.
+    steps = np.abs(np.diff(meas))
+    assert np.min(steps[steps > 0]) == pytest.approx(q, rel=1e-6)
