@@ -1,0 +1,2 @@
+"""Control laws for closing a loop around the stage (pure Python, no ROS): the example
+controller node `flexure_sim.node.pi_controller` is a thin shell around `pi_notch`."""
