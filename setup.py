@@ -17,6 +17,7 @@ PACKAGE = "flexure_sim"
 EXECUTABLES = {
     "stage_node": "flexure_sim.node.stage_node:main",
     "replay": "flexure_sim.node.replay:main",
+    "pi_controller": "flexure_sim.node.pi_controller:main",
 }
 
 setup(
@@ -27,7 +28,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml")) + sorted(glob("config/*.xml"))),
         (f"share/{PACKAGE}/config/examples", sorted(glob("config/examples/*"))),
         (f"share/{PACKAGE}/config/studies", sorted(glob("config/studies/*.yaml"))),
         (f"share/{PACKAGE}/launch", sorted(glob("launch/*.launch.py"))),

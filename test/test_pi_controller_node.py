@@ -1,0 +1,71 @@
+"""pi_controller as users start it (`ros2 run flexure_sim pi_controller`, installed): one
+command per measurement, the setpoint topic followed, the law's answer (checked against the
+pure law), one-line errors. The closed loop with the stage: test_closed_loop.py."""
+from __future__ import annotations
+
+import signal
+import subprocess
+
+from std_msgs.msg import Float64
+
+from flexure_sim.control.pi_notch import PIConfig, PIController
+
+from node_harness import NodeProcess, Peer, next_domain_id
+from test_node_launch import PACKAGE, ament_prefix_path, bare_env, ros2_run_lookup
+
+
+def test_ros2_run_pi_controller_answers_each_measurement_once_and_follows_the_setpoint(tmp_path):
+    domain = next_domain_id()
+    exe = ros2_run_lookup(PACKAGE, "pi_controller", ament_prefix_path())
+    params = {"kp": 0.01, "ki": 20, "measurement_topic": "output/displacement"}
+    node = NodeProcess(tmp_path, domain, params, command=[str(exe)], env=bare_env(domain, tmp_path))
+    peer = Peer(domain)
+    peer.watch = node
+    try:
+        peer.subscribe("/drive/displacement", Float64)
+        measurement = peer.publisher("/output/displacement", Float64)
+        setpoint = peer.publisher("/setpoint", Float64)
+        peer.wait_for_subscribers(measurement, timeout=30)
+        peer.wait_for_subscribers(setpoint, timeout=30)
+        setpoint.publish(Float64(data=1.0e-5))
+        # The setpoint and the measurements come from two writers: wait for the setpoint's
+        # effect (a non-zero command) before counting.
+        peer.spin_until(lambda: _answer_to(peer, measurement, 0.0) > 0.0, 30, "the setpoint")
+        start = len(peer.received["/drive/displacement"])
+        for y in (2e-6, 4e-6, 6e-6):
+            measurement.publish(Float64(data=y))
+        peer.spin_until(lambda: len(peer.received["/drive/displacement"]) >= start + 3, 30, "commands")
+        peer.spin_for(0.2)  # nothing more arrives: one command per measurement
+        commands = [m.data for m in peer.messages("/drive/displacement")]
+    finally:
+        peer.close()
+        rc = node.stop(signal.SIGINT)
+    assert rc == 0, node.stderr
+    assert len(commands) == start + 3
+    # The pure law fed the same inputs: probes answered before the setpoint arrived had zero
+    # error (command 0, integral unchanged); those after it had error 1e-5.
+    law = PIController(PIConfig(0.01, 20.0, 1e-3, 0.0, 2e-6))
+    for c in commands[:start]:
+        if c != 0.0:
+            assert c == law.update(1.0e-5, 0.0)
+    assert commands[start:] == [law.update(1.0e-5, y) for y in (2e-6, 4e-6, 6e-6)]
+
+
+def _answer_to(peer: Peer, measurement, y: float) -> float:
+    """Publish one measurement, return the command that answers it."""
+    n = len(peer.received["/drive/displacement"])
+    measurement.publish(Float64(data=y))
+    peer.spin_until(lambda: len(peer.received["/drive/displacement"]) > n, 30, "a command")
+    return peer.last("/drive/displacement").data
+
+
+def test_invalid_parameters_stop_it_with_one_line(tmp_path):
+    domain = next_domain_id()
+    exe = ros2_run_lookup(PACKAGE, "pi_controller", ament_prefix_path())
+    result = subprocess.run(
+        [str(exe), "--ros-args", "-p", "command_min:=1.0e-6", "-p", "command_max:=0.0"],
+        env=bare_env(domain, tmp_path), capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1
+    assert result.stderr.strip().splitlines()[-1] == (
+        "pi_controller: error: invalid parameters: command_min 1e-06 exceeds command_max 0.0")
+    assert "Traceback" not in result.stderr
