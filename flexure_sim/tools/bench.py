@@ -15,7 +15,9 @@ Wall times are medians of several runs (7 for flexure_sim, 3 for the baseline).
   per second in this process without Dask, on a LocalCluster of 1 and of 2 worker processes,
   the parallel efficiency and the overhead of a batch (a task).
 - node (with --node): stage_node in fast mode (real-time factor) and real-time mode
-  (missed ticks, tick jitter) at 1 kHz with all topics and recording on.
+  (missed ticks, tick jitter) at 1 kHz with all topics and recording on; the closed loop with
+  pi_controller in a second process (missed ticks, jitter, command-to-applied latency:
+  tools/closed_loop.py).
 """
 from __future__ import annotations
 
@@ -306,7 +308,7 @@ def bench_node(duration: float = 30.0) -> dict:
     mode; real-time mode with the defaults; with a short wake_spin; and next to a controller
     process (an rclpy node subscribed to three topics at 1 kHz each), with the default
     stepping-thread niceness and with none."""
-    from . import measure  # needs ROS 2
+    from . import closed_loop, measure  # needs ROS 2
 
     def realtime(subscribe=False, flood_hz=0.0, **params) -> dict:
         return measure.run_node("realtime", duration, 1000.0, DEFAULT_STEP, True, subscribe,
@@ -321,6 +323,8 @@ def bench_node(duration: float = 30.0) -> dict:
         "realtime_controller": realtime(list(CONTROLLER_TOPICS)),
         "realtime_controller_nice0": realtime(list(CONTROLLER_TOPICS), stepping_nice=0),
         "realtime_flood": realtime(flood_hz=FLOOD_HZ),
+        # pi_controller in a second process closing the loop on output/measured (issue 12).
+        "realtime_closed_loop": closed_loop.run(duration),
     }
     return {
         "fast_rtf": fast["real_time_factor"],
@@ -331,6 +335,9 @@ def bench_node(duration: float = 30.0) -> dict:
         "realtime_rtf": default["real_time_factor"],
         "flood_missed_tick_fraction": runs["realtime_flood"]["missed_fraction"],
         "flood_command_time_us": runs["realtime_flood"]["command_time_mean_us"],
+        "closed_loop_missed_tick_fraction": runs["realtime_closed_loop"]["missed_fraction"],
+        "closed_loop_applied_next_tick_fraction":
+            runs["realtime_closed_loop"]["applied_next_tick_fraction"],
         "fast": fast,
         **runs,
     }
@@ -404,6 +411,10 @@ def print_table(res: dict) -> None:
                       + f": missed {r['missed_ticks']} of {r['paced_ticks']} ticks ({r['missed_fraction']:.3%}), "
                       f"node CPU {r['node_cpu_cores'] or float('nan'):.2f} cores, "
                       f"worst lateness {r['max_late_us'] / 1e3:.1f} ms")
+        if nd.get("realtime_closed_loop"):
+            from .closed_loop import summary
+
+            print("  " + summary(nd["realtime_closed_loop"]))
 
 
 def run(args: argparse.Namespace) -> dict:

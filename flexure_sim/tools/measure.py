@@ -27,7 +27,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 from ..engine.solver import DEFAULT_STEP
 
@@ -58,6 +58,7 @@ def run_node(
     keep_dir: Optional[Path] = None,
     params: Optional[dict[str, str]] = None,
     flood_hz: float = 0.0,
+    companion: Optional[Callable[[dict[str, str], Path], Any]] = None,
 ) -> dict[str, Any]:
     """Run the node in ``mode`` for warm-up + ``duration`` seconds and return the figures.
 
@@ -65,7 +66,8 @@ def run_node(
     runs in ``keep_dir`` (kept) or in a temporary directory (removed afterwards).
     ``flood_hz``: during the measuring window another process (`flood`) publishes drive
     commands at that rate; the figures then include the commands received and the node's
-    intake cost per command."""
+    intake cost per command. ``companion(env, workdir)``: started once the node runs (before
+    the warm-up), returns an object whose ``stop()`` ends it before the node stops."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.context import Context
@@ -110,12 +112,15 @@ def run_node(
         for spec in itf.tick_topics:
             if wanted is None or spec.name.lstrip("/") in wanted:
                 node.create_subscription(spec.msg_type, spec.name, count, QoSProfile(depth=1000), raw=True)
+    other = None
     try:
         deadline = time.monotonic() + 60.0
         while not samples:
             if proc.poll() is not None or time.monotonic() > deadline:
                 raise RuntimeError(f"stage_node did not start: see {workdir / 'node.stderr'}")
             executor.spin_once(timeout_sec=0.1)
+        if companion is not None:
+            other = companion(env, workdir)
         start_at = time.monotonic() + warmup
         while time.monotonic() < start_at:
             executor.spin_once(timeout_sec=0.05)
@@ -135,6 +140,8 @@ def run_node(
         cpu_end, cpu_wall_end = _cpu_seconds(proc.pid), time.monotonic()
         flood = flooder.result() if flooder is not None else None
     finally:
+        if other is not None:
+            other.stop()
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
         try:
