@@ -14,7 +14,8 @@ MS = 1_000_000
 
 def test_late_ticks_are_counted_from_the_answered_reading_to_the_applying_tick(tmp_path):
     readings = [1.1e-9, -0.7e-9, 2.3e-9, 0.4e-9, -1.9e-9]  # at the ends of ticks 1..5
-    applied = [1 * MS, 2 * MS, 4 * MS, 4 * MS]  # answers to readings 1..4: on time, on time, 1 late, on time
+    # Answers to readings 1..4: on time, on time, one tick late, on time.
+    applied = [1 * MS, 2 * MS, 4 * MS, 4 * MS]
     path = tmp_path / "run.mcap"
     with McapRecorder(path) as rec:
         rec.add_topic("/output/measured", "std_msgs/msg/Float64")
@@ -24,7 +25,8 @@ def test_late_ticks_are_counted_from_the_answered_reading_to_the_applying_tick(t
         for t in applied:
             rec.write("/drive/displacement", serialize_message(Float64(data=1e-7)), t)
     trace = tmp_path / "trace.txt"
-    trace.write_text("".join(f"{i} {y!r} 1e-07 0\n" for i, y in enumerate(readings[:4] + [9e-9], 1)))
+    traced = readings[:4] + [9e-9]  # the last command never reached the recording
+    trace.write_text("".join(f"{i} {y!r} 1e-07 0\n" for i, y in enumerate(traced, 1)))
     r = command_latency(path, trace, 1e-3)
     assert r["commands_traced"] == 5 and r["commands_recorded"] == 4
     assert r["commands_matched"] == 4 and r["commands_unmatched"] == 0

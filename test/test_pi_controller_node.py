@@ -18,7 +18,8 @@ def test_ros2_run_pi_controller_answers_each_measurement_once_and_follows_the_se
     domain = next_domain_id()
     exe = ros2_run_lookup(PACKAGE, "pi_controller", ament_prefix_path())
     params = {"kp": 0.01, "ki": 20, "measurement_topic": "output/displacement"}
-    node = NodeProcess(tmp_path, domain, params, command=[str(exe)], env=bare_env(domain, tmp_path))
+    node = NodeProcess(tmp_path, domain, params, command=[str(exe)],
+                       env=bare_env(domain, tmp_path))
     peer = Peer(domain)
     peer.watch = node
     try:
@@ -34,7 +35,8 @@ def test_ros2_run_pi_controller_answers_each_measurement_once_and_follows_the_se
         start = len(peer.received["/drive/displacement"])
         for y in (2e-6, 4e-6, 6e-6):
             measurement.publish(Float64(data=y))
-        peer.spin_until(lambda: len(peer.received["/drive/displacement"]) >= start + 3, 30, "commands")
+        peer.spin_until(lambda: len(peer.received["/drive/displacement"]) >= start + 3, 30,
+                        "commands")
         peer.spin_for(0.2)  # nothing more arrives: one command per measurement
         commands = [m.data for m in peer.messages("/drive/displacement")]
     finally:

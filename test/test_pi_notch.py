@@ -18,10 +18,12 @@ T = 1e-3
 def analog_notch_discretised(f0: float, zeta: float, depth: float):
     """scipy's bilinear transform of N(s) with w0 pre-warped to (2/T) tan(w0 T / 2)."""
     wa = 2.0 / T * math.tan(math.pi * f0 * T)
-    return signal.bilinear([1.0, 2 * depth * zeta * wa, wa**2], [1.0, 2 * zeta * wa, wa**2], fs=1 / T)
+    return signal.bilinear([1.0, 2 * depth * zeta * wa, wa**2], [1.0, 2 * zeta * wa, wa**2],
+                           fs=1 / T)
 
 
-@pytest.mark.parametrize("f0, zeta, depth", [(300.6, 0.1, 0.0), (120.0, 0.3, 0.2), (450.0, 0.05, 0.5)])
+@pytest.mark.parametrize("f0, zeta, depth",
+                         [(300.6, 0.1, 0.0), (120.0, 0.3, 0.2), (450.0, 0.05, 0.5)])
 def test_notch_coefficients_equal_scipy_bilinear_and_the_gain_at_f0_is_the_depth(f0, zeta, depth):
     b, a = notch_coefficients(f0, zeta, depth, T)
     b_ref, a_ref = analog_notch_discretised(f0, zeta, depth)
@@ -71,7 +73,8 @@ def test_anti_windup_holds_the_integral_at_the_limit_and_leaves_it_at_once():
     (PIConfig(-0.01, 20.0, T, 0.0, 1e-6), "kp and ki must not be negative"),
     (PIConfig(0.01, 20.0, T, 2e-6, 1e-6), "command_min"),
     (PIConfig(0.01, 20.0, T, 0.0, 1e-6, notch_frequency=500.0), "below the Nyquist"),
-    (PIConfig(0.01, 20.0, T, 0.0, 1e-6, notch_frequency=300.0, notch_damping=0.0), "notch_damping"),
+    (PIConfig(0.01, 20.0, T, 0.0, 1e-6, notch_frequency=300.0, notch_damping=0.0),
+     "notch_damping"),
     (PIConfig(0.01, 20.0, T, 0.0, 1e-6, notch_frequency=300.0, notch_depth=1.5), "notch_depth"),
     (PIConfig(0.01, math.nan, T, 0.0, 1e-6), "finite"),
 ])

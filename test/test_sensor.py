@@ -35,7 +35,8 @@ def test_bandwidth_follows_a_new_period():
     sensor = Sensor(SensorSpec(bandwidth=100.0), T)
     sensor.sample(0.0)
     sensor.set_period(2e-3)
-    assert sensor.sample(1.0) == pytest.approx(1.0 - math.exp(-2e-3 * 2 * math.pi * 100.0), abs=1e-15)
+    expected = 1.0 - math.exp(-2e-3 * 2 * math.pi * 100.0)
+    assert sensor.sample(1.0) == pytest.approx(expected, abs=1e-15)
 
 
 def test_latency_delays_by_exactly_that_many_ticks():
@@ -78,7 +79,8 @@ def stage(sensor) -> dict:
 
 
 def test_sensor_block_is_parsed_and_bad_values_name_the_key():
-    mech = mechanism_from_dict(stage({"noise_rms": 1e-9, "latency": 2, "bandwidth": 5000.0}), "s.yaml")
+    block = {"noise_rms": 1e-9, "latency": 2, "bandwidth": 5000.0}
+    mech = mechanism_from_dict(stage(block), "s.yaml")
     assert mech.sensor == SensorSpec(noise_rms=1e-9, latency=2, bandwidth=5000.0)
     assert mechanism_from_dict(stage({}), "s.yaml").sensor == SensorSpec()
     for bad, message in [

@@ -50,8 +50,9 @@ class PIConfig:
         if self.u_min > self.u_max:
             return f"command_min {self.u_min!r} exceeds command_max {self.u_max!r}"
         if self.notch_frequency < 0.0 or self.notch_frequency >= 0.5 / self.period:
-            return (f"notch_frequency must be in [0, {0.5 / self.period:g}) Hz (0: off; below the "
-                    f"Nyquist frequency of the {self.period:g} s period), got {self.notch_frequency!r}")
+            return (f"notch_frequency must be in [0, {0.5 / self.period:g}) Hz (0: off; below "
+                    f"the Nyquist frequency of the {self.period:g} s period), got "
+                    f"{self.notch_frequency!r}")
         if self.notch_damping <= 0.0:
             return f"notch_damping must be positive, got {self.notch_damping!r}"
         if not 0.0 <= self.notch_depth <= 1.0:
@@ -59,8 +60,11 @@ class PIConfig:
         return ""
 
 
+Coefficients = tuple[float, float, float]
+
+
 def notch_coefficients(frequency: float, damping: float, depth: float,
-                       period: float) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+                       period: float) -> tuple[Coefficients, Coefficients]:
     """(b, a) of the pre-warped bilinear transform of N(s) (module docstring), a[0] = 1."""
     w0 = 2.0 * math.pi * frequency
     k = w0 / math.tan(0.5 * w0 * period)
@@ -76,7 +80,7 @@ class Biquad:
     """y_k = b0 x_k + b1 x_{k-1} + b2 x_{k-2} - a1 y_{k-1} - a2 y_{k-2} (transposed direct
     form II), starting at rest."""
 
-    def __init__(self, b: tuple[float, float, float], a: tuple[float, float, float]) -> None:
+    def __init__(self, b: Coefficients, a: Coefficients) -> None:
         self.b, self.a = b, a
         self.reset()
 

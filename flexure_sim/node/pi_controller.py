@@ -108,11 +108,13 @@ def make_node() -> Any:
             self.setpoint = float(values["setpoint"])
             self.answered = 0
             self.handshake = bool(values["handshake"])
-            self.trace = open(values["trace_path"], "w") if values["trace_path"] else None  # noqa: SIM115
+            path = values["trace_path"]
+            self.trace = open(path, "w") if path else None  # noqa: SIM115
             self.command_pub = self.create_publisher(Float64, values["command_topic"], qos)
             self.answered_pub = (self.create_publisher(UInt64, "~/answered", qos)
                                  if self.handshake else None)
-            self.create_subscription(Float64, values["measurement_topic"], self.on_measurement, qos)
+            self.create_subscription(Float64, values["measurement_topic"], self.on_measurement,
+                                     qos)
             self.create_subscription(Float64, values["setpoint_topic"], self.on_setpoint, qos)
             self.create_service(Trigger, "~/reset", self.on_reset)
             self.add_on_set_parameters_callback(self.validate)

@@ -142,7 +142,7 @@ def summary(r: dict[str, Any]) -> str:
             f"{pct(r.get('missed_fraction'))}, jitter p50/p99 {1e6 * r['jitter_p50_s']:.0f}/"
             f"{1e6 * r['jitter_p99_s']:.0f} us, commands applied at the next tick "
             f"{pct(r['applied_next_tick_fraction'])} (late ticks mean "
-            f"{r['late_ticks_mean'] if r['late_ticks_mean'] is None else round(r['late_ticks_mean'], 3)}"
+            f"{None if r['late_ticks_mean'] is None else round(r['late_ticks_mean'], 3)}"
             f", p99 {r['late_ticks_p99']}, max {r['late_ticks_max']}; "
             f"{r['commands_matched']} matched, {r['commands_unmatched']} unmatched)")
 
