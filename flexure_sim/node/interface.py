@@ -180,6 +180,11 @@ class StageInterface:
                 "drive_force", topics.DRIVE_FORCE, Float64, "N", "",
                 f"force the actuator applies to the driven body {mech.drive.body} along the drive axis"))
         self.tick_topics: tuple[TopicSpec, ...] = tuple(specs)
+        #: Indices in `tick_topics` of the control topics (published every tick whatever
+        #: ``monitor_rate``): everything but poses, wrenches and deflections.
+        monitoring = ("poses", "pose", "wrench", "deflection")
+        self.control_indices: tuple[int, ...] = tuple(
+            i for i, spec in enumerate(specs) if spec.key.split(":")[0] not in monitoring)
         self.diagnostics = _spec("diagnostics", topics.DIAGNOSTICS, DiagnosticArray, "", "",
                                  "real-time factor, step times, solver work, command counters")
         self.command: Optional[TopicSpec] = None
@@ -217,15 +222,36 @@ class StageInterface:
         out.extend([self._float] * n_float)
         return out
 
-    def encode(self, snap: Any, stamp_ns: int, measured: float = 0.0) -> list[bytes]:
+    def encode(self, snap: Any, stamp_ns: int, measured: float = 0.0,
+               monitor: bool = True) -> list[bytes]:
         """CDR payloads of every tick topic, in `tick_topics` order, stamped ``stamp_ns``;
-        ``measured`` is the sensor's reading of the tick (used if the mechanism has one)."""
+        ``measured`` is the sensor's reading of the tick (used if the mechanism has one).
+        ``monitor`` False: only the control topics (those of `control_indices`, in order)."""
         if not self.packed:
-            return [serialize_message(m) for m in self.messages(snap, stamp_ns, measured)]
+            messages = self.messages(snap, stamp_ns, measured)
+            if not monitor:
+                messages = [messages[i] for i in self.control_indices]
+            return [serialize_message(m) for m in messages]
         sec, nsec = split_stamp(stamp_ns)
         out: list[bytes] = []
         if self.publishes_clock:
             out.append(self._clock.pack(sec, nsec))
+        if monitor:
+            self._encode_monitoring(snap, sec, nsec, out)
+        f = self._float.pack
+        if self.compression_hinge is not None:
+            out.append(f(float(snap.compression)))
+        if self.has_output:
+            out.append(f(float(snap.output)))
+        if self.has_sensor:
+            out.append(f(float(measured)))
+        if self.has_drive:
+            out.append(f(float(snap.drive_input)))
+            out.append(f(float(snap.drive_force)))
+        return out
+
+    def _encode_monitoring(self, snap: Any, sec: int, nsec: int, out: list[bytes]) -> None:
+        """Append the poses, wrenches and deflections of ``snap`` (packed) to ``out``."""
         flat: list[float] = []
         singles: list[bytes] = []
         sin, cos = math.sin, math.cos
@@ -242,17 +268,6 @@ class StageInterface:
             out.append(wp.pack(sec, nsec, fx, fy, 0.0, 0.0, 0.0, m))
             h = 0.5 * a
             out.append(dp.pack(sec, nsec, px, py, 0.0, 0.0, 0.0, sin(h), cos(h)))
-        f = self._float.pack
-        if self.compression_hinge is not None:
-            out.append(f(float(snap.compression)))
-        if self.has_output:
-            out.append(f(float(snap.output)))
-        if self.has_sensor:
-            out.append(f(float(measured)))
-        if self.has_drive:
-            out.append(f(float(snap.drive_input)))
-            out.append(f(float(snap.drive_force)))
-        return out
 
     # ------------------------------------------------------ reference messages
     def messages(self, snap: Any, stamp_ns: int, measured: float = 0.0) -> list[Any]:

@@ -54,6 +54,11 @@ def parameter_specs(drive_defaults: Optional[tuple[float, float, float]] = None)
                   "Ticks per second: each tick advances the simulation by 1/publish_rate s and "
                   "publishes every topic once (diagnostics at ~10 Hz). 1/publish_rate must be a "
                   "whole multiple of sim_step."),
+        ParamSpec("monitor_rate", 0.0, float, "Hz", False, 0.0, MAX_PUBLISH_RATE,
+                  "Rate of the monitoring topics (body poses, hinge wrenches and deflections): "
+                  "published and recorded every round(publish_rate / monitor_rate)-th tick, "
+                  "while the control topics (output, output/measured, drive, compression, "
+                  "/clock) keep every tick. 0: every tick."),
         ParamSpec("sim_step", DEFAULT_STEP, float, "s", True, 0.0, MAX_SIM_STEP,
                   "Fixed engine step, in (0, 0.01] s; must divide the publish period. Read-only."),
         ParamSpec("time_mode", "realtime", str, "", True, None, None,
@@ -135,6 +140,12 @@ def steps_per_tick(publish_rate: float, sim_step: float) -> tuple[int, Optional[
     return n, None
 
 
+def monitor_every(publish_rate: float, monitor_rate: float) -> int:
+    """Ticks per publication of the monitoring topics: round(publish_rate / monitor_rate),
+    1 for monitor_rate 0."""
+    return 1 if monitor_rate <= 0 else max(1, round(publish_rate / monitor_rate))
+
+
 def validate(values: Mapping[str, Any]) -> Optional[str]:
     """Why this complete set of parameter values is invalid, or None."""
     _, problem = steps_per_tick(values["publish_rate"], values["sim_step"])
@@ -145,6 +156,11 @@ def validate(values: Mapping[str, Any]) -> Optional[str]:
     problem = limits_problem(values["stroke_min"], values["stroke_max"], values["slew_rate"])
     if problem:
         return problem
+    monitor = values["monitor_rate"]
+    if not (isinstance(monitor, (int, float)) and math.isfinite(monitor)
+            and 0.0 <= monitor <= values["publish_rate"]):
+        return (f"monitor_rate: must be 0 (every tick) or in (0, publish_rate "
+                f"{values['publish_rate']:g}] Hz, got {monitor!r}")
     spin = values["wake_spin"]
     if not (isinstance(spin, (int, float)) and math.isfinite(spin) and 0.0 <= spin <= 1.0):
         return f"wake_spin: must be in [0, 1] s, got {spin!r}"

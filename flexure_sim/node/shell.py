@@ -138,7 +138,8 @@ class StageNode(Node):
         self.loop = loop = SteppingLoop(
             sim, drive_filter, self.interface, tick_pubs, self.session, self._log,
             time_mode=time_mode, rate=float(values["publish_rate"]), dt=dt,
-            wake_spin=float(values["wake_spin"]), nice=int(values["stepping_nice"]))
+            wake_spin=float(values["wake_spin"]), nice=int(values["stepping_nice"]),
+            monitor_rate=float(values["monitor_rate"]))
         # Recording channels: the tick topics in publishing order, diagnostics, commands.
         self._command_sub = None
         if self.interface.command is not None:
@@ -225,9 +226,10 @@ class StageNode(Node):
         if names & {"stroke_min", "stroke_max", "slew_rate"} and loop.filter is not None:
             limits = self._limits(values)
             loop.requests.call(lambda: loop.filter.set_limits(limits))
-        if names & {"publish_rate", "wake_spin"}:
+        if names & {"publish_rate", "wake_spin", "monitor_rate"}:
             rate, spin = float(values["publish_rate"]), float(values["wake_spin"])
-            loop.requests.call(lambda: loop.set_pacing(rate, spin))
+            monitor = float(values["monitor_rate"])
+            loop.requests.call(lambda: loop.set_pacing(rate, spin, monitor))
         if "record" in names and not self._sync_record_param:
             ok, message = self._set_recording(bool(values["record"]))
             (self._log.info if ok else self._log.error)(message)

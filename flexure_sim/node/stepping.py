@@ -21,7 +21,7 @@ from .diagnostics import Diagnostics
 from .drive_input import CommandFilter, WarningThrottle
 from .engine_guard import EngineHold, snapshot_finite
 from .pacing import Pacer, set_thread_nice
-from .params import steps_per_tick
+from .params import monitor_every, steps_per_tick
 from .requests import RequestQueue
 from .session import RecordingSession
 
@@ -38,7 +38,8 @@ class SteppingLoop:
 
     def __init__(self, sim: Simulation, drive_filter: Optional[CommandFilter], interface: Any,
                  publishers: Sequence[Any], session: RecordingSession, log: Any, *,
-                 time_mode: str, rate: float, dt: float, wake_spin: float, nice: int) -> None:
+                 time_mode: str, rate: float, dt: float, wake_spin: float, nice: int,
+                 monitor_rate: float = 0.0) -> None:
         self.sim = sim
         self.filter = drive_filter
         self.interface = interface
@@ -50,6 +51,10 @@ class SteppingLoop:
         self.dt = dt
         self.n_steps, _ = steps_per_tick(rate, dt)
         self.diag_every = max(1, round(rate / DIAGNOSTICS_RATE))
+        self.monitor_rate = monitor_rate
+        #: Ticks per publication of the monitoring topics (``monitor_rate``).
+        self.monitor_every = monitor_every(rate, monitor_rate)
+        self._control_publishers = [self._publishers[i] for i in interface.control_indices]
         #: The output's sensor (``output/measured``), sampled once per published tick.
         spec = interface.mechanism.sensor if interface.has_sensor else None
         self.sensor: Optional[Sensor] = Sensor(spec, 1.0 / rate) if spec is not None else None
@@ -182,12 +187,18 @@ class SteppingLoop:
         self.snapshot = snap
         stamp = round(snap.t * 1e9)
         measured = self.sensor.sample(float(snap.output)) if self.sensor is not None else 0.0
-        payloads = self.interface.encode(snap, stamp, measured)
+        monitor = self.ticks % self.monitor_every == 0
+        payloads = self.interface.encode(snap, stamp, measured, monitor)
+        if monitor:
+            channels: Sequence[int] = range(len(payloads))
+            publishers = self._publishers
+        else:
+            channels, publishers = self.interface.control_indices, self._control_publishers
         # Recorded first, so that the file holds every message a subscriber can have seen even
         # if a shutdown interrupts the publishing. Channels 0..n-1: the tick topics.
         if self.session.current is not None:
-            self.session.write(list(enumerate(payloads)), stamp)
-        for pub, payload in zip(self._publishers, payloads):
+            self.session.write(list(zip(channels, payloads)), stamp)
+        for pub, payload in zip(publishers, payloads):
             pub.publish(payload)
         t3 = perf()
         if self.diagnostics is not None:
@@ -201,8 +212,10 @@ class SteppingLoop:
             self.diagnostics.publish(stamp)
 
     # ------------------------------------------------------------- live changes
-    def set_pacing(self, rate: float, wake_spin: float) -> None:
-        """New publish rate and busy-wait (stepping thread)."""
+    def set_pacing(self, rate: float, wake_spin: float, monitor_rate: float = 0.0) -> None:
+        """New publish rate, busy-wait and monitoring rate (stepping thread)."""
+        self.monitor_rate = monitor_rate
+        self.monitor_every = monitor_every(rate, monitor_rate)
         if self.pacer is not None:
             self.pacer.spin_s = min(wake_spin, 1.0 / rate)
         if rate == self.rate:

@@ -299,6 +299,8 @@ def bench_sweep(designs: int = 1000, batch_size: int = 50, overhead_tasks: int =
 LOW_WAKE_SPIN_S = 2e-4
 #: Rate of the drive-command flood of the last real-time run (another process, tools/flood.py).
 FLOOD_HZ = 10000.0
+#: monitor_rate of the second closed-loop run (Hz).
+MONITOR_RATE = 100.0
 #: Topics a controller would subscribe to, for the real-time runs next to a subscriber.
 CONTROLLER_TOPICS = (topics.OUTPUT, topics.DRIVE_FORCE, topics.hinge_compression("a"))
 
@@ -325,6 +327,9 @@ def bench_node(duration: float = 30.0) -> dict:
         "realtime_flood": realtime(flood_hz=FLOOD_HZ),
         # pi_controller in a second process closing the loop on output/measured (issue 12).
         "realtime_closed_loop": closed_loop.run(duration),
+        # The same with the monitoring topics at 100 Hz (control topics still every tick).
+        "realtime_closed_loop_monitor100": closed_loop.run(
+            duration, params={"monitor_rate": repr(MONITOR_RATE)}),
     }
     return {
         "fast_rtf": fast["real_time_factor"],
@@ -338,6 +343,8 @@ def bench_node(duration: float = 30.0) -> dict:
         "closed_loop_missed_tick_fraction": runs["realtime_closed_loop"]["missed_fraction"],
         "closed_loop_applied_next_tick_fraction":
             runs["realtime_closed_loop"]["applied_next_tick_fraction"],
+        "closed_loop_monitor100_missed_tick_fraction":
+            runs["realtime_closed_loop_monitor100"]["missed_fraction"],
         "fast": fast,
         **runs,
     }
@@ -411,10 +418,13 @@ def print_table(res: dict) -> None:
                       + f": missed {r['missed_ticks']} of {r['paced_ticks']} ticks ({r['missed_fraction']:.3%}), "
                       f"node CPU {r['node_cpu_cores'] or float('nan'):.2f} cores, "
                       f"worst lateness {r['max_late_us'] / 1e3:.1f} ms")
-        if nd.get("realtime_closed_loop"):
-            from .closed_loop import summary
+        from .closed_loop import summary
 
-            print("  " + summary(nd["realtime_closed_loop"]))
+        for key, label in (("realtime_closed_loop", ""),
+                           ("realtime_closed_loop_monitor100",
+                            f" [monitor_rate {MONITOR_RATE:g} Hz]")):
+            if nd.get(key):
+                print("  " + summary(nd[key]) + label)
 
 
 def run(args: argparse.Namespace) -> dict:

@@ -1,7 +1,7 @@
 """The closed loop at 1 kHz, measured: stage_node in real-time mode (recording on) with
 ``pi_controller`` in a second process answering every measurement.
 
-    python -m flexure_sim.tools.closed_loop --duration 10 [--json]
+    python -m flexure_sim.tools.closed_loop --duration 10 [--monitor-rate 100] [--json]
 
 The stage is the built-in one with a sensor (`SENSOR`: its noise makes every reading unique,
 which is how commands are matched to the ticks they answer). Figures: the node's missed
@@ -151,9 +151,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m flexure_sim.tools.closed_loop",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--duration", type=float, default=10.0, help="measuring window, s")
+    parser.add_argument("--monitor-rate", type=float, default=0.0,
+                        help="the node's monitor_rate, Hz (0: every tick)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
-    r = run(args.duration)
+    r = run(args.duration, params={"monitor_rate": repr(args.monitor_rate)})
     print(json.dumps(r) if args.json else summary(r))
     return 0
 
