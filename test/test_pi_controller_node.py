@@ -33,10 +33,9 @@ def test_ros2_run_pi_controller_answers_each_measurement_once_and_follows_the_se
         # effect (a non-zero command) before counting.
         peer.spin_until(lambda: _answer_to(peer, measurement, 0.0) > 0.0, 30, "the setpoint")
         start = len(peer.received["/drive/displacement"])
+        # One at a time: the controller keeps only the newest measurement (keep last 1).
         for y in (2e-6, 4e-6, 6e-6):
-            measurement.publish(Float64(data=y))
-        peer.spin_until(lambda: len(peer.received["/drive/displacement"]) >= start + 3, 30,
-                        "commands")
+            _answer_to(peer, measurement, y)
         peer.spin_for(0.2)  # nothing more arrives: one command per measurement
         commands = [m.data for m in peer.messages("/drive/displacement")]
     finally:

@@ -8,7 +8,9 @@ measurement (``output/measured``, or ``output/displacement``), keeps the latest 
 value) and answers every measurement received with exactly one command on
 ``drive/displacement`` (std_msgs/Float64, m). Nothing is timed by a clock: one command per
 measurement, so in the stage's lockstep mode the run is a deterministic function of the
-measurements (README "Developing a controller against the stage").
+measurements (README "Developing a controller against the stage"). The measurement
+subscription keeps only the newest reading (reliable, keep last 1): in real time a
+controller that fell behind skips stale readings rather than answering them ever later.
 
 ``handshake`` (lockstep drivers): after each command the node waits until every matched
 reliable subscriber (the stage) has acknowledged it (`Publisher.wait_for_all_acked`), then
@@ -88,6 +90,12 @@ def make_node() -> Any:
 
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    # The measurement: the newest reading only. A controller that fell behind answers the
+    # latest reading instead of working through a queue of stale ones (whose answers would
+    # come ever later); in lockstep nothing is skipped (one reading per step).
+    newest = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                        reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.VOLATILE)
 
     class PIControllerNode(Node):
         def __init__(self) -> None:
@@ -114,7 +122,7 @@ def make_node() -> Any:
             self.answered_pub = (self.create_publisher(UInt64, "~/answered", qos)
                                  if self.handshake else None)
             self.create_subscription(Float64, values["measurement_topic"], self.on_measurement,
-                                     qos)
+                                     newest)
             self.create_subscription(Float64, values["setpoint_topic"], self.on_setpoint, qos)
             self.create_service(Trigger, "~/reset", self.on_reset)
             self.add_on_set_parameters_callback(self.validate)
