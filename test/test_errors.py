@@ -1,5 +1,9 @@
-"""One exception root: every error class of the package derives from FlexureSimError, and
-keeps its built-in base (ValueError / RuntimeError) so existing handlers still catch it."""
+"""
+One exception root.
+
+Every error class of the package derives from FlexureSimError, and keeps its built-in base
+(ValueError / RuntimeError) so existing handlers still catch it.
+"""
 
 import importlib
 import inspect

@@ -1,5 +1,8 @@
-"""The node's recorder helper process, driven directly (no ROS): a real child process writes
-a real MCAP file that the recording layer reads back."""
+"""
+The node's recorder helper process, driven directly (no ROS).
+
+A real child process writes a real MCAP file that the recording layer reads back.
+"""
 import os
 import struct
 import subprocess
@@ -87,8 +90,12 @@ def test_a_slow_recorder_loses_nothing_when_the_node_may_wait(tmp_path, monkeypa
 
 
 def test_a_slow_recorder_in_real_time_counts_every_message_it_drops(tmp_path, monkeypatch) -> None:
-    """Real-time mode: the node never waits; whole ticks the pipe cannot take are dropped, and
-    the file's metadata, the recording's count and `flexure-sim info` all say how many."""
+    """
+    Real-time mode.
+
+    The node never waits; whole ticks the pipe cannot take are dropped, and the file's metadata,
+    the recording's count and `flexure-sim info` all say how many.
+    """
     monkeypatch.setenv(WRITE_DELAY_ENV, DISK_DELAY_S)
     monkeypatch.setenv(MAX_BACKLOG_ENV, str(256 << 10))
     process = RecorderProcess()

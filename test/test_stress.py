@@ -122,8 +122,12 @@ def test_analyse_reports_the_peak_stress_ratio_of_each_step(tmp_path, capsys):
 
 
 def test_static_stress_with_a_polynomial_hinge_covers_the_notch_hinges(capsys):
-    """A fitted polynomial hinge has no geometry: no stress for it, the others as usual; the
-    analyses that need the generic force chain say why they cannot run."""
+    """
+    A fitted polynomial hinge has no geometry.
+
+    No stress for it, the others as usual; the analyses that need the generic force chain say why
+    they cannot run.
+    """
     from flexure_sim.engine.config import resolve_mechanism_path
 
     path = str(

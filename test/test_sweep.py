@@ -1,5 +1,9 @@
-"""flexure-sim sweep: outputs against independent figures, failed designs, Ctrl-C and --resume,
-a LocalCluster worker killed mid-study, bit-identical results for any worker count."""
+"""
+flexure-sim sweep.
+
+Outputs against independent figures, failed designs, Ctrl-C and --resume, a LocalCluster worker
+killed mid-study, bit-identical results for any worker count.
+"""
 import json
 import math
 import os
@@ -25,7 +29,7 @@ STAGE_STUDY = ROOT / "config" / "studies" / "stage_tolerance.yaml"
 
 
 def _small_stage_study(tmp_path: Path, samples=200, batch_size=20, **over) -> Path:
-    """The shipped stage tolerance study, with fewer designs."""
+    """Return the shipped stage tolerance study, with fewer designs."""
     data = yaml.safe_load(STAGE_STUDY.read_text())
     data.update(samples=samples, batch_size=batch_size, **over)
     path = tmp_path / "study.yaml"
@@ -95,10 +99,13 @@ def test_outputs_do_not_depend_on_their_order():
 
 
 def test_monte_carlo_spread_of_the_gain_agrees_with_the_first_order_prediction(tmp_path):
-    """2000 designs of the stage study (h +- 5 um on all seven hinges): the standard deviation
-    of the gain is sqrt(sum (dg/dh_i)^2) * 5 um, with dg/dh_i by central differences (the
-    exact sensitivities will replace them), within 4 standard errors (1/sqrt(2n)) plus 1 %
-    for the neglected second-order terms."""
+    """
+    2000 designs of the stage study (h +- 5 um on all seven hinges).
+
+    The standard deviation of the gain is sqrt(sum (dg/dh_i)^2) * 5 um, with dg/dh_i by central
+    differences (the exact sensitivities will replace them), within 4 standard errors (1/sqrt(2n))
+    plus 1 % for the neglected second-order terms.
+    """
     study = load_study(_small_stage_study(tmp_path, samples=2000, batch_size=2000), OUTPUTS)
     gain = evaluate_batch(study, 0, 2000)["gain"]
     base = np.array([p.base[0] for p in study.parameters])
@@ -194,9 +201,12 @@ def test_unreachable_scheduler_and_a_directory_as_output_get_one_line(tmp_path):
 
 
 def test_ctrl_c_at_a_terminal_stops_a_local_cluster_study_cleanly(tmp_path):
-    """Ctrl-C at a terminal signals the whole foreground process group: the workers of the
-    LocalCluster ignore it (no KeyboardInterrupt tracebacks), the command stops the study
-    and keeps the finished batches."""
+    """
+    Ctrl-C at a terminal signals the whole foreground process group.
+
+    The workers of the LocalCluster ignore it (no KeyboardInterrupt tracebacks), the command stops
+    the study and keeps the finished batches.
+    """
     study = _small_stage_study(tmp_path, samples=400, batch_size=10)
     out = tmp_path / "out.parquet"
     env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}

@@ -1,4 +1,5 @@
-"""Where and how a hinge's compression is measured (README "Conventions").
+"""
+Where and how a hinge's compression is measured (README "Conventions").
 
 The compression hinge (e.g. the stage's joint a) is measured at its centre of stiffness,
 along the drive axis: the displacement from rest of that point as carried by the hinge's
@@ -26,10 +27,13 @@ def point_displacement(i: int, c: np.ndarray, z: np.ndarray, z0: np.ndarray) -> 
 
 
 def stiffness_centre(K: np.ndarray) -> np.ndarray:
-    """Centre of stiffness of a hinge in its frame's coordinates: the point where the
-    stiffness at rest K = [[Ko, Kc^T], [Kc, Kt]] (moment first) decouples. Moving the frame
-    by p turns the coupling into Kc + Kt (-J p) (``kinematics.transform_stiffness``), which
-    vanishes at p = -J Kt^-1 Kc."""
+    """
+    Centre of stiffness of a hinge in its frame's coordinates.
+
+    The point where the stiffness at rest K = [[Ko, Kc^T], [Kc, Kt]] (moment first) decouples.
+    Moving the frame by p turns the coupling into Kc + Kt (-J p)
+    (``kinematics.transform_stiffness``), which vanishes at p = -J Kt^-1 Kc.
+    """
     K = np.asarray(K, dtype=float)
     return -J @ np.linalg.solve(K[1:, 1:], K[1:, 0])
 

@@ -82,7 +82,7 @@ def shown(value: Any, limit: int = 60) -> str:
 
 
 def key_text(key: Any) -> str:
-    """A mapping key of the file as it appears in a key path (quoted unless a plain word)."""
+    """Return a mapping key of the file as it appears in a key path (quoted unless a plain word)."""
     return key if isinstance(key, str) and key.isidentifier() else shown(key, 30)
 
 

@@ -1,4 +1,5 @@
-"""Mechanisms as plain data: bodies, hinges, constraints, drive (the MjModel of flexure_sim).
+"""
+Mechanisms as plain data: bodies, hinges, constraints, drive (the MjModel of flexure_sim).
 
 A mechanism holds constants only; the evolving state lives in ``solver.State``.
 
@@ -21,8 +22,12 @@ COORDINATE_NAMES = ("x", "y", "theta")
 
 @dataclass(frozen=True)
 class Body:
-    """A rigid body: mass (kg), rotational inertia about its mass centre (kg m^2), and the
-    initial (unstressed) pose (x, y, theta) of its body frame in the root frame."""
+    """
+    A rigid body.
+
+    Mass (kg), rotational inertia about its mass centre (kg m^2), and the initial (unstressed) pose
+    (x, y, theta) of its body frame in the root frame.
+    """
 
     name: str
     mass: float
@@ -43,10 +48,13 @@ class Frame:
 
 @dataclass(frozen=True)
 class Hinge:
-    """An elastic element joining frame ``a`` on body A and frame ``b`` on body B, which
-    coincide in the unstressed pose. ``law`` evaluates potential and dissipation (see
+    """
+    An elastic element joining frame ``a`` on body A and frame ``b`` on body B.
+
+    Which coincide in the unstressed pose. ``law`` evaluates potential and dissipation (see
     hinge_laws; its stiffness and damping are 3x3, moment first, in the hinge frame);
-    ``stiffness_source`` says where the stiffness came from (model name, matrix, file)."""
+    ``stiffness_source`` says where the stiffness came from (model name, matrix, file).
+    """
 
     name: str
     a: Frame
@@ -64,8 +72,11 @@ class Fixed:
 
 @dataclass(frozen=True)
 class Drive:
-    """The driven input: the body's displacement along ``axis`` (unit vector in the root
-    frame) equals the actuator output u; its other coordinates are held.
+    """
+    The driven input.
+
+    The body's displacement along ``axis`` (unit vector in the root frame) equals the actuator
+    output u; its other coordinates are held.
 
     The actuator output follows the command through a first-order lag,
     du/dt = (command - u) / response_time: the slow pole of the dissertation's second-order
@@ -116,10 +127,14 @@ class Output:
 
 @dataclass(frozen=True)
 class Mechanism:
-    """A planar flexure mechanism. ``compression_hinge`` names the hinge whose compression
-    (along the drive axis, at its centre of stiffness: its drive side's displacement minus
-    its far side's; see ``solver.compression_points``) is reported, as joint a of the
-    micropositioning stage (Figure 6.4)."""
+    """
+    A planar flexure mechanism.
+
+    ``compression_hinge`` names the hinge whose compression (along the drive axis, at its centre of
+    stiffness: its drive side's displacement minus its far side's; see
+    ``solver.compression_points``) is reported, as joint a of the micropositioning stage (Figure
+    6.4).
+    """
 
     name: str
     bodies: tuple[Body, ...]
@@ -147,6 +162,6 @@ class Mechanism:
 
     @property
     def drive(self) -> Optional[Drive]:
-        """The drive constraint, if the mechanism has one."""
+        """Return the drive constraint, if the mechanism has one."""
         drives = [c for c in self.constraints if isinstance(c, Drive)]
         return drives[0] if drives else None

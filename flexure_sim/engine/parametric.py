@@ -1,5 +1,7 @@
-"""The mechanism's hinge forces as a function of its coordinates *and* its design parameters,
-in arithmetic that accepts hyper-dual numbers (``hyperdual.py``).
+"""
+The mechanism's hinge forces as a function of its coordinates *and* its design parameters.
+
+In arithmetic that accepts hyper-dual numbers (``hyperdual.py``).
 
 The engine's force paths (``assembly.py``, ``kernels.py``) take floats only. Sensitivities
 need the forces with derivative parts flowing from a parameter of the mechanism file (a
@@ -35,8 +37,12 @@ from .design import Design
 
 @dataclass
 class Forces:
-    """Q (..., N) generalized forces; r (..., n, 3) deflections; wrench (..., n, 3) on body B
-    in frame b (moment, fx, fy); energy (..., n)."""
+    """
+    Q (..., N) generalized forces.
+
+    R (..., n, 3) deflections; wrench (..., n, 3) on body B in frame b (moment, fx, fy); energy
+    (..., n).
+    """
 
     Q: Any
     r: Any
@@ -96,9 +102,12 @@ def forces(
 
 
 def _dot(coefficients, values):
-    """sum_i a_i x_i, skipping the structural zeros and units of the coefficient lists (most
-    entries of dr/dzz and dc/dr, off-diagonal stiffness) -- they cost four array products
-    each in hyper-dual arithmetic."""
+    """
+    sum_i a_i x_i.
+
+    Skipping the structural zeros and units of the coefficient lists (most entries of dr/dzz and
+    dc/dr, off-diagonal stiffness) -- they cost four array products each in hyper-dual arithmetic.
+    """
     terms = []
     for a, x in zip(coefficients, values):
         if isinstance(a, float):
@@ -198,8 +207,11 @@ def _stack(items):
 
 
 def _scatter(q_local, ia, ib, N):
-    """Sum the per-hinge six forces into the N generalized forces: one product with the 0/1
-    scatter matrix (a linear map, applied part by part for HyperDuals)."""
+    """
+    Sum the per-hinge six forces into the N generalized forces.
+
+    One product with the 0/1 scatter matrix (a linear map, applied part by part for HyperDuals).
+    """
     n = len(ia)
     S = np.zeros((n, 6, N))
     rows = np.arange(n)

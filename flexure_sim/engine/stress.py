@@ -1,4 +1,5 @@
-"""Peak stress in notch and leaf hinges from their wrench, and the stress ratio sigma / sigma_y.
+"""
+Peak stress in notch and leaf hinges from their wrench, and the stress ratio sigma / sigma_y.
 
 The wrench (m, f_x, f_y) is the one a hinge exerts on its body B, in frame b at the hinge's
 centre (solver.Snapshot.wrenches); its magnitude is the section load. Works on floats and
@@ -74,8 +75,11 @@ def u_notch_bending_factor(depth, radius, width):
 
 
 def notch_concentration(h, D):
-    """K_t of a circular notch hinge (neck h, holes D) in bending: semicircular U-notches,
-    a = r = D/2 in a member of width h + D (module docstring)."""
+    """
+    K_t of a circular notch hinge (neck h, holes D) in bending.
+
+    Semicircular U-notches, a = r = D/2 in a member of width h + D (module docstring).
+    """
     return u_notch_bending_factor(0.5 * D, 0.5 * D, h + D)
 
 
@@ -109,8 +113,12 @@ def hinge_stress(wrench, geometry: dict) -> Optional[Any]:
 
 
 def stress_table(wrenches, geometry: list, names: list) -> dict:
-    """Per hinge: stress (Pa), yield strength (Pa or None) and their ratio (None without a
-    yield strength); wrenches (n, 3) floats."""
+    """
+    Per hinge.
+
+    Stress (Pa), yield strength (Pa or None) and their ratio (None without a yield strength);
+    wrenches (n, 3) floats.
+    """
     out = {}
     for name, w, g in zip(names, np.asarray(wrenches, dtype=float), geometry):
         s = hinge_stress(w, g)
@@ -128,9 +136,13 @@ def peak_ratio(table: dict) -> Optional[tuple[str, float]]:
 
 
 def stroke_limit(sim, geometry: list, tol: float = 1e-9, max_iter: int = 30) -> tuple[float, str]:
-    """Drive input (m) at which the first hinge reaches yield: the secant method on
-    max_h sigma_h / sigma_y,h (u) = 1 with static solves (``Simulation.static``), from the
-    linear estimate u / ratio(u) at the drive's stroke. Returns (input, hinge)."""
+    """
+    Drive input (m) at which the first hinge reaches yield.
+
+    The secant method on max_h sigma_h / sigma_y,h (u) = 1 with static solves
+    (``Simulation.static``), from the linear estimate u / ratio(u) at the drive's stroke. Returns
+    (input, hinge).
+    """
     names = [h.name for h in sim.mechanism.hinges]
 
     def ratio(u):

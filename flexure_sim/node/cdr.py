@@ -1,4 +1,5 @@
-"""Precompiled CDR packers for the few fixed-layout messages the stage node publishes.
+"""
+Precompiled CDR packers for the few fixed-layout messages the stage node publishes.
 
 ``rclpy.serialization.serialize_message`` costs ~6 us per message plus ~6 us to build the
 Python message; the node publishes ~26 messages per tick at up to 10 kHz, so it packs the
@@ -54,7 +55,7 @@ ENCAPSULATIONS = {
 
 @functools.lru_cache(maxsize=1)
 def middleware() -> str:
-    """The rmw implementation rclpy loaded (``RMW_IMPLEMENTATION`` if rclpy cannot say)."""
+    """Return the rmw implementation rclpy loaded (``RMW_IMPLEMENTATION`` if rclpy cannot say)."""
     try:
         import rclpy
         return rclpy.get_rmw_implementation_identifier()
@@ -63,7 +64,7 @@ def middleware() -> str:
 
 
 def packing_applies(type_name: str, rmw: str | None = None) -> bool:
-    """True if the node may publish ``type_name`` packed here rather than serialize it."""
+    """Return True if the node may publish ``type_name`` packed here rather than serialize it."""
     return (rmw or middleware()) in FAST_DDS and type_name in PACKED_TYPES
 
 
@@ -113,8 +114,10 @@ class _Layout:
 
 
 class StampedPacker:
-    """A message made of a std_msgs/Header with a fixed frame_id, optional fixed strings and
-    a fixed uint32 sequence count, then ``n_doubles`` float64 values.
+    """
+    A message made of a std_msgs/Header with a fixed frame_id.
+
+    Optional fixed strings and a fixed uint32 sequence count, then ``n_doubles`` float64 values.
 
     Covers PoseStamped, WrenchStamped, TransformStamped (child_frame_id as extra string) and
     PoseArray (pose count as ``count``). ``pack(sec, nanosec, *doubles)``.
@@ -240,7 +243,7 @@ _UINT32 = {"<": struct.Struct("<I"), ">": struct.Struct(">I")}
 
 
 def parse_float64(data: bytes, rmw: str | None = None) -> float:
-    """The value of a serialized ``std_msgs/msg/Float64`` in any encoding named in the module
+    """Return the value of a serialized ``std_msgs/msg/Float64`` in any encoding named in the module
     docstring. Raises ValueError naming the problem (unknown or unsupported encapsulation,
     too short, not a Float64)."""
     if len(data) < 4:

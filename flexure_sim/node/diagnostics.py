@@ -1,6 +1,10 @@
-"""The stage node's ``diagnostics`` topic: one ``DiagnosticStatus`` per window of ticks (~10 Hz
-of simulated time) with timings, pacing, solver work, command counters, engine failures,
-recording state and QoS problems, at level OK, WARN or ERROR (README "Diagnostics")."""
+"""
+The stage node's ``diagnostics`` topic.
+
+One ``DiagnosticStatus`` per window of ticks (~10 Hz of simulated time) with timings, pacing,
+solver work, command counters, engine failures, recording state and QoS problems, at level OK, WARN
+or ERROR (README "Diagnostics").
+"""
 from __future__ import annotations
 
 import time
@@ -30,8 +34,11 @@ class Window:
         self.intake0 = intake0
 
     def add(self, step_time: float, snap_time: float, pub_time: float, tick_time: float) -> None:
-        """One tick's wall-clock times (s): engine steps, snapshot, pack + record + publish,
-        whole tick."""
+        """
+        One tick's wall-clock times (s).
+
+        Engine steps, snapshot, pack + record + publish, whole tick.
+        """
         self.ticks += 1
         self.step_sum += step_time
         self.snap_sum += snap_time
@@ -45,9 +52,12 @@ class Window:
 
 
 class Diagnostics:
-    """Builds and publishes the status of the stepping loop ``loop`` (a `SteppingLoop`):
-    recorded on channel ``channel`` of its recording session, then published by ``publisher``.
-    ``extra`` returns further (counters, notes, level) from the node (QoS problems)."""
+    """
+    Builds and publishes the status of the stepping loop ``loop`` (a `SteppingLoop`).
+
+    Recorded on channel ``channel`` of its recording session, then published by ``publisher``.
+    ``extra`` returns further (counters, notes, level) from the node (QoS problems).
+    """
 
     def __init__(self, loop: Any, publisher: Any, channel: int, name: str, hardware_id: str,
                  extra: Any = None) -> None:

@@ -1,5 +1,7 @@
-"""What the engine can follow: refusing actuator strokes beyond it, holding the state when a
-step fails anyway (no ROS).
+"""
+What the engine can follow.
+
+Refusing actuator strokes beyond it, holding the state when a step fails anyway (no ROS).
 
 Two lines of defence keep input from ever stopping the node (issue 16.10):
 
@@ -58,7 +60,7 @@ class StrokeProbe:
 
 
 def snapshot_finite(snap: Any) -> bool:
-    """True if every number a tick publishes from ``snap`` is finite (~3 us)."""
+    """Return True if every number a tick publishes from ``snap`` is finite (~3 us)."""
     scalars = [getattr(snap, name, 0.0) for name in
                ("compression", "output", "drive_input", "drive_force")]
     return bool(np.isfinite(snap.poses).all() and np.isfinite(snap.wrenches).all()
@@ -67,8 +69,12 @@ def snapshot_finite(snap: Any) -> bool:
 
 
 class EngineHold:
-    """Saves the engine state (and the drive filter's targets) before a tick; `restore` puts
-    them back after a failed step. Counts failures (`failures`) and keeps the last reason."""
+    """
+    Saves the engine state (and the drive filter's targets) before a tick.
+
+    `restore` puts them back after a failed step. Counts failures (`failures`) and keeps the last
+    reason.
+    """
 
     def __init__(self) -> None:
         self.failures = 0
@@ -82,8 +88,12 @@ class EngineHold:
         self._targets = (drive_filter.target, drive_filter.applied) if drive_filter else None
 
     def restore(self, sim: Simulation, drive_filter: Any, exc: BaseException) -> str:
-        """Back to the saved state after ``exc``; the drive target returns to where the actuator
-        was (the command the engine could not follow is dropped). Returns the reason logged."""
+        """
+        Back to the saved state after ``exc``.
+
+        The drive target returns to where the actuator was (the command the engine could not follow
+        is dropped). Returns the reason logged.
+        """
         self.failures += 1
         sim.state = self._state.copy()
         dropped = ""

@@ -1,5 +1,8 @@
-"""Summary of a sweep's results: statistics per output, parameters ranked by correlation,
-a tornado plot and histograms (PNG, Agg backend).
+"""
+Summary of a sweep's results.
+
+Statistics per output, parameters ranked by correlation, a tornado plot and histograms (PNG, Agg
+backend).
 
 Per output, over the designs that solved and gave a value: count, mean, sample standard
 deviation (ddof 1), 1st and 99th percentiles (numpy's linear interpolation), min, max, and
