@@ -1,7 +1,7 @@
 """
 Hinge laws.
 
-Wrench = gradient of the potential, invariance (3.3, 4.6), small displacements " "(4.52).
+Wrench = gradient of the potential, invariance (3.3, 4.6), small displacements (4.52).
 """
 
 import numpy as np

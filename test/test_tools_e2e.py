@@ -208,7 +208,7 @@ def test_a_malformed_command_from_another_node_is_skipped_and_counted_by_every_t
 # ------------------------------------------------------------------------------ replay
 def same_payloads(received: list[bytes], recorded: list[bytes]) -> bool:
     """
-    Equal CDR payloads; the transport may pad a payload with up to 3 bytes to a multiple of " "4.
+    Equal CDR payloads; the transport may pad a payload with up to 3 bytes to a multiple of 4.
     """
     return len(received) == len(recorded) and all(
         r[: len(d)] == d and len(r) - len(d) < 4 and not any(r[len(d) :])

@@ -201,7 +201,7 @@ def crossing_time(
     t: Sequence[float], y: Sequence[float], t0: float, initial: float, level: float
 ) -> Optional[float]:
     """
-    First time (interpolated) the signal, starting at ``initial`` at ``t0``, reaches " "``level``.
+    First time (interpolated) the signal, starting at ``initial`` at ``t0``, reaches ``level``.
     """
     t, y = _arrays(t, y)
     tt = np.concatenate(([t0], t))
