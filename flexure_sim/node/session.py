@@ -210,7 +210,7 @@ class RecordingSession:
             self._failed(exc)
 
     def note(self, name: str, data: Mapping[str, str]) -> None:
-        """Return a metadata record in the current file (if any)."""
+        """Write a metadata record in the current file (if any)."""
         if self.current is not None:
             self.current.add_metadata(name, data)
 

@@ -228,7 +228,7 @@ def _exit_now(code: int) -> int:
 
 def _ignore_signals() -> None:
     """
-    Return the exit is decided: ignore SIGINT/SIGTERM in every thread until the process ends.
+    Ignore SIGINT/SIGTERM in every thread until the process ends: the exit is decided.
 
     (At exit Python resets signals that have a Python handler to their default action, which would
     let a late Ctrl-C kill the process instead of letting it exit with its code; it leaves ignored

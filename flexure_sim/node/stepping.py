@@ -125,7 +125,7 @@ class SteppingLoop:
             self._on_end(self.failure is None)
 
     def restart_clocks(self) -> None:
-        """Return a new run or window starts now (wall clock and simulated time)."""
+        """Start a new run or window now (wall clock and simulated time)."""
         if self.diagnostics is not None:
             self.diagnostics.window = self.diagnostics.new_window()
         self.run_wall0, self.run_sim0 = time.perf_counter(), self.sim.state.t
@@ -138,7 +138,7 @@ class SteppingLoop:
         return True, f"t = {self.sim.state.t:.9g} s"
 
     def _advance_engine(self) -> None:
-        """Return the tick's engine steps, following the drive filter's ramp."""
+        """Take the tick's engine steps, following the drive filter's ramp."""
         sim = self.sim
         filt = self.filter
         if filt is None:
@@ -203,7 +203,7 @@ class SteppingLoop:
 
     # ------------------------------------------------------------- live changes
     def set_pacing(self, rate: float, wake_spin: float) -> None:
-        """Return new publish rate and busy-wait (stepping thread)."""
+        """Apply a new publish rate and busy-wait (stepping thread)."""
         if self.pacer is not None:
             self.pacer.spin_s = min(wake_spin, 1.0 / rate)
         if rate == self.rate:
