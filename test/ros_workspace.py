@@ -83,8 +83,11 @@ def environment_without_package(venv: Path, dest: Path) -> Path:
 
 
 def fresh_shell_env(python: Path, **extra: str) -> dict[str, str]:
-    """Return the environment of a fresh shell with ``python``'s bin folder first on PATH and nothing
-    of the test's own virtual environment (PATH without it, no PYTHONPATH)."""
+    """
+    Return the environment of a fresh shell with ``python``'s bin folder first on PATH.
+
+    Nothing of the test's own virtual environment is kept (PATH without it, no PYTHONPATH).
+    """
     env = {k: v for k, v in os.environ.items() if k not in _SHELL_STATE}
     own_bin = str(Path(sys.prefix) / "bin")
     path = [p for p in env.get("PATH", "").split(os.pathsep) if p and p != own_bin]
@@ -125,8 +128,11 @@ class Workspace:
         return self.root / "src" / PACKAGE
 
     def shell_env(self, **extra: str) -> dict[str, str]:
-        """Return a fresh shell that sourced install/setup.bash over the environment's own prefix
-        (the ROS underlay, without flexure_sim)."""
+        """
+        Return a fresh shell that sourced install/setup.bash over the environment's own prefix.
+
+        That prefix is the ROS underlay, without flexure_sim.
+        """
         env = fresh_shell_env(self.python, AMENT_PREFIX_PATH=str(self.env_prefix), **extra)
         return sourced(env, self.root / "install" / "setup.bash")
 

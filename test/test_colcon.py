@@ -156,7 +156,11 @@ def test_colcon_test_runs_pytest_and_reports_failures(workspace):
 
 
 def ros2_cli() -> str:
-    """Return the ``ros2`` command; skips (only) when neither it nor the folder of its wheels exists."""
+    """
+    Return the ``ros2`` command.
+
+    Skips (only) when neither it nor the folder of its wheels exists.
+    """
     found = shutil.which("ros2")
     if found:
         return found
@@ -183,8 +187,11 @@ class Ros2:
 
     def until(self, args: tuple[str, ...], done,
               timeout: float = 60) -> subprocess.CompletedProcess:
-        """Repeat a discovery-dependent command until ``done(result)`` (each try waits for
-        discovery itself, --spin-time), at most ``timeout`` s."""
+        """
+        Repeat a discovery-dependent command until ``done(result)``, at most ``timeout`` s.
+
+        Each try waits for discovery itself (--spin-time).
+        """
         deadline = time.monotonic() + timeout
         while True:
             result = self(*args)

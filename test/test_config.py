@@ -11,6 +11,7 @@ from flexure_sim.engine.config import (
     resolve_mechanism_path,
 )
 
+
 def test_builtins_load():
     assert {"microstage", "fourbar_cantilever", "fourbar_mixed"} <= set(builtin_names())
     stage = load_mechanism("microstage")

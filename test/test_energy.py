@@ -66,8 +66,11 @@ def _work(mech, command, dt, duration):
 
 
 def test_stage_work_at_the_shipped_step_equals_the_converged_work():
-    """The work of the 1.35 um step over 5 ms at 1e-4 s agrees with 1e-6 s steps (where the
-    old trapezoidal figures differed by 11-19 % and 1.6 %)."""
+    """
+    The work of the 1.35 um step over 5 ms at 1e-4 s agrees with 1e-6 s steps.
+
+    There the old trapezoidal figures differed by 11-19 % and 1.6 %.
+    """
     stage = load_mechanism("microstage")
     converged = _work(stage, 1.35e-6, 1e-6, 5e-3)
     assert _work(stage, 1.35e-6, 1e-4, 5e-3) == pytest.approx(converged, rel=1e-6)

@@ -35,7 +35,7 @@ LAW_TEXT = (EXAMPLES / "notch_hinge_order4.yaml").read_text()
 
 
 def _row(text: str, index: int) -> list[str]:
-    """Data row `index` (0-based) of a CSV text without comments, as its fields."""
+    """Return data row `index` (0-based) of a CSV text without comments, as its fields."""
     rows = [line for line in text.splitlines() if line and not line.startswith("#")]
     return rows[1 + index].split(",")
 
@@ -48,7 +48,11 @@ def _with_row(text: str, index: int, fields: list[str]) -> str:
 
 
 def _bad_files(directory):
-    """Return the issue's three files (plus a NUL byte): name -> (path, fragments of the message)."""
+    """
+    Return the issue's three files (plus a NUL byte).
+
+    As name -> (path, fragments of the message).
+    """
     header = TRAIN.splitlines()
     lines = [line for line in header if line and not line.startswith("#")]
     columns = lines[0].split(",")

@@ -67,7 +67,8 @@ def test_predict_wrench_is_the_engine_wrench():
 
 
 def test_unknown_counts():
-    # twistor, sigma_degree 0: C(N+3,3) - 4; with sigma: C(N+3,3) + C(N+2,3) - 4; twist: C(N+3,3) - 4
+    # twistor, sigma_degree 0: C(N+3,3) - 4; with sigma: C(N+3,3) + C(N+2,3) - 4;
+    # twist: C(N+3,3) - 4
     for N in range(2, 9):
         assert number_of_unknowns("twistor", N) == math.comb(N + 3, 3) - 4
         assert number_of_unknowns("twistor", N, 1) == math.comb(N + 3, 3) + math.comb(N + 2, 3) - 4
@@ -164,10 +165,14 @@ def test_chapter_7_1_fits_the_training_rows_and_predicts_nothing(alpha_dist):
 # ------------------------------------------------ held-out error vs order and size
 
 def test_held_out_error_falls_with_order_and_data_twistor_law_in_twist_coordinates():
-    """Data from the twistor quadratic law at large deflections (|alpha| <= 1.5 rad) fitted
+    """
+    Twistor quadratic law data at large deflections, fitted in twist coordinates.
+
+    Data from the twistor quadratic law at large deflections (|alpha| <= 1.5 rad) fitted
     in twist coordinates: not a polynomial there, so the held-out error measures the
     approximation and must fall with the order (the law is even, so even orders are the
-    steps) and with the data size."""
+    steps) and with the data size.
+    """
     t = error_table("twistor-quadratic", "twist", [2, 4, 6, 8], [60, 500], test_rows=500, seed=2)
     err = np.array([[np.inf if v is None else v for v in row] for row in t["test_max_rel"]])
     big = err[:, 1]
@@ -296,7 +301,7 @@ def test_rank_deficient_design_names_the_terms():
 
 def test_numerically_rank_deficient_design_names_the_collinear_terms():
     """
-    sigma - 1 = -xi^2/2 + O(xi^4).
+    Check sigma - 1 = -xi^2/2 + O(xi^4).
 
     At milliradian rotations the sigma terms cannot be told from the xi terms (why sigma_degree
     defaults to 0).
@@ -454,9 +459,13 @@ def test_example_hinge_file_is_what_the_command_writes(tmp_path):
 
 
 def test_fourbar_with_fitted_hinges_matches_at_large_deflection():
-    """All four leaf hinges of the four-bar replaced by an order-6 twist polynomial fitted to
+    """
+    Four-bar with order-6 twist polynomial hinges: the static pose agrees.
+
+    All four leaf hinges of the four-bar replaced by an order-6 twist polynomial fitted to
     their twistor quadratic law (not a polynomial in twist coordinates); the static pose at a
-    0.157 rad driver rotation agrees within the fit's held-out error."""
+    0.157 rad driver rotation agrees within the fit's held-out error.
+    """
     mech = load_mechanism("fourbar_cantilever")
     K = mech.hinges[0].law.K
     rng = np.random.default_rng(9)

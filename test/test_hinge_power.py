@@ -189,7 +189,7 @@ def _two_bodies(seed):
 
 def _relative(g):
     """
-    r = (alpha, p) of frame b in frame a and its rate r_dot, from the bodies' motion.
+    Return r = (alpha, p) of frame b in frame a and its rate r_dot, from the bodies' motion.
 
     Frame origins x_f = x + R(theta) p_f, velocities v + w J R(theta) p_f; p = R_a^T (x_b - x_a)
     whose rate is R_a^T (v_b - v_a) - w_A J p (d/dt R_a^T = -w_A J R_a^T).
@@ -208,8 +208,12 @@ def _relative(g):
 
 
 def _power_on_bodies(g, alpha, m_b, xb):
-    """Power of the wrench -m_b on B (frame b coordinates, about b's origin) and of the
-    opposite wrench on A, with the bodies' absolute twists; also the sum of |terms|."""
+    """
+    Return the power of the wrench -m_b on B and of the opposite wrench on A.
+
+    The wrench on B is in frame b coordinates, about b's origin; both with the bodies' absolute
+    twists. Also returns the sum of |terms|.
+    """
     Rb = kin.rot(g["thB"] + g["phib"])
     F = -np.einsum("nij,nj->ni", Rb, m_b[:, 1:])  # force on B, world coordinates
     m = -m_b[:, 0]  # moment on B about b's origin

@@ -215,7 +215,7 @@ def _sine_response(sim, z_static, u0, amp, freq, dt, body, axis):
         sim.step()
         if k >= n_transient:
             t[k - n_transient] = sim.state.t
-            y[k - n_transient] = (sim.state.z[i : i + 2] - sim.z0[i : i + 2]) @ axis
+            y[k - n_transient] = (sim.state.z[i:i + 2] - sim.z0[i:i + 2]) @ axis
     basis = np.column_stack(
         [np.sin(2 * np.pi * freq * t), np.cos(2 * np.pi * freq * t), np.ones_like(t)]
     )

@@ -53,7 +53,11 @@ def ros2_run_lookup(package: str, executable: str, prefix_path: str) -> Path:
 
 
 def bare_env(domain: int, cwd: Path) -> dict[str, str]:
-    """Return an environment like a fresh shell's: system PATH, no virtual environment, no PYTHONPATH."""
+    """
+    Return an environment like a fresh shell's.
+
+    System PATH, no virtual environment, no PYTHONPATH.
+    """
     env = node_env(
         domain,
         AMENT_PREFIX_PATH=ament_prefix_path(),

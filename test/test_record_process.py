@@ -58,8 +58,11 @@ DISK_DELAY_S = "0.2"  # per write to the file descriptor: a ~1 MiB chunk waits 0
 
 
 def string_cdr(text: str) -> bytes:
-    """std_msgs/String as little-endian CDR (encapsulation 00 01 00 00; uint32 length counting
-    the terminating NUL; the bytes; NUL), written from the CDR rules, not by the package."""
+    """
+    Return std_msgs/String as little-endian CDR, written from the CDR rules, not by the package.
+
+    Encapsulation 00 01 00 00; uint32 length counting the terminating NUL; the bytes; NUL.
+    """
     data = text.encode() + b"\0"
     return b"\x00\x01\x00\x00" + struct.pack("<I", len(data)) + data
 

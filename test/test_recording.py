@@ -933,7 +933,7 @@ def test_every_flipped_byte_is_detected(reference_bytes: bytes, tmp_path: Path) 
 
 def test_chunks_after_a_damaged_chunk_holding_the_channels_are_recovered(tmp_path: Path) -> None:
     """
-    mcap's own Writer puts Schema and Channel records inside the first chunk that uses them.
+    The mcap library's Writer puts Schema and Channel records inside the first chunk using them.
 
     When that chunk is damaged, the summary's copies still give the later chunks' messages their
     topic.

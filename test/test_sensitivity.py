@@ -1,5 +1,9 @@
-"""Exact design sensitivities by hyper-dual numbers against finite differences of re-solved
-mechanisms (the engine's own static solver and eigen-analysis, from edited YAML)."""
+"""
+Exact design sensitivities by hyper-dual numbers against finite differences.
+
+The finite differences are of re-solved mechanisms (the engine's own static solver and
+eigen-analysis, from edited YAML).
+"""
 
 import copy
 import json

@@ -52,9 +52,13 @@ def _grid(values, outputs=("gain", "compression", "drive_force"), input=1.35e-6,
 
 # ------------------------------------------------------------------------------ outputs
 def test_nominal_stage_outputs_match_the_reference_figures():
-    """Gain 27.628 and compression 192.2 nm at 1.35 um (README: an independent
-    reimplementation agrees); drive force = dU/du, by central differences of the potential
-    energy of two static solves (a second method)."""
+    """
+    Gain 27.628 and compression 192.2 nm at 1.35 um; drive force = dU/du.
+
+    README: an independent reimplementation agrees on gain and compression. The drive force
+    is checked by central differences of the potential energy of two static solves (a second
+    method).
+    """
     cols = evaluate_batch(_grid([2.5e-4]), 0, 1)
     assert cols["status"] == ["ok"]
     assert cols["gain"][0] == pytest.approx(27.628, rel=1e-4)
@@ -66,8 +70,12 @@ def test_nominal_stage_outputs_match_the_reference_figures():
 
 
 def test_step_outputs_agree_with_an_independent_integrator():
-    """Settling time and overshoot of the step to 1.35 um equal those of the same equations
-    integrated by scipy's Radau (rtol 1e-9, exact Jacobian), sampled at the same instants."""
+    """
+    Settling time and overshoot of the step to 1.35 um equal those of scipy's Radau.
+
+    The same equations integrated by scipy's Radau (rtol 1e-9, exact Jacobian), sampled at the
+    same instants.
+    """
     from scipy.integrate import solve_ivp
 
     study = _grid([2.5e-4], outputs=("settling_time", "overshoot"),

@@ -158,9 +158,12 @@ def test_export_rows_equal_message_counts(capsys, recorded, tmp_path):
 def test_a_malformed_command_from_another_node_is_skipped_and_counted_by_every_tool(
     capsys, tmp_path
 ):
-    """A 2-byte payload published on drive/displacement (rclpy publishes raw bytes as they
-    are) is rejected by the node and recorded as received; the tools skip it, say so in one
-    line, and read the rest of the run with exit 0; --strict refuses the file."""
+    """
+    A 2-byte payload on drive/displacement is rejected by the node and recorded as received.
+
+    rclpy publishes raw bytes as they are. The tools skip it, say so in one line, and read the
+    rest of the run with exit 0; --strict refuses the file.
+    """
     domain = next_domain_id()
     path = tmp_path / "malformed.mcap"
     node = NodeProcess(tmp_path / "node", domain, {"time_mode": "realtime", "publish_rate": 200.0,
@@ -208,10 +211,12 @@ def test_a_malformed_command_from_another_node_is_skipped_and_counted_by_every_t
 # ------------------------------------------------------------------------------ replay
 def same_payloads(received: list[bytes], recorded: list[bytes]) -> bool:
     """
-    Equal CDR payloads; the transport may pad a payload with up to 3 bytes to a multiple of 4.
+    Return whether the received and recorded CDR payloads are equal.
+
+    The transport may pad a payload with up to 3 bytes to a multiple of 4.
     """
     return len(received) == len(recorded) and all(
-        r[: len(d)] == d and len(r) - len(d) < 4 and not any(r[len(d) :])
+        r[:len(d)] == d and len(r) - len(d) < 4 and not any(r[len(d):])
         for r, d in zip(received, recorded)
     )
 
@@ -337,7 +342,7 @@ def test_replay_loops_until_interrupted_and_stops_cleanly(recorded):
         data = [raw for _, raw in peer.received["/drive/force"]]
         recorded_bytes = [m.data for m in log.messages_on("/drive/force")]
         assert same_payloads(data[:n], recorded_bytes) and same_payloads(
-            data[n : 2 * n], recorded_bytes
+            data[n:2 * n], recorded_bytes
         )
     finally:
         peer.close()

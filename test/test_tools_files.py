@@ -482,8 +482,11 @@ def test_a_message_that_does_not_decode_is_skipped_counted_and_kept(capsys, tmp_
 
 # ------------------------------------------------------------------------------ damaged chunks
 def flip_bit_in_chunk(data: bytes, chunk_offset: int, where: int = 500) -> bytes:
-    """``data`` with one bit flipped ``where`` bytes into the chunk record at ``chunk_offset``
-    (past the record's header fields: inside its records)."""
+    """
+    Return ``data`` with one bit flipped ``where`` bytes into the chunk record at ``chunk_offset``.
+
+    The offset is past the record's header fields: inside its records.
+    """
     b = bytearray(data)
     b[chunk_offset + where] ^= 0x04
     return bytes(b)

@@ -101,10 +101,9 @@ class Assembly:
     # ------------------------------------------------------------------ geometry
     def relative(self, z: np.ndarray, second: bool = True):
         """
-        r (n, 3).
+        Return r (n, 3), dr/dzz (n, 3, 6) and, if asked, d2r/dzz2 (n, 3, 6, 6).
 
-        dr/dzz (n, 3, 6) and, if asked, d2r/dzz2 (n, 3, 6, 6), where zz are the six coordinates
-        (x_A, y_A, theta_A, x_B, y_B, theta_B) of each hinge's bodies.
+        zz are the six coordinates (x_A, y_A, theta_A, x_B, y_B, theta_B) of each hinge's bodies.
 
         With beta = theta_A + phi_a, w_a = R(theta_A) c_a, w_b = R(theta_B) c_b and
         Delta = P_B + w_b - P_A - w_a: p = R(beta)^T Delta, so

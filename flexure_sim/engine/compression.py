@@ -39,9 +39,10 @@ def stiffness_centre(K: np.ndarray) -> np.ndarray:
 
 
 def compression_points(mech: Mechanism):
-    """((drive body, centre in its coordinates), (far body, centre), drive axis) for the
-    mechanism's compression hinge, or None.
+    """
+    Return the points and axis of the mechanism's compression hinge, or None.
 
+    The result is ((drive body, centre in its coordinates), (far body, centre), drive axis).
     The drive side is the hinge's body fewer hinges away from the driven body; when both
     are equally far, the one whose rest centre lies further back along the drive axis.
     The centre of stiffness comes from the law's Hessian at rest (any law).
@@ -65,7 +66,7 @@ def compression_points(mech: Mechanism):
 
 
 def _hinge_distance(mech: Mechanism, start: int) -> list:
-    """Number of hinges between each body and body ``start`` (inf where unconnected)."""
+    """Count the hinges between each body and body ``start`` (inf where unconnected)."""
     dist = [np.inf] * len(mech.bodies)
     dist[start] = 0
     frontier = [start]

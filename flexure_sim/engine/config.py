@@ -11,11 +11,11 @@ Format (SI units; see config/microstage.yaml for a complete example)::
       - {name: body1, mass: 0.0712, inertia: 8.8e-6, pose: [0, 0, 0]}     # pose: x, y, theta
     hinges:
       - name: a
-        a: {body: body2, at: [0.007, 0.012]}  # frame on body A, body coordinates [x, y(, angle)]
+        a: {body: body2, at: [0.007, 0.012]} # frame on body A, body coordinates [x, y(, angle)]
         b: {body: body6, at: [-0.007, 0.0]}
-        stiffness: notch                      # a name above, or an inline {model: ...}
-        law: twistor                          # twistor (Ch. 4) | twist (Ch. 3) | {polynomial: FILE}
-        damping: {t_char: 1.0e-3}             # B = t_char K, or {B: [[...], [...], [...]]}
+        stiffness: notch                     # a name above, or an inline {model: ...}
+        law: twistor                         # twistor (Ch. 4) | twist (Ch. 3) | {polynomial: FILE}
+        damping: {t_char: 1.0e-3}            # B = t_char K, or {B: [[...], [...], [...]]}
     constraints:
       - {type: fixed, body: body1}
       - {type: drive, body: body6, axis: [1, 0], response_time: 1.0e-3,

@@ -12,8 +12,8 @@ And the studies of docs/polynomial_hinges.md.
   (Appendix B) do it: 17 random configurations, random wrenches, order 4.
 - ``error_table``: held-out error against order N and data size.
 
-Run ``python -m flexure_sim.engine.datasets --help`` for the command-line front end (generate a CSV,
-print the held-out error table, reproduce Chapter 7.1).
+Run ``python -m flexure_sim.engine.datasets --help`` for the command-line front end (generate a
+CSV, print the held-out error table, reproduce Chapter 7.1).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ NOTCH_K = notch_stiffness(0.003, 0.00025, 0.02, 69.0e9, 0.33)
 
 def sample_box(n: int, alpha_max: float, p_max: Sequence[float],
                rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """n displacements uniform in |alpha| <= alpha_max, |p_i| <= p_max[i]."""
+    """Return n displacements uniform in |alpha| <= alpha_max, |p_i| <= p_max[i]."""
     alpha = rng.uniform(-alpha_max, alpha_max, n)
     p = rng.uniform(-1.0, 1.0, (n, 2)) * as_array("p_max", p_max, (2,))
     return alpha, p
@@ -159,7 +159,7 @@ def leaf_tip(
 def cantilever_data(n: int, rng: np.random.Generator, leaf: Leaf = Leaf(), load: float = 0.25,
                     steps: int = 400) -> WrenchData:
     """
-    n load cases of a leaf hinge at large deflection.
+    Return n load cases of a leaf hinge at large deflection.
 
     Base moment and force uniform in |M| <= load EI/L, |V|, |N| <= 2 load EI/L^2 (load = 0.25 gives
     rotations up to about 0.5 rad and centre displacements up to 0.45 mm for the 10 mm leaf),
@@ -234,7 +234,7 @@ class GeneralizedForceFit:
     coefficients: np.ndarray
 
     def wrench(self, data: WrenchData) -> np.ndarray:
-        """m = 1/2 Delta_inv Q with Q = dU/dc (evalpoly4 of c_Sigma, c_Xi, c_X1, c_X2)."""
+        """Return m = 1/2 Delta_inv Q with Q = dU/dc (evalpoly4 of c_Sigma, c_Xi, c_X1, c_X2)."""
         c = twistor_coordinates(data.alpha, data.p).c
         Q = np.einsum(
             "nmk,m->nk",
@@ -366,9 +366,13 @@ def error_table(
     sigma_degree: int = 0,
     noise: float = 0.0,
 ) -> dict[str, Any]:
-    """Held-out error (test_max_rel, the worst component's max |error| / max |value|) of fits
+    """
+    Return the held-out error of fits of each order.
+
+    The error is test_max_rel (the worst component's max |error| / max |value|) of fits
     of each order to the first ``size`` rows of one training draw, on a separate test draw.
-    Entries are None where the order has more unknowns than the rows give equations."""
+    Entries are None where the order has more unknowns than the rows give equations.
+    """
     rng = np.random.default_rng(seed)
     make = MODELS[model]
     test = make(test_rows, rng)

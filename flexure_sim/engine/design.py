@@ -151,7 +151,11 @@ class Parameters:
 
     # --------------------------------------------------------------- design
     def design(self, overrides: Optional[dict[str, Any]] = None) -> Design:
-        """Return the Design with the numbers at the given paths replaced (values may be HyperDual)."""
+        """
+        Return the Design with the numbers at the given paths replaced.
+
+        The values may be HyperDual.
+        """
         overrides = dict(overrides or {})
         for path in overrides:
             self.check(path)

@@ -77,8 +77,12 @@ def _list_index(node: list, part: str, where: str, fail) -> int:
 
 
 def own_stiffness(doc: dict, through: tuple) -> dict:
-    """``doc`` with the hinge stiffness at ``through[0]`` replaced by its own copy of the
-    shared model ``through[1]`` (as ``doc`` has it, i.e. with any values already set)."""
+    """
+    Return ``doc`` with the hinge stiffness at ``through[0]`` replaced by its own model copy.
+
+    The copy is of the shared model ``through[1]`` (as ``doc`` has it, i.e. with any values
+    already set).
+    """
     steps, model = through
     node: Any = doc
     for step in steps:

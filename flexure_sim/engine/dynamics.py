@@ -65,7 +65,7 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command: float)
 
 
 def _shifted_phi1(A: np.ndarray, expA: np.ndarray, h: float, tau: float) -> np.ndarray:
-    """h phi_1(h (A - I/tau)) from e^{hA} by one solve (see ``linearize``)."""
+    """Return h phi_1(h (A - I/tau)) from e^{hA} by one solve (see ``linearize``)."""
     m = A.shape[0]
     shifted = A - np.eye(m) / tau
     try:

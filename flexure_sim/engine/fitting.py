@@ -282,7 +282,11 @@ def _scales(coordinates: str, c: np.ndarray) -> np.ndarray:
 def _design(
     coordinates: str, exps: np.ndarray, data: WrenchData, scale: np.ndarray, energy: float
 ) -> np.ndarray:
-    """Return a (n, 3, M): column j is m_b of the term energy * u^e_j at each row (u = scaled c)."""
+    """
+    Return a (n, 3, M).
+
+    Column j is m_b of the term energy * u^e_j at each row (u = scaled c).
+    """
     cmap = COORDINATES[coordinates](data.alpha, data.p)
     u = (cmap.c - np.array(REST[coordinates])) / scale
     dU_dc = monomial_gradients(u, exps) * (energy / scale)  # (n, M, k)
@@ -362,7 +366,8 @@ def fit_polynomial(
         raise FitError(
             "rank-deficient design: the data do not determine the "
             f"term{'s' if len(dead) > 1 else ''} "
-            f"{', '.join(describe_monomial(exps[j], names) for j in dead[:6])}{' ...' if len(dead) > 6 else ''} "
+            f"{', '.join(describe_monomial(exps[j], names) for j in dead[:6])}"
+            f"{' ...' if len(dead) > 6 else ''} "
             f"(their wrench is zero at every row: the data never move "
             f"{_unmoved(cmap.c, coordinates, exps[dead]) or 'the variables they involve'}); "
             f"use more varied data, a lower order, or --regularization"

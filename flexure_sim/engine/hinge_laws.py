@@ -42,9 +42,10 @@ from .kinematics import J, half_cot_derivatives, rot
 
 # ------------------------------------------------------------------ law coordinates
 
+
 def deflections(alpha, p, rdot=None):
     """
-    alpha (n,), p (n, 2) (and rdot (n, 3)) as float arrays, checked.
+    Return alpha (n,), p (n, 2) (and rdot (n, 3)) as float arrays, checked.
 
     A ValueError names the argument of a wrong shape.
     """
@@ -53,7 +54,6 @@ def deflections(alpha, p, rdot=None):
     if rdot is None:
         return alpha, p
     return alpha, p, as_array("rdot", rdot, (alpha.shape[0], 3))
-
 
 
 @dataclass(frozen=True)
@@ -191,8 +191,12 @@ class HingeLaw(Protocol):
 
 
 class LawPower:
-    """Energy and power of one law at m states r = (alpha (m,), p (m, 2)) with rates r_dot
-    (m, 3) (module docstring): the methods every law offers, through `LawBatch.power`."""
+    """
+    Energy and power of one law at m states.
+
+    The states are r = (alpha (m,), p (m, 2)) with rates r_dot (m, 3) (module docstring): the
+    methods every law offers, through `LawBatch.power`.
+    """
 
     def potential_energy(self: HingeLaw, alpha, p) -> np.ndarray:
         """Potential energy U(r) (J), shape (m,)."""

@@ -78,7 +78,7 @@ class HyperDual:
         def pick(p):
             if p.ndim == 0:
                 return p
-            if trailing and p.shape[-(len(key) - 1) :] == s[-(len(key) - 1) :]:
+            if trailing and p.shape[-(len(key) - 1):] == s[-(len(key) - 1):]:
                 return p[key]  # indexes trailing axes only: keep the part's own leading shape
             return np.broadcast_to(p, s)[key]
 
@@ -261,7 +261,7 @@ _UFUNCS: dict[Any, Any] = {
 
 def seed(value, e1: float = 0.0, e2: float = 0.0) -> HyperDual:
     """
-    value + e1 e1 + e2 e2.
+    Return value + e1 e1 + e2 e2.
 
     A parameter seeded for its derivatives (e1 = e2 = 1 for the first and second derivative in one
     parameter).
@@ -275,7 +275,7 @@ def real(x) -> np.ndarray:
 
 
 def parts_of(x) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(a, b, c, d) of x broadcast to a common shape (zeros for a plain number)."""
+    """Return (a, b, c, d) of x broadcast to a common shape (zeros for a plain number)."""
     x = _lift(x)
     s = x.shape
     return tuple(np.broadcast_to(p, s) for p in (x.a, x.b, x.c, x.d))

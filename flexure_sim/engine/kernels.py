@@ -43,7 +43,7 @@ _half_cot = njit(cache=True)(half_cot_scalar)
 @njit(cache=True, inline="always")
 def hinge_relative(xA, yA, thA, xB, yB, thB, ca1, ca2, cb1, cb2, phia, phib, dr):
     """
-    r = (alpha, p1, p2) of one hinge and dr/dzz into dr (3, 6).
+    Write r = (alpha, p1, p2) of one hinge and dr/dzz into dr (3, 6).
 
     Zz = (x_A, y_A, theta_A, x_B, y_B, theta_B): the compiled twin of ``Assembly.relative`` (eq.
     2.81 with the poses of eq. 6.1; a test pins the two together at random inputs).
@@ -85,9 +85,13 @@ def hinge_relative(xA, yA, thA, xB, yB, thB, ca1, ca2, cb1, cb2, phia, phib, dr)
 
 @njit(cache=True, inline="always")
 def law_coordinates(kind, alpha, p1, p2, dv):
-    """Law coordinates (twistor vector part (xi, x1, x2), or twist (tau, t1, t2)) of
-    r = (alpha, p1, p2) and their derivative dv/dr into dv (3, 3): the compiled twin of
-    ``hinge_laws.twistor_coordinates`` / ``twist_coordinates`` (pinned by a test)."""
+    """
+    Write the law coordinates of r = (alpha, p1, p2) and their derivative dv/dr into dv (3, 3).
+
+    The law coordinates are the twistor vector part (xi, x1, x2), or twist (tau, t1, t2): the
+    compiled twin of ``hinge_laws.twistor_coordinates`` / ``twist_coordinates`` (pinned by a
+    test).
+    """
     if kind == TWISTOR:
         sg, xi = math.cos(0.5 * alpha), math.sin(0.5 * alpha)
         x1 = 0.5 * (sg * p1 + xi * p2)

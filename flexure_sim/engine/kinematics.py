@@ -65,7 +65,7 @@ def angle_of(R: np.ndarray) -> float:
 
 
 def hat(v: np.ndarray) -> np.ndarray:
-    """Moment map of a 2-vector, hat(v) = [-v2, v1] = J v (hat.sci)."""
+    """Return the moment map of a 2-vector, [-v2, v1] = J v (hat.sci)."""
     return v @ J.T
 
 

@@ -138,7 +138,7 @@ def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True) -> LinearM
     Vx[F, nF + np.arange(nF)] = 1.0
     if drive:
         tau = lay.tau
-        B[nF : 2 * nF, 0] = dQv[np.ix_(F, P)] @ du / (tau * mF)
+        B[nF:2 * nF, 0] = dQv[np.ix_(F, P)] @ du / (tau * mF)
         B[2 * nF, 0] = 1.0 / tau
         Zx[P, 2 * nF] = du
         Vx[P, 2 * nF] = -du / tau
@@ -148,7 +148,7 @@ def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True) -> LinearM
     if mech.output is not None:
         e = np.zeros(N)
         i = mech.body_index(mech.output.body)
-        e[3 * i : 3 * i + 2] = mech.output.axis
+        e[3 * i:3 * i + 2] = mech.output.axis
         names.append("output"), Cs.append(e @ Zx), Ds.append(0.0), y0.append(snap.output)
     if drive and mech.compression_hinge is not None:
         h = mech.hinges[mech.hinge_index(mech.compression_hinge)]
@@ -216,14 +216,14 @@ def _frame_jacobian(mech, frame, z: np.ndarray) -> np.ndarray:
         ]
     )
     G = np.zeros((2, len(z)))
-    G[:, 3 * i : 3 * i + 2] = np.eye(2)
+    G[:, 3 * i:3 * i + 2] = np.eye(2)
     G[:, 3 * i + 2] = J @ w
     return G
 
 
 def wrench_jacobians(mech, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
-    d wrench / dz and d wrench / dv at rest at z, (n_hinges, 3, N) each.
+    Return d wrench / dz and d wrench / dv at rest at z, (n_hinges, 3, N) each.
 
     The e1 and e2 parts of one hyper-dual evaluation with z + e1 I and v = 0 + e2 I (N directions).
     """
@@ -267,7 +267,11 @@ class Modes:
 
 
 def modes(model: LinearModel) -> Modes:
-    """Undamped modes (generalised eigenproblem K phi = w^2 M phi) and damped poles (eig A)."""
+    """
+    Return undamped modes and damped poles.
+
+    Undamped modes: the generalised eigenproblem K phi = w^2 M phi; damped poles: eig A.
+    """
     w2, shapes = scipy.linalg.eigh(model.stiffness, np.diag(model.mass))
     if np.any(w2 <= 0):
         raise ValueError(
@@ -306,11 +310,11 @@ def frf(
     )
     s = 2j * np.pi * np.asarray(frequencies, dtype=float)
     A, nF = model.A, len(model.free)
-    Avz, Avv, Avu = A[nF : 2 * nF, :nF], A[nF : 2 * nF, nF : 2 * nF], A[nF : 2 * nF, 2 * nF]
+    Avz, Avv, Avu = A[nF:2 * nF, :nF], A[nF:2 * nF, nF:2 * nF], A[nF:2 * nF, 2 * nF]
     tau = -1.0 / A[2 * nF, 2 * nF]
     u = 1.0 / (1.0 + tau * s)
     M = (s * s)[:, None, None] * np.eye(nF) - s[:, None, None] * Avv - Avz
-    rhs = u[:, None] * Avu + model.B[nF : 2 * nF, 0]
+    rhs = u[:, None] * Avu + model.B[nF:2 * nF, 0]
     z = np.linalg.solve(M, rhs[..., None])[..., 0]
     x = np.concatenate([z, s[:, None] * z, u[:, None]], axis=1)
     return model.C[rows] @ x.T + model.D[rows]

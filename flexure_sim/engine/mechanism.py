@@ -94,8 +94,11 @@ class Drive:
 
 @dataclass(frozen=True)
 class SineRate:
-    """Prescribed rate omega(t) = amplitude * sin(2 pi frequency t + phase) of one coordinate
-    (the four-bar driver omega2 = 0.5 pi^2 sin(10 pi t), eqs. 5.26 and 5.34)."""
+    """
+    Prescribed rate omega(t) = amplitude * sin(2 pi frequency t + phase) of one coordinate.
+
+    The four-bar driver is omega2 = 0.5 pi^2 sin(10 pi t), eqs. 5.26 and 5.34.
+    """
 
     body: str
     coordinate: str

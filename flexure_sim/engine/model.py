@@ -177,7 +177,7 @@ class Model:
         return z, v, aP
 
     def pack(self, state) -> np.ndarray:
-        """y = (z_F, v_F, u) of a state."""
+        """Return y = (z_F, v_F, u) of a state."""
         part = self.part
         parts = [state.z[part.free], state.v[part.free]]
         if self.drive:

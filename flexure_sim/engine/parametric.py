@@ -53,8 +53,12 @@ class Forces:
 def forces(
     design: Design, twistor: np.ndarray, ia: np.ndarray, ib: np.ndarray, z, v=None
 ) -> Forces:
-    """Hinge forces at coordinates z and velocities v (length N in the last axis; float or
-    HyperDual; v None: at rest, no damping terms), as in the module docstring."""
+    """
+    Return the hinge forces at coordinates z and velocities v, as in the module docstring.
+
+    z and v have length N in the last axis; float or HyperDual; v None: at rest, no damping
+    terms.
+    """
     A, B = 3 * ia, 3 * ib
     xA, yA, thA = z[..., A], z[..., A + 1], z[..., A + 2]
     xB, yB, thB = z[..., B], z[..., B + 1], z[..., B + 2]
@@ -136,7 +140,7 @@ def _entries(M):
 
 
 def _law_coordinates(twistor, alpha, p1, p2):
-    """c (3 components) and dc/dr (3x3) for twistor (xi, x1, x2) or twist (tau, t1, t2)."""
+    """Return c (3 components) and dc/dr (3x3) for twistor (xi, x1, x2) or twist (tau, t1, t2)."""
     sg, xi = np.cos(0.5 * alpha), np.sin(0.5 * alpha)
     x1 = 0.5 * (sg * p1 + xi * p2)
     x2 = 0.5 * (-xi * p1 + sg * p2)
@@ -174,7 +178,7 @@ def _law_coordinates(twistor, alpha, p1, p2):
 
 
 def _half_cot(alpha):
-    """f = (a/2) cot(a/2) and f' (series below |a| = 1e-2, as hinge_laws)."""
+    """Return f = (a/2) cot(a/2) and f' (series below |a| = 1e-2, as hinge_laws)."""
     a_real = hd.real(alpha)
     small = np.abs(a_real) < 1e-2
     safe = _where(small, 1.0, alpha)

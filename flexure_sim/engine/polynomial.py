@@ -95,8 +95,11 @@ def _index_map(n_vars: int, order: int) -> dict[tuple[int, ...], int]:
 
 
 def monomial_index(exponents, order: int) -> int:
-    """0-based position of a monomial in the coefficient array of an order-N polynomial
-    (idx4.sci returns this plus one)."""
+    """
+    Return the 0-based position of a monomial in the coefficient array of an order-N polynomial.
+
+    idx4.sci returns this plus one.
+    """
     e = tuple(int(v) for v in exponents)
     if min(e) < 0 or sum(e) > order:
         raise ValueError(f"exponents {list(e)} are not those of a monomial of order <= {order}")
@@ -188,7 +191,10 @@ def describe_monomial(exponents, names: tuple[str, ...]) -> str:
 
 @dataclass(frozen=True)
 class PolynomialLaw(LawPower):
-    """Potential U(c) = E sum_j a_j prod_k ((c_k - rest_k) / s_k)^(e_jk) and dissipation
+    """
+    Polynomial hinge law: a potential U(c) and a dissipation D.
+
+    Potential U(c) = E sum_j a_j prod_k ((c_k - rest_k) / s_k)^(e_jk) and dissipation
     D = 1/2 c_dot^T C c_dot, C the damping B embedded as the quadratic laws embed it (4 B on
     (xi, x) for twistors, B for twists); E = energy, a = coefficients, s = scale,
     e = exponents. Energy and power: `hinge_laws.LawPower`.
@@ -347,8 +353,11 @@ class PolynomialLaw(LawPower):
         return dataclasses.replace(self, exponents=exps[keep], coefficients=dense[keep], B=B)
 
     def _linear_map(self, T: np.ndarray) -> "PolynomialLaw":
-        """Return the law P'(c') = P(T c') for c - rest = T (c' - rest) (a linear map of the vector
-        coordinates that fixes the rest pose)."""
+        """
+        Return the law P'(c') = P(T c') for c - rest = T (c' - rest).
+
+        T is a linear map of the vector coordinates that fixes the rest pose.
+        """
         k = len(self.scale)
         M = (T / self.scale[:, None]) * self.scale[None, :]
         return self._from_dense(

@@ -152,7 +152,7 @@ def _finite(fail, key: str, value: Any) -> float:
 
 
 def _shown(value: Any, limit: int = 60) -> str:
-    """repr of a value from the file, shortened so that a message stays one line."""
+    """Return the repr of a value from the file, shortened so that a message stays one line."""
     text = repr(value)
     return text if len(text) <= limit else text[:limit - 3] + "..."
 

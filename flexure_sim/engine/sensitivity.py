@@ -143,7 +143,7 @@ class Sensitivity:
         return dx, dy
 
     def first_mode_derivative(self, path: str, z_p: Optional[np.ndarray] = None) -> float:
-        """d f_1 / dp (Hz per unit of p) by eigenvalue sensitivity; z_p = dz/dp if known."""
+        """Return d f_1 / dp (Hz per unit of p) by eigenvalue sensitivity; z_p = dz/dp if known."""
         v = self.params.check(path)
         design = self.params.design({path: hd.HyperDual(v, 0.0, 1.0, 0.0)})
         if z_p is None:

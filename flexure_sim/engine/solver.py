@@ -70,7 +70,7 @@ class Simulation:
 
     @property
     def state(self) -> State:
-        """Return the current state (assign a State to continue from it)."""
+        """Return the current state; assign a State to continue from it."""
         return self.data.state
 
     @state.setter

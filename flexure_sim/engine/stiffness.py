@@ -13,10 +13,14 @@ from .hyperdual import HyperDual
 
 
 def _numbers(**named):
-    """Return the named arguments as NumPy scalars (arithmetic overflows to inf, which callers
-    check, instead of raising); arrays or non-numbers raise a ValueError naming the argument.
+    """
+    Return the named arguments as NumPy scalars.
+
+    Arithmetic overflows to inf, which callers check, instead of raising; arrays or
+    non-numbers raise a ValueError naming the argument.
     Hyper-dual numbers pass unchanged: the formulas are plain arithmetic, so exact design
-    sensitivities (engine/sensitivity.py) flow through them."""
+    sensitivities (engine/sensitivity.py) flow through them.
+    """
     return [value if isinstance(value, HyperDual) else as_array(name, value, ())[()]
             for name, value in named.items()]
 

@@ -61,8 +61,11 @@ _ROARK_U_NOTCH_BENDING = (
 
 
 def u_notch_bending_factor(depth, radius, width):
-    """K_t of two opposite U-notches (depth a, radius r) in a member of gross width W under
-    in-plane bending (Roark, Table 17.1; module docstring); 0.25 <= a/r <= 50."""
+    """
+    Return K_t of two opposite U-notches (depth a, radius r) in a member of gross width W.
+
+    Under in-plane bending (Roark, Table 17.1; module docstring); 0.25 <= a/r <= 50.
+    """
     ar = depth / radius
     ar_real = float(hd.real(ar))
     if not 0.25 <= ar_real <= 50.0:
@@ -102,8 +105,12 @@ def _num(x):
 
 
 def hinge_stress(wrench, geometry: dict) -> Optional[Any]:
-    """Peak stress of one hinge from its stiffness model's numbers (``model`` and the keys of
-    the mechanism file), or None for a hinge without geometry."""
+    """
+    Return the peak stress of one hinge from its stiffness model's numbers.
+
+    The numbers are ``model`` and the keys of the mechanism file; None for a hinge without
+    geometry.
+    """
     model = geometry.get("model")
     if model == "notch":
         return notch_stress(wrench, *(_num(geometry[k]) for k in ("D", "h", "t")))

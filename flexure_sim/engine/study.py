@@ -9,8 +9,8 @@ document, and the outputs wanted (see docs/sweeps.md)::
     seed: 20261124                   # Monte Carlo only
     batch_size: 250                  # designs per task (default 100)
     input: 2.0e-6                    # drive input (m) of the static outputs and the step
-    step: {duration: 0.05, dt: 1.0e-4, band: 0.02}   # dynamic run of settling_time/overshoot
     outputs: [gain, compression, drive_force]
+    step: {duration: 0.05, dt: 1.0e-4, band: 0.02}   # dynamic run of settling_time/overshoot
     parameters:
       - {path: hinges.a.stiffness.h, normal: {std: 5.0e-6}}              # mean: the base value
       - {path: stiffness_models.notch.D, uniform: {low: 2.9e-3, high: 3.1e-3}}
@@ -145,7 +145,11 @@ class Study:
         return mechanism_from_dict(self.design(values), source=self.mechanism_source)
 
     def fingerprint(self) -> str:
-        """Return a hash of everything that determines the results (to refuse resuming another study)."""
+        """
+        Return a hash of everything that determines the results.
+
+        Used to refuse resuming another study.
+        """
         text = json.dumps([self.base, [p.__dict__ for p in self.parameters], self.outputs,
                            self.monte_carlo, self.samples, self.seed, self.batch_size,
                            self.input, self.step], sort_keys=True, default=str)

@@ -182,8 +182,12 @@ _TIME = struct.Struct("<iI")
 
 
 def _align4(out: bytearray, padding: list[int] | None) -> None:
-    """Pad ``out`` (whose first 4 bytes are the encapsulation header, so alignment modulo 4
-    is unchanged by it) to a multiple of 4 bytes with zeros."""
+    """
+    Pad ``out`` to a multiple of 4 bytes with zeros.
+
+    The first 4 bytes of ``out`` are the encapsulation header, so alignment modulo 4 is
+    unchanged by it.
+    """
     pad = (-len(out)) % 4
     if pad:
         if padding is not None:
@@ -212,10 +216,13 @@ def pack_diagnostics(
     frame_id: str = "",
     padding: list[int] | None = None,
 ) -> bytes:
-    """diagnostic_msgs/DiagnosticArray holding one DiagnosticStatus with ``values`` as its
-    KeyValue pairs (strings). serialize_message needs ~300 us for the node's ~50 values, a
-    third of a 1 kHz tick; this takes ~30 us. ``padding``, if given, receives the offsets
-    of the padding bytes written (for comparison with serialize_message)."""
+    """
+    Serialize a diagnostic_msgs/DiagnosticArray holding one DiagnosticStatus.
+
+    ``values`` are its KeyValue pairs (strings). serialize_message needs ~300 us for the node's
+    ~50 values, a third of a 1 kHz tick; this takes ~30 us. ``padding``, if given, receives the
+    offsets of the padding bytes written (for comparison with serialize_message).
+    """
     out = bytearray(CDR_LE)
     out += _TIME.pack(sec, nanosec)
     _put_string(out, frame_id, padding)
@@ -243,9 +250,12 @@ _UINT32 = {"<": struct.Struct("<I"), ">": struct.Struct(">I")}
 
 
 def parse_float64(data: bytes, rmw: str | None = None) -> float:
-    """Return the value of a serialized ``std_msgs/msg/Float64`` in any encoding named in the module
-    docstring. Raises ValueError naming the problem (unknown or unsupported encapsulation,
-    too short, not a Float64)."""
+    """
+    Return the value of a serialized ``std_msgs/msg/Float64``.
+
+    Any encoding named in the module docstring is read. Raises ValueError naming the problem
+    (unknown or unsupported encapsulation, too short, not a Float64).
+    """
     if len(data) < 4:
         raise ValueError(f"{len(data)} bytes: too short for a serialized Float64")
     kind = int.from_bytes(data[:2], "big")
@@ -272,7 +282,7 @@ def parse_float64(data: bytes, rmw: str | None = None) -> float:
 
 
 def _deserialize(data: bytes, name: str) -> float:
-    """rclpy's deserialisation (the middleware's own type support) of a Float64."""
+    """Deserialise a Float64 by rclpy (the middleware's own type support)."""
     from rclpy.serialization import deserialize_message
     from std_msgs.msg import Float64
     try:

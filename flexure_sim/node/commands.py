@@ -51,8 +51,11 @@ def decode_float64_batch(payloads: Sequence[bytes]) -> tuple[list[float], list[s
 
 
 class CommandIntake:
-    """Commands of one polled subscription into one `CommandFilter` (None: no drive) and onto
-    recording channel ``channel`` through ``record(items, stamp)``."""
+    """
+    Commands of one polled subscription into one `CommandFilter` and onto a recording channel.
+
+    The filter is None: no drive; the channel is ``channel``, through ``record(items, stamp)``.
+    """
 
     def __init__(self, subscription: Any, drive_filter: Optional[CommandFilter], channel: int,
                  record: Callable[[list[tuple[int, bytes]], int], None], log: Any,
@@ -103,8 +106,11 @@ class CommandIntake:
         take_raw(self.subscription, COMMAND_TAKE_LIMIT)
 
     def warn(self, kind: str, message: str, events: int = 1) -> None:
-        """Return a throttled warning about ``events`` commands of ``kind`` (a counter of the
-        filter); ``message`` describes the last of them."""
+        """
+        Log a throttled warning about ``events`` commands of ``kind``.
+
+        ``kind`` is a counter of the filter; ``message`` describes the last of them.
+        """
         count = self._throttle.event(kind, events)
         if count is not None:
             total = getattr(self.filter.counters, kind) if self.filter else count

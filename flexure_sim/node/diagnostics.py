@@ -14,8 +14,11 @@ from . import interface as itf
 
 
 class Window:
-    """Accumulators of one diagnostics window (wall-clock timings of the stepping thread) and
-    the cumulative counters at its start."""
+    """
+    Accumulators of one diagnostics window and the cumulative counters at its start.
+
+    The accumulators are wall-clock timings of the stepping thread.
+    """
 
     __slots__ = ("ticks", "step_sum", "step_max", "snap_sum", "pub_sum", "pub_max", "tick_max",
                  "wall0", "sim0", "missed0", "lin0", "steps0", "counters0", "engine_failures0",

@@ -113,7 +113,7 @@ class CommandFilter:
         return self._limits
 
     def set_limits(self, limits: DriveLimits) -> None:
-        """Return new stroke / slew rate; the current target is clamped into the new stroke."""
+        """Apply a new stroke / slew rate; the current target is clamped into the new stroke."""
         self._limits = limits
         self.target = self._clamp(self.target)
         self._checked = False
@@ -200,7 +200,11 @@ class CommandFilter:
 
     @property
     def settled(self) -> bool:
-        """Return True when the engine's target equals the accepted command (no ramp in progress)."""
+        """
+        Return True when the engine's target equals the accepted command.
+
+        That is, no ramp is in progress.
+        """
         return self.applied == self.target
 
     def advance(self, dt: float) -> float:
@@ -215,8 +219,11 @@ class CommandFilter:
         return self.applied
 
     def hold(self, value: float) -> None:
-        """Target and applied target both ``value`` (the engine could not follow the command:
-        the actuator stays where it was)."""
+        """
+        Set the target and applied target both to ``value``.
+
+        The engine could not follow the command: the actuator stays where it was.
+        """
         self.target = self.applied = float(value)
         self._checked = True
 

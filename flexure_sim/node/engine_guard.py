@@ -26,9 +26,12 @@ from ..engine.solver import Simulation, SolverError
 
 
 class StrokeProbe:
-    """Static-equilibrium check of stroke ends on a simulation of its own (the node's is
-    stepped by another thread). Results are cached per value; the first check builds the
-    probe (tens of milliseconds)."""
+    """
+    Static-equilibrium check of stroke ends on a simulation of its own.
+
+    The node's simulation is stepped by another thread. Results are cached per value; the first
+    check builds the probe (tens of milliseconds).
+    """
 
     def __init__(self, mechanism: Mechanism, dt: float) -> None:
         self._mechanism = mechanism

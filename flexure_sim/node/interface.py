@@ -51,13 +51,13 @@ def _reliable_volatile(depth: int) -> QoSProfile:
 
 
 def stream_qos() -> QoSProfile:
-    """QoS of every published topic: reliable, keep last `QUEUE_DEPTH`, volatile."""
+    """Return the QoS of every published topic: reliable, keep last `QUEUE_DEPTH`, volatile."""
     return _reliable_volatile(QUEUE_DEPTH)
 
 
 def command_qos(reliability: str = "reliable") -> QoSProfile:
     """
-    QoS of the drive command subscription.
+    Return the QoS of the drive command subscription.
 
     ``reliability`` (``reliable``: only reliable publishers match; ``best_effort``: reliable and
     best-effort ones), keep last `COMMAND_DEPTH`, volatile.

@@ -35,7 +35,11 @@ class PolledGroup(CallbackGroup):
 
 
 def never_called(_message: Any) -> None:
-    """Return the callback of a polled subscription (rclpy requires one; the executor never runs it)."""
+    """
+    Serve as the callback of a polled subscription.
+
+    rclpy requires one; the executor never runs it.
+    """
 
 
 def take_raw(subscription: Subscription, limit: int) -> list[bytes]:

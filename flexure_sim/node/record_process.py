@@ -273,7 +273,11 @@ class ProcessRecording:
         self._unreported = {}
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
-        """Return a Metadata record; never dropped, and in real time it never waits for the pipe."""
+        """
+        Send a Metadata record.
+
+        It is never dropped, and in real time it never waits for the pipe.
+        """
         self.process.send(b"M", json.dumps({"name": name, "data": dict(data)}).encode(),
                           wait=self.lossless)
 

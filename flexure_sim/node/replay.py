@@ -31,10 +31,10 @@ from typing import Any, Iterator, Optional, Sequence
 from ..recording.command_line import check_path, report_reading, tool_errors, warn
 from ..recording.ordered import OrderedLog
 from ..recording.errors import EXIT_OK, EXIT_USAGE, RunError
+from ..topics import CLOCK as CLOCK_TOPIC
 
 PROG = "flexure-sim replay"
 NODE_NAME = "flexure_sim_replay"
-from ..topics import CLOCK as CLOCK_TOPIC
 #: Longest sleep between checks for Ctrl-C and /clock fill-in (s).
 MAX_SLEEP_S = 0.05
 #: How long the end of a replay waits for reliable subscribers to acknowledge (s).

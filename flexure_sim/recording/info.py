@@ -60,7 +60,11 @@ class LogInfo(TopicTable):
 
     @property
     def flexure_sim(self) -> dict[str, str]:
-        """Return the ``flexure_sim`` metadata record (mechanism and parameters), empty if absent."""
+        """
+        Return the ``flexure_sim`` metadata record (mechanism and parameters).
+
+        Empty if absent.
+        """
         return dict(self.metadata.get(RECORD_NAME, {}))
 
     @property

@@ -63,12 +63,12 @@ class QosDescription:
 
     @classmethod
     def reliable(cls, depth: int = 10) -> QosDescription:
-        """rclpy's ``QoSProfile(depth=depth)``: keep_last, reliable, volatile."""
+        """Return rclpy's ``QoSProfile(depth=depth)``: keep_last, reliable, volatile."""
         return cls(depth=depth)
 
     @classmethod
     def sensor_data(cls) -> QosDescription:
-        """rclpy's ``qos_profile_sensor_data``: keep_last 5, best_effort, volatile."""
+        """Return rclpy's ``qos_profile_sensor_data``: keep_last 5, best_effort, volatile."""
         return cls(depth=5, reliability="best_effort")
 
     @classmethod
@@ -138,7 +138,11 @@ def as_qos_description(qos: QosLike) -> QosDescription:
 
 
 def qos_profiles_yaml(profiles: Iterable[QosLike]) -> str:
-    """Return the ``offered_qos_profiles`` string: a YAML list, ``""`` for no profiles (as rosbag2)."""
+    """
+    Return the ``offered_qos_profiles`` string.
+
+    A YAML list, ``""`` for no profiles (as rosbag2).
+    """
     items = [as_qos_description(p).to_dict() for p in profiles]
     if not items:
         return ""

@@ -220,7 +220,7 @@ class LogReader:
 
     @property
     def note(self) -> str:
-        """What was lost from a damaged file read with ``recover`` ('' for an intact file)."""
+        """Return what a damaged file read with ``recover`` lost ('' for an intact file)."""
         return recovery_note(self.scan) if self.scan is not None else ""
 
 
@@ -259,8 +259,12 @@ def read_log(
     path: str | os.PathLike[str], recover: bool = False, decode: bool = True,
     strict: bool = False,
 ) -> McapLog:
-    """Every message of ``path`` in one list (for small logs and tests; tools stream with
-    `LogReader`). Decoded unless ``decode`` is False."""
+    """
+    Return every message of ``path`` in one list.
+
+    For small logs and tests; tools stream with `LogReader`. Decoded unless ``decode`` is
+    False.
+    """
     reader = LogReader(path, recover=recover, strict=strict)
     messages = list(reader.messages(decode=decode))
     return McapLog(
@@ -280,7 +284,7 @@ def read_log(
 
 
 def recovery_note(scan: FileScan) -> str:
-    """What a pass over a damaged file read and lost ('' for an intact file)."""
+    """Return what a pass over a damaged file read and lost ('' for an intact file)."""
     if scan.problem is None:
         return ""
     if scan.stopped:

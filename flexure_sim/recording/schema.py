@@ -118,7 +118,11 @@ class SchemaResolver:
         return cached
 
     def full_text(self, type_name: str) -> str:
-        """Return the ros2msg schema text: the type's .msg, then each dependency once, depth-first."""
+        """
+        Return the ros2msg schema text.
+
+        The type's .msg, then each dependency once, depth-first.
+        """
         seen: set[tuple[str, str, str]] = set()
 
         def append(key: tuple[str, str, str], depth: int) -> str:
@@ -188,5 +192,5 @@ class SchemaResolver:
 def load_schema(
     type_name: str, prefixes: Sequence[str | os.PathLike[str]] | None = None
 ) -> MessageSchema:
-    """Schema of one type, searched in ``prefixes`` (default: `ament_prefixes()`)."""
+    """Return the schema of one type, searched in ``prefixes`` (default: `ament_prefixes()`)."""
     return SchemaResolver(prefixes).schema(type_name)

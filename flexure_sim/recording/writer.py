@@ -304,8 +304,12 @@ class McapRecorder:
             self._worker.put_control(AddMetadata(name, items), _CONTROL_TIMEOUT_S)
 
     def add_dropped(self, topic: str, count: int) -> None:
-        """Count ``count`` messages of ``topic`` that a producer dropped before they reached
-        this recorder (e.g. ticks a full pipe refused): in `stats` and the file's metadata."""
+        """
+        Count ``count`` messages of ``topic`` that a producer dropped.
+
+        They were dropped before they reached this recorder (e.g. ticks a full pipe refused); the
+        count goes in `stats` and the file's metadata.
+        """
         if topic not in self._channels:
             raise ValueError(f"topic: {topic!r} was not added (call add_topic first)")
         if isinstance(count, bool) or not isinstance(count, int) or count < 0:

@@ -34,7 +34,8 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "analyse",
         aliases=["analyze"],
-        help="gain, settling time, overshoot, hinge loads and drive force per step of a recorded run",
+        help="gain, settling time, overshoot, hinge loads and drive force per step of a "
+        "recorded run",
         description=__doc__.split("\n\n")[0].replace("``", ""),
     )
     add_file_arguments(p)

@@ -201,7 +201,9 @@ def crossing_time(
     t: Sequence[float], y: Sequence[float], t0: float, initial: float, level: float
 ) -> Optional[float]:
     """
-    First time (interpolated) the signal, starting at ``initial`` at ``t0``, reaches ``level``.
+    Return the first time the signal reaches ``level``.
+
+    The time is interpolated; the signal starts at ``initial`` at ``t0``.
     """
     t, y = _arrays(t, y)
     tt = np.concatenate(([t0], t))

@@ -253,8 +253,12 @@ def bench_analyses(frequencies: int = 1000) -> dict:
 
 
 def _stage_tolerance_study(designs: int, batch_size: int):
-    """Return the shipped stage tolerance study (config/studies/stage_tolerance.yaml) with
-    ``designs`` designs: the seven hinges' h with a normal error of 5 um each."""
+    """
+    Return the shipped stage tolerance study with ``designs`` designs.
+
+    The study is config/studies/stage_tolerance.yaml: the seven hinges' h with a normal error
+    of 5 um each.
+    """
     from ..engine.study import study_from_dict
     from .sweep_outputs import OUTPUTS
 

@@ -163,12 +163,12 @@ def _mode_points(mech, points, z, dz):
     """
     out = {}
     for i, body in enumerate(mech.bodies):
-        x, y, th = z[3 * i : 3 * i + 3]
+        x, y, th = z[3 * i:3 * i + 3]
         c, s = np.cos(th), np.sin(th)
         rest = [np.array([x, y])] + [
             np.array([x + c * p[0] - s * p[1], y + s * p[0] + c * p[1]]) for p in points[body.name]
         ]
-        dx, dy, dth = dz[3 * i : 3 * i + 3]
+        dx, dy, dth = dz[3 * i:3 * i + 3]
         disp = [q + np.array([dx, dy]) + dth * np.array([-(q[1] - y), q[0] - x]) for q in rest]
         out[body.name] = (np.array(rest), np.array(disp))
     return out

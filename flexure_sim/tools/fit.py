@@ -31,8 +31,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "fit",
         help="fit a polynomial hinge law to measured (displacement, wrench) pairs",
-        description="Fit a polynomial hinge law (eq. 4.69 or 3.67) to measured wrenches, by linear least "
-        "squares as makeAB_Q.sci does (dissertation Ch. 7, Appendix B).",
+        description="Fit a polynomial hinge law (eq. 4.69 or 3.67) to measured wrenches, by "
+        "linear least squares as makeAB_Q.sci does (dissertation Ch. 7, Appendix B).",
     )
     p.add_argument("data", help="CSV with columns alpha, px, py, m, fx, fy")
     p.add_argument("--order", type=int, required=True,
@@ -64,7 +64,7 @@ def _sha256(path: Path) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Handler: exit 0 on success, 2 with a message on stderr for any bad input."""
+    """Handle the command: exit 0 on success, 2 with a message on stderr for any bad input."""
     try:
         out = _fit(args)
     except FlexureSimError as exc:  # DataError, FitError: one line, exit 2

@@ -33,8 +33,11 @@ SLEEP_S = 5e-4
 
 def flood(rate: float, duration: float, topic: str = topics.COMMAND, wait_s: float = 30.0,
           started: Optional[Callable[[], None]] = None) -> dict[str, Any]:
-    """Publish at ``rate`` Hz for ``duration`` s once a subscriber matched (``started`` is
-    called then); the counts."""
+    """
+    Publish at ``rate`` Hz for ``duration`` s once a subscriber matched; return the counts.
+
+    ``started`` is called when the subscriber matched.
+    """
     import rclpy
     from rclpy.context import Context
     from std_msgs.msg import Float64

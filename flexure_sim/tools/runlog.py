@@ -96,8 +96,11 @@ class Run:
 
     @property
     def clock_mapped(self) -> bool:
-        """Return True when log times are not simulation time (e.g. ``ros2 bag record`` without
-        ``--use-sim-time`` of a fast-mode run) and the recorded /clock maps them to it."""
+        """
+        Return True when log times are not simulation time and the recorded /clock maps them to it.
+
+        E.g. ``ros2 bag record`` without ``--use-sim-time`` of a fast-mode run.
+        """
         return self.timebase.mapped
 
     @property
@@ -216,8 +219,11 @@ class Run:
     def hinge_frame_displacements(
         self, hinge: str
     ) -> Optional[tuple[np.ndarray, np.ndarray, np.ndarray, str, str]]:
-        """`mechanism_reload.hinge_frame_displacements` of this run (None without the
-        mechanism or the poses)."""
+        """
+        Return `mechanism_reload.hinge_frame_displacements` of this run.
+
+        None without the mechanism or the poses.
+        """
         mech = self.mechanism()
         if mech is None:
             return None
@@ -231,10 +237,11 @@ def _ordered(found: set[str], listed: str) -> list[str]:
 
 def find_namespace(log: Any, requested: Optional[str] = None) -> str:
     """
-    Return the namespace of the stage run in ``log`` (its ``path`` and ``topics``; '' for the root).
+    Return the namespace of the stage run in ``log`` ('' for the root).
 
-    ``requested`` (``--namespace``) is checked; otherwise it is inferred from the topics
-    ending in output/displacement, drive/input, bodies/poses or drive/force.
+    Uses the log's ``path`` and ``topics``. ``requested`` (``--namespace``) is checked; otherwise
+    it is inferred from the topics ending in output/displacement, drive/input, bodies/poses or
+    drive/force.
     """
     path, topics = log.path, set(log.topics)
     if requested is not None:

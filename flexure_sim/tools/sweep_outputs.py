@@ -100,7 +100,7 @@ OUTPUTS: dict[str, Output] = {}
 
 
 def output(name: str, unit: str, description: str):
-    """Register ``fn(design) -> float | None`` as an output (None: no value, stored as NaN)."""
+    """Register ``fn(design) -> float | None`` as an output; None means no value, stored as NaN."""
     def register(fn: Callable[[Design], Optional[float]]):
         OUTPUTS[name] = Output(name, unit, description, fn)
         return fn

@@ -78,8 +78,11 @@ def print_summary(result: dict, study: Study) -> None:
 
 
 def plot(table: pa.Table, study: Study, summary: dict, output: Path) -> list[Path]:
-    """``<output stem>_tornado.png`` (r of each parameter, per output) and
-    ``<output stem>_histograms.png``; returns the paths written."""
+    """
+    Write ``<output stem>_tornado.png`` and ``<output stem>_histograms.png``.
+
+    The tornado shows r of each parameter, per output. Returns the paths written.
+    """
     import matplotlib
 
     matplotlib.use("Agg", force=True)
