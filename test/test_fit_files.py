@@ -51,7 +51,7 @@ def _bad_files(directory):
     """
     Return the issue's three files (plus a NUL byte).
 
-    As name -> (path, fragments of the message).
+    They are returned as name -> (path, fragments of the message).
     """
     header = TRAIN.splitlines()
     lines = [line for line in header if line and not line.startswith("#")]

@@ -43,10 +43,10 @@ _half_cot = njit(cache=True)(half_cot_scalar)
 @njit(cache=True, inline="always")
 def hinge_relative(xA, yA, thA, xB, yB, thB, ca1, ca2, cb1, cb2, phia, phib, dr):
     """
-    Write r = (alpha, p1, p2) of one hinge and dr/dzz into dr (3, 6).
+    Return r = (alpha, p1, p2) of one hinge; write dr/dzz into dr (3, 6).
 
-    Zz = (x_A, y_A, theta_A, x_B, y_B, theta_B): the compiled twin of ``Assembly.relative`` (eq.
-    2.81 with the poses of eq. 6.1; a test pins the two together at random inputs).
+    Here zz = (x_A, y_A, theta_A, x_B, y_B, theta_B): the compiled twin of ``Assembly.relative``
+    (eq. 2.81 with the poses of eq. 6.1; a test pins the two together at random inputs).
     """
     cA, sA = math.cos(thA), math.sin(thA)
     cB, sB = math.cos(thB), math.sin(thB)
@@ -86,7 +86,7 @@ def hinge_relative(xA, yA, thA, xB, yB, thB, ca1, ca2, cb1, cb2, phia, phib, dr)
 @njit(cache=True, inline="always")
 def law_coordinates(kind, alpha, p1, p2, dv):
     """
-    Write the law coordinates of r = (alpha, p1, p2) and their derivative dv/dr into dv (3, 3).
+    Return the law coordinates of r = (alpha, p1, p2); write their derivative dv/dr into dv (3, 3).
 
     The law coordinates are the twistor vector part (xi, x1, x2), or twist (tau, t1, t2): the
     compiled twin of ``hinge_laws.twistor_coordinates`` / ``twist_coordinates`` (pinned by a

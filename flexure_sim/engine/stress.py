@@ -64,7 +64,7 @@ def u_notch_bending_factor(depth, radius, width):
     """
     Return K_t of two opposite U-notches (depth a, radius r) in a member of gross width W.
 
-    Under in-plane bending (Roark, Table 17.1; module docstring); 0.25 <= a/r <= 50.
+    The member is under in-plane bending (Roark, Table 17.1; module docstring); 0.25 <= a/r <= 50.
     """
     ar = depth / radius
     ar_real = float(hd.real(ar))
