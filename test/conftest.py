@@ -14,7 +14,7 @@ def context():
     """
     Return an rclpy context of its own.
 
-    On this run's next DDS domain (ROS is imported only here: engine tests need none).
+    It is on this run's next DDS domain (ROS is imported only here: engine tests need none).
     """
     import rclpy
     from rclpy.context import Context

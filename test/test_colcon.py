@@ -175,7 +175,7 @@ class Ros2:
     """
     Runs ``ros2 VERB ...`` in the sourced workspace.
 
-    Without the ros2 daemon (which would outlive the test).
+    It runs without the ros2 daemon (which would outlive the test).
     """
 
     def __init__(self, exe: str, env: dict[str, str], cwd: Path) -> None:

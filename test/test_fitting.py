@@ -195,7 +195,7 @@ def test_cantilever_model_small_displacement_stiffness_and_conservative():
     """
     The leaf model reduces to the linear Timoshenko cantilever at small loads.
 
-    And its tangent stiffness d(dU/dr)/dr is symmetric at large deflection (a potential exists).
+    Its tangent stiffness d(dU/dr)/dr is symmetric at large deflection (a potential exists).
     """
     leaf = Leaf()
 

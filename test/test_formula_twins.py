@@ -20,7 +20,7 @@ def test_half_cotangent_has_one_source():
     """
     The force kernel compiles kinematics.half_cot_scalar itself.
 
-    And hinge_laws uses kinematics' array version of it: no second series with its own threshold.
+    Also, hinge_laws uses kinematics' array version of it: no second series with its own threshold.
     """
     assert kernels._half_cot.py_func is kinematics.half_cot_scalar
     assert not hasattr(hinge_laws, "_half_cot_derivatives")

@@ -1,8 +1,8 @@
 """
 The node measuring harness behind `python -m flexure_sim.tools.bench --node`.
 
-On a short real run (a real stage_node subprocess, Fast DDS on loopback, a real recording read
-back).
+It is tested on a short real run (a real stage_node subprocess, Fast DDS on loopback, a real
+recording read back).
 """
 
 import pytest

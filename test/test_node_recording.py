@@ -47,7 +47,7 @@ def start(tmp_path: Path, domain_peer: tuple[int, Peer], time_mode: str, record_
     """
     Return the stage at 200 Hz recording to ``record_path`` (relative: in ``tmp_path/node``).
 
-    With extra environment variables (the recorder's test hooks), watched by the peer.
+    It runs with extra environment variables (the recorder's test hooks), watched by the peer.
     """
     domain, peer = domain_peer
     cwd = tmp_path / "node"

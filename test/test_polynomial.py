@@ -183,7 +183,8 @@ def test_potential_derivatives_in_law_coordinates_are_exact(coords):
     """
     dU/dc and d2U/dc2 against finite differences of U and dU/dc.
 
-    At general c (sigma off the unit circle too: the polynomial is defined on all of R^4).
+    They are checked at general c (sigma off the unit circle too: the polynomial is defined on all
+    of R^4).
     """
     rng = np.random.default_rng(11)
     law = random_law(coords, 6, rng)

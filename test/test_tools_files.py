@@ -1,7 +1,7 @@
 """
 flexure-sim info / analyse / plot / export on recordings written without DDS (tools_fixtures).
 
-And on bad files: truncated at several offsets, flipped bytes, empty, not MCAP, MCAP of another
+Also on bad files: truncated at several offsets, flipped bytes, empty, not MCAP, MCAP of another
 profile, rosbag2 files of other topics. Bad files give a message naming the file and the problem,
 exit code 1 (2 for bad usage), and never a traceback.
 """
@@ -573,8 +573,9 @@ def rosbags_files(stage, tmp_path_factory):
     """
     Return the stage run converted by rosbags-convert.
 
-    To a sqlite3 bag and back to MCAP, and directly to an MCAP bag with zstd-compressed chunks
-    (both rosbag2 MCAP written by rosbags, with ``custom_data: null`` in their metadata).
+    It is converted to a sqlite3 bag and back to MCAP, and directly to an MCAP bag with
+    zstd-compressed chunks (both rosbag2 MCAP written by rosbags, with ``custom_data: null`` in
+    their metadata).
     """
     root = tmp_path_factory.mktemp("rosbags")
     convert = [sys.executable, "-m", "rosbags.convert"]

@@ -1,7 +1,7 @@
 """
 Synthetic (displacement, wrench) data for fitting polynomial hinges.
 
-And the studies of docs/polynomial_hinges.md.
+Also the studies of docs/polynomial_hinges.md.
 
 - ``law_data``: exact wrenches of any hinge law (e.g. the twistor quadratic law, 4.7) at
   given displacements.

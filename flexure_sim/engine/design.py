@@ -69,7 +69,7 @@ class Parameters:
         """
         From a built-in name or YAML path.
 
-        Or (with ``data``) from a parsed document whose name_or_path is only used in messages.
+        Or, with ``data``, from a parsed document whose name_or_path is only used in messages.
         """
         source = str(name_or_path)
         if data is None:

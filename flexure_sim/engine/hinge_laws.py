@@ -283,7 +283,7 @@ class LawBatch:
         """
         Energy, dU/dr and C_r r_dot by the chain rule through c(r).
 
-        With ``jacobian`` also d2U/dr2, C_r and d(C_r r_dot)/dr (else those fields are None):.
+        With ``jacobian`` also d2U/dr2, C_r and d(C_r r_dot)/dr (else those fields are None):
 
         grad_r = dc^T U_c; hess_r = dc^T U_cc dc + sum_k U_c,k d2c_k; C_r = dc^T C dc;
         d(C_r r_dot)/dr = sum_k (C dc r_dot)_k d2c_k + dc^T C (d2c . r_dot).

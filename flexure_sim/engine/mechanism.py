@@ -51,8 +51,8 @@ class Hinge:
     """
     An elastic element joining frame ``a`` on body A and frame ``b`` on body B.
 
-    Which coincide in the unstressed pose. ``law`` evaluates potential and dissipation (see
-    hinge_laws; its stiffness and damping are 3x3, moment first, in the hinge frame);
+    The two frames coincide in the unstressed pose. ``law`` evaluates potential and dissipation
+    (see hinge_laws; its stiffness and damping are 3x3, moment first, in the hinge frame);
     ``stiffness_source`` says where the stiffness came from (model name, matrix, file).
     """
 

@@ -1,7 +1,7 @@
 """
 The mechanism's hinge forces as a function of its coordinates *and* its design parameters.
 
-In arithmetic that accepts hyper-dual numbers (``hyperdual.py``).
+It is written in arithmetic that accepts hyper-dual numbers (``hyperdual.py``).
 
 The engine's force paths (``assembly.py``, ``kernels.py``) take floats only. Sensitivities
 need the forces with derivative parts flowing from a parameter of the mechanism file (a

@@ -343,7 +343,7 @@ class PolynomialLaw(LawPower):
         """
         Coefficients of all monomials of order <= N.
 
-        In idx4.sci order (first column of the internal table).
+        They are in idx4.sci order (first column of the internal table).
         """
         return self._table[:, 0].copy()
 

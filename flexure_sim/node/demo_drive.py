@@ -1,7 +1,7 @@
 """
 A small rclpy node that drives a running ``stage_node`` through a demo profile of steps.
 
-Optionally recording exactly that part of the run, and reports the gain it saw live.
+It optionally records exactly that part of the run, and reports the gain it saw live.
 
     python -m flexure_sim.node.demo_drive [--fractions 0.25 0.5 0.75 1 0 | --levels M ...]
         [--rest 0.01] [--dwell 0.02] [--node stage_node] [--record] [--json] [--timeout 60]

@@ -237,7 +237,7 @@ class WarningThrottle:
     """
     At most one warning per kind every ``interval_s`` (wall clock).
 
-    With the number of events it stands for. ``clock`` is injectable for tests.
+    Each warning comes with the number of events it stands for. ``clock`` is injectable for tests.
     """
 
     def __init__(

@@ -56,8 +56,8 @@ class PacingStats:
         """
         Start lateness (s) below which a fraction q of the ticks started (bin upper edge).
 
-        For each q. Called from the paced loop (diagnostics), so it costs a bounded ~20 us whatever
-        the distribution: one cumulative sum of the histogram, binary searches.
+        One value for each q. Called from the paced loop (diagnostics), so it costs a bounded ~20
+        us whatever the distribution: one cumulative sum of the histogram, binary searches.
         """
         if self.observed == 0:
             return tuple(0.0 for _ in qs)

@@ -47,7 +47,7 @@ class OrderedLog:
         """
         (log time ns, topic, payload) of ``topics`` logged at or after ``start_ns``.
 
-        In log-time order.
+        They come in log-time order.
         """
         wanted = set(topics)
         if self._held is not None:

@@ -54,7 +54,7 @@ def hinge_frame_displacements(
     """
     Displacement from rest (root frame, m) of a hinge's frame on body A and on body B.
 
-    From the recorded body poses and the mechanism's frame positions.
+    It is computed from the recorded body poses and the mechanism's frame positions.
 
     Returns (t, disp_a (n, 2), disp_b (n, 2), body A, body B), or None when the hinge or the
     poses of its two bodies (sampled at the same times) are not available.

@@ -55,8 +55,8 @@ class Design:
         """
         Output response to a step of the command from 0 to the input.
 
-        From rest, over the study's ``step.duration`` at ``step.dt``; metrics as ``flexure-sim
-        analyse``.
+        The step starts from rest and runs over the study's ``step.duration`` at ``step.dt``;
+        metrics as ``flexure-sim analyse``.
         """
         if self._step is None:
             dt, duration = self.study.step["dt"], self.study.step["duration"]
@@ -76,8 +76,8 @@ def output_displacement(sim: Simulation) -> float:
     """
     Output body's displacement from rest along the output axis (m).
 
-    Of the current state (Snapshot.output without the rest of the snapshot, for sampling every
-    step).
+    It is that of the current state (Snapshot.output without the rest of the snapshot, for sampling
+    every step).
     """
     mech = sim.mechanism
     if mech.output is None:

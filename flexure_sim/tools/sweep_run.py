@@ -75,7 +75,8 @@ class PartStore:
     """
     Finished batches as Parquet part files in ``<output>.parts/``.
 
-    With a manifest holding the study's fingerprint (a study may only be resumed by itself).
+    They come with a manifest holding the study's fingerprint (a study may only be resumed by
+    itself).
     """
 
     def __init__(self, output: Path, study: Study, resume: bool):
