@@ -1,4 +1,5 @@
-"""Packaging for flexure_sim.
+"""
+Packaging for flexure_sim.
 
 One layout serves colcon (ament_python) and plain pip:
 - colcon honours setup.cfg's install_scripts, so console scripts land in lib/flexure_sim;

@@ -1,4 +1,5 @@
-"""flexure_sim: planar flexure mechanisms with the twistor-based potential energy method.
+"""
+flexure_sim: planar flexure mechanisms with the twistor-based potential energy method.
 
 Layers, visible in the folder listing (each imports only the ones above it):
   engine/     the physics, no ROS (kinematics -> hinge laws -> mechanism -> solver)

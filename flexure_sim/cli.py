@@ -1,5 +1,7 @@
-"""The ``flexure-sim`` command: offline simulation without ROS (and, from the tools
-package, analysis of recorded runs).
+"""
+The ``flexure-sim`` command.
+
+Offline simulation without ROS (and, from the tools package, analysis of recorded runs).
 
     flexure-sim simulate microstage --drive step:1.35e-6 --duration 0.05 [--json]
     flexure-sim simulate microstage --drive step:1.35e-6 --static [--json]
@@ -44,7 +46,7 @@ def parse_drive(spec: str) -> float:
 
 
 def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
-    """The figures the command prints, as a JSON-ready dict (SI units)."""
+    """Return the figures the command prints, as a JSON-ready dict (SI units)."""
     mech = sim.mechanism
     gain = None
     if snap.output is not None and amplitude != 0.0:
@@ -112,8 +114,13 @@ def run_simulate(args: argparse.Namespace) -> dict:
     out = summarize(sim, sim.snapshot(), amplitude)
     out.update(
         mechanism_file=str(path),
-        mode="dynamic", duration=args.duration, dt=args.dt, steps=n_steps,
-        output_at=samples, wall_s=wall, real_time_factor=args.duration / wall if wall > 0 else None,
+        mode="dynamic",
+        duration=args.duration,
+        dt=args.dt,
+        steps=n_steps,
+        output_at=samples,
+        wall_s=wall,
+        real_time_factor=args.duration / wall if wall > 0 else None,
         linearizations=sim.stats.linearizations,
     )
     return out
@@ -173,7 +180,9 @@ def print_table(out: dict) -> None:
     e = out["energy"]
     print(f"energy [J]: kinetic {e['kinetic']:.6g}, potential {e['potential']:.6g}, "
           f"dissipated {e['dissipated']:.6g}, drive work {e['drive_work']:.6g}")
-    extra = f", real-time factor {out['real_time_factor']:.3g}" if out.get("real_time_factor") else ""
+    extra = (
+        f", real-time factor {out['real_time_factor']:.3g}" if out.get("real_time_factor") else ""
+    )
     print(f"wall time: {out['wall_s']:.4g} s{extra}")
 
 
@@ -181,16 +190,33 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="flexure-sim", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     sim = sub.add_parser("simulate", help="simulate a mechanism offline (no ROS)")
-    sim.add_argument("mechanism", help="built-in name (microstage, fourbar_cantilever, fourbar_mixed) or YAML path")
+    sim.add_argument(
+        "mechanism",
+        help="built-in name (microstage, fourbar_cantilever, fourbar_mixed) or YAML path",
+    )
     sim.add_argument("--drive", default="none", help="step:AMPLITUDE in metres, or none (default)")
-    sim.add_argument("--duration", type=float, default=0.05, help="simulated time in seconds (default 0.05)")
-    sim.add_argument("--dt", type=float, default=DEFAULT_STEP, help=f"fixed step in seconds (default {DEFAULT_STEP:g})")
-    sim.add_argument("--relinearize-tol", type=float, default=None,
-                     help="also re-linearize when the configuration moved this much (rad, or m per "
-                          "mechanism size; 0: every step). Default: only when the step's iteration needs it")
+    sim.add_argument(
+        "--duration", type=float, default=0.05, help="simulated time in seconds (default 0.05)"
+    )
+    sim.add_argument(
+        "--dt",
+        type=float,
+        default=DEFAULT_STEP,
+        help=f"fixed step in seconds (default {DEFAULT_STEP:g})",
+    )
+    sim.add_argument(
+        "--relinearize-tol",
+        type=float,
+        default=None,
+        help="also re-linearize when the configuration moved this much (rad, or m per "
+        "mechanism size; 0: every step). Default: only when the step's iteration needs it",
+    )
     sim.add_argument("--static", action="store_true", help="solve the static equilibrium instead")
-    sim.add_argument("--stroke-limit", action="store_true",
-                     help="report the drive input at which the first hinge reaches its yield strength")
+    sim.add_argument(
+        "--stroke-limit",
+        action="store_true",
+        help="report the drive input at which the first hinge reaches its yield strength",
+    )
     sim.add_argument("--json", action="store_true", help="print one JSON object")
     _add_tool_commands(sub)
     return parser

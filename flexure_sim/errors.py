@@ -1,4 +1,5 @@
-"""The root of the package's exceptions: catch `FlexureSimError` to catch them all.
+"""
+The root of the package's exceptions: catch `FlexureSimError` to catch them all.
 
 Every error flexure_sim raises on purpose derives from `FlexureSimError`. Each keeps the
 built-in base it had before (``ValueError`` for bad input, ``RuntimeError`` for failures at
@@ -27,7 +28,8 @@ class FlexureSimError(Exception):
 
 
 def as_array(name: str, value, shape: Sequence[int | None], dtype=float) -> np.ndarray:
-    """``value`` as an array of ``shape`` (None: any length), or a ValueError naming ``name``.
+    """
+    ``value`` as an array of ``shape`` (None: any length), or a ValueError naming ``name``.
 
     Public functions check their arguments with this instead of letting NumPy's reshape or
     broadcasting errors (which name neither the argument nor the expected shape) escape.

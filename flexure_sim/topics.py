@@ -1,4 +1,5 @@
-"""Names of the stage node's interface: topics, frames and recording metadata records.
+"""
+Names of the stage node's interface: topics, frames and recording metadata records.
 
 One home for every name the node publishes under and the tools look for (README
 "## stage_node"), with no ROS import, so the engine-free tools share them with the node.

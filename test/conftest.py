@@ -11,8 +11,11 @@ if str(ROOT) not in sys.path:
 
 @pytest.fixture
 def context():
-    """An rclpy context of its own, on this run's next DDS domain (ROS is imported only here:
-    engine tests need none)."""
+    """
+    Return an rclpy context of its own.
+
+    It is on this run's next DDS domain (ROS is imported only here: engine tests need none).
+    """
     import rclpy
     from rclpy.context import Context
 
@@ -26,7 +29,7 @@ def context():
 
 @pytest.fixture
 def peer_and_domain():
-    """A fresh DDS domain and a real rclpy peer node on it (node_harness.Peer)."""
+    """Return a fresh DDS domain and a real rclpy peer node on it (node_harness.Peer)."""
     from node_harness import Peer, next_domain_id
 
     domain = next_domain_id()

@@ -1,5 +1,8 @@
-"""Helpers of the stage_node tests: the node as a real subprocess, and a real rclpy peer node
-(its own context and DDS domain) that publishes commands, subscribes and calls services.
+"""
+Helpers of the stage_node tests.
+
+The node as a real subprocess, and a real rclpy peer node (its own context and DDS domain) that
+publishes commands, subscribes and calls services.
 
 DDS stays on this machine (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST). Every node test gets
 its own domain id, derived from the run's ROS_DOMAIN_ID (scripts/run_tests.sh picks a random
@@ -33,7 +36,7 @@ _offsets = itertools.count(1)
 
 
 def next_domain_id() -> int:
-    """A fresh domain id in 1..100 for one test (cycles through the range from the base)."""
+    """Return a fresh domain id in 1..100 for one test (cycles through the range from the base)."""
     return (_BASE_DOMAIN - 1 + 37 * next(_offsets)) % 100 + 1
 
 
@@ -50,7 +53,8 @@ def node_env(domain_id: int, **extra: str) -> dict[str, str]:
 
 
 class NodeProcess:
-    """``stage_node`` run as a subprocess in ``cwd`` (output captured to files there).
+    """
+    ``stage_node`` run as a subprocess in ``cwd`` (output captured to files there).
 
     By default it runs the source tree (``python -m flexure_sim.node.stage_node`` with the
     repository on PYTHONPATH); ``command`` runs something else (console script, launcher).
@@ -78,8 +82,14 @@ class NodeProcess:
         self.args = args
         self._out = open(self.cwd / "node.stdout", "wb")  # noqa: SIM115
         self._err = open(self.cwd / "node.stderr", "wb")  # noqa: SIM115
-        self.proc = subprocess.Popen(args, cwd=self.cwd, env=env, stdout=self._out, stderr=self._err,
-                                     stdin=subprocess.DEVNULL)
+        self.proc = subprocess.Popen(
+            args,
+            cwd=self.cwd,
+            env=env,
+            stdout=self._out,
+            stderr=self._err,
+            stdin=subprocess.DEVNULL,
+        )
 
     def alive(self) -> bool:
         return self.proc.poll() is None
@@ -113,8 +123,11 @@ class NodeProcess:
         return (self.cwd / "node.stdout").read_text(errors="replace")
 
     def wait_for_output(self, text: str, timeout: float = 60.0, stream: str = "stderr") -> str:
-        """Wait until the node's ``stream`` holds a line containing ``text``; return that line.
-        Fails at once with the output if the node exits first."""
+        """
+        Wait until the node's ``stream`` holds a line containing ``text``; return that line.
+
+        Fails at once with the output if the node exits first.
+        """
         path = self.cwd / f"node.{stream}"
         end = time.monotonic() + timeout
         while True:
@@ -126,7 +139,9 @@ class NodeProcess:
                 raise AssertionError(f"stage_node exited ({self.proc.returncode}) before printing "
                                      f"{text!r}:\n{self.stderr}")
             if time.monotonic() > end:
-                raise AssertionError(f"timed out after {timeout:g} s waiting for {text!r}:\n{self.stderr}")
+                raise AssertionError(
+                    f"timed out after {timeout:g} s waiting for {text!r}:\n{self.stderr}"
+                )
             time.sleep(0.01)  # polling interval of the file, not a synchronisation
 
     def children(self) -> list[int]:
@@ -153,7 +168,9 @@ def reliable(depth: int = 1000) -> QoSProfile:
 class Peer:
     """A real rclpy node in the test process, in its own context and domain."""
 
-    def __init__(self, domain_id: int, name: str = "test_peer", use_sim_time: bool = False) -> None:
+    def __init__(
+        self, domain_id: int, name: str = "test_peer", use_sim_time: bool = False
+    ) -> None:
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain_id)
         overrides = [Parameter("use_sim_time", Parameter.Type.BOOL, True)] if use_sim_time else []
@@ -192,14 +209,18 @@ class Peer:
         while time.monotonic() < end:
             self.executor.spin_once(timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
 
-    def spin_until(self, predicate: Callable[[], bool], timeout: float, what: str = "condition") -> None:
+    def spin_until(
+        self, predicate: Callable[[], bool], timeout: float, what: str = "condition"
+    ) -> None:
         end = time.monotonic() + timeout
         while not predicate():
             if time.monotonic() > end:
                 raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
             if self.watch is not None and not self.watch.alive():
-                raise AssertionError(f"stage_node exited ({self.watch.proc.returncode}) while waiting for "
-                                     f"{what}:\n{self.watch.stderr}")
+                raise AssertionError(
+                    f"stage_node exited ({self.watch.proc.returncode}) while waiting for "
+                    f"{what}:\n{self.watch.stderr}"
+                )
             self.executor.spin_once(timeout_sec=0.05)
 
     def wait_for_publishers(self, topics: Iterable[str], timeout: float = 20.0) -> None:

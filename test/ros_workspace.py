@@ -1,6 +1,8 @@
-"""A colcon workspace holding flexure_sim, built by real colcon in a Python environment that has
-no pip copy of flexure_sim, as on a ROS 2 machine where the package only exists in the
-workspace.
+"""
+A colcon workspace holding flexure_sim.
+
+Built by real colcon in a Python environment that has no pip copy of flexure_sim, as on a ROS 2
+machine where the package only exists in the workspace.
 
 That environment is a mirror of the test's virtual environment made of symbolic links (cheap:
 no copies, no downloads), leaving out every file the pip install of flexure_sim put there
@@ -51,8 +53,11 @@ def pip_installed_files(prefix: Path) -> set[Path]:
 
 
 def _mirror(src: Path, dst: Path, leave_out: set[Path], parents: set[Path]) -> None:
-    """Recreate ``src`` at ``dst`` as symbolic links, descending only into the folders
-    (``parents``) where something is left out."""
+    """
+    Recreate ``src`` at ``dst`` as symbolic links.
+
+    Descending only into the folders (``parents``) where something is left out.
+    """
     dst.mkdir()
     for entry in src.iterdir():
         if entry in leave_out:
@@ -78,8 +83,11 @@ def environment_without_package(venv: Path, dest: Path) -> Path:
 
 
 def fresh_shell_env(python: Path, **extra: str) -> dict[str, str]:
-    """The environment of a fresh shell with ``python``'s bin folder first on PATH and nothing
-    of the test's own virtual environment (PATH without it, no PYTHONPATH)."""
+    """
+    Return the environment of a fresh shell with ``python``'s bin folder first on PATH.
+
+    Nothing of the test's own virtual environment is kept (PATH without it, no PYTHONPATH).
+    """
     env = {k: v for k, v in os.environ.items() if k not in _SHELL_STATE}
     own_bin = str(Path(sys.prefix) / "bin")
     path = [p for p in env.get("PATH", "").split(os.pathsep) if p and p != own_bin]
@@ -99,8 +107,12 @@ def sourced(env: dict[str, str], setup: Path) -> dict[str, str]:
 
 @dataclass
 class Workspace:
-    """A built colcon workspace: ``root``/src/flexure_sim, ``root``/install, and the Python
-    environment (``python``, prefix ``env_prefix``) that built it."""
+    """
+    A built colcon workspace.
+
+    ``root``/src/flexure_sim, ``root``/install, and the Python environment (``python``, prefix
+    ``env_prefix``) that built it.
+    """
 
     root: Path
     python: Path
@@ -116,8 +128,11 @@ class Workspace:
         return self.root / "src" / PACKAGE
 
     def shell_env(self, **extra: str) -> dict[str, str]:
-        """A fresh shell that sourced install/setup.bash over the environment's own prefix
-        (the ROS underlay, without flexure_sim)."""
+        """
+        Return a fresh shell that sourced install/setup.bash over the environment's own prefix.
+
+        That prefix is the ROS underlay, without flexure_sim.
+        """
         env = fresh_shell_env(self.python, AMENT_PREFIX_PATH=str(self.env_prefix), **extra)
         return sourced(env, self.root / "install" / "setup.bash")
 

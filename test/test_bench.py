@@ -20,7 +20,7 @@ def test_shipped_step_is_accurate_to_1e_6_against_the_reference(stage_run):
 
 
 def test_reference_is_confirmed_by_an_independent_integrator(stage_run):
-    """scipy's Radau (rtol 1e-8) on the same equations agrees with the reference."""
+    """Check that scipy's Radau (rtol 1e-8) on the same equations agrees with the reference."""
     assert stage_run["baseline_max_rel_error"] < 1e-6
     assert stage_run["baseline_nfev"] > 100
 

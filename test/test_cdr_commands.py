@@ -1,5 +1,7 @@
-"""Drive commands in every CDR encoding a ROS 2 publisher may use, and the serialize_message
-fallback of the node's packed CDR (issue 10 item 9).
+"""
+Drive commands in every CDR encoding a ROS 2 publisher may use.
+
+Also the serialize_message fallback of the node's packed CDR (issue 10 item 9).
 
 Payloads are built here from the encapsulation rules (DDS-XTypes 1.3, 7.6.3.1.2 and 7.4.3):
 a 2-byte big-endian encapsulation identifier, 2 option bytes, then the body in the byte

@@ -1,6 +1,8 @@
-"""The package as a ROS 2 user builds, runs and tests it: ``colcon build`` in a workspace, the
-built ``stage_node`` (directly and through ``ros2 run``), ``ros2 topic pub``/``ros2 param
-set`` against it, and ``colcon test``.
+"""
+The package as a ROS 2 user builds, runs and tests it.
+
+``colcon build`` in a workspace, the built ``stage_node`` (directly and through ``ros2 run``),
+``ros2 topic pub``/``ros2 param set`` against it, and ``colcon test``.
 
 colcon comes from PyPI (requirements.txt); the ros2 command-line tools are not on PyPI and come
 as wheels from ``../shared/ros2cli`` (FLEXURE_ROS2CLI overrides; scripts/venv.sh installs
@@ -41,7 +43,7 @@ def workspace(tmp_path_factory):
 
 
 def ros_env(workspace, cwd: Path, **extra: str) -> dict[str, str]:
-    """A shell that sourced the workspace, on a DDS domain of its own."""
+    """Return a shell that sourced the workspace, on a DDS domain of its own."""
     return workspace.shell_env(ROS_DOMAIN_ID=str(next_domain_id()),
                                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                                ROS_LOG_DIR=str(cwd / "ros_log"), **extra)
@@ -108,9 +110,12 @@ def test_built_stage_node_runs_the_builtin_stage_and_stops_on_sigint(workspace, 
 
 
 def test_colcon_installed_code_reads_its_own_builtins_when_a_pip_copy_is_indexed_first(workspace):
-    """The test's virtual environment holds a pip copy and registers it in the ament index;
-    put it first on AMENT_PREFIX_PATH and the workspace's code first on PYTHONPATH: the code
-    that runs (the workspace's) must read the workspace's files, and the pip copy its own."""
+    """
+    The test's virtual environment holds a pip copy and registers it in the ament index.
+
+    Put it first on AMENT_PREFIX_PATH and the workspace's code first on PYTHONPATH: the code that
+    runs (the workspace's) must read the workspace's files, and the pip copy its own.
+    """
     site = next(workspace.install.glob("lib/python*/site-packages"))
     probe = ("from flexure_sim.engine.config import resolve_mechanism_path; "
              "import flexure_sim; print(flexure_sim.__file__); "
@@ -151,7 +156,11 @@ def test_colcon_test_runs_pytest_and_reports_failures(workspace):
 
 
 def ros2_cli() -> str:
-    """The ``ros2`` command; skips (only) when neither it nor the folder of its wheels exists."""
+    """
+    Return the ``ros2`` command.
+
+    Skips (only) when neither it nor the folder of its wheels exists.
+    """
     found = shutil.which("ros2")
     if found:
         return found
@@ -163,8 +172,11 @@ def ros2_cli() -> str:
 
 
 class Ros2:
-    """Runs ``ros2 VERB ...`` in the sourced workspace, without the ros2 daemon (which would
-    outlive the test)."""
+    """
+    Runs ``ros2 VERB ...`` in the sourced workspace.
+
+    It runs without the ros2 daemon (which would outlive the test).
+    """
 
     def __init__(self, exe: str, env: dict[str, str], cwd: Path) -> None:
         self.exe, self.env, self.cwd = exe, env, cwd
@@ -175,8 +187,11 @@ class Ros2:
 
     def until(self, args: tuple[str, ...], done,
               timeout: float = 60) -> subprocess.CompletedProcess:
-        """Repeat a discovery-dependent command until ``done(result)`` (each try waits for
-        discovery itself, --spin-time), at most ``timeout`` s."""
+        """
+        Repeat a discovery-dependent command until ``done(result)``, at most ``timeout`` s.
+
+        Each try waits for discovery itself (--spin-time).
+        """
         deadline = time.monotonic() + timeout
         while True:
             result = self(*args)

@@ -1,5 +1,8 @@
-"""The compression hinge's compression does not depend on labels (issue 16 item 9): not on
-which body is called A, not on where the coincident hinge frames are put."""
+"""
+The compression hinge's compression does not depend on labels (issue 16 item 9).
+
+Not on which body is called A, not on where the coincident hinge frames are put.
+"""
 import dataclasses
 
 import numpy as np
@@ -24,8 +27,11 @@ def _swap(h):
 
 
 def _move_frames(h, R, p):
-    """Both coincident frames of h moved to a*(R, p), b*(R, p), K and B transformed with the
-    adjoint (Sections 3.3, 4.6): the same physical hinge."""
+    """
+    Both coincident frames of h moved to a*(R, p).
+
+    b*(R, p), K and B transformed with the adjoint (Sections 3.3, 4.6): the same physical hinge.
+    """
     def moved(f):
         pos = np.array(f.position) + kin.rot(f.angle) @ p
         return dataclasses.replace(f, position=(pos[0], pos[1]), angle=f.angle + kin.angle_of(R))

@@ -4,7 +4,12 @@ import copy
 import pytest
 import yaml
 
-from flexure_sim.engine.config import ConfigError, builtin_names, load_mechanism, resolve_mechanism_path
+from flexure_sim.engine.config import (
+    ConfigError,
+    builtin_names,
+    load_mechanism,
+    resolve_mechanism_path,
+)
 
 
 def test_builtins_load():
@@ -53,14 +58,19 @@ def test_duplicate_hinge_name(tmp_path, stage_doc):
     _expect(tmp_path, stage_doc, "hinges[4].name", "duplicate hinge name 'a'")
 
 
-@pytest.mark.parametrize("key,value", [("mass", 0.0), ("mass", -1.0), ("inertia", 0.0), ("inertia", -2e-6)])
+@pytest.mark.parametrize(
+    "key,value", [("mass", 0.0), ("mass", -1.0), ("inertia", 0.0), ("inertia", -2e-6)]
+)
 def test_non_positive_mass_or_inertia(tmp_path, stage_doc, key, value):
     stage_doc["bodies"][1][key] = value
     _expect(tmp_path, stage_doc, f"bodies[1].{key}", "must be positive")
 
 
 def test_non_symmetric_stiffness(tmp_path, stage_doc):
-    stage_doc["hinges"][0]["stiffness"] = {"model": "matrix", "K": [[2.5, 1.0, 0], [0, 1.6e8, 0], [0, 0, 1.7e7]]}
+    stage_doc["hinges"][0]["stiffness"] = {
+        "model": "matrix",
+        "K": [[2.5, 1.0, 0], [0, 1.6e8, 0], [0, 0, 1.7e7]],
+    }
     _expect(tmp_path, stage_doc, "hinges[0].stiffness", "not symmetric")
 
 

@@ -1,4 +1,5 @@
-"""Bad mechanism files end in one ConfigError line (file: key: problem), never a traceback.
+"""
+Bad mechanism files end in one ConfigError line (file: key: problem), never a traceback.
 
 The four files of issue 16 item 6 (binary garbage, a Latin-1 comment, unhashable values) are
 checked one by one, through the loader, ``flexure-sim simulate`` (exit 2) and ``stage_node``
@@ -83,7 +84,7 @@ def test_the_issue_files_are_rejected_with_file_key_and_problem(tmp_path):
 
 
 def _mutated(*changes) -> dict:
-    """The stage document with values replaced: changes are (path, value) pairs."""
+    """Return the stage document with values replaced: changes are (path, value) pairs."""
     doc = yaml.safe_load(STAGE_TEXT)
     for path, value in changes:
         node = doc
@@ -264,7 +265,7 @@ def fuzz_dir(tmp_path_factory):
 
 
 def _load_or_config_error(path: Path):
-    """The loader's only outcomes: a meaningful mechanism, or one ConfigError line."""
+    """Return the loader's only outcomes: a meaningful mechanism, or one ConfigError line."""
     try:
         mech = load_mechanism(path)
     except ConfigError as exc:
@@ -285,7 +286,9 @@ def _check_meaningful(mech: Mechanism) -> None:
         )
         assert all(math.isfinite(v) for v in body.pose)
     for hinge in mech.hinges:
-        assert np.all(np.isfinite(hinge.law.K)) and np.all(np.linalg.eigvalsh(hinge.law.K) > 0), hinge.name
+        assert np.all(np.isfinite(hinge.law.K)) and np.all(
+            np.linalg.eigvalsh(hinge.law.K) > 0
+        ), hinge.name
         assert np.all(np.isfinite(hinge.law.B)) and np.all(
             np.linalg.eigvalsh(hinge.law.B) >= -1e-12 * np.abs(hinge.law.B).max()
         )

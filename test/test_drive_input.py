@@ -31,7 +31,9 @@ def test_non_finite_or_non_numeric_commands_are_rejected_and_leave_the_target(ba
     assert (f.counters.received, f.counters.rejected, f.counters.accepted) == (2, 1, 1)
 
 
-@pytest.mark.parametrize("value, clamped", [(5e-6, 2e-6), (-1e-9, 0.0), (2e-6 + 1e-18, 2e-6), (1e300, 2e-6)])
+@pytest.mark.parametrize(
+    "value, clamped", [(5e-6, 2e-6), (-1e-9, 0.0), (2e-6 + 1e-18, 2e-6), (1e300, 2e-6)]
+)
 def test_commands_outside_the_stroke_are_clamped_and_counted(value, clamped):
     f = CommandFilter(STAGE)
     assert f.submit(value) is CommandStatus.CLAMPED
@@ -61,7 +63,9 @@ def test_a_command_reachable_within_the_tick_is_not_counted_but_still_slew_limit
     f = CommandFilter(STAGE)  # 0.01 m/s: 1 um per 0.1 ms engine step, 10 um per 1 ms tick
     f.submit(1.35e-6)
     assert f.begin_tick(1e-3) is False
-    assert [f.advance(1e-4) for _ in range(3)] == pytest.approx([1e-6, 1.35e-6, 1.35e-6], rel=1e-15)
+    assert [f.advance(1e-4) for _ in range(3)] == pytest.approx(
+        [1e-6, 1.35e-6, 1.35e-6], rel=1e-15
+    )
     assert f.applied == 1.35e-6 and f.settled
     assert f.counters.rate_limited == 0
 

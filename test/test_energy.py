@@ -1,6 +1,9 @@
-"""Energy figures after command steps (issue 16 item 8): the drive work is integrated as
-exactly as the motion, the actuator's velocity jump is accounted for, and the budget
-T + U + dissipated - work - initial closes."""
+"""
+Energy figures after command steps (issue 16 item 8).
+
+The drive work is integrated as exactly as the motion, the actuator's velocity jump is accounted
+for, and the budget T + U + dissipated - work - initial closes.
+"""
 import math
 
 import numpy as np
@@ -34,11 +37,13 @@ def test_budget_closes_after_command_steps_at_the_shipped_step(name, command):
 
 
 def test_work_and_dissipation_of_a_driven_hinge_match_the_closed_form():
-    """A platform driven on ground through one hinge (twistor law, alpha = 0, p = (u, 0)):
-    U = KX u^2 / 2, dissipated power BX u_dot^2 with BX = t_char KX, and the platform's own
-    kinetic energy m u_dot^2 / 2, which the actuator supplies at once when the command
-    jumps. With u = c (1 - e^{-t/tau}):
-    W = m ud^2/2 + KX u^2/2 + BX c^2 (1 - e^{-2t/tau})/(2 tau)."""
+    """
+    A platform driven on ground through one hinge (twistor law, alpha = 0, p = (u, 0)).
+
+    U = KX u^2 / 2, dissipated power BX u_dot^2 with BX = t_char KX, and the platform's own kinetic
+    energy m u_dot^2 / 2, which the actuator supplies at once when the command jumps. With u = c (1
+    - e^{-t/tau}): W = m ud^2/2 + KX u^2/2 + BX c^2 (1 - e^{-2t/tau})/(2 tau).
+    """
     m, tau, bx, c = 0.01, 1e-3, 1e-3 * KX, 1e-6
     sim = Simulation(mechanism_from_dict(DRIVEN_PLATFORM), dt=1e-4)
     sim.set_command(c)
@@ -61,16 +66,23 @@ def _work(mech, command, dt, duration):
 
 
 def test_stage_work_at_the_shipped_step_equals_the_converged_work():
-    """The work of the 1.35 um step over 5 ms at 1e-4 s agrees with 1e-6 s steps (where the
-    old trapezoidal figures differed by 11-19 % and 1.6 %)."""
+    """
+    The work of the 1.35 um step over 5 ms at 1e-4 s agrees with 1e-6 s steps.
+
+    There the old trapezoidal figures differed by 11-19 % and 1.6 %.
+    """
     stage = load_mechanism("microstage")
     converged = _work(stage, 1.35e-6, 1e-6, 5e-3)
     assert _work(stage, 1.35e-6, 1e-4, 5e-3) == pytest.approx(converged, rel=1e-6)
 
 
 def test_light_parallelogram_work_at_the_shipped_step_is_close_to_the_converged_work():
-    """87 % off before; what is left (2e-4) comes from the first step, whose sub-microsecond
-    transient the step's linear model follows but whose small nonlinear part it interpolates."""
+    """
+    87 % off before.
+
+    What is left (2e-4) comes from the first step, whose sub-microsecond transient the step's
+    linear model follows but whose small nonlinear part it interpolates.
+    """
     mech = load_mechanism(PARALLELOGRAM)
     assert _work(mech, 5e-6, 1e-4, 5e-3) == pytest.approx(_work(mech, 5e-6, 1e-6, 5e-3), rel=5e-4)
 

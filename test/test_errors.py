@@ -1,5 +1,9 @@
-"""One exception root: every error class of the package derives from FlexureSimError, and
-keeps its built-in base (ValueError / RuntimeError) so existing handlers still catch it."""
+"""
+One exception root.
+
+Every error class of the package derives from FlexureSimError, and keeps its built-in base
+(ValueError / RuntimeError) so existing handlers still catch it.
+"""
 
 import importlib
 import inspect
@@ -113,8 +117,12 @@ def test_errors_keep_their_builtin_base(name, builtin):
     ],
 )
 def test_argument_checks_name_the_argument(call, fragment):
-    """Public functions that used to fail in NumPy's matmul/broadcasting (or, for a 3x3 R,
-    silently returned a wrong twist) name the argument and the expected shape."""
+    """
+    Public functions name the argument and the expected shape.
+
+    These used to fail in NumPy's matmul/broadcasting (or, for a 3x3 R, silently returned a
+    wrong twist).
+    """
     with pytest.raises(ValueError) as err:
         call()
     assert str(err.value).startswith(fragment), str(err.value)

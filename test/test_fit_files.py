@@ -1,4 +1,5 @@
-"""Bad fit inputs end in one message naming the file (and line/column), never a traceback.
+"""
+Bad fit inputs end in one message naming the file (and line/column), never a traceback.
 
 Issue 16 item 12: ``flexure-sim fit`` on a CSV holding 1e300 values, binary garbage or a
 Latin-1 comment line. Also fuzzed (hypothesis, derandomized and bounded): the CSV reader and
@@ -34,7 +35,7 @@ LAW_TEXT = (EXAMPLES / "notch_hinge_order4.yaml").read_text()
 
 
 def _row(text: str, index: int) -> list[str]:
-    """Data row `index` (0-based) of a CSV text without comments, as its fields."""
+    """Return data row `index` (0-based) of a CSV text without comments, as its fields."""
     rows = [line for line in text.splitlines() if line and not line.startswith("#")]
     return rows[1 + index].split(",")
 
@@ -47,7 +48,11 @@ def _with_row(text: str, index: int, fields: list[str]) -> str:
 
 
 def _bad_files(directory):
-    """The issue's three files (plus a NUL byte): name -> (path, fragments of the message)."""
+    """
+    Return the issue's three files (plus a NUL byte).
+
+    They are returned as name -> (path, fragments of the message).
+    """
     header = TRAIN.splitlines()
     lines = [line for line in header if line and not line.startswith("#")]
     columns = lines[0].split(",")
@@ -107,8 +112,11 @@ def test_fit_command_exits_2_with_one_line(tmp_path):
 
 
 def test_fit_refuses_values_that_overflow_its_arithmetic():
-    """Data built in memory (no CSV) with 1e300 wrenches: the squares overflow, so the fit
-    says which value is too large instead of failing in the SVD."""
+    """
+    Data built in memory (no CSV) with 1e300 wrenches.
+
+    The squares overflow, so the fit says which value is too large instead of failing in the SVD.
+    """
     rng = np.random.default_rng(3)
     n = 30
     wrench = rng.normal(size=(n, 3))

@@ -1,5 +1,9 @@
-"""Fitting polynomial hinges (Ch. 7, Appendix B): exact recovery, Chapter 7.1, held-out error
-against order and data size, bad input, the command, and fitted hinges in mechanisms."""
+"""
+Fitting polynomial hinges (Ch. 7, Appendix B).
+
+Exact recovery, Chapter 7.1, held-out error against order and data size, bad input, the command,
+and fitted hinges in mechanisms.
+"""
 import dataclasses
 import json
 import math
@@ -52,14 +56,19 @@ def quad(coords, K=NOTCH_K):
 def test_predict_wrench_is_the_engine_wrench():
     """predict_wrench (vectorised) equals hinge_laws.evaluate + wrench_on_element."""
     rng = np.random.default_rng(0)
-    law = quad("twistor", np.array([[2.0, 30.0, -12.0], [30.0, 4.0e4, 5.0e3], [-12.0, 5.0e3, 2.0e4]]))
+    law = quad(
+        "twistor", np.array([[2.0, 30.0, -12.0], [30.0, 4.0e4, 5.0e3], [-12.0, 5.0e3, 2.0e4]])
+    )
     alpha, p = sample_box(7, 2.0, (0.05, 0.05), rng)
     ev = evaluate([law] * 7, alpha, p, np.zeros((7, 3)))
-    assert predict_wrench(law, alpha, p) == pytest.approx(wrench_on_element(alpha, ev.grad), rel=1e-13)
+    assert predict_wrench(law, alpha, p) == pytest.approx(
+        wrench_on_element(alpha, ev.grad), rel=1e-13
+    )
 
 
 def test_unknown_counts():
-    # twistor, sigma_degree 0: C(N+3,3) - 4; with sigma: C(N+3,3) + C(N+2,3) - 4; twist: C(N+3,3) - 4
+    # twistor, sigma_degree 0: C(N+3,3) - 4; with sigma: C(N+3,3) + C(N+2,3) - 4;
+    # twist: C(N+3,3) - 4
     for N in range(2, 9):
         assert number_of_unknowns("twistor", N) == math.comb(N + 3, 3) - 4
         assert number_of_unknowns("twistor", N, 1) == math.comb(N + 3, 3) + math.comb(N + 2, 3) - 4
@@ -72,13 +81,19 @@ def _random_poly(coords, order, rng, sigma_degree=0):
     deg = exps.sum(axis=1)
     keep = deg >= 2
     if coords == "twistor":
-        keep = (keep & (exps[:, 0] <= sigma_degree)) | ((deg == 1) & (exps[:, 0] == 1) & (sigma_degree == 1))
+        keep = (keep & (exps[:, 0] <= sigma_degree)) | (
+            (deg == 1) & (exps[:, 0] == 1) & (sigma_degree == 1)
+        )
     exps = exps[keep]
-    scale = np.array([0.1, 0.5, 1e-3, 1e-3]) if coords == "twistor" else np.array([1.0, 2e-3, 2e-3])
+    scale = (
+        np.array([0.1, 0.5, 1e-3, 1e-3]) if coords == "twistor" else np.array([1.0, 2e-3, 2e-3])
+    )
     return PolynomialLaw(coords, order, exps, rng.normal(size=len(exps)), scale, 0.2)
 
 
-@pytest.mark.parametrize("coords,sigma_degree,alpha_max", [("twistor", 0, 1.0), ("twistor", 1, 2.8), ("twist", 0, 2.0)])
+@pytest.mark.parametrize(
+    "coords,sigma_degree,alpha_max", [("twistor", 0, 1.0), ("twistor", 1, 2.8), ("twist", 0, 2.0)]
+)
 @pytest.mark.parametrize("order", [2, 4, 6])
 def test_fit_recovers_a_polynomial_of_the_same_order(coords, sigma_degree, alpha_max, order):
     rng = np.random.default_rng(order)
@@ -127,10 +142,13 @@ def test_regularization_shrinks_and_still_fits():
 
 @pytest.mark.parametrize("alpha_dist", [math.pi / 4, 5 * math.pi / 4])
 def test_chapter_7_1_fits_the_training_rows_and_predicts_nothing(alpha_dist):
-    """randomtest.sce: 17 random configurations, random wrenches, order 4. The makeAB_Q
-    system has 68 equations for 70 coefficients, so it interpolates (the dissertation reports
-    2.6e-5 against 0.944): the training error measures the conditioning, not a model. On 17
-    fresh configurations the same polynomial is off by more than the wrenches themselves."""
+    """
+    randomtest.sce: 17 random configurations, random wrenches, order 4.
+
+    The makeAB_Q system has 68 equations for 70 coefficients, so it interpolates (the dissertation
+    reports 2.6e-5 against 0.944): the training error measures the conditioning, not a model. On 17
+    fresh configurations the same polynomial is off by more than the wrenches themselves.
+    """
     rep = randomtest_report(seed=22, alpha_dist=alpha_dist)
     diss = rep["dissertation_method"]
     assert diss["equations"] == 68 and diss["unknowns"] == 70
@@ -147,10 +165,14 @@ def test_chapter_7_1_fits_the_training_rows_and_predicts_nothing(alpha_dist):
 # ------------------------------------------------ held-out error vs order and size
 
 def test_held_out_error_falls_with_order_and_data_twistor_law_in_twist_coordinates():
-    """Data from the twistor quadratic law at large deflections (|alpha| <= 1.5 rad) fitted
+    """
+    Twistor quadratic law data at large deflections, fitted in twist coordinates.
+
+    Data from the twistor quadratic law at large deflections (|alpha| <= 1.5 rad) fitted
     in twist coordinates: not a polynomial there, so the held-out error measures the
     approximation and must fall with the order (the law is even, so even orders are the
-    steps) and with the data size."""
+    steps) and with the data size.
+    """
     t = error_table("twistor-quadratic", "twist", [2, 4, 6, 8], [60, 500], test_rows=500, seed=2)
     err = np.array([[np.inf if v is None else v for v in row] for row in t["test_max_rel"]])
     big = err[:, 1]
@@ -170,8 +192,11 @@ def test_held_out_error_falls_with_order_cantilever():
 
 
 def test_cantilever_model_small_displacement_stiffness_and_conservative():
-    """The leaf model reduces to the linear Timoshenko cantilever at small loads, and its
-    tangent stiffness d(dU/dr)/dr is symmetric at large deflection (a potential exists)."""
+    """
+    The leaf model reduces to the linear Timoshenko cantilever at small loads.
+
+    Its tangent stiffness d(dU/dr)/dr is symmetric at large deflection (a potential exists).
+    """
     leaf = Leaf()
 
     def grad_r(q):
@@ -191,7 +216,9 @@ def test_cantilever_model_small_displacement_stiffness_and_conservative():
         K = dg @ np.linalg.inv(dr)
         assert np.abs(K - K.T).max() < 1e-6 * np.abs(K).max()
         if load < 1e-3:
-            assert np.diag(K) == pytest.approx(np.diag(leaf.small_displacement_stiffness()), rel=1e-5)
+            assert np.diag(K) == pytest.approx(
+                np.diag(leaf.small_displacement_stiffness()), rel=1e-5
+            )
     data = cantilever_data(500, np.random.default_rng(0))
     assert 0.4 < np.abs(data.alpha).max() < 0.6
 
@@ -273,8 +300,12 @@ def test_rank_deficient_design_names_the_terms():
 
 
 def test_numerically_rank_deficient_design_names_the_collinear_terms():
-    """sigma - 1 = -xi^2/2 + O(xi^4): at milliradian rotations the sigma terms cannot be
-    told from the xi terms (why sigma_degree defaults to 0)."""
+    """
+    Check sigma - 1 = -xi^2/2 + O(xi^4).
+
+    At milliradian rotations the sigma terms cannot be told from the xi terms (why sigma_degree
+    defaults to 0).
+    """
     rng = np.random.default_rng(6)
     data = law_data(quad("twistor"), *sample_box(200, 1e-3, (1e-6, 1e-6), rng))
     with pytest.raises(FitError) as err:
@@ -302,8 +333,14 @@ def test_other_bad_arguments():
 
 def run(*args, cwd=ROOT):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    return subprocess.run([sys.executable, "-m", "flexure_sim.cli", *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=300, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "flexure_sim.cli", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+    )
 
 
 def test_cli_fit_json_and_output_file(tmp_path):
@@ -313,7 +350,19 @@ def test_cli_fit_json_and_output_file(tmp_path):
     write_wrench_csv(train, law_data(law, *sample_box(300, 1.0, (2e-5, 2e-5), rng)))
     write_wrench_csv(test, law_data(law, *sample_box(100, 1.0, (2e-5, 2e-5), rng)))
     out = tmp_path / "hinge.yaml"
-    p = run("fit", str(train), "--order", "4", "--coords", "twist", "--test", str(test), "-o", str(out), "--json")
+    p = run(
+        "fit",
+        str(train),
+        "--order",
+        "4",
+        "--coords",
+        "twist",
+        "--test",
+        str(test),
+        "-o",
+        str(out),
+        "--json",
+    )
     assert p.returncode == 0, p.stderr
     rep = json.loads(p.stdout)
     assert len(rep["train_rms"]) == 3 and len(rep["test_max_abs"]) == 3
@@ -325,7 +374,11 @@ def test_cli_fit_json_and_output_file(tmp_path):
     assert load_law(out).order == 4
     # human-readable form
     p = run("fit", str(train), "--order", "2", "--coords", "twistor")
-    assert p.returncode == 0 and "worst relative error" in p.stdout and "stiffness at rest" in p.stdout
+    assert (
+        p.returncode == 0
+        and "worst relative error" in p.stdout
+        and "stiffness at rest" in p.stdout
+    )
 
 
 def test_cli_fit_errors_are_messages_not_tracebacks(tmp_path):
@@ -333,9 +386,15 @@ def test_cli_fit_errors_are_messages_not_tracebacks(tmp_path):
     p = run("fit", str(bad), "--order", "3")
     assert p.returncode == 2 and "missing column fy" in p.stderr and "Traceback" not in p.stderr
     few = tmp_path / "few.csv"
-    write_wrench_csv(few, law_data(quad("twistor"), *sample_box(5, 0.1, (1e-6, 1e-6), np.random.default_rng(0))))
+    write_wrench_csv(
+        few, law_data(quad("twistor"), *sample_box(5, 0.1, (1e-6, 1e-6), np.random.default_rng(0)))
+    )
     p = run("fit", str(few), "--order", "4")
-    assert p.returncode == 2 and "too few rows for order 4" in p.stderr and "Traceback" not in p.stderr
+    assert (
+        p.returncode == 2
+        and "too few rows for order 4" in p.stderr
+        and "Traceback" not in p.stderr
+    )
     p = run("fit", str(tmp_path / "absent.csv"), "--order", "2")
     assert p.returncode == 2 and "absent.csv" in p.stderr and "cannot read" in p.stderr
     p = run("fit", str(few), "--order", "2", "--regularization", "-1")
@@ -345,9 +404,13 @@ def test_cli_fit_errors_are_messages_not_tracebacks(tmp_path):
 # ------------------------------------------------ fitted hinges in mechanisms
 
 def test_example_stage_matches_the_notch_stage_within_the_fit_error():
-    """config/examples: hinge a of the stage fitted (order 4 twistor) to noisy notch-law
-    data; the static answer agrees with the built-in stage within the fit's reported
-    held-out error, and the damping is the notch hinge's B = t_char K."""
+    """
+    config/examples.
+
+    Hinge a of the stage fitted (order 4 twistor) to noisy notch-law data; the static answer agrees
+    with the built-in stage within the fit's reported held-out error, and the damping is the notch
+    hinge's B = t_char K.
+    """
     fitted = load_mechanism(EXAMPLES / "microstage_polynomial_a.yaml")
     builtin = load_mechanism("microstage")
     report = yaml.safe_load((EXAMPLES / "notch_hinge_order4.yaml").read_text())["fit"]
@@ -375,8 +438,19 @@ def test_example_stage_matches_the_notch_stage_within_the_fit_error():
 def test_example_hinge_file_is_what_the_command_writes(tmp_path):
     """The shipped fit is reproducible from the shipped CSVs."""
     out = tmp_path / "again.yaml"
-    p = run("fit", "notch_hinge_train.csv", "--order", "4", "--coords", "twistor", "--test", "notch_hinge_test.csv",
-            "-o", str(out), cwd=EXAMPLES)
+    p = run(
+        "fit",
+        "notch_hinge_train.csv",
+        "--order",
+        "4",
+        "--coords",
+        "twistor",
+        "--test",
+        "notch_hinge_test.csv",
+        "-o",
+        str(out),
+        cwd=EXAMPLES,
+    )
     assert p.returncode == 0, p.stderr
     shipped, again = load_law(EXAMPLES / "notch_hinge_order4.yaml"), load_law(out)
     assert np.array_equal(shipped.exponents, again.exponents)
@@ -385,9 +459,13 @@ def test_example_hinge_file_is_what_the_command_writes(tmp_path):
 
 
 def test_fourbar_with_fitted_hinges_matches_at_large_deflection():
-    """All four leaf hinges of the four-bar replaced by an order-6 twist polynomial fitted to
+    """
+    Four-bar with order-6 twist polynomial hinges: the static pose agrees.
+
+    All four leaf hinges of the four-bar replaced by an order-6 twist polynomial fitted to
     their twistor quadratic law (not a polynomial in twist coordinates); the static pose at a
-    0.157 rad driver rotation agrees within the fit's held-out error."""
+    0.157 rad driver rotation agrees within the fit's held-out error.
+    """
     mech = load_mechanism("fourbar_cantilever")
     K = mech.hinges[0].law.K
     rng = np.random.default_rng(9)
@@ -445,7 +523,9 @@ def test_mechanism_errors_for_polynomial_laws(tmp_path):
     bad["terms"][0]["exponents"] = [0, 1, 0, 0]
     (tmp_path / "broken.yaml").write_text(yaml.safe_dump(bad))
     doc["hinges"][0]["law"]["polynomial"] = "broken.yaml"
-    _expect(tmp_path, doc, "hinges[0].law.polynomial", "broken.yaml: terms:", "unstressed equilibrium")
+    _expect(
+        tmp_path, doc, "hinges[0].law.polynomial", "broken.yaml: terms:", "unstressed equilibrium"
+    )
 
 
 def test_builtins_are_unchanged_and_examples_are_not_builtins():

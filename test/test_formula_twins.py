@@ -1,6 +1,9 @@
-"""One definition per formula (issue 10 item 3): where Numba needs a compiled copy, it is the
-same source compiled, or a twin pinned here to the reference at random inputs to machine
-precision."""
+"""
+One definition per formula (issue 10 item 3).
+
+Where Numba needs a compiled copy, it is the same source compiled, or a twin pinned here to the
+reference at random inputs to machine precision.
+"""
 import math
 
 import numpy as np
@@ -14,8 +17,11 @@ EPS = np.finfo(float).eps
 
 
 def test_half_cotangent_has_one_source():
-    """The force kernel compiles kinematics.half_cot_scalar itself, and hinge_laws uses
-    kinematics' array version of it: no second series with its own threshold."""
+    """
+    The force kernel compiles kinematics.half_cot_scalar itself.
+
+    Also, hinge_laws uses kinematics' array version of it: no second series with its own threshold.
+    """
     assert kernels._half_cot.py_func is kinematics.half_cot_scalar
     assert not hasattr(hinge_laws, "_half_cot_derivatives")
     rng = np.random.default_rng(0)

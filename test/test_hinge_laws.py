@@ -1,4 +1,9 @@
-"""Hinge laws: wrench = gradient of the potential, invariance (3.3, 4.6), small displacements (4.52)."""
+"""
+Hinge laws.
+
+Wrench = gradient of the potential, invariance (3.3, 4.6), small displacements (4.52).
+"""
+
 import numpy as np
 import pytest
 
@@ -46,8 +51,12 @@ def test_gradient_hessian_and_damping_derivative_are_exact(kind, r):
     assert e.hess[0] == pytest.approx(H_fd, rel=1e-5, abs=1e-7 * np.abs(e.hess).max())
     rdot = np.array([0.7, -0.02, 0.03])
     d = ev(lw, r, rdot)
-    dfd = np.array([fd_grad(lambda x: ev(lw, x, rdot).damping_force[0, i], r, scale) for i in range(3)])
-    assert d.damping_force_dr[0] == pytest.approx(dfd, rel=1e-5, abs=1e-7 * np.abs(d.damping_force_dr).max())
+    dfd = np.array(
+        [fd_grad(lambda x: ev(lw, x, rdot).damping_force[0, i], r, scale) for i in range(3)]
+    )
+    assert d.damping_force_dr[0] == pytest.approx(
+        dfd, rel=1e-5, abs=1e-7 * np.abs(d.damping_force_dr).max()
+    )
     assert d.damping_force[0] == pytest.approx(d.damping[0] @ rdot)
 
 
@@ -69,8 +78,11 @@ def _lam(q, sign):
 
 
 def test_twistor_wrench_matches_comply_quat2():
-    """m_b = 2 Lambda K [xi; x] (4.35) and the viscous wrench 2 Lambda B dx (4.40-4.42),
-    written out as comply_quat2.sci does, with the frames' own velocities."""
+    """
+    m_b = 2 Lambda K [xi; x] (4.35) and the viscous wrench 2 Lambda B dx (4.40-4.42).
+
+    Written out as comply_quat2.sci does, with the frames' own velocities.
+    """
     rng = np.random.default_rng(7)
     K, B = K_GENERAL, 1e-3 * K_GENERAL
     for _ in range(20):
@@ -114,8 +126,12 @@ def test_potential_does_not_depend_on_which_body_is_A(kind):
 
 @pytest.mark.parametrize("kind", LAWS)
 def test_potential_does_not_depend_on_where_the_frames_are(kind):
-    """Sections 3.3 / 4.6: moving both coincident frames by G needs K' = Ad^T K Ad;
-    without transforming K the energy changes (the control)."""
+    """
+    Sections 3.3 / 4.6.
+
+    Moving both coincident frames by G needs K' = Ad^T K Ad; without transforming K the energy
+    changes (the control).
+    """
     rng = np.random.default_rng(5)
     for _ in range(20):
         Ha = (kin.rot(rng.uniform(-3, 3)), rng.normal(size=2))
@@ -136,4 +152,6 @@ def test_twistor_and_twist_laws_agree_for_small_displacements():
     assert u1 == pytest.approx(u2, rel=1e-8)
     # ... and differ at large rotation: U_twistor = 4 sin^2(a/2)/a^2 U_twist.
     r = np.array([1.0, 0.0, 0.0])
-    assert ev(law("twistor"), r).energy[0] / ev(law("twist"), r).energy[0] == pytest.approx(4 * np.sin(0.5) ** 2)
+    assert ev(law("twistor"), r).energy[0] / ev(law("twist"), r).energy[0] == pytest.approx(
+        4 * np.sin(0.5) ** 2
+    )

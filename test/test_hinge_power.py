@@ -1,5 +1,8 @@
-"""Energy and power of each hinge law, checked like Drake's force elements
-(multibody/plant/test/energy_and_power_test.cc), apart from any integrator.
+"""
+Energy and power of each hinge law.
+
+Checked like Drake's force elements (multibody/plant/test/energy_and_power_test.cc), apart from any
+integrator.
 
 At random states of every law (twistor and twist quadratic, twistor and twist polynomial):
 - the potential energy equals an independent formula (kinematics' twistor / twist maps, or
@@ -185,9 +188,12 @@ def _two_bodies(seed):
 
 
 def _relative(g):
-    """r = (alpha, p) of frame b in frame a and its rate r_dot, from the bodies' motion:
-    frame origins x_f = x + R(theta) p_f, velocities v + w J R(theta) p_f; p = R_a^T (x_b - x_a)
-    whose rate is R_a^T (v_b - v_a) - w_A J p (d/dt R_a^T = -w_A J R_a^T)."""
+    """
+    Return r = (alpha, p) of frame b in frame a and its rate r_dot, from the bodies' motion.
+
+    Frame origins x_f = x + R(theta) p_f, velocities v + w J R(theta) p_f; p = R_a^T (x_b - x_a)
+    whose rate is R_a^T (v_b - v_a) - w_A J p (d/dt R_a^T = -w_A J R_a^T).
+    """
     RA, RB = kin.rot(g["thA"]), kin.rot(g["thB"])
     xa = g["xA"] + np.einsum("nij,nj->ni", RA, g["pa"])
     xb = g["xB"] + np.einsum("nij,nj->ni", RB, g["pb"])
@@ -202,8 +208,12 @@ def _relative(g):
 
 
 def _power_on_bodies(g, alpha, m_b, xb):
-    """Power of the wrench -m_b on B (frame b coordinates, about b's origin) and of the
-    opposite wrench on A, with the bodies' absolute twists; also the sum of |terms|."""
+    """
+    Return the power of the wrench -m_b on B and of the opposite wrench on A.
+
+    The wrench on B is in frame b coordinates, about b's origin; both with the bodies' absolute
+    twists. Also returns the sum of |terms|.
+    """
     Rb = kin.rot(g["thB"] + g["phib"])
     F = -np.einsum("nij,nj->ni", Rb, m_b[:, 1:])  # force on B, world coordinates
     m = -m_b[:, 0]  # moment on B about b's origin

@@ -28,8 +28,22 @@ def test_section_2_7_4_twistor_example():
 
 
 def _random_displacements(rng, n):
-    angles = np.concatenate([rng.uniform(-np.pi, np.pi, n), [0.0, 1e-9, -1e-7, 5e-5, np.pi - 1e-9, -np.pi + 1e-9,
-                                                             np.pi - 1e-3, -(np.pi - 0.05), 3.0]])
+    angles = np.concatenate(
+        [
+            rng.uniform(-np.pi, np.pi, n),
+            [
+                0.0,
+                1e-9,
+                -1e-7,
+                5e-5,
+                np.pi - 1e-9,
+                -np.pi + 1e-9,
+                np.pi - 1e-3,
+                -(np.pi - 0.05),
+                3.0,
+            ],
+        ]
+    )
     for a in angles:
         yield a, rng.normal(size=2) * rng.choice([1e-6, 1e-2, 1.0, 10.0])
 
@@ -50,7 +64,9 @@ def test_round_trips_twist_and_twistor():
         assert p3 == pytest.approx(p, rel=1e-9, abs=1e-12 * max(1.0, np.abs(p).max()))
         # The twistor's vector part is sin(alpha/2)/alpha times the twist (same pole).
         qt = kin.twistor_from_twist(d)
-        assert np.array(qt) == pytest.approx(np.array(q), rel=1e-9, abs=1e-12 * max(1.0, np.abs(p).max()))
+        assert np.array(qt) == pytest.approx(
+            np.array(q), rel=1e-9, abs=1e-12 * max(1.0, np.abs(p).max())
+        )
 
 
 def test_pure_translation():

@@ -1,5 +1,8 @@
-"""Hyper-dual numbers, the generic force chain, and the exact linearisation: modes, damped
-poles, frequency response against the time-domain engine, state space."""
+"""
+Hyper-dual numbers, the generic force chain, and the exact linearisation.
+
+modes, damped poles, frequency response against the time-domain engine, state space.
+"""
 
 import dataclasses
 
@@ -194,8 +197,12 @@ def test_frf_at_the_lowest_frequency_is_the_static_gain(stage, stage_model):
 
 
 def _sine_response(sim, z_static, u0, amp, freq, dt, body, axis):
-    """Drive command u0 + amp sin(2 pi f t), sampled at each step's midpoint (so the
-    piecewise-constant command has no half-step delay); output samples after each step."""
+    """
+    Drive command u0 + amp sin(2 pi f t).
+
+    Sampled at each step's midpoint (so the piecewise-constant command has no half-step delay);
+    output samples after each step.
+    """
     sim.state = State(0.0, z_static.copy(), np.zeros_like(z_static), u0, u0)
     periods = max(2, int(np.ceil(0.005 * freq)))
     n_transient = int(round(0.03 / dt))
@@ -208,7 +215,7 @@ def _sine_response(sim, z_static, u0, amp, freq, dt, body, axis):
         sim.step()
         if k >= n_transient:
             t[k - n_transient] = sim.state.t
-            y[k - n_transient] = (sim.state.z[i : i + 2] - sim.z0[i : i + 2]) @ axis
+            y[k - n_transient] = (sim.state.z[i:i + 2] - sim.z0[i:i + 2]) @ axis
     basis = np.column_stack(
         [np.sin(2 * np.pi * freq * t), np.cos(2 * np.pi * freq * t), np.ones_like(t)]
     )

@@ -1,5 +1,9 @@
-"""Model apart from Data (issue 10 item 2): several runs share one model's constants and
-step independently, exactly as separate simulations do."""
+"""
+Model apart from Data (issue 10 item 2).
+
+Several runs share one model's constants and step independently, exactly as separate simulations
+do.
+"""
 import copy
 
 import numpy as np

@@ -1,5 +1,9 @@
-"""Batch intake of drive commands (issue 18.3): one decode and one filter call per tick must
-give exactly what decoding and submitting the commands one by one gives (no ROS)."""
+"""
+Batch intake of drive commands (issue 18.3).
+
+One decode and one filter call per tick must give exactly what decoding and submitting the commands
+one by one gives (no ROS).
+"""
 from __future__ import annotations
 
 import math

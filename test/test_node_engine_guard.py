@@ -1,4 +1,5 @@
-"""Live parameters and commands the engine cannot follow never stop stage_node (issue 16.10).
+"""
+Live parameters and commands the engine cannot follow never stop stage_node (issue 16.10).
 
 A real node process; real ``set_parameters`` calls and drive commands from a real rclpy peer.
 Strokes without a static equilibrium are refused with the engine's reason; a step that fails

@@ -1,4 +1,5 @@
-"""How stage_node ends: bad start-up input (issue 16.6) and signals at any moment (issue 18.4).
+"""
+How stage_node ends: bad start-up input (issue 16.6) and signals at any moment (issue 18.4).
 
 Real node processes. Every ending is one line on stderr and the documented exit code: 1 when
 the node cannot start, 2 for bad arguments, 0 after SIGINT/SIGTERM (the recording finished),

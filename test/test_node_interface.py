@@ -1,4 +1,5 @@
-"""The stage node's topic table and its hand-packed CDR, checked against rclpy's serializer.
+"""
+The stage node's topic table and its hand-packed CDR, checked against rclpy's serializer.
 
 serialize_message leaves alignment padding uninitialised (whatever its buffer held), so the
 packed bytes are compared with it at every byte that is not padding; the packer writes zeros
@@ -29,8 +30,12 @@ STAMPS = [0, 1, 999_999_999, 1_000_000_000, 1_234_567_891_011, 2**31 * 1_000_000
 
 
 def moving_snapshot(name: str, steps: int = 30):
-    """A snapshot with non-trivial values in every field: the static answer at 1.35 um (stage)
-    or at a time when the four-bar's driver has turned the linkage."""
+    """
+    Return a snapshot with non-trivial values in every field.
+
+    The static answer at 1.35 um (stage) or at a time when the four-bar's driver has turned the
+    linkage.
+    """
     mech = load_mechanism(name)
     sim = Simulation(mech)
     result = sim.static(1.35e-6 if sim.drive is not None else 0.0, t=steps * 1e-3)
@@ -74,7 +79,9 @@ def test_stamped_packer_handles_every_frame_id_alignment():
         expected = serialize_message(msg)
         mask = set(packer.padding)
         assert len(data) == len(expected)
-        assert [b for i, b in enumerate(data) if i not in mask] == [b for i, b in enumerate(expected) if i not in mask]
+        assert [b for i, b in enumerate(data) if i not in mask] == [
+            b for i, b in enumerate(expected) if i not in mask
+        ]
         assert deserialize_message(data, TransformStamped) == msg
 
 
@@ -93,14 +100,22 @@ def test_stage_topic_table_names_types_frames():
     table = {t.name: t for t in itf.tick_topics}
     assert list(table)[:2] == ["/clock", "bodies/poses"]
     assert len(table) == 26
-    assert table["bodies/poses"].msg_type is PoseArray and table["bodies/poses"].frame_id == "stage"
+    assert (
+        table["bodies/poses"].msg_type is PoseArray and table["bodies/poses"].frame_id == "stage"
+    )
     assert table["bodies/body6/pose"].msg_type is PoseStamped
-    assert table["hinges/a/wrench"].msg_type is WrenchStamped and table["hinges/a/wrench"].frame_id == "hinge_a"
+    assert (
+        table["hinges/a/wrench"].msg_type is WrenchStamped
+        and table["hinges/a/wrench"].frame_id == "hinge_a"
+    )
     assert "body6" in table["hinges/a/wrench"].description  # the body the wrench acts on
     assert table["hinges/g/deflection"].frame_id == "hinge_g_a"
     assert table["hinges/a/compression"].msg_type is Float64
     assert {"output/displacement", "drive/input", "drive/force"} <= set(table)
-    assert table["/clock"].msg_type is Clock and table["/clock"].type_name == "rosgraph_msgs/msg/Clock"
+    assert (
+        table["/clock"].msg_type is Clock
+        and table["/clock"].type_name == "rosgraph_msgs/msg/Clock"
+    )
     assert itf.command.name == "drive/displacement" and itf.diagnostics.name == "diagnostics"
     assert all(not t.name.startswith("/") for t in itf.tick_topics[1:])
     assert "/clock" not in {t.name for t in StageInterface(mech, "realtime").tick_topics}
@@ -119,8 +134,14 @@ def test_values_land_in_the_documented_fields():
     itf = StageInterface(mech, "realtime")
     msgs = dict(zip((t.name for t in itf.tick_topics), itf.messages(snap, 5_000_000)))
     pose = msgs["bodies/body4/pose"].pose
-    assert (pose.position.x, pose.position.y, pose.position.z) == (snap.poses[3, 0], snap.poses[3, 1], 0.0)
-    assert 2 * math.atan2(pose.orientation.z, pose.orientation.w) == pytest.approx(snap.poses[3, 2], abs=1e-15)
+    assert (pose.position.x, pose.position.y, pose.position.z) == (
+        snap.poses[3, 0],
+        snap.poses[3, 1],
+        0.0,
+    )
+    assert 2 * math.atan2(pose.orientation.z, pose.orientation.w) == pytest.approx(
+        snap.poses[3, 2], abs=1e-15
+    )
     w = msgs["hinges/c/wrench"].wrench
     assert (w.torque.z, w.force.x, w.force.y) == tuple(snap.wrenches[2])
     assert (w.torque.x, w.torque.y, w.force.z) == (0.0, 0.0, 0.0)
@@ -128,7 +149,10 @@ def test_values_land_in_the_documented_fields():
     assert (d.translation.x, d.translation.y) == tuple(snap.deflections[2, 1:])
     assert msgs["output/displacement"].data == snap.output
     assert msgs["hinges/a/compression"].data == snap.compression
-    assert msgs["drive/input"].data == snap.drive_input and msgs["drive/force"].data == snap.drive_force
+    assert (
+        msgs["drive/input"].data == snap.drive_input
+        and msgs["drive/force"].data == snap.drive_force
+    )
     assert np.allclose(yaw_quaternion(0.3), (0, 0, math.sin(0.15), math.cos(0.15)))
     assert split_stamp(1_500_000_001) == (1, 500_000_001)
 
@@ -142,8 +166,14 @@ def test_clashing_frame_names_are_refused():
             {"name": "stage", "mass": 1.0, "inertia": 1.0, "pose": [0, 0, 0]},
             {"name": "b", "mass": 1.0, "inertia": 1.0, "pose": [0, 0, 0]},
         ],
-        "hinges": [{"name": "h", "a": {"body": "stage", "at": [0, 0]}, "b": {"body": "b", "at": [0, 0]},
-                    "stiffness": {"model": "matrix", "K": np.eye(3).tolist()}}],
+        "hinges": [
+            {
+                "name": "h",
+                "a": {"body": "stage", "at": [0, 0]},
+                "b": {"body": "b", "at": [0, 0]},
+                "stiffness": {"model": "matrix", "K": np.eye(3).tolist()},
+            }
+        ],
         "constraints": [{"type": "fixed", "body": "stage"}],
     }
     clash = mechanism_from_dict(data)
@@ -156,16 +186,33 @@ def test_clashing_frame_names_are_refused():
 def test_packed_diagnostics_equal_serialize_message_outside_padding(level):
     # Names and values of 0..5 bytes (and a 2-byte UTF-8 character) walk every alignment.
     for shift in range(6):
-        values = [(f"k{'x' * ((shift + i) % 5)}", 1.5 * i if i % 2 else "é" * (i % 3)) for i in range(9)]
+        values = [
+            (f"k{'x' * ((shift + i) % 5)}", 1.5 * i if i % 2 else "é" * (i % 3)) for i in range(9)
+        ]
         values += [("flag", True), ("count", 7), ("empty", "")]
-        args = (1_234_567_891_011 + shift, "n" * shift, "hw" * shift, level, "m" * (5 - shift), values)
+        args = (
+            1_234_567_891_011 + shift,
+            "n" * shift,
+            "hw" * shift,
+            level,
+            "m" * (5 - shift),
+            values,
+        )
         msg = diagnostics_message(*args)
         expected = serialize_message(msg)
         data = encode_diagnostics(*args)
         padding: list[int] = []
         sec, nsec = split_stamp(args[0])
-        again = pack_diagnostics(sec, nsec, level, args[1], args[4], args[2],
-                                 [(kv.key, kv.value) for kv in msg.status[0].values], padding=padding)
+        again = pack_diagnostics(
+            sec,
+            nsec,
+            level,
+            args[1],
+            args[4],
+            args[2],
+            [(kv.key, kv.value) for kv in msg.status[0].values],
+            padding=padding,
+        )
         assert again == data
         mask = set(padding)
         assert len(data) == len(expected)

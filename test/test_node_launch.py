@@ -1,5 +1,8 @@
-"""How users start the node: ``ros2 run flexure_sim stage_node`` and the ``stage_node`` console
-script, from the installed package (``pip install .``; scripts/run_tests.sh reinstalls it).
+"""
+How users start the node.
+
+``ros2 run flexure_sim stage_node`` and the ``stage_node`` console script, from the installed
+package (``pip install .``; scripts/run_tests.sh reinstalls it).
 
 There is no ``ros2`` CLI on PyPI, so `ros2_run` does what ros2run does: find the prefix on
 AMENT_PREFIX_PATH whose ament index registers flexure_sim, then execute
@@ -31,10 +34,17 @@ def ament_prefix_path() -> str:
 
 
 def ros2_run_lookup(package: str, executable: str, prefix_path: str) -> Path:
-    """ros2run's lookup: <prefix>/lib/<package>/<executable> of the first prefix holding the
-    package marker share/ament_index/resource_index/packages/<package>."""
+    """
+    ros2run's lookup.
+
+    <prefix>/lib/<package>/<executable> of the first prefix holding the package marker
+    share/ament_index/resource_index/packages/<package>.
+    """
     for prefix in prefix_path.split(os.pathsep):
-        if prefix and (Path(prefix) / "share/ament_index/resource_index/packages" / package).is_file():
+        if (
+            prefix
+            and (Path(prefix) / "share/ament_index/resource_index/packages" / package).is_file()
+        ):
             candidate = Path(prefix) / "lib" / package / executable
             if not (candidate.is_file() and os.access(candidate, os.X_OK)):
                 raise LookupError(f"No executable found: {candidate}")
@@ -43,9 +53,17 @@ def ros2_run_lookup(package: str, executable: str, prefix_path: str) -> Path:
 
 
 def bare_env(domain: int, cwd: Path) -> dict[str, str]:
-    """An environment like a fresh shell's: system PATH, no virtual environment, no PYTHONPATH."""
-    env = node_env(domain, AMENT_PREFIX_PATH=ament_prefix_path(), PATH="/usr/local/bin:/usr/bin:/bin",
-                   ROS_LOG_DIR=str(cwd / "ros_log"))
+    """
+    Return an environment like a fresh shell's.
+
+    System PATH, no virtual environment, no PYTHONPATH.
+    """
+    env = node_env(
+        domain,
+        AMENT_PREFIX_PATH=ament_prefix_path(),
+        PATH="/usr/local/bin:/usr/bin:/bin",
+        ROS_LOG_DIR=str(cwd / "ros_log"),
+    )
     for key in ("VIRTUAL_ENV", "PYTHONPATH", "PYTHONHOME", "_ROS_WHEELS_BOOTSTRAP_COMPLETE"):
         env.pop(key, None)
     return env
@@ -66,8 +84,13 @@ def test_ros2_run_starts_the_installed_node_with_the_builtin_stage(tmp_path):
     exe = ros2_run_lookup(PACKAGE, "stage_node", ament_prefix_path())
     cwd = tmp_path / "ros2run"
     cwd.mkdir()
-    node = NodeProcess(cwd, domain, {"time_mode": "fast", "publish_rate": 200.0}, command=[str(exe)],
-                       env=bare_env(domain, cwd))
+    node = NodeProcess(
+        cwd,
+        domain,
+        {"time_mode": "fast", "publish_rate": 200.0},
+        command=[str(exe)],
+        env=bare_env(domain, cwd),
+    )
     peer = Peer(domain)
     peer.watch = node
     try:
@@ -76,8 +99,12 @@ def test_ros2_run_starts_the_installed_node_with_the_builtin_stage(tmp_path):
         peer.wait_for_publishers(["/output/displacement"], timeout=30)
         peer.wait_for_subscribers(drive)
         drive.publish(Float64(data=1.35e-6))
-        peer.spin_until(lambda: peer.last("/output/displacement") is not None
-                        and peer.last("/output/displacement").data > 30e-6, 30, "the stage to move")
+        peer.spin_until(
+            lambda: peer.last("/output/displacement") is not None
+            and peer.last("/output/displacement").data > 30e-6,
+            30,
+            "the stage to move",
+        )
     finally:
         peer.close()
         rc = node.stop(signal.SIGINT)
@@ -116,14 +143,24 @@ def test_installed_entry_points_report_bad_input_without_a_traceback(tmp_path):
     domain = next_domain_id()
     exe = ros2_run_lookup(PACKAGE, "stage_node", ament_prefix_path())
     env = bare_env(domain, tmp_path)
-    help_text = subprocess.run([str(exe), "--help"], env=env, capture_output=True, text=True, timeout=60)
+    help_text = subprocess.run(
+        [str(exe), "--help"], env=env, capture_output=True, text=True, timeout=60
+    )
     assert help_text.returncode == 0 and "publish_rate" in help_text.stdout
     bad = tmp_path / "bad.yaml"
     bad.write_text("name: [unclosed\n")
     for command in ([str(exe)], [str(Path(sys.prefix) / "bin" / "stage_node")]):
-        p = subprocess.run(command + ["--ros-args", "-p", f"mechanism:={bad}"], env=env, cwd=tmp_path,
-                           capture_output=True, text=True, timeout=60)
+        p = subprocess.run(
+            command + ["--ros-args", "-p", f"mechanism:={bad}"],
+            env=env,
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         assert p.returncode == 1
         assert f"{bad}: not valid YAML" in p.stderr and "Traceback" not in p.stderr
-    p = subprocess.run([str(exe), "--unknown"], env=env, capture_output=True, text=True, timeout=60)
+    p = subprocess.run(
+        [str(exe), "--unknown"], env=env, capture_output=True, text=True, timeout=60
+    )
     assert p.returncode == 2 and "unexpected arguments" in p.stderr

@@ -1,5 +1,10 @@
-"""The node measuring harness behind `python -m flexure_sim.tools.bench --node`, on a short real run
-(a real stage_node subprocess, Fast DDS on loopback, a real recording read back)."""
+"""
+The node measuring harness behind `python -m flexure_sim.tools.bench --node`.
+
+It is tested on a short real run (a real stage_node subprocess, Fast DDS on loopback, a real
+recording read back).
+"""
+
 import pytest
 
 from flexure_sim.tools import measure

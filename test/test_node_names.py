@@ -1,4 +1,5 @@
-"""Recording names of stage_node processes started together, as a launch file does (issue 16.4).
+"""
+Recording names of stage_node processes started together, as a launch file does (issue 16.4).
 
 Real node processes on one DDS domain share one directory; each must get its own file (node
 namespace and name in the default name, ``_1``, ``_2`` when taken), none may fail or

@@ -18,7 +18,9 @@ def test_defaults_are_valid_and_give_ten_steps_per_tick():
     assert validate(values) is None
     assert values["publish_rate"] == 1000.0 and values["sim_step"] == 1e-4
     assert values["mechanism"] == "microstage" and values["time_mode"] == "realtime"
-    assert values["record"] is True and values["record_dir"] == "runs" and values["record_path"] == ""
+    assert (
+        values["record"] is True and values["record_dir"] == "runs" and values["record_path"] == ""
+    )
     assert steps_per_tick(1000.0, 1e-4) == (10, None)
     read_only = {s.name for s in parameter_specs() if s.read_only}
     assert read_only == {"mechanism", "sim_step", "time_mode", "stepping_nice",
@@ -26,10 +28,18 @@ def test_defaults_are_valid_and_give_ten_steps_per_tick():
     assert values["command_reliability"] == "reliable"
 
 
-@pytest.mark.parametrize("rate, step, n", [
-    (1000.0, 1e-4, 10), (200.0, 1e-4, 50), (10000.0, 1e-4, 1), (1.0, 1e-2, 100), (333.0, 1 / 3330, 10),
-    (100.0, 1e-3, 10), (3.0, 1 / 3000, 1000),
-])
+@pytest.mark.parametrize(
+    "rate, step, n",
+    [
+        (1000.0, 1e-4, 10),
+        (200.0, 1e-4, 50),
+        (10000.0, 1e-4, 1),
+        (1.0, 1e-2, 100),
+        (333.0, 1 / 3330, 10),
+        (100.0, 1e-3, 10),
+        (3.0, 1 / 3000, 1000),
+    ],
+)
 def test_steps_per_tick(rate, step, n):
     assert steps_per_tick(rate, step) == (n, None)
 
@@ -186,7 +196,9 @@ def _claim_many(directory, barrier, results):
 def test_processes_racing_for_one_name_never_get_the_same(tmp_path):
     ctx = multiprocessing.get_context("spawn")
     barrier, results = ctx.Barrier(4), ctx.Queue()
-    procs = [ctx.Process(target=_claim_many, args=(str(tmp_path), barrier, results)) for _ in range(4)]
+    procs = [
+        ctx.Process(target=_claim_many, args=(str(tmp_path), barrier, results)) for _ in range(4)
+    ]
     for p in procs:
         p.start()
     names = [name for _ in procs for name in results.get(timeout=60)]

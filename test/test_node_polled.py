@@ -1,5 +1,9 @@
-"""Polled subscriptions (in-process rclpy, real Fast DDS on loopback): the executor never
-runs or waits on them; the stepping thread's `take_raw` gets every message, in order."""
+"""
+Polled subscriptions (in-process rclpy, real Fast DDS on loopback).
+
+The executor never runs or waits on them; the stepping thread's `take_raw` gets every message, in
+order.
+"""
 import time
 
 import rclpy

@@ -1,4 +1,5 @@
-"""Publishers and subscribers whose QoS does not match the node's (issue 18.2).
+"""
+Publishers and subscribers whose QoS does not match the node's (issue 18.2).
 
 A real node process and real rclpy peers. With the default ``command_reliability`` reliable,
 a best-effort command publisher cannot be heard: the node says so (WARN line, diagnostics
@@ -26,7 +27,7 @@ PARAMS = dict(time_mode="realtime", sim_step=5e-4, publish_rate=200.0, record=Fa
 
 
 def diag(peer: Peer) -> dict[str, str]:
-    """The latest diagnostics values ({} before the first)."""
+    """Return the latest diagnostics values ({} before the first)."""
     msg = peer.last("/diagnostics")
     return diagnostics_values(msg) if msg is not None else {}
 

@@ -1,5 +1,7 @@
-"""stage_node recording when the disk is slow or full (issue 16 items 3 and 12): a real node
-subprocess, its real recorder process, real files read back.
+"""
+stage_node recording when the disk is slow or full (issue 16 items 3 and 12).
+
+A real node subprocess, its real recorder process, real files read back.
 
 The disk is slowed with the recorder's test hook (every write to the file sleeps) and filled
 with a real 3 MiB tmpfs (needs root to mount it): room for a few complete 1 MiB chunks, full
@@ -31,7 +33,7 @@ DROPPED = "flexure_sim.dropped_messages"
 
 @pytest.fixture
 def domain_peer() -> Iterator[tuple[int, Peer]]:
-    """A fresh DDS domain and a test peer node in it."""
+    """Return a fresh DDS domain and a test peer node in it."""
     domain = next_domain_id()
     peer = Peer(domain)
     try:
@@ -42,8 +44,11 @@ def domain_peer() -> Iterator[tuple[int, Peer]]:
 
 def start(tmp_path: Path, domain_peer: tuple[int, Peer], time_mode: str, record_path: str,
           **env: str) -> NodeProcess:
-    """The stage at 200 Hz recording to ``record_path`` (relative: in ``tmp_path/node``), with
-    extra environment variables (the recorder's test hooks), watched by the peer."""
+    """
+    Return the stage at 200 Hz recording to ``record_path`` (relative: in ``tmp_path/node``).
+
+    It runs with extra environment variables (the recorder's test hooks), watched by the peer.
+    """
     domain, peer = domain_peer
     cwd = tmp_path / "node"
     params = dict(time_mode=time_mode, sim_step=5e-4, publish_rate=200.0,
@@ -116,7 +121,7 @@ def test_real_time_drops_are_counted_in_diagnostics_and_file(tmp_path, domain_pe
 
 @pytest.fixture
 def full_disk(tmp_path):
-    """A real 3 MiB filesystem (tmpfs) that a recording fills in a few seconds."""
+    """Return a real 3 MiB filesystem (tmpfs) that a recording fills in a few seconds."""
     mount = tmp_path / "small_fs"
     mount.mkdir()
     done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(mount)],

@@ -1,6 +1,10 @@
-"""stage_node's main loop (in-process rclpy, real Fast DDS on loopback): a shutdown ends it
-cleanly wherever it lands, also inside the executor's wait-set build, where rclpy's SIGTERM
-thread can land it (CI saw the node exit 1 with RCLError "the given context is not valid")."""
+"""
+stage_node's main loop (in-process rclpy, real Fast DDS on loopback).
+
+A shutdown ends it cleanly wherever it lands, also inside the executor's wait-set build, where
+rclpy's SIGTERM thread can land it (CI saw the node exit 1 with RCLError "the given context is not
+valid").
+"""
 import threading
 
 import pytest
@@ -16,8 +20,11 @@ from flexure_sim.node.shell import spin_until_stopped
 
 
 class ShutdownWhileCollecting(CallbackGroup):
-    """Shuts its context down when the executor asks about its entity: that is
-    while the executor collects the entities of its next wait set, before it builds it."""
+    """
+    Shuts its context down when the executor asks about its entity.
+
+    That is while the executor collects the entities of its next wait set, before it builds it.
+    """
 
     def __init__(self, context: Context):
         super().__init__()

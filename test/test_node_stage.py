@@ -1,4 +1,5 @@
-"""stage_node as a real subprocess, talked to over DDS on loopback by real rclpy test nodes.
+"""
+stage_node as a real subprocess, talked to over DDS on loopback by real rclpy test nodes.
 
 Each test gets its own ROS domain (node_harness.next_domain_id). The node runs the source
 tree; test_node_launch.py covers the installed console script and the ros2-run launcher.
@@ -34,8 +35,13 @@ STAGE_TOPICS = (
     + ["/hinges/a/compression", "/output/displacement", "/drive/input", "/drive/force"]
 )
 TYPES = {
-    "/bodies/poses": PoseArray, "/hinges/a/compression": Float64, "/output/displacement": Float64,
-    "/drive/input": Float64, "/drive/force": Float64, "/diagnostics": DiagnosticArray, "/clock": Clock,
+    "/bodies/poses": PoseArray,
+    "/hinges/a/compression": Float64,
+    "/output/displacement": Float64,
+    "/drive/input": Float64,
+    "/drive/force": Float64,
+    "/diagnostics": DiagnosticArray,
+    "/clock": Clock,
     **{f"/bodies/body{i}/pose": PoseStamped for i in range(1, 7)},
     **{f"/hinges/{h}/wrench": WrenchStamped for h in "abcdefg"},
     **{f"/hinges/{h}/deflection": TransformStamped for h in "abcdefg"},
@@ -44,7 +50,7 @@ TYPES = {
 
 @pytest.fixture(scope="module")
 def engine_static():
-    """The engine's static answer at 1.35 um (no ROS)."""
+    """Return the engine's static answer at 1.35 um (no ROS)."""
     sim = Simulation(load_mechanism("microstage"))
     return sim.static(STEP).snapshot
 
@@ -82,12 +88,23 @@ def stop_cleanly(node: NodeProcess, sig: int = signal.SIGINT) -> None:
 
 
 # ------------------------------------------------------------------------------ acceptance
-def test_step_response_settles_to_the_engines_static_gain_and_compression(tmp_path, domain, peer,
-                                                                        engine_static):
-    node = start(tmp_path, domain, peer, time_mode="fast", sim_step=1e-4, publish_rate=200.0, record=False)
+def test_step_response_settles_to_the_engines_static_gain_and_compression(
+    tmp_path, domain, peer, engine_static
+):
+    node = start(
+        tmp_path, domain, peer, time_mode="fast", sim_step=1e-4, publish_rate=200.0, record=False
+    )
     try:
-        for topic in ("/output/displacement", "/hinges/a/compression", "/drive/input", "/drive/force",
-                      "/bodies/body4/pose", "/hinges/a/wrench", "/hinges/a/deflection", "/diagnostics"):
+        for topic in (
+            "/output/displacement",
+            "/hinges/a/compression",
+            "/drive/input",
+            "/drive/force",
+            "/bodies/body4/pose",
+            "/hinges/a/wrench",
+            "/hinges/a/deflection",
+            "/diagnostics",
+        ):
             peer.subscribe(topic, TYPES[topic])
         drive = peer.publisher("/drive/displacement", Float64)
         peer.wait_for_publishers(["/output/displacement"])
@@ -97,15 +114,22 @@ def test_step_response_settles_to_the_engines_static_gain_and_compression(tmp_pa
         drive.publish(Float64(data=STEP))
         # Settled: the actuator lag is 1 ms, the hinge modes are faster still; wait for
         # 0.2 s of simulated time after the input reached the command.
-        peer.spin_until(lambda: peer.last("/drive/input").data == pytest.approx(STEP, rel=1e-12), 30,
-                        "the actuator to reach the command")
+        peer.spin_until(
+            lambda: peer.last("/drive/input").data == pytest.approx(STEP, rel=1e-12),
+            30,
+            "the actuator to reach the command",
+        )
         count = len(peer.received["/output/displacement"])
-        peer.spin_until(lambda: len(peer.received["/output/displacement"]) > count + 40, 30, "settling")
+        peer.spin_until(
+            lambda: len(peer.received["/output/displacement"]) > count + 40, 30, "settling"
+        )
         gain = peer.last("/output/displacement").data / STEP
         engine_gain = engine_static.output / STEP
         assert gain == pytest.approx(engine_gain, rel=1e-4)
         assert gain == pytest.approx(27.628, rel=1e-4)
-        assert peer.last("/hinges/a/compression").data == pytest.approx(engine_static.compression, rel=1e-4)
+        assert peer.last("/hinges/a/compression").data == pytest.approx(
+            engine_static.compression, rel=1e-4
+        )
         assert peer.last("/drive/force").data == pytest.approx(engine_static.drive_force, rel=1e-4)
         # Frames and units as documented.
         pose = peer.last("/bodies/body4/pose")
@@ -122,11 +146,15 @@ def test_step_response_settles_to_the_engines_static_gain_and_compression(tmp_pa
         assert wrench.wrench.force.y == pytest.approx(fy, rel=1e-4)
         deflection = peer.last("/hinges/a/deflection")
         assert (deflection.header.frame_id, deflection.child_frame_id) == ("hinge_a_a", "hinge_a")
-        assert deflection.transform.translation.x == pytest.approx(engine_static.deflections[0, 1], rel=1e-4)
+        assert deflection.transform.translation.x == pytest.approx(
+            engine_static.deflections[0, 1], rel=1e-4
+        )
         # Stamps are simulated time, on the tick grid (5 ms).
         stamps = [stamp_ns(m) for m in peer.messages("/bodies/body4/pose")]
         off_grid = [s for s in stamps if s % 5_000_000]
-        assert not off_grid, f"stamps off the 5 ms tick grid (ns): {off_grid[:10]} of {len(stamps)}"
+        assert (
+            not off_grid
+        ), f"stamps off the 5 ms tick grid (ns): {off_grid[:10]} of {len(stamps)}"
         assert all(b - a == 5_000_000 for a, b in zip(stamps, stamps[1:]))
         diag = latest_diagnostics(peer)
         assert diag["commands_received"] == "1" and diag["commands_accepted"] == "1"
@@ -157,7 +185,11 @@ def test_bad_commands_are_rejected_clamped_rate_limited_and_counted_and_a_flood_
         for bad in (math.nan, math.inf, -math.inf):
             drive.publish(Float64(data=bad))
         d = diag_after()
-        assert (d["commands_received"], d["commands_rejected"], d["commands_accepted"]) == ("3", "3", "0")
+        assert (d["commands_received"], d["commands_rejected"], d["commands_accepted"]) == (
+            "3",
+            "3",
+            "0",
+        )
         assert d["drive_target"] == "0.0"
         drive.publish(Float64(data=5e-6))      # above the 2 um stroke
         d = diag_after()
@@ -214,8 +246,11 @@ def test_bad_commands_are_rejected_clamped_rate_limited_and_counted_and_a_flood_
             assert all(math.isfinite(m.data) for m in peer.messages(topic))
         assert all(math.isfinite(m.wrench.force.x) and math.isfinite(m.wrench.torque.z)
                    for m in peer.messages("/hinges/a/wrench"))
-        print(f"flood: {sent} sent in {wall:.2f} s, {received} received, sim time advanced "
-              f"{sim_times[-1] - float(before['sim_time']):.2f} s, missed ticks {d.get('missed_ticks')}")
+        print(
+            f"flood: {sent} sent in {wall:.2f} s, {received} received, sim time advanced "
+            f"{sim_times[-1] - float(before['sim_time']):.2f} s, missed ticks "
+            f"{d.get('missed_ticks')}"
+        )
     finally:
         stop_cleanly(node)
     # Every received command is in the recording, NaN included, in order.
@@ -223,14 +258,16 @@ def test_bad_commands_are_rejected_clamped_rate_limited_and_counted_and_a_flood_
     assert log.complete
     commands = [m.message.data for m in log.messages_on("/drive/displacement")]
     assert len(commands) == int(d["commands_received"])
-    assert sum(1 for c in commands if math.isnan(c)) == int(d["commands_rejected"]) - 2  # inf, -inf
+    assert (
+        sum(1 for c in commands if math.isnan(c)) == int(d["commands_rejected"]) - 2
+    )  # inf, -inf
     assert math.isnan(commands[0]) and commands[1] == math.inf and commands[2] == -math.inf
     assert commands[3:6] == [5e-6, -1e-6, 1e-6] and commands[-1] == 1.5e-6
 
 
 # ------------------------------------------------------------------------------ signals
 def read_with_mcap(path: Path) -> tuple[dict[str, int], int, dict]:
-    """Counts per topic from mcap + mcap-ros2-support, decoding every message."""
+    """Count per topic from mcap + mcap-ros2-support, decoding every message."""
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
@@ -263,7 +300,9 @@ def read_with_rosbags(path: Path) -> dict[str, int]:
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-def test_signal_leaves_a_complete_recording_matching_what_was_received(tmp_path, domain, peer, sig):
+def test_signal_leaves_a_complete_recording_matching_what_was_received(
+    tmp_path, domain, peer, sig
+):
     ticks = 25
     node = start(tmp_path, domain, peer, time_mode="lockstep", sim_step=1e-4, publish_rate=100.0,
                  record=True, record_path="run.mcap")
@@ -281,8 +320,12 @@ def test_signal_leaves_a_complete_recording_matching_what_was_received(tmp_path,
         for k in range(ticks):
             answer = peer.call(Trigger, "/stage_node/step")
             assert answer.success, answer.message
-        peer.spin_until(lambda: all(len(peer.received[t]) >= ticks for t in ["/clock"] + STAGE_TOPICS)
-                        and len(peer.received["/diagnostics"]) >= 2, 20, "every tick's messages")
+        peer.spin_until(
+            lambda: all(len(peer.received[t]) >= ticks for t in ["/clock"] + STAGE_TOPICS)
+            and len(peer.received["/diagnostics"]) >= 2,
+            20,
+            "every tick's messages",
+        )
         peer.spin_for(0.3)
     finally:
         stop_cleanly(node, sig)
@@ -297,7 +340,11 @@ def test_signal_leaves_a_complete_recording_matching_what_was_received(tmp_path,
     meta = metadata["flexure_sim"]
     assert meta["mechanism"] == "microstage" and meta["mechanism_name"] == "microstage"
     assert meta["time_mode"] == "lockstep" and meta["publish_rate"] == "100.0"
-    assert meta["sim_step"] == "0.0001" and meta["record"] == "true" and meta["steps_per_tick"] == "100"
+    assert (
+        meta["sim_step"] == "0.0001"
+        and meta["record"] == "true"
+        and meta["steps_per_tick"] == "100"
+    )
     assert "bodies:" in meta["mechanism_yaml"]
     assert "rosbag2" in metadata
     # The bytes received are the bytes recorded; log time = header stamp.
@@ -305,7 +352,9 @@ def test_signal_leaves_a_complete_recording_matching_what_was_received(tmp_path,
     recorded = log.messages_on("/hinges/c/wrench")
     assert [m.data for m in recorded] == [raw for _, raw in peer.received["/hinges/c/wrench"]]
     assert all(m.log_time_ns == stamp_ns(m.message) for m in recorded)
-    clocks = [m.message.clock.sec * 10**9 + m.message.clock.nanosec for m in log.messages_on("/clock")]
+    clocks = [
+        m.message.clock.sec * 10**9 + m.message.clock.nanosec for m in log.messages_on("/clock")
+    ]
     assert clocks == [k * 10_000_000 for k in range(1, ticks + 1)]
     commands = log.messages_on("/drive/displacement")
     assert commands[0].message.data == STEP and math.isnan(commands[1].message.data)
@@ -321,7 +370,9 @@ def test_fast_mode_publishes_clock_and_a_use_sim_time_node_follows_it(tmp_path, 
         follower.subscribe("/clock", Clock, depth=100000)
         follower.subscribe("/bodies/body4/pose", PoseStamped, depth=100000)
         follower.wait_for_publishers(["/clock", "/bodies/body4/pose"])
-        follower.spin_until(lambda: len(follower.received["/bodies/body4/pose"]) > 300, 30, "poses")
+        follower.spin_until(
+            lambda: len(follower.received["/bodies/body4/pose"]) > 300, 30, "poses"
+        )
         during = follower.node.get_clock().now().nanoseconds
         follower.watch = None
         stop_cleanly(node)
@@ -334,7 +385,9 @@ def test_fast_mode_publishes_clock_and_a_use_sim_time_node_follows_it(tmp_path, 
         follower.close()
         if node.alive():
             stop_cleanly(node)
-    assert all(b - a == 1_000_000 for a, b in zip(clocks, clocks[1:])), "/clock advances tick by tick"
+    assert all(
+        b - a == 1_000_000 for a, b in zip(clocks, clocks[1:])
+    ), "/clock advances tick by tick"
     # Every pose carries the simulated time of a /clock tick.
     assert set(stamps) <= set(clocks)
     # The follower's ROS clock is simulated time: it followed /clock, ending at its last value.
@@ -362,8 +415,12 @@ def test_lockstep_runs_are_deterministic_and_reset_restarts_time(tmp_path, domai
                 peer.spin_for(0.3)
                 for _ in range(steps):
                     assert peer.call(Trigger, "/stage_node/step").success
-            peer.spin_until(lambda: len(peer.received["/output/displacement"]) == start_out + 10, 10, "outputs")
-            peer.spin_until(lambda: len(peer.received["/hinges/b/wrench"]) == start_w + 10, 10, "wrenches")
+            peer.spin_until(
+                lambda: len(peer.received["/output/displacement"]) == start_out + 10, 10, "outputs"
+            )
+            peer.spin_until(
+                lambda: len(peer.received["/hinges/b/wrench"]) == start_w + 10, 10, "wrenches"
+            )
             outs = [m.data for m in peer.messages("/output/displacement")[start_out:]]
             wrenches = [(stamp_ns(m), m.wrench.torque.z, m.wrench.force.x, m.wrench.force.y)
                         for m in peer.messages("/hinges/b/wrench")[start_w:]]
@@ -379,22 +436,38 @@ def test_lockstep_runs_are_deterministic_and_reset_restarts_time(tmp_path, domai
     assert first[1][0][0] == 1_000_000 and first[0][-1] != 0.0
     # Both files complete; each holds its run's commands at the ticks they were applied.
     logs = [read_log(node.cwd / name) for name in ("det.mcap", "det_1.mcap")]
-    times = [[(m.log_time_ns, m.message.data) for m in log.messages_on("/drive/displacement")] for log in logs]
+    times = [
+        [(m.log_time_ns, m.message.data) for m in log.messages_on("/drive/displacement")]
+        for log in logs
+    ]
     assert times[0] == times[1] == [(0, 1.0e-6), (4_000_000, 1.8e-6), (7_000_000, 0.3e-6)]
 
 
 # ------------------------------------------------------------------------------ recording
-def test_realtime_run_records_what_it_publishes_and_kill_9_leaves_readable_chunks(tmp_path, domain, peer):
+def test_realtime_run_records_what_it_publishes_and_kill_9_leaves_readable_chunks(
+    tmp_path, domain, peer
+):
     custom = tmp_path / "my_stage.yaml"
     custom.write_text(resolve_mechanism_path("microstage").read_text())
-    node = start(tmp_path, domain, peer, mechanism=str(custom), time_mode="realtime", sim_step=5e-4,
-                 publish_rate=200.0, record=True, record_path="rt.mcap")
+    node = start(
+        tmp_path,
+        domain,
+        peer,
+        mechanism=str(custom),
+        time_mode="realtime",
+        sim_step=5e-4,
+        publish_rate=200.0,
+        record=True,
+        record_path="rt.mcap",
+    )
     try:
         peer.subscribe("/bodies/poses", PoseArray, depth=10000)
         peer.subscribe("/diagnostics", DiagnosticArray)
         peer.wait_for_publishers(["/bodies/poses"])
         t0 = time.monotonic()
-        peer.spin_until(lambda: len(peer.received["/diagnostics"]) >= 25, 20, "2.5 s of diagnostics")
+        peer.spin_until(
+            lambda: len(peer.received["/diagnostics"]) >= 25, 20, "2.5 s of diagnostics"
+        )
         wall = time.monotonic() - t0
         d = latest_diagnostics(peer)
     finally:
@@ -417,7 +490,9 @@ def test_realtime_run_records_what_it_publishes_and_kill_9_leaves_readable_chunk
                                                          publish_rate=200.0, record_path="k.mcap"))
     peer.watch = node
     path = node.cwd / "k.mcap"
-    peer.spin_until(lambda: path.exists() and path.stat().st_size > 200_000, 30, "a few chunks on disk")
+    peer.spin_until(
+        lambda: path.exists() and path.stat().st_size > 200_000, 30, "a few chunks on disk"
+    )
     (recorder,) = node.children()
     peer.watch = None
     node.kill()
@@ -426,11 +501,16 @@ def test_realtime_run_records_what_it_publishes_and_kill_9_leaves_readable_chunk
     assert log.complete and log.message_count > 1000
 
     # kill -9 of node and recorder alike: the chunks already written are readable.
-    node = NodeProcess(tmp_path / "crashed", domain, dict(time_mode="realtime", sim_step=5e-4,
-                                                          publish_rate=200.0, record_path="c.mcap"))
+    node = NodeProcess(
+        tmp_path / "crashed",
+        domain,
+        dict(time_mode="realtime", sim_step=5e-4, publish_rate=200.0, record_path="c.mcap"),
+    )
     peer.watch = node
     path = node.cwd / "c.mcap"
-    peer.spin_until(lambda: path.exists() and path.stat().st_size > 200_000, 30, "a few chunks on disk")
+    peer.spin_until(
+        lambda: path.exists() and path.stat().st_size > 200_000, 30, "a few chunks on disk"
+    )
     peer.watch = None
     for pid in node.children():
         os.kill(pid, signal.SIGKILL)
@@ -476,10 +556,16 @@ def test_record_and_reset_services_close_complete_files(tmp_path, domain, peer):
         peer.spin_for(0.5)
         t_before = stamp_ns(peer.last("/bodies/poses"))
         answer = peer.call(Trigger, "/stage_node/reset")
-        assert answer.success and "closed svc_1.mcap" in answer.message and "svc_2.mcap" in answer.message
+        assert (
+            answer.success
+            and "closed svc_1.mcap" in answer.message
+            and "svc_2.mcap" in answer.message
+        )
         assert read_log(node.cwd / "svc_1.mcap").complete
         n = len(peer.received["/bodies/poses"])
-        peer.spin_until(lambda: len(peer.received["/bodies/poses"]) > n + 20, 10, "poses after reset")
+        peer.spin_until(
+            lambda: len(peer.received["/bodies/poses"]) > n + 20, 10, "poses after reset"
+        )
         after = [stamp_ns(m) for m in peer.messages("/bodies/poses")[n:]]
         assert min(after) < t_before and min(after) <= 200_000_000  # time restarted at 0
         answer = peer.call(Trigger, "/stage_node/step")
@@ -502,15 +588,25 @@ def _set(peer: Peer, name: str, value) -> tuple[bool, str]:
         msg.value = ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=value)
     else:
         msg.value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
-    answer = peer.call(SetParameters, "/stage_node/set_parameters", SetParameters.Request(parameters=[msg]))
+    answer = peer.call(
+        SetParameters, "/stage_node/set_parameters", SetParameters.Request(parameters=[msg])
+    )
     result = answer.results[0]
     return result.successful, result.reason
 
 
 def test_parameters_are_validated_with_reasons_and_applied_live(tmp_path, domain, peer):
     # stepping_nice 5: raising niceness is always permitted, so the request is granted.
-    node = start(tmp_path, domain, peer, time_mode="realtime", sim_step=5e-4, publish_rate=200.0, record=False,
-                 stepping_nice=5)
+    node = start(
+        tmp_path,
+        domain,
+        peer,
+        time_mode="realtime",
+        sim_step=5e-4,
+        publish_rate=200.0,
+        record=False,
+        stepping_nice=5,
+    )
     try:
         peer.subscribe("/diagnostics", DiagnosticArray)
         peer.subscribe("/bodies/poses", PoseArray, depth=10000)
@@ -554,8 +650,10 @@ def test_parameters_are_validated_with_reasons_and_applied_live(tmp_path, domain
 
 def test_invalid_startup_parameters_and_bad_mechanisms_stop_with_the_reason(tmp_path, domain):
     broken = tmp_path / "broken.yaml"
-    broken.write_text("name: broken\nbodies: [{name: body1, mass: -1, inertia: 1, pose: [0, 0, 0]}]\n"
-                      "hinges: []\nconstraints: []\n")
+    broken.write_text(
+        "name: broken\nbodies: [{name: body1, mass: -1, inertia: 1, pose: [0, 0, 0]}]\n"
+        "hinges: []\nconstraints: []\n"
+    )
     with pytest.raises(ConfigError) as loader:
         load_mechanism(str(broken))
     cases = {
@@ -568,7 +666,9 @@ def test_invalid_startup_parameters_and_bad_mechanisms_stop_with_the_reason(tmp_
         "range": (dict(publish_rate=20000.0), "publish_rate"),
         "stroke": (dict(stroke_min=3e-6), "stroke_min"),
     }
-    nodes = {name: NodeProcess(tmp_path / name, domain, params) for name, (params, _) in cases.items()}
+    nodes = {
+        name: NodeProcess(tmp_path / name, domain, params) for name, (params, _) in cases.items()
+    }
     for name, node in nodes.items():
         rc = node.wait(60)
         assert rc != 0, name
@@ -578,8 +678,17 @@ def test_invalid_startup_parameters_and_bad_mechanisms_stop_with_the_reason(tmp_
 
 
 def test_fourbar_runs_without_drive_topics(tmp_path, domain, peer):
-    node = start(tmp_path, domain, peer, mechanism="fourbar_mixed", time_mode="fast", sim_step=1e-4,
-                 publish_rate=1000.0, record=True, record_path="fb.mcap")
+    node = start(
+        tmp_path,
+        domain,
+        peer,
+        mechanism="fourbar_mixed",
+        time_mode="fast",
+        sim_step=1e-4,
+        publish_rate=1000.0,
+        record=True,
+        record_path="fb.mcap",
+    )
     try:
         peer.subscribe("/hinges/B/deflection", TransformStamped)
         peer.subscribe("/bodies/poses", PoseArray)
@@ -594,4 +703,8 @@ def test_fourbar_runs_without_drive_topics(tmp_path, domain, peer):
     finally:
         stop_cleanly(node)
     log = read_log(node.cwd / "fb.mcap")
-    assert log.complete and "/bodies/link2/pose" in log.topics and "/drive/displacement" not in log.topics
+    assert (
+        log.complete
+        and "/bodies/link2/pose" in log.topics
+        and "/drive/displacement" not in log.topics
+    )

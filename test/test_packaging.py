@@ -1,6 +1,9 @@
-"""Packaging: package.xml names every dependency setup.py declares (by rosdep key), matplotlib
-is an optional extra the node never imports, and the plot tool says what to install without
-it. Built-in mechanisms: found in the running code's own install (engine/builtins.py).
+"""
+Packaging.
+
+package.xml names every dependency setup.py declares (by rosdep key), matplotlib is an optional
+extra the node never imports, and the plot tool says what to install without it. Built-in
+mechanisms: found in the running code's own install (engine/builtins.py).
 """
 from __future__ import annotations
 
@@ -28,7 +31,7 @@ ROSDEP_KEYS = {
 
 
 def setup_keywords() -> dict:
-    """The literal keyword arguments of the setup() call in setup.py."""
+    """Return the literal keyword arguments of the setup() call in setup.py."""
     tree = ast.parse((ROOT / "setup.py").read_text())
     call = next(node for node in ast.walk(tree) if isinstance(node, ast.Call)
                 and getattr(node.func, "id", None) == "setup")
@@ -88,8 +91,12 @@ def test_plot_without_matplotlib_names_the_missing_extra(tmp_path):
 
 
 def test_builtins_come_from_the_install_the_code_belongs_to(tmp_path):
-    """Layouts built by hand: an installed copy reads <prefix>/share, a checkout its config/,
-    code in neither layout finds nothing of its own (then only the ament index can answer)."""
+    """
+    Layouts built by hand.
+
+    An installed copy reads <prefix>/share, a checkout its config/, code in neither layout finds
+    nothing of its own (then only the ament index can answer).
+    """
     from flexure_sim.engine import builtins
 
     prefix = tmp_path / "prefix"

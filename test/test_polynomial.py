@@ -1,5 +1,9 @@
-"""Polynomial hinge laws (3.6, 4.7): indexing as Appendix B, exact derivatives, the rest
-conditions, damping, the frame/body claims of 3.69/4.70, and the hinge file."""
+"""
+Polynomial hinge laws (3.6, 4.7).
+
+Indexing as Appendix B, exact derivatives, the rest conditions, damping, the frame/body claims of
+3.69/4.70, and the hinge file.
+"""
 import math
 
 import numpy as np
@@ -18,7 +22,12 @@ from flexure_sim.engine.polynomial import (
     swap_bodies,
     transform_frames,
 )
-from flexure_sim.engine.polynomial_files import PolynomialFileError, law_from_dict, load_law, save_law
+from flexure_sim.engine.polynomial_files import (
+    PolynomialFileError,
+    law_from_dict,
+    load_law,
+    save_law,
+)
 
 K_GENERAL = np.array([[2.0, 30.0, -12.0], [30.0, 4.0e4, 5.0e3], [-12.0, 5.0e3, 2.0e4]])
 COORDS = ["twistor", "twist"]
@@ -100,7 +109,7 @@ def test_derivative_coefficients_are_those_of_randomtest_sce():
 # ------------------------------------------------------------------ random laws
 
 def random_law(coords, order, rng, sigma=True, scale=None, energy=1.3):
-    """A general polynomial law: every admissible term, random coefficients."""
+    """Return a general polynomial law: every admissible term, random coefficients."""
     k = 4 if coords == "twistor" else 3
     exps = monomial_exponents(k, order)
     deg = exps.sum(axis=1)
@@ -111,7 +120,11 @@ def random_law(coords, order, rng, sigma=True, scale=None, energy=1.3):
             keep &= exps[:, 0] == 0
     exps = exps[keep]
     if scale is None:
-        scale = np.array([0.05, 0.4, 2e-3, 3e-3]) if coords == "twistor" else np.array([0.8, 4e-3, 6e-3])
+        scale = (
+            np.array([0.05, 0.4, 2e-3, 3e-3])
+            if coords == "twistor"
+            else np.array([0.8, 4e-3, 6e-3])
+        )
     coef = rng.normal(size=len(exps))
     # a positive-definite quadratic part so the law is a plausible hinge
     B = rng.normal(size=(k, k))
@@ -137,8 +150,12 @@ def fd(f, x, h):
     return np.array(g).T
 
 
-CONFIGS = [np.array([0.3, 2e-3, -1e-3]), np.array([-1.1, -4e-3, 3e-3]), np.array([2.5, 1e-2, 5e-3]),
-           np.array([4e-3, 2e-6, -3e-6])]
+CONFIGS = [
+    np.array([0.3, 2e-3, -1e-3]),
+    np.array([-1.1, -4e-3, 3e-3]),
+    np.array([2.5, 1e-2, 5e-3]),
+    np.array([4e-3, 2e-6, -3e-6]),
+]
 
 
 @pytest.mark.parametrize("coords", COORDS)
@@ -156,13 +173,19 @@ def test_wrench_is_the_exact_gradient_and_the_hessian_is_exact(coords, order, r)
     rdot = np.array([0.7, -0.02, 0.03])
     d = ev(law, r, rdot)
     D_fd = fd(lambda x: ev(law, x, rdot).damping_force[0], r, h)
-    assert d.damping_force_dr[0] == pytest.approx(D_fd, rel=1e-5, abs=1e-7 * np.abs(d.damping_force_dr).max())
+    assert d.damping_force_dr[0] == pytest.approx(
+        D_fd, rel=1e-5, abs=1e-7 * np.abs(d.damping_force_dr).max()
+    )
 
 
 @pytest.mark.parametrize("coords", COORDS)
 def test_potential_derivatives_in_law_coordinates_are_exact(coords):
-    """dU/dc and d2U/dc2 against finite differences of U and dU/dc, at general c
-    (sigma off the unit circle too: the polynomial is defined on all of R^4)."""
+    """
+    dU/dc and d2U/dc2 against finite differences of U and dU/dc.
+
+    They are checked at general c (sigma off the unit circle too: the polynomial is defined on all
+    of R^4).
+    """
     rng = np.random.default_rng(11)
     law = random_law(coords, 6, rng)
     k = len(law.scale)
@@ -213,8 +236,12 @@ def test_sigma_minus_one_is_allowed_for_twistors():
 
 @pytest.mark.parametrize("coords", COORDS)
 def test_quadratic_laws_are_order_two_polynomials_with_the_same_damping(coords):
-    """4.7 and 3.4 written as polynomials: same energy, wrench, Hessian and dissipation
-    (the damping metric 4B on (xi, x) for twistors, B for twists)."""
+    """
+    4.7 and 3.4 written as polynomials.
+
+    Same energy, wrench, Hessian and dissipation (the damping metric 4B on (xi, x) for twistors, B
+    for twists).
+    """
     K, B = K_GENERAL, 1e-3 * K_GENERAL
     poly = quadratic_as_polynomial(K, coords, B)
     quad = QuadraticLaw(coords, K, B)
@@ -243,8 +270,12 @@ def _poses(rng):
 
 @pytest.mark.parametrize("coords", COORDS)
 def test_moving_the_frames_gives_another_polynomial_of_the_same_order(coords):
-    """3.69 / 4.70: for frames a' = a G, b' = b G there are coefficients c' of the same order
-    with the same energy (transform_frames); the same coefficients alone would not do."""
+    """
+    3.69 / 4.70.
+
+    For frames a' = a G, b' = b G there are coefficients c' of the same order with the same energy
+    (transform_frames); the same coefficients alone would not do.
+    """
     rng = np.random.default_rng(3)
     law = random_law(coords, 5, rng)
     for _ in range(10):
@@ -269,20 +300,32 @@ def test_transform_frames_of_a_quadratic_law_is_the_adjoint_stiffness(coords):
     assert moved.stiffness_at_rest() == pytest.approx(K_moved, rel=1e-10)
     assert moved.B == pytest.approx(1e-3 * K_moved, rel=1e-12)
     r = np.array([0.9, 4e-3, -1e-3])
-    assert ev(moved, r).energy[0] == pytest.approx(ev(QuadraticLaw(coords, K_moved, K_moved), r).energy[0], rel=1e-10)
+    assert ev(moved, r).energy[0] == pytest.approx(
+        ev(QuadraticLaw(coords, K_moved, K_moved), r).energy[0], rel=1e-10
+    )
 
 
 @pytest.mark.parametrize("coords", COORDS)
 def test_swapping_the_bodies_needs_the_swapped_coefficients_unless_the_law_is_even(coords):
-    """The claim holds as 'there exist coefficients' (swap_bodies flips the odd terms):
-    with the same coefficients a polynomial with odd terms changes its energy when A and B
-    are exchanged; an even one (e.g. the quadratic laws) does not."""
+    """
+    The claim holds as 'there exist coefficients' (swap_bodies flips the odd terms).
+
+    With the same coefficients a polynomial with odd terms changes its energy when A and B are
+    exchanged; an even one (e.g. the quadratic laws) does not.
+    """
     rng = np.random.default_rng(8)
     law = random_law(coords, 4, rng)
     swapped = swap_bodies(law)
     k = len(law.scale)
     vec = law.exponents[:, 1:].sum(axis=1) if coords == "twistor" else law.exponents.sum(axis=1)
-    even = PolynomialLaw(coords, 4, law.exponents[vec % 2 == 0], law.coefficients[vec % 2 == 0], law.scale, law.energy)
+    even = PolynomialLaw(
+        coords,
+        4,
+        law.exponents[vec % 2 == 0],
+        law.coefficients[vec % 2 == 0],
+        law.scale,
+        law.energy,
+    )
     assert k == law.exponents.shape[1]
     for _ in range(10):
         Ha, Hb = _poses(rng)
@@ -314,19 +357,38 @@ def test_file_round_trip(tmp_path):
     assert np.array(doc["stiffness_at_rest"]) == pytest.approx(law.stiffness_at_rest(), rel=1e-15)
 
 
-@pytest.mark.parametrize("edit,key,fragment", [
-    (lambda d: d.update(format="something"), "format", "flexure_sim.polynomial_hinge"),
-    (lambda d: d.update(coordinates="quaternion"), "coordinates", "twistor, twist"),
-    (lambda d: d.update(order=2.5), "order", "integer"),
-    (lambda d: d.update(scale=[1.0, 1.0]), "scale", "list of 4 numbers"),
-    (lambda d: d["scale"].__setitem__(2, -1.0), "scale[2]", "positive"),
-    (lambda d: d.update(energy=".nan"), "energy", "finite"),
-    (lambda d: d["terms"][1].__setitem__("coefficient", "abc"), "terms[1].coefficient", "finite number"),
-    (lambda d: d["terms"][0].__setitem__("exponents", [0, 2, 0]), "terms[0].exponents", "4 non-negative integers"),
-    (lambda d: d["terms"][0].__setitem__("exponents", [0, 9, 0, 0]), "terms[0].exponents", "exceeds the order"),
-    (lambda d: d["terms"].append({"exponents": [0, 0, 1, 0], "coefficient": 1.0}), "terms", "unstressed equilibrium"),
-    (lambda d: d.update(rest=[0, 0, 0, 0]), "rest", "unstressed pose"),
-])
+@pytest.mark.parametrize(
+    "edit,key,fragment",
+    [
+        (lambda d: d.update(format="something"), "format", "flexure_sim.polynomial_hinge"),
+        (lambda d: d.update(coordinates="quaternion"), "coordinates", "twistor, twist"),
+        (lambda d: d.update(order=2.5), "order", "integer"),
+        (lambda d: d.update(scale=[1.0, 1.0]), "scale", "list of 4 numbers"),
+        (lambda d: d["scale"].__setitem__(2, -1.0), "scale[2]", "positive"),
+        (lambda d: d.update(energy=".nan"), "energy", "finite"),
+        (
+            lambda d: d["terms"][1].__setitem__("coefficient", "abc"),
+            "terms[1].coefficient",
+            "finite number",
+        ),
+        (
+            lambda d: d["terms"][0].__setitem__("exponents", [0, 2, 0]),
+            "terms[0].exponents",
+            "4 non-negative integers",
+        ),
+        (
+            lambda d: d["terms"][0].__setitem__("exponents", [0, 9, 0, 0]),
+            "terms[0].exponents",
+            "exceeds the order",
+        ),
+        (
+            lambda d: d["terms"].append({"exponents": [0, 0, 1, 0], "coefficient": 1.0}),
+            "terms",
+            "unstressed equilibrium",
+        ),
+        (lambda d: d.update(rest=[0, 0, 0, 0]), "rest", "unstressed pose"),
+    ],
+)
 def test_bad_files_name_the_file_key_and_problem(tmp_path, edit, key, fragment):
     law = random_law("twistor", 3, np.random.default_rng(4), sigma=False)
     path = tmp_path / "bad_hinge.yaml"

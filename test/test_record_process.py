@@ -1,5 +1,8 @@
-"""The node's recorder helper process, driven directly (no ROS): a real child process writes
-a real MCAP file that the recording layer reads back."""
+"""
+The node's recorder helper process, driven directly (no ROS).
+
+A real child process writes a real MCAP file that the recording layer reads back.
+"""
 import os
 import struct
 import subprocess
@@ -55,8 +58,11 @@ DISK_DELAY_S = "0.2"  # per write to the file descriptor: a ~1 MiB chunk waits 0
 
 
 def string_cdr(text: str) -> bytes:
-    """std_msgs/String as little-endian CDR (encapsulation 00 01 00 00; uint32 length counting
-    the terminating NUL; the bytes; NUL), written from the CDR rules, not by the package."""
+    """
+    Return std_msgs/String as little-endian CDR, written from the CDR rules, not by the package.
+
+    Encapsulation 00 01 00 00; uint32 length counting the terminating NUL; the bytes; NUL.
+    """
     data = text.encode() + b"\0"
     return b"\x00\x01\x00\x00" + struct.pack("<I", len(data)) + data
 
@@ -87,8 +93,12 @@ def test_a_slow_recorder_loses_nothing_when_the_node_may_wait(tmp_path, monkeypa
 
 
 def test_a_slow_recorder_in_real_time_counts_every_message_it_drops(tmp_path, monkeypatch) -> None:
-    """Real-time mode: the node never waits; whole ticks the pipe cannot take are dropped, and
-    the file's metadata, the recording's count and `flexure-sim info` all say how many."""
+    """
+    Real-time mode.
+
+    The node never waits; whole ticks the pipe cannot take are dropped, and the file's metadata,
+    the recording's count and `flexure-sim info` all say how many.
+    """
     monkeypatch.setenv(WRITE_DELAY_ENV, DISK_DELAY_S)
     monkeypatch.setenv(MAX_BACKLOG_ENV, str(256 << 10))
     process = RecorderProcess()

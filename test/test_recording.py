@@ -1,4 +1,5 @@
-"""Tests of flexure_sim.recording with real rclpy messages and independent MCAP readers.
+"""
+Tests of flexure_sim.recording with real rclpy messages and independent MCAP readers.
 
 Files written by `McapRecorder` are read back with mcap + mcap-ros2-support, with rosbags
 (bare .mcap and a rosbag2 bag directory) and with rclpy's own deserializer.
@@ -93,7 +94,7 @@ def stamp(ns: int) -> Time:
 
 
 def make_messages(step: int) -> list[tuple[str, object]]:
-    """The messages one simulation step publishes (diagnostics every 50 steps)."""
+    """Return the messages one simulation step publishes (diagnostics every 50 steps)."""
     t_ns = T0_NS + step * DT_NS
     out: list[tuple[str, object]] = []
     for k, hinge in enumerate(HINGES):
@@ -555,8 +556,10 @@ def test_chunks_are_bounded_by_chunk_size(tmp_path: Path) -> None:
     record_standard_log(path, chunk_size=4096)
     with path.open("rb") as stream:
         summary = make_reader(stream).get_summary()
-    sizes = [ci.uncompressed_size for ci in sorted(summary.chunk_indexes,
-                                                    key=lambda ci: ci.chunk_start_offset)]
+    sizes = [
+        ci.uncompressed_size
+        for ci in sorted(summary.chunk_indexes, key=lambda ci: ci.chunk_start_offset)
+    ]
     largest_message = 400  # a PoseArray record is well below this
     assert len(sizes) > 20
     assert max(sizes[1:]) < 4096 + largest_message
@@ -894,9 +897,13 @@ def chunk_payloads(data: bytes) -> dict[int, list[bytes]]:
 
 
 def test_every_flipped_byte_is_detected(reference_bytes: bytes, tmp_path: Path) -> None:
-    """Strict reading refuses every flip; recovery keeps every intact chunk, also those after
-    a chunk that fails its CRC or whose framing is broken (the summary's chunk index says
-    where the next chunk starts), and exactly their messages."""
+    """
+    Strict reading refuses every flip.
+
+    Recovery keeps every intact chunk, also those after a chunk that fails its CRC or whose framing
+    is broken (the summary's chunk index says where the next chunk starts), and exactly their
+    messages.
+    """
     by_chunk = chunk_payloads(reference_bytes)
     path = tmp_path / "flipped.mcap"
     skipped_over = 0
@@ -925,9 +932,12 @@ def test_every_flipped_byte_is_detected(reference_bytes: bytes, tmp_path: Path) 
 
 
 def test_chunks_after_a_damaged_chunk_holding_the_channels_are_recovered(tmp_path: Path) -> None:
-    """mcap's own Writer puts Schema and Channel records inside the first chunk that uses
-    them: when that chunk is damaged, the summary's copies still give the later chunks'
-    messages their topic."""
+    """
+    The mcap library's Writer puts Schema and Channel records inside the first chunk using them.
+
+    When that chunk is damaged, the summary's copies still give the later chunks' messages their
+    topic.
+    """
     path = tmp_path / "mcap_writer.mcap"
     with path.open("wb") as stream:
         writer = Writer(stream, compression=CompressionType.NONE, chunk_size=512)

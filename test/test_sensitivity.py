@@ -1,5 +1,9 @@
-"""Exact design sensitivities by hyper-dual numbers against finite differences of re-solved
-mechanisms (the engine's own static solver and eigen-analysis, from edited YAML)."""
+"""
+Exact design sensitivities by hyper-dual numbers against finite differences.
+
+The finite differences are of re-solved mechanisms (the engine's own static solver and
+eigen-analysis, from edited YAML).
+"""
 
 import copy
 import json
@@ -24,8 +28,11 @@ def params():
 
 
 def _resolve(params, changes):
-    """gain, compression, first mode of the stage with the YAML numbers changed, re-solved
-    by the engine."""
+    """
+    gain.
+
+    compression, first mode of the stage with the YAML numbers changed, re-solved by the engine.
+    """
     data = copy.deepcopy(params.data)
     for path, value in changes.items():
         keys = path.split(".")
@@ -126,8 +133,11 @@ def test_sensitivity_command_json(capsys):
 
 
 def _replaced(mech, hinge=None, frame=None, index=None, value=None, body=None, mass=None):
-    """The engine's mechanism with one hinge frame coordinate or one body mass changed,
-    bypassing the file's coincidence check (a moved frame prestresses its hinge)."""
+    """
+    Return the engine's mechanism with one hinge frame coordinate or one body mass changed.
+
+    Bypassing the file's coincidence check (a moved frame prestresses its hinge).
+    """
     import dataclasses
 
     if hinge is not None:

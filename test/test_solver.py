@@ -1,5 +1,9 @@
-"""Solver: the stage's static and dynamic answers, the four-bars' energy budget, exact Jacobians,
-and the invariance of the whole stage (Sections 3.3, 4.6)."""
+"""
+Solver.
+
+The stage's static and dynamic answers, the four-bars' energy budget, exact Jacobians, and the
+invariance of the whole stage (Sections 3.3, 4.6).
+"""
 import dataclasses
 
 import numpy as np
@@ -60,7 +64,11 @@ def test_stage_step_settles_to_the_static_answer(stage, stage_static):
     target = stage_static.snapshot.output
     assert final.t == pytest.approx(0.05)
     assert abs(final.output - target) / target < 1e-4
-    assert abs(final.compression - stage_static.snapshot.compression) / stage_static.snapshot.compression < 1e-4
+    assert (
+        abs(final.compression - stage_static.snapshot.compression)
+        / stage_static.snapshot.compression
+        < 1e-4
+    )
     # It moves: a third of the way at 1 ms, most of the way by 5 ms.
     assert 0.3 * target < outputs[0] < 0.8 * target
     assert outputs[4] > 0.99 * target
@@ -69,8 +77,12 @@ def test_stage_step_settles_to_the_static_answer(stage, stage_static):
 
 
 def test_step_does_not_depend_on_where_the_jacobian_was_taken(stage):
-    """The remainder is solved to convergence, so a Jacobian from the first step serves
-    the whole step response, and gives what re-linearizing at every step gives."""
+    """
+    The remainder is solved to convergence.
+
+    So a Jacobian from the first step serves the whole step response, and gives what re-linearizing
+    at every step gives.
+    """
     every, once = Simulation(stage, relinearize_tol=0.0), Simulation(stage)
     for s in (every, once):
         s.set_command(U_IN)
@@ -115,7 +127,9 @@ def _move_frames(h, R, p, transform_K=True):
         return dataclasses.replace(f, position=(pos[0], pos[1]), angle=f.angle + kin.angle_of(R))
     K = kin.transform_stiffness(h.law.K, R, p) if transform_K else h.law.K
     B = kin.transform_stiffness(h.law.B, R, p) if transform_K else h.law.B
-    return dataclasses.replace(h, a=moved(h.a), b=moved(h.b), law=QuadraticLaw(h.law.coordinates, K, B))
+    return dataclasses.replace(
+        h, a=moved(h.a), b=moved(h.b), law=QuadraticLaw(h.law.coordinates, K, B)
+    )
 
 
 @pytest.mark.parametrize("law", ["twistor", "twist"])
@@ -128,12 +142,20 @@ def test_whole_stage_is_body_and_frame_independent(stage, law):
     moves = [(kin.rot(rng.uniform(-3, 3)), rng.normal(size=2) * 3e-3) for _ in stage.hinges]
 
     swapped = dataclasses.replace(base_mech, hinges=tuple(_swap(h) for h in base_mech.hinges))
-    moved = dataclasses.replace(base_mech, hinges=tuple(_move_frames(h, *g) for h, g in zip(base_mech.hinges, moves)))
+    moved = dataclasses.replace(
+        base_mech, hinges=tuple(_move_frames(h, *g) for h, g in zip(base_mech.hinges, moves))
+    )
     control = dataclasses.replace(
-        base_mech, hinges=tuple(_move_frames(h, *g, transform_K=False) for h, g in zip(base_mech.hinges, moves)))
+        base_mech,
+        hinges=tuple(
+            _move_frames(h, *g, transform_K=False) for h, g in zip(base_mech.hinges, moves)
+        ),
+    )
     for variant in (swapped, moved):
         res = Simulation(variant).static(U_IN)
-        assert res.z == pytest.approx(base.z, rel=0, abs=1e-9 * np.abs(base.z - Simulation(stage).z0).max())
+        assert res.z == pytest.approx(
+            base.z, rel=0, abs=1e-9 * np.abs(base.z - Simulation(stage).z0).max()
+        )
         assert res.snapshot.output == pytest.approx(base.snapshot.output, rel=1e-9)
         assert res.snapshot.drive_force == pytest.approx(base.snapshot.drive_force, rel=1e-9)
     ctrl = Simulation(control).static(U_IN)
@@ -172,7 +194,9 @@ def test_fourbar_energy_budget_tightens_as_the_step_shrinks(name):
     assert errors[0] > 2 * errors[1] > 4 * errors[2]
 
 
-@pytest.mark.parametrize("name,law", [("microstage", None), ("fourbar_mixed", None), ("fourbar_mixed", "twist")])
+@pytest.mark.parametrize(
+    "name,law", [("microstage", None), ("fourbar_mixed", None), ("fourbar_mixed", "twist")]
+)
 def test_compiled_forces_equal_the_reference_path(name, law):
     mech = load_mechanism(name)
     if law:
@@ -236,9 +260,13 @@ def test_compiled_report_equals_the_reference_path(name):
 
 
 def test_time_is_the_step_count_times_the_step_not_a_running_sum(stage):
-    """Simulated time stays on the step grid however long the run: stamps derived from it
-    (round(t * 1e9) ns) land on the tick grid. A running sum t += dt drifts by ~1 ns per
-    5e5 steps of 1e-4 s, enough to put a 5 ms tick's stamp at ...000001 ns after ~50 s."""
+    """
+    Simulated time stays on the step grid however long the run.
+
+    Stamps derived from it (round(t * 1e9) ns) land on the tick grid. A running sum t += dt drifts
+    by ~1 ns per 5e5 steps of 1e-4 s, enough to put a 5 ms tick's stamp at ...000001 ns after ~50
+    s.
+    """
     sim = Simulation(stage, dt=1e-4)
     per_tick = 50
     off_grid = []

@@ -36,9 +36,13 @@ DRIVEN_PLATFORM = {
 
 @pytest.mark.parametrize("u", [0.0, 1.0e-6, -3.0e-7])
 def test_static_without_free_coordinates_is_the_prescribed_pose(u):
-    """The hinge is stretched by exactly u along its axial direction: alpha = 0, p = (u, 0),
-    so U = 1/2 KX u^2 for the twistor law (x = p/2, U = 2 x^T Kt x) and the drive must
-    push with KX u. Tolerance 1e-9: p comes from poses of ~1e-2 m (1e-18 m rounding on 1e-6 m)."""
+    """
+    The hinge is stretched by exactly u along its axial direction.
+
+    Alpha = 0, p = (u, 0), so U = 1/2 KX u^2 for the twistor law (x = p/2, U = 2 x^T Kt x) and the
+    drive must push with KX u. Tolerance 1e-9: p comes from poses of ~1e-2 m (1e-18 m rounding on
+    1e-6 m).
+    """
     sim = Simulation(mechanism_from_dict(DRIVEN_PLATFORM))
     res = sim.static(u)
     snap = res.snapshot

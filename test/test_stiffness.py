@@ -16,7 +16,7 @@ def test_stage_notch_hinge_matches_chapter_6():
 def test_cantilever_hinge_of_the_fourbar():
     # 10 mm x 1 mm x 5 mm leaf, E = 5 % of aluminium.
     K = cantilever_stiffness(length=0.01, thickness=0.001, width=0.005, E=0.05 * 69e9, nu=0.3)
-    I = 0.005 * 0.001**3 / 12
-    assert K[0, 0] == pytest.approx(0.05 * 69e9 * I / 0.01)
-    assert K[1, 1] == pytest.approx(12 * 0.05 * 69e9 * I / 0.01**3)
+    second_moment = 0.005 * 0.001**3 / 12
+    assert K[0, 0] == pytest.approx(0.05 * 69e9 * second_moment / 0.01)
+    assert K[1, 1] == pytest.approx(12 * 0.05 * 69e9 * second_moment / 0.01**3)
     assert K[2, 2] == pytest.approx(0.005 * 0.001 * 0.05 * 69e9 / 0.01)

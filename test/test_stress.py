@@ -83,10 +83,14 @@ def test_simulate_static_shows_stress_and_stroke_limit_command(capsys):
 
 
 def test_analyse_reports_the_peak_stress_ratio_of_each_step(tmp_path, capsys):
-    """A recorded stage run (tools_fixtures: the engine stepped as the node steps it, written
-    as the node writes it) analysed from the file, against the same schedule stepped here
-    with the engine and the stress of every tick's snapshot. The damping wrenches of the
-    transient make the peaks exceed the static ratio of the level (which they must reach)."""
+    """
+    A recorded stage run analysed from the file agrees with the engine stepped here.
+
+    The run (tools_fixtures: the engine stepped as the node steps it, written as the node
+    writes it) is analysed from the file, against the same schedule stepped here with the
+    engine and the stress of every tick's snapshot. The damping wrenches of the transient
+    make the peaks exceed the static ratio of the level (which they must reach).
+    """
     from tools_fixtures import DEMO_LEVELS, record_stage_run
 
     path = tmp_path / "stage.mcap"
@@ -119,8 +123,12 @@ def test_analyse_reports_the_peak_stress_ratio_of_each_step(tmp_path, capsys):
 
 
 def test_static_stress_with_a_polynomial_hinge_covers_the_notch_hinges(capsys):
-    """A fitted polynomial hinge has no geometry: no stress for it, the others as usual; the
-    analyses that need the generic force chain say why they cannot run."""
+    """
+    A fitted polynomial hinge has no geometry.
+
+    No stress for it, the others as usual; the analyses that need the generic force chain say why
+    they cannot run.
+    """
     from flexure_sim.engine.config import resolve_mechanism_path
 
     path = str(

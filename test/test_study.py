@@ -73,8 +73,12 @@ def test_a_broken_study_file_names_the_file(tmp_path):
 
 
 def test_a_hinge_path_changes_that_hinge_only_and_keeps_the_shared_model_changes():
-    """hinges.a.stiffness.h gives hinge a its own notch (with E as the shared model has it in
-    this design); the other six keep the shared model. Expected K from the notch formula."""
+    """
+    Path hinges.a.stiffness.h gives hinge a its own notch; the other six keep the shared model.
+
+    Hinge a's notch has E as the shared model has it in this design. Expected K from the notch
+    formula.
+    """
     study = _study(parameters=[{"path": "stiffness_models.notch.E", "values": [70e9]},
                                {"path": "hinges.a.stiffness.h", "values": [2.6e-4]}])
     mech = study.mechanism(study.sample(0))

@@ -1,5 +1,9 @@
-"""flexure-sim sweep: outputs against independent figures, failed designs, Ctrl-C and --resume,
-a LocalCluster worker killed mid-study, bit-identical results for any worker count."""
+"""
+flexure-sim sweep.
+
+Outputs against independent figures, failed designs, Ctrl-C and --resume, a LocalCluster worker
+killed mid-study, bit-identical results for any worker count.
+"""
 import json
 import math
 import os
@@ -25,7 +29,7 @@ STAGE_STUDY = ROOT / "config" / "studies" / "stage_tolerance.yaml"
 
 
 def _small_stage_study(tmp_path: Path, samples=200, batch_size=20, **over) -> Path:
-    """The shipped stage tolerance study, with fewer designs."""
+    """Return the shipped stage tolerance study, with fewer designs."""
     data = yaml.safe_load(STAGE_STUDY.read_text())
     data.update(samples=samples, batch_size=batch_size, **over)
     path = tmp_path / "study.yaml"
@@ -48,9 +52,13 @@ def _grid(values, outputs=("gain", "compression", "drive_force"), input=1.35e-6,
 
 # ------------------------------------------------------------------------------ outputs
 def test_nominal_stage_outputs_match_the_reference_figures():
-    """Gain 27.628 and compression 192.2 nm at 1.35 um (README: an independent
-    reimplementation agrees); drive force = dU/du, by central differences of the potential
-    energy of two static solves (a second method)."""
+    """
+    Gain 27.628 and compression 192.2 nm at 1.35 um; drive force = dU/du.
+
+    README: an independent reimplementation agrees on gain and compression. The drive force
+    is checked by central differences of the potential energy of two static solves (a second
+    method).
+    """
     cols = evaluate_batch(_grid([2.5e-4]), 0, 1)
     assert cols["status"] == ["ok"]
     assert cols["gain"][0] == pytest.approx(27.628, rel=1e-4)
@@ -62,8 +70,12 @@ def test_nominal_stage_outputs_match_the_reference_figures():
 
 
 def test_step_outputs_agree_with_an_independent_integrator():
-    """Settling time and overshoot of the step to 1.35 um equal those of the same equations
-    integrated by scipy's Radau (rtol 1e-9, exact Jacobian), sampled at the same instants."""
+    """
+    Settling time and overshoot of the step to 1.35 um equal those of scipy's Radau.
+
+    The same equations integrated by scipy's Radau (rtol 1e-9, exact Jacobian), sampled at the
+    same instants.
+    """
     from scipy.integrate import solve_ivp
 
     study = _grid([2.5e-4], outputs=("settling_time", "overshoot"),
@@ -306,9 +318,12 @@ def test_unreachable_scheduler_and_a_directory_as_output_get_one_line(tmp_path):
 
 
 def test_ctrl_c_at_a_terminal_stops_a_local_cluster_study_cleanly(tmp_path):
-    """Ctrl-C at a terminal signals the whole foreground process group: the workers of the
-    LocalCluster ignore it (no KeyboardInterrupt tracebacks), the command stops the study
-    and keeps the finished batches."""
+    """
+    Ctrl-C at a terminal signals the whole foreground process group.
+
+    The workers of the LocalCluster ignore it (no KeyboardInterrupt tracebacks), the command stops
+    the study and keeps the finished batches.
+    """
     study = _small_stage_study(tmp_path, samples=400, batch_size=10)
     out = tmp_path / "out.parquet"
     env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}

@@ -8,7 +8,9 @@ import pytest
 
 from flexure_sim.node.pacing import set_thread_nice
 
-pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread niceness is Linux only")
+pytestmark = pytest.mark.skipif(
+    not sys.platform.startswith("linux"), reason="per-thread niceness is Linux only"
+)
 
 
 def test_a_thread_gets_its_own_niceness_and_the_others_keep_theirs():

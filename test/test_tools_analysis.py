@@ -10,12 +10,14 @@ from flexure_sim.tools import analysis
 from flexure_sim.tools.analysis import Step
 
 
-def first_order(tau: float, t: np.ndarray, t0: float = 0.0, y0: float = 0.0, y1: float = 1.0) -> np.ndarray:
+def first_order(
+    tau: float, t: np.ndarray, t0: float = 0.0, y0: float = 0.0, y1: float = 1.0
+) -> np.ndarray:
     return np.where(t <= t0, y0, y1 + (y0 - y1) * np.exp(-(t - t0) / tau))
 
 
 def second_order(zeta: float, wn: float, t: np.ndarray) -> np.ndarray:
-    """Unit step response of wn^2 / (s^2 + 2 zeta wn s + wn^2), 0 < zeta < 1."""
+    """Return unit step response of wn^2 / (s^2 + 2 zeta wn s + wn^2), 0 < zeta < 1."""
     wd = wn * math.sqrt(1 - zeta**2)
     phi = math.acos(zeta)
     return 1 - np.exp(-zeta * wn * t) * np.sin(wd * t + phi) / math.sqrt(1 - zeta**2)
@@ -49,7 +51,9 @@ def test_second_order_overshoot_is_exp_of_minus_pi_zeta_over_sqrt(zeta):
     t = np.linspace(0, 30 / (zeta * wn), 200001)[1:]
     y = second_order(zeta, wn, t)
     r = analysis.step_response(t, y, 0.0, 0.0)
-    assert r.overshoot == pytest.approx(math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2)), rel=1e-6)
+    assert r.overshoot == pytest.approx(
+        math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2)), rel=1e-6
+    )
     assert r.peak == pytest.approx(1 + r.overshoot, rel=1e-9)
     # The 2 % settling time is bounded by the envelope: exp(-zeta wn t)/sqrt(1-zeta^2) = 0.02.
     envelope = math.log(50 / math.sqrt(1 - zeta**2)) / (zeta * wn)
@@ -123,11 +127,20 @@ def test_analyse_steps_reports_gain_settling_and_peaks_per_step():
         assert r.joint_a_compression == pytest.approx(0.1 * s.target, rel=1e-6)
         assert r.compression_hinge == "a"
         assert r.peak_wrench["a"]["fx"] == pytest.approx(-20 * s.target / 1e-6, rel=1e-6)
-        assert r.peak_wrench["a"]["force"] == pytest.approx(math.hypot(20, 0.1) * s.target / 1e-6, rel=1e-6)
+        assert r.peak_wrench["a"]["force"] == pytest.approx(
+            math.hypot(20, 0.1) * s.target / 1e-6, rel=1e-6
+        )
         assert abs(r.peak_drive_force) >= abs(r.drive_force)
     assert results[0].duration == pytest.approx(0.03)
     d = results[0].as_dict()
-    for key in ("input", "gain", "settling_time", "overshoot", "joint_a_compression", "peak_drive_force"):
+    for key in (
+        "input",
+        "gain",
+        "settling_time",
+        "overshoot",
+        "joint_a_compression",
+        "peak_drive_force",
+    ):
         assert key in d
 
 

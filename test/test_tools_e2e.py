@@ -1,4 +1,5 @@
-"""The tools on a run recorded through the real node, and replay to real rclpy subscribers.
+"""
+The tools on a run recorded through the real node, and replay to real rclpy subscribers.
 
 A stage_node subprocess (lockstep mode, 2 kHz ticks) is driven by the demo driver
 (``python -m flexure_sim.node.demo_drive --record``), a real rclpy node that advances it with
@@ -38,16 +39,37 @@ RATE = 2000.0
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    """A demo run through the real node: (recording, what the driver saw live, work dir)."""
+    """Return a demo run through the real node: (recording, what the driver saw live, work dir)."""
     work = tmp_path_factory.mktemp("node_run")
     domain = next_domain_id()
-    node = NodeProcess(work, domain, {"time_mode": "lockstep", "publish_rate": RATE, "record": False,
-                                      "record_path": str(work / "stage.mcap")})
+    node = NodeProcess(
+        work,
+        domain,
+        {
+            "time_mode": "lockstep",
+            "publish_rate": RATE,
+            "record": False,
+            "record_path": str(work / "stage.mcap"),
+        },
+    )
     try:
         env = node_env(domain, PYTHONPATH=str(ROOT), ROS_LOG_DIR=str(work / "ros_log"))
-        proc = subprocess.run([sys.executable, "-m", "flexure_sim.node.demo_drive", "--record", "--json",
-                               "--timeout", "60"], capture_output=True, text=True, env=env, cwd=work,
-                              timeout=180)
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "flexure_sim.node.demo_drive",
+                "--record",
+                "--json",
+                "--timeout",
+                "60",
+            ],
+            capture_output=True,
+            text=True,
+            env=env,
+            cwd=work,
+            timeout=180,
+        )
         assert proc.returncode == 0, proc.stderr + node.stderr
         live = json.loads(proc.stdout)
     finally:
@@ -75,7 +97,9 @@ def test_analyse_gives_the_gain_of_the_live_run_and_of_the_engines_statics(capsy
     sim = Simulation(load_mechanism("microstage"))
     for s, seen in zip(steps, live["steps"]):
         assert s["settled"], s["notes"]
-        assert s["t"] == pytest.approx(seen["t"], abs=1e-12)  # applied at the tick after it was sent
+        assert s["t"] == pytest.approx(
+            seen["t"], abs=1e-12
+        )  # applied at the tick after it was sent
         assert s["gain"] == pytest.approx(seen["gain"], rel=1e-4)
         assert s["gain"] == pytest.approx(s["static_gain"], rel=1e-6)
         assert s["gain"] == pytest.approx(27.628, rel=1e-4)
@@ -131,11 +155,15 @@ def test_export_rows_equal_message_counts(capsys, recorded, tmp_path):
 
 
 # ------------------------------------------------------------------------------ other nodes' input
-def test_a_malformed_command_from_another_node_is_skipped_and_counted_by_every_tool(capsys,
-                                                                                   tmp_path):
-    """A 2-byte payload published on drive/displacement (rclpy publishes raw bytes as they
-    are) is rejected by the node and recorded as received; the tools skip it, say so in one
-    line, and read the rest of the run with exit 0; --strict refuses the file."""
+def test_a_malformed_command_from_another_node_is_skipped_and_counted_by_every_tool(
+    capsys, tmp_path
+):
+    """
+    A 2-byte payload on drive/displacement is rejected by the node and recorded as received.
+
+    rclpy publishes raw bytes as they are. The tools skip it, say so in one line, and read the
+    rest of the run with exit 0; --strict refuses the file.
+    """
     domain = next_domain_id()
     path = tmp_path / "malformed.mcap"
     node = NodeProcess(tmp_path / "node", domain, {"time_mode": "realtime", "publish_rate": 200.0,
@@ -182,9 +210,15 @@ def test_a_malformed_command_from_another_node_is_skipped_and_counted_by_every_t
 
 # ------------------------------------------------------------------------------ replay
 def same_payloads(received: list[bytes], recorded: list[bytes]) -> bool:
-    """Equal CDR payloads; the transport may pad a payload with up to 3 bytes to a multiple of 4."""
+    """
+    Return whether the received and recorded CDR payloads are equal.
+
+    The transport may pad a payload with up to 3 bytes to a multiple of 4.
+    """
     return len(received) == len(recorded) and all(
-        r[:len(d)] == d and len(r) - len(d) < 4 and not any(r[len(d):]) for r, d in zip(received, recorded))
+        r[:len(d)] == d and len(r) - len(d) < 4 and not any(r[len(d):])
+        for r, d in zip(received, recorded)
+    )
 
 
 def _subscribe_all(peer: Peer, log, topics) -> None:
@@ -199,17 +233,23 @@ def _replay(domain: int, work: Path, *args: str, command=None, env=None) -> subp
                             stderr=subprocess.PIPE, text=True)
 
 
-def _spin_until_done(peer: Peer, proc: subprocess.Popen, expected: dict[str, int], timeout: float = 60) -> None:
+def _spin_until_done(
+    peer: Peer, proc: subprocess.Popen, expected: dict[str, int], timeout: float = 60
+) -> None:
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         peer.executor.spin_once(timeout_sec=0.01)
-        if proc.poll() is not None and all(len(peer.received[t]) >= n for t, n in expected.items()):
+        if proc.poll() is not None and all(
+            len(peer.received[t]) >= n for t, n in expected.items()
+        ):
             # Drain what is still in flight, then stop.
             peer.spin_for(0.3)
             return
-    raise AssertionError(f"replay did not deliver everything in {timeout} s: "
-                         f"{ {t: (len(peer.received[t]), n) for t, n in expected.items()} } "
-                         f"rc={proc.poll()} {proc.stderr.read() if proc.poll() is not None else ''}")
+    raise AssertionError(
+        f"replay did not deliver everything in {timeout} s: "
+        f"{ {t: (len(peer.received[t]), n) for t, n in expected.items()} } "
+        f"rc={proc.poll()} {proc.stderr.read() if proc.poll() is not None else ''}"
+    )
 
 
 def test_replay_delivers_every_message_in_order_and_the_recorded_clock(recorded):
@@ -231,7 +271,9 @@ def test_replay_delivers_every_message_in_order_and_the_recorded_clock(recorded)
             assert same_payloads([raw for _, raw in peer.received[topic]],
                                  [m.data for m in log.messages_on(topic)]), topic
             cls = _message_class(log.topics[topic].type)
-            assert peer.messages(topic) == [deserialize_message(m.data, cls) for m in log.messages_on(topic)]
+            assert peer.messages(topic) == [
+                deserialize_message(m.data, cls) for m in log.messages_on(topic)
+            ]
         clock = [c.clock.sec * 10**9 + c.clock.nanosec for c in peer.messages("/clock")]
         times = [m.log_time_ns for m in log.messages]
         assert clock[0] <= min(times) and clock[-1] >= max(times)
@@ -247,7 +289,9 @@ def test_replay_generates_clock_honours_the_topic_filter_offset_and_rate(recorde
     topics = ["/output/displacement", "/hinges/a/wrench"]
     offset = 0.05
     first = min(m.log_time_ns for m in log.messages)
-    expected = {t: [m for m in log.messages_on(t) if m.log_time_ns >= first + offset * 1e9] for t in topics}
+    expected = {
+        t: [m for m in log.messages_on(t) if m.log_time_ns >= first + offset * 1e9] for t in topics
+    }
     domain = next_domain_id()
     peer = Peer(domain, name="filtered_listener")
     try:
@@ -262,7 +306,9 @@ def test_replay_generates_clock_honours_the_topic_filter_offset_and_rate(recorde
         assert proc.returncode == 0, err
         assert "/clock generated" in out
         for t in topics:
-            assert same_payloads([raw for _, raw in peer.received[t]], [m.data for m in expected[t]])
+            assert same_payloads(
+                [raw for _, raw in peer.received[t]], [m.data for m in expected[t]]
+            )
         assert not peer.received["/bodies/poses"]  # filtered out
         clock = [c.clock.sec * 10**9 + c.clock.nanosec for c in peer.messages("/clock")]
         played = sorted({m.log_time_ns for v in expected.values() for m in v})
@@ -286,21 +332,28 @@ def test_replay_loops_until_interrupted_and_stops_cleanly(recorded):
         _subscribe_all(peer, log, ["/drive/force"])
         proc = _replay(domain, work, str(path), "--topics", "/drive/force", "--loop",
                        "--wait-for-subscribers", "30")
-        peer.spin_until(lambda: len(peer.received["/drive/force"]) >= 2 * n + 10, 60, "a second pass")
+        peer.spin_until(
+            lambda: len(peer.received["/drive/force"]) >= 2 * n + 10, 60, "a second pass"
+        )
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=30)
         assert proc.returncode == 0, err
         assert "Traceback" not in err
         data = [raw for _, raw in peer.received["/drive/force"]]
         recorded_bytes = [m.data for m in log.messages_on("/drive/force")]
-        assert same_payloads(data[:n], recorded_bytes) and same_payloads(data[n:2 * n], recorded_bytes)
+        assert same_payloads(data[:n], recorded_bytes) and same_payloads(
+            data[n:2 * n], recorded_bytes
+        )
     finally:
         peer.close()
 
 
 def test_ros2_run_replay_finds_the_installed_launcher(recorded, tmp_path):
-    """`ros2 run flexure_sim replay` executes <prefix>/lib/flexure_sim/replay; run it as ros2run
-    would, from a shell without the virtual environment on PATH."""
+    """
+    `ros2 run flexure_sim replay` executes <prefix>/lib/flexure_sim/replay.
+
+    Run it as ros2run would, from a shell without the virtual environment on PATH.
+    """
     path, _, _ = recorded
     prefix = None
     for p in (os.environ.get("AMENT_PREFIX_PATH") or sys.prefix).split(os.pathsep):
@@ -312,7 +365,9 @@ def test_ros2_run_replay_finds_the_installed_launcher(recorded, tmp_path):
     assert exe.is_file() and os.access(exe, os.X_OK)
     log = read_log(path)
     domain = next_domain_id()
-    env = node_env(domain, PATH="/usr/local/bin:/usr/bin:/bin", ROS_LOG_DIR=str(tmp_path / "ros_log"))
+    env = node_env(
+        domain, PATH="/usr/local/bin:/usr/bin:/bin", ROS_LOG_DIR=str(tmp_path / "ros_log")
+    )
     for key in ("VIRTUAL_ENV", "PYTHONPATH", "PYTHONHOME"):
         env.pop(key, None)
     peer = Peer(domain, name="launcher_listener")
@@ -321,7 +376,9 @@ def test_ros2_run_replay_finds_the_installed_launcher(recorded, tmp_path):
         proc = _replay(domain, tmp_path, str(path), "--topics", "/output/displacement",
                        "--wait-for-subscribers", "30", "--ros-args", "--log-level", "warn",
                        command=[str(exe)], env=env)
-        _spin_until_done(peer, proc, {"/output/displacement": log.topics["/output/displacement"].message_count})
+        _spin_until_done(
+            peer, proc, {"/output/displacement": log.topics["/output/displacement"].message_count}
+        )
         out, err = proc.communicate(timeout=30)
         assert proc.returncode == 0, err
         assert same_payloads([raw for _, raw in peer.received["/output/displacement"]],
@@ -329,7 +386,11 @@ def test_ros2_run_replay_finds_the_installed_launcher(recorded, tmp_path):
         # Bad input: a message and exit code 1, no traceback.
         bad = tmp_path / "bad.mcap"
         bad.write_bytes(path.read_bytes()[:1000])
-        proc = subprocess.run([str(exe), str(bad)], env=env, capture_output=True, text=True, timeout=60)
-        assert proc.returncode == 1 and "Traceback" not in proc.stderr and "truncated" in proc.stderr
+        proc = subprocess.run(
+            [str(exe), str(bad)], env=env, capture_output=True, text=True, timeout=60
+        )
+        assert (
+            proc.returncode == 1 and "Traceback" not in proc.stderr and "truncated" in proc.stderr
+        )
     finally:
         peer.close()

@@ -1,7 +1,10 @@
-"""flexure-sim info / analyse / plot / export on recordings written without DDS (tools_fixtures),
-and on bad files: truncated at several offsets, flipped bytes, empty, not MCAP, MCAP of another
-profile, rosbag2 files of other topics. Bad files give a message naming the file and the
-problem, exit code 1 (2 for bad usage), and never a traceback."""
+"""
+flexure-sim info / analyse / plot / export on recordings written without DDS (tools_fixtures).
+
+Also on bad files: truncated at several offsets, flipped bytes, empty, not MCAP, MCAP of another
+profile, rosbag2 files of other topics. Bad files give a message naming the file and the problem,
+exit code 1 (2 for bad usage), and never a traceback.
+"""
 from __future__ import annotations
 
 import csv
@@ -39,7 +42,7 @@ def flexure_sim(capsys, *args: str) -> tuple[int, str, str]:
 
 @pytest.fixture(scope="module")
 def stage(tmp_path_factory):
-    """A demo-profile run of the stage, in several chunks, and what the 'live' run saw."""
+    """Return a demo-profile run of the stage, in several chunks, and what the 'live' run saw."""
     path = tmp_path_factory.mktemp("stage") / "stage.mcap"
     live = record_stage_run(path, chunk_size=32 * 1024)
     return path, live
@@ -67,12 +70,19 @@ def test_info_shows_topics_counts_duration_mechanism_and_parameters(capsys, stag
     assert "/hinges/a/wrench" in out and "geometry_msgs/msg/WrenchStamped" in out
     assert "Duration:     0.109000 s" in out
     assert "Mechanism:    microstage" in out
-    for param in ("publish_rate  1000.0 Hz", "sim_step      0.0001 s", "stroke_max    2e-06 m", "time_mode     fast"):
+    for param in (
+        "publish_rate  1000.0 Hz",
+        "sim_step      0.0001 s",
+        "stroke_max    2e-06 m",
+        "time_mode     fast",
+    ):
         assert param in out
     code, out, _ = flexure_sim(capsys, "info", path, "--json")
     info = json.loads(out)
     counts = {t["name"]: t["count"] for t in info["topics"]}
-    assert counts["/output/displacement"] == 110 and counts["/drive/displacement"] == len(DEMO_LEVELS)
+    assert counts["/output/displacement"] == 110 and counts["/drive/displacement"] == len(
+        DEMO_LEVELS
+    )
     assert info["mechanism"]["name"] == "microstage" and info["parameters"]["sim_step"] == "0.0001"
     assert info["duration"] == pytest.approx(0.109)
     assert info["message_count"] == sum(counts.values())
@@ -91,7 +101,14 @@ def test_analyse_gives_the_live_gains_and_the_engines_static_gain(capsys, stage)
     steps = json.loads(out)
     assert [s["input"] for s in steps] == list(DEMO_LEVELS)
     for s, g in zip(steps, live_gains(live)):
-        for key in ("input", "gain", "settling_time", "overshoot", "joint_a_compression", "peak_drive_force"):
+        for key in (
+            "input",
+            "gain",
+            "settling_time",
+            "overshoot",
+            "joint_a_compression",
+            "peak_drive_force",
+        ):
             assert key in s
         assert s["settled"]
         assert s["gain"] == pytest.approx(g, rel=1e-12)
@@ -107,7 +124,9 @@ def test_analyse_gives_the_live_gains_and_the_engines_static_gain(capsys, stage)
     assert "27.628" in out and "joint-a compr. [nm]" in out and "peak hinge load" in out
 
 
-def test_analyse_finds_the_steps_in_the_drive_input_when_the_command_was_not_recorded(capsys, stage, stage_nocmd):
+def test_analyse_finds_the_steps_in_the_drive_input_when_the_command_was_not_recorded(
+    capsys, stage, stage_nocmd
+):
     code, out, err = flexure_sim(capsys, "analyse", stage_nocmd[0], "--json")
     assert code == 0
     assert "steps found in /drive/input" in err
@@ -126,9 +145,14 @@ def test_plot_without_the_mechanism_draws_the_recorded_compression(capsys, stage
     assert figure_title(tmp_path / "input_output.png") == "Input and output displacement"
 
 
-def test_a_bag_recorded_on_the_wall_clock_is_analysed_in_simulation_time_from_clock(capsys, stage, tmp_path):
-    """``ros2 bag record`` (no --use-sim-time) of a fast-mode run: log times are reception times
-    on the wall clock; /clock gives the simulation time back."""
+def test_a_bag_recorded_on_the_wall_clock_is_analysed_in_simulation_time_from_clock(
+    capsys, stage, tmp_path
+):
+    """
+    ``ros2 bag record`` (no --use-sim-time) of a fast-mode run.
+
+    Log times are reception times on the wall clock; /clock gives the simulation time back.
+    """
     path = tmp_path / "wall.mcap"
     record_stage_run(path, wall_clock=(1_763_000_000_000_000_000, 0.2))
     code, out, err = flexure_sim(capsys, "analyse", path, "--json")
@@ -153,7 +177,9 @@ def test_analyse_of_a_namespaced_stage(capsys, tmp_path):
 
 
 def test_two_stages_in_one_file_need_a_namespace():
-    log = types.SimpleNamespace(path=Path("two.mcap"), topics={"/a/output/displacement": 0, "/b/output/displacement": 0})
+    log = types.SimpleNamespace(
+        path=Path("two.mcap"), topics={"/a/output/displacement": 0, "/b/output/displacement": 0}
+    )
     with pytest.raises(RunError, match="choose one with --namespace"):
         find_namespace(log)
     assert find_namespace(log, "b") == "/b"
@@ -164,7 +190,10 @@ def test_analyse_refuses_a_run_without_a_drive_and_plot_still_draws_it(capsys, f
     assert code == 1 and "/output/displacement" in err and "fourbar_mixed" in err
     code, out, err = flexure_sim(capsys, "plot", fourbar, "-o", tmp_path / "p")
     assert code == 0, err
-    assert sorted(p.name for p in (tmp_path / "p").iterdir()) == ["body_poses.png", "hinge_wrenches.png"]
+    assert sorted(p.name for p in (tmp_path / "p").iterdir()) == [
+        "body_poses.png",
+        "hinge_wrenches.png",
+    ]
 
 
 def test_bad_usage_exits_2(capsys, stage, tmp_path):
@@ -173,7 +202,9 @@ def test_bad_usage_exits_2(capsys, stage, tmp_path):
     assert code == 2 and "no such file" in err
     code, _, err = flexure_sim(capsys, "info", tmp_path)
     assert code == 2 and "is a directory" in err
-    code, _, err = flexure_sim(capsys, "export", stage[0], "--csv", tmp_path / "c", "--topics", "/nope")
+    code, _, err = flexure_sim(
+        capsys, "export", stage[0], "--csv", tmp_path / "c", "--topics", "/nope"
+    )
     assert code == 2 and "/nope" in err
 
 
@@ -224,13 +255,20 @@ def test_export_writes_one_csv_per_topic_with_a_row_per_message(capsys, stage, t
     with open(tmp_path / "csv" / "hinges.a.wrench.csv", newline="") as f:
         reader = csv.DictReader(f)
         first = next(reader)
-    assert reader.fieldnames[:4] == ["time", "header/stamp/sec", "header/stamp/nanosec", "header/frame_id"]
+    assert reader.fieldnames[:4] == [
+        "time",
+        "header/stamp/sec",
+        "header/stamp/nanosec",
+        "header/frame_id",
+    ]
     assert first["header/frame_id"] == "hinge_a"
     msg = log.messages_on("/hinges/a/wrench")[0].message
     assert float(first["wrench/force/x"]) == msg.wrench.force.x  # full precision
     with open(tmp_path / "csv" / "diagnostics.csv", newline="") as f:
         assert "status[0]/values/sim_time" in next(csv.reader(f))
-    code, out, _ = flexure_sim(capsys, "export", path, "--csv", tmp_path / "one", "--topics", "/drive/force")
+    code, out, _ = flexure_sim(
+        capsys, "export", path, "--csv", tmp_path / "one", "--topics", "/drive/force"
+    )
     assert code == 0 and [p.name for p in (tmp_path / "one").iterdir()] == ["drive.force.csv"]
 
 
@@ -239,7 +277,10 @@ TOOLS = (("info",), ("analyse",), ("plot", "-o", "PLOTS"), ("export", "--csv", "
 
 
 def run_tool(capsys, tool: tuple, path: Path, tmp_path: Path, *extra: str) -> tuple[int, str, str]:
-    args = [a.replace("PLOTS", str(tmp_path / "plots")).replace("CSV", str(tmp_path / "csv")) for a in tool]
+    args = [
+        a.replace("PLOTS", str(tmp_path / "plots")).replace("CSV", str(tmp_path / "csv"))
+        for a in tool
+    ]
     return flexure_sim(capsys, args[0], path, *args[1:], *extra)
 
 
@@ -261,7 +302,9 @@ def chunk_offsets(stage):
 
 
 @pytest.mark.parametrize("where", ["magic", "header", "chunk1", "mid", "summary", "last_byte"])
-def test_a_truncated_file_is_refused_with_what_was_readable(capsys, stage, chunk_offsets, tmp_path, where):
+def test_a_truncated_file_is_refused_with_what_was_readable(
+    capsys, stage, chunk_offsets, tmp_path, where
+):
     src = stage[0]
     data = src.read_bytes()
     cut = {"magic": 5, "header": 30, "chunk1": chunk_offsets[1] + 100, "mid": len(data) // 2,
@@ -276,7 +319,9 @@ def test_a_truncated_file_is_refused_with_what_was_readable(capsys, stage, chunk
         assert "--recover" in err
 
 
-def test_recover_analyses_the_readable_part_of_a_truncated_file(capsys, stage, chunk_offsets, tmp_path):
+def test_recover_analyses_the_readable_part_of_a_truncated_file(
+    capsys, stage, chunk_offsets, tmp_path
+):
     data = stage[0].read_bytes()
     bad = tmp_path / "killed.mcap"
     bad.write_bytes(data[: int(len(data) * 0.7)])
@@ -299,9 +344,13 @@ def test_recover_analyses_the_readable_part_of_a_truncated_file(capsys, stage, c
     assert_clean_failure(code, out, err, empty_prefix, "nothing readable")
 
 
-def test_flipped_bytes_give_a_clear_error_or_a_correct_answer_never_a_traceback(capsys, stage, chunk_offsets, tmp_path):
+def test_flipped_bytes_give_a_clear_error_or_a_correct_answer_never_a_traceback(
+    capsys, stage, chunk_offsets, tmp_path
+):
     data = stage[0].read_bytes()
-    positions = sorted(set(range(8, len(data), len(data) // 23)) | {chunk_offsets[2] + 200, 12, len(data) - 20})
+    positions = sorted(
+        set(range(8, len(data), len(data) // 23)) | {chunk_offsets[2] + 200, 12, len(data) - 20}
+    )
     failures = 0
     for pos in positions:
         bad = tmp_path / "flipped.mcap"
@@ -334,9 +383,13 @@ def test_an_mcap_of_another_profile_is_refused(capsys, tmp_path):
         w = Writer(f)
         w.start(profile="", library="test")
         sid = w.register_schema(name="Point", encoding="jsonschema", data=b'{"type": "object"}')
-        cid = w.register_channel(topic="/output/displacement", message_encoding="json", schema_id=sid)
+        cid = w.register_channel(
+            topic="/output/displacement", message_encoding="json", schema_id=sid
+        )
         for k in range(10):
-            w.add_message(channel_id=cid, log_time=k * 1000, publish_time=k * 1000, data=b'{"x": 1}')
+            w.add_message(
+                channel_id=cid, log_time=k * 1000, publish_time=k * 1000, data=b'{"x": 1}'
+            )
         w.finish()
     for tool in TOOLS:
         assert_clean_failure(*run_tool(capsys, tool, path, tmp_path), path, "not a rosbag2 log")
@@ -352,8 +405,12 @@ def test_a_rosbag2_file_of_other_topics_is_summarised_but_not_analysed(capsys, t
             rec.write("/temperature", serialize_message(Float64(data=20.0 + k)), k * 1_000_000)
     code, out, _ = flexure_sim(capsys, "info", path)
     assert code == 0 and "/chatter" in out and "not recorded" in out
-    assert_clean_failure(*run_tool(capsys, ("analyse",), path, tmp_path), path, "/output/displacement", "/chatter")
-    assert_clean_failure(*run_tool(capsys, ("plot", "-o", "PLOTS"), path, tmp_path), path, "nothing to plot")
+    assert_clean_failure(
+        *run_tool(capsys, ("analyse",), path, tmp_path), path, "/output/displacement", "/chatter"
+    )
+    assert_clean_failure(
+        *run_tool(capsys, ("plot", "-o", "PLOTS"), path, tmp_path), path, "nothing to plot"
+    )
     code, out, _ = run_tool(capsys, ("export", "--csv", "CSV"), path, tmp_path)
     assert code == 0
     assert (tmp_path / "csv" / "chatter.csv").read_text().splitlines()[1] == "0.000000000,hello 0"
@@ -362,19 +419,31 @@ def test_a_rosbag2_file_of_other_topics_is_summarised_but_not_analysed(capsys, t
 def test_the_installed_command_prints_no_traceback_for_a_damaged_file(stage, tmp_path):
     bad = tmp_path / "cut.mcap"
     bad.write_bytes(stage[0].read_bytes()[:5000])
-    for tool in (["info"], ["analyse"], ["plot", "-o", str(tmp_path / "p")], ["export", "--csv", str(tmp_path / "c")]):
-        proc = subprocess.run([sys.executable, "-m", "flexure_sim.cli", tool[0], str(bad), *tool[1:]],
-                              capture_output=True, text=True, cwd=ROOT, timeout=120)
+    for tool in (
+        ["info"],
+        ["analyse"],
+        ["plot", "-o", str(tmp_path / "p")],
+        ["export", "--csv", str(tmp_path / "c")],
+    ):
+        proc = subprocess.run(
+            [sys.executable, "-m", "flexure_sim.cli", tool[0], str(bad), *tool[1:]],
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            timeout=120,
+        )
         assert proc.returncode == 1, proc.stderr
         assert "Traceback" not in proc.stderr and proc.stderr.count("\n") == 1
         assert "truncated" in proc.stderr and "readable" in proc.stderr
 
 
-
 # ------------------------------------------------------------------------------ undecodable
 def test_a_message_that_does_not_decode_is_skipped_counted_and_kept(capsys, tmp_path):
-    """A run whose command at 15 ms was recorded as the 2 bytes another node published: the
-    tools skip it and say so, info counts it, the bytes stay in the file, --strict refuses."""
+    """
+    A run whose command at 15 ms was recorded as the 2 bytes another node published.
+
+    The tools skip it and say so, info counts it, the bytes stay in the file, --strict refuses.
+    """
     path = tmp_path / "odd.mcap"
     record_stage_run(path, extra_commands=[(0.015, 1e-6)], chunk_size=32 * 1024)
     odd = tmp_path / "odd_bytes.mcap"
@@ -413,8 +482,11 @@ def test_a_message_that_does_not_decode_is_skipped_counted_and_kept(capsys, tmp_
 
 # ------------------------------------------------------------------------------ damaged chunks
 def flip_bit_in_chunk(data: bytes, chunk_offset: int, where: int = 500) -> bytes:
-    """``data`` with one bit flipped ``where`` bytes into the chunk record at ``chunk_offset``
-    (past the record's header fields: inside its records)."""
+    """
+    Return ``data`` with one bit flipped ``where`` bytes into the chunk record at ``chunk_offset``.
+
+    The offset is past the record's header fields: inside its records.
+    """
     b = bytearray(data)
     b[chunk_offset + where] ^= 0x04
     return bytes(b)
@@ -427,8 +499,9 @@ def independent_crc_check(path: Path) -> None:
             pass
 
 
-def test_a_bit_flipped_inside_a_chunk_is_reported_by_every_tool(capsys, stage, chunk_offsets,
-                                                                 tmp_path):
+def test_a_bit_flipped_inside_a_chunk_is_reported_by_every_tool(
+    capsys, stage, chunk_offsets, tmp_path
+):
     data = stage[0].read_bytes()
     bad = tmp_path / "flipped.mcap"
     bad.write_bytes(flip_bit_in_chunk(data, chunk_offsets[2]))
@@ -468,9 +541,12 @@ def test_a_bit_flipped_inside_a_chunk_is_reported_by_every_tool(capsys, stage, c
 
 def test_a_chunk_whose_length_is_damaged_is_stepped_over_with_the_chunk_index(
         capsys, stage, chunk_offsets, tmp_path):
-    """A flipped bit in a chunk record's length field breaks the framing: the next record
-    cannot be found by reading on, but the summary's chunk index says where the next chunk
-    starts, so --recover still reads every chunk after the damaged one."""
+    """
+    A flipped bit in a chunk record's length field breaks the framing.
+
+    The next record cannot be found by reading on, but the summary's chunk index says where the
+    next chunk starts, so --recover still reads every chunk after the damaged one.
+    """
     data = bytearray(stage[0].read_bytes())
     data[chunk_offsets[2] + 1 + 2] ^= 0x10  # opcode, then the u64 length: +1 MiB
     bad = tmp_path / "length.mcap"
@@ -494,9 +570,13 @@ def test_a_chunk_whose_length_is_damaged_is_stepped_over_with_the_chunk_index(
 # ------------------------------------------------------------------------------ other writers
 @pytest.fixture(scope="module")
 def rosbags_files(stage, tmp_path_factory):
-    """The stage run converted by rosbags-convert: to a sqlite3 bag and back to MCAP, and
-    directly to an MCAP bag with zstd-compressed chunks (both rosbag2 MCAP written by rosbags,
-    with ``custom_data: null`` in their metadata)."""
+    """
+    Return the stage run converted by rosbags-convert.
+
+    It is converted to a sqlite3 bag and back to MCAP, and directly to an MCAP bag with
+    zstd-compressed chunks (both rosbag2 MCAP written by rosbags, with ``custom_data: null`` in
+    their metadata).
+    """
     root = tmp_path_factory.mktemp("rosbags")
     convert = [sys.executable, "-m", "rosbags.convert"]
 
@@ -543,8 +623,11 @@ def test_every_tool_reads_a_rosbag2_mcap_written_by_rosbags(capsys, stage, rosba
 
 # ------------------------------------------------------------------------------ memory
 def peak_rss_kib(*args: str) -> int:
-    """Peak resident memory (KiB) of ``flexure-sim ARGS`` in a fresh interpreter: VmHWM of
-    /proc/self/status (ru_maxrss would carry the peak of the forking test process over)."""
+    """
+    Peak resident memory (KiB) of ``flexure-sim ARGS`` in a fresh interpreter.
+
+    VmHWM of /proc/self/status (ru_maxrss would carry the peak of the forking test process over).
+    """
     code = ("import contextlib, io, sys\n"
             "from flexure_sim import cli\n"
             "with contextlib.redirect_stdout(io.StringIO()), \\\n"
@@ -561,8 +644,11 @@ def peak_rss_kib(*args: str) -> int:
 
 @pytest.fixture(scope="module")
 def long_runs(tmp_path_factory):
-    """A run of the stage's topics and one ten times longer, both of several 256 KiB chunks:
-    (paths, message counts)."""
+    """
+    Return a run of the stage's topics and one ten times longer, both of several 256 KiB chunks.
+
+    (paths, message counts).
+    """
     root = tmp_path_factory.mktemp("long")
     short, long = root / "short.mcap", root / "long.mcap"
     counts = (record_long_run(short, 0.3, chunk_size=1 << 18),
@@ -571,9 +657,12 @@ def long_runs(tmp_path_factory):
 
 
 def test_analyse_and_info_keep_memory_bounded_on_a_ten_times_longer_recording(long_runs):
-    """Streaming: the peak memory of analyse (and info) on a run 10 x longer stays within
-    1.2 x (the numeric series of the analysed topics grow, 8 bytes a value; no decoded
-    messages are kept)."""
+    """
+    Streaming.
+
+    The peak memory of analyse (and info) on a run 10 x longer stays within 1.2 x (the numeric
+    series of the analysed topics grow, 8 bytes a value; no decoded messages are kept).
+    """
     (short, long), (n_short, n_long) = long_runs
     assert n_long > 9 * n_short
     for tool in (("analyse", "--json"), ("info", "--json")):
@@ -584,10 +673,14 @@ def test_analyse_and_info_keep_memory_bounded_on_a_ten_times_longer_recording(lo
 
 
 def test_replay_reads_an_intact_file_in_log_time_order_in_bounded_memory(long_runs, tmp_path):
-    """What replay plays: every message of the chosen topics in log-time order (file order on
-    ties), also when the file holds them out of order. Reading a run ten times longer adds to
-    the peak of Python allocations less than a tenth of the payload bytes it adds (holding
-    the payloads, as replay did, would add all of them; what grows is mcap's chunk index)."""
+    """
+    What replay plays.
+
+    Every message of the chosen topics in log-time order (file order on ties), also when the file
+    holds them out of order. Reading a run ten times longer adds to the peak of Python allocations
+    less than a tenth of the payload bytes it adds (holding the payloads, as replay did, would add
+    all of them; what grows is mcap's chunk index).
+    """
     import tracemalloc
 
     from flexure_sim.recording.ordered import OrderedLog

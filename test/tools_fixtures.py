@@ -1,6 +1,9 @@
-"""Recordings for the tools' tests, written without DDS: the engine stepped as the node steps
-it, its state turned into the node's messages (rclpy message classes, serialize_message) and
-written with McapRecorder under the node's topic names and metadata keys.
+"""
+Recordings for the tools' tests, written without DDS.
+
+The engine stepped as the node steps it, its state turned into the node's messages (rclpy message
+classes, serialize_message) and written with McapRecorder under the node's topic names and metadata
+keys.
 
 The end-to-end tests (test_tools_e2e.py) use the real node; these files make the unit tests
 fast and independent of it.
@@ -51,7 +54,8 @@ def record_stage_run(
     metadata: bool = True,
     wall_clock: Optional[tuple[int, float]] = None,
 ) -> dict:
-    """Record a stage run: at rest for ``rest`` s, then each level for ``dwell`` s.
+    """
+    Record a stage run: at rest for ``rest`` s, then each level for ``dwell`` s.
 
     Returns what the live run saw: per step the settled (input, output) before the next
     command, for comparing with the analysis. ``wall_clock`` = (offset ns, real-time factor)
@@ -84,17 +88,29 @@ def record_stage_run(
         topics.append((f"{ns}/drive/displacement", "std_msgs/msg/Float64"))
     mech_path = resolve_mechanism_path(mechanism).resolve()
     meta = {
-        "mechanism": mechanism, "publish_rate": repr(publish_rate), "sim_step": repr(sim_step),
+        "mechanism": mechanism,
+        "publish_rate": repr(publish_rate),
+        "sim_step": repr(sim_step),
         "time_mode": "fast" if clock else "realtime",
         "stroke_min": repr(mech.drive.stroke[0]) if has_drive else "0.0",
         "stroke_max": repr(mech.drive.stroke[1]) if has_drive else "0.0",
         "slew_rate": repr(mech.drive.slew_rate) if has_drive else "1.0",
-        "record": "true", "record_dir": "runs", "record_path": str(path),
-        "mechanism_name": mech.name, "mechanism_path": str(mech_path),
-        "mechanism_yaml": mech_path.read_text(), "node": f"{ns}/stage_node",
-        "flexure_sim_version": "0.1.0", "steps_per_tick": str(n_steps), "relinearize_tol": "0.0001",
-        "root_frame": "stage", "bodies": ",".join(bodies), "hinges": ",".join(hinges), "run": "0",
-        "sim_time_start": "0.0", "started_utc": "2025-01-01T00:00:00+00:00",
+        "record": "true",
+        "record_dir": "runs",
+        "record_path": str(path),
+        "mechanism_name": mech.name,
+        "mechanism_path": str(mech_path),
+        "mechanism_yaml": mech_path.read_text(),
+        "node": f"{ns}/stage_node",
+        "flexure_sim_version": "0.1.0",
+        "steps_per_tick": str(n_steps),
+        "relinearize_tol": "0.0001",
+        "root_frame": "stage",
+        "bodies": ",".join(bodies),
+        "hinges": ",".join(hinges),
+        "run": "0",
+        "sim_time_start": "0.0",
+        "started_utc": "2025-01-01T00:00:00+00:00",
     }
     schedule = []
     t_cmd = rest
@@ -132,7 +148,11 @@ def record_stage_run(
                     live.append({"t": stamp / 1e9, "command": value, **last})
                     sim.set_command(value)
                     if record_command:
-                        rec.write(f"{ns}/drive/displacement", serialize_message(Float64(data=value)), stamp)
+                        rec.write(
+                            f"{ns}/drive/displacement",
+                            serialize_message(Float64(data=value)),
+                            stamp,
+                        )
                 k += 1
             sim.step(n_steps)
             snap = sim.snapshot()
@@ -153,21 +173,29 @@ def record_stage_run(
                 msg = PoseStamped()
                 msg.header.stamp, msg.header.frame_id, msg.pose = st, "stage", p
                 rec.write(f"{ns}/bodies/{b}/pose", serialize_message(msg), stamp)
-            for h, (m, fx, fy), (a, px, py) in zip(hinges, snap.wrenches.tolist(), snap.deflections.tolist()):
+            for h, (m, fx, fy), (a, px, py) in zip(
+                hinges, snap.wrenches.tolist(), snap.deflections.tolist()
+            ):
                 w = WrenchStamped()
                 w.header.stamp, w.header.frame_id = st, f"hinge_{h}"
                 w.wrench.force.x, w.wrench.force.y, w.wrench.torque.z = fx, fy, m
                 rec.write(f"{ns}/hinges/{h}/wrench", serialize_message(w), stamp)
                 d = TransformStamped()
-                d.header.stamp, d.header.frame_id, d.child_frame_id = st, f"hinge_{h}_a", f"hinge_{h}"
+                d.header.stamp, d.header.frame_id, d.child_frame_id = (
+                    st,
+                    f"hinge_{h}_a",
+                    f"hinge_{h}",
+                )
                 d.transform.translation.x, d.transform.translation.y = px, py
                 _quat(d.transform.rotation, a)
                 rec.write(f"{ns}/hinges/{h}/deflection", serialize_message(d), stamp)
             if has_drive:
-                for topic, value in ((f"{ns}/hinges/{mech.compression_hinge}/compression", snap.compression),
-                                     (f"{ns}/output/displacement", snap.output),
-                                     (f"{ns}/drive/input", snap.drive_input),
-                                     (f"{ns}/drive/force", snap.drive_force)):
+                for topic, value in (
+                    (f"{ns}/hinges/{mech.compression_hinge}/compression", snap.compression),
+                    (f"{ns}/output/displacement", snap.output),
+                    (f"{ns}/drive/input", snap.drive_input),
+                    (f"{ns}/drive/force", snap.drive_force),
+                ):
                     rec.write(topic, serialize_message(Float64(data=float(value))), stamp)
                 last = {"input": snap.drive_input, "output": snap.output}
             if stamp % 100_000_000 == 0:
@@ -194,11 +222,14 @@ def live_gains(live: dict) -> list[Optional[float]]:
 
 def record_long_run(path: Path, seconds: float, publish_rate: float = 1000.0,
                     step_every: float = 0.05, chunk_size: int = 1 << 20) -> int:
-    """A run of the stage's topics (seven bodies and hinges, /clock, diagnostics at 10 Hz),
+    """
+    Return a run of the stage's topics (seven bodies and hinges, /clock, diagnostics at 10 Hz).
+
     ``seconds`` long, written fast: the values are those of a first-order lag (tau 0.5 ms)
-    following a command that alternates between 1 and 2 um every ``step_every`` s, scaled by
-    the stage's gain, without stepping the engine (all bodies share a pose, all hinges a
-    wrench). Returns the number of messages written."""
+    following a command that alternates between 1 and 2 um every ``step_every`` s, scaled by the
+    stage's gain, without stepping the engine (all bodies share a pose, all hinges a wrench).
+    Returns the number of messages written.
+    """
     bodies = [f"body{k}" for k in range(1, 8)]
     hinges = list("abcdefg")
     topics = [("/clock", "rosgraph_msgs/msg/Clock"),

@@ -1,4 +1,5 @@
-"""The engine: planar flexure mechanics with the twistor-based potential energy method.
+"""
+The engine: planar flexure mechanics with the twistor-based potential energy method.
 
 No ROS here. Layers, each importing only the ones above it:
 

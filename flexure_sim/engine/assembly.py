@@ -1,4 +1,5 @@
-"""Generalized forces of all hinges on all bodies, with exact Jacobians.
+"""
+Generalized forces of all hinges on all bodies, with exact Jacobians.
 
 Body coordinates z = (x, y, theta) per body, velocities v = dz/dt (root frame), stacked as
 vectors of length 3 * n_bodies in body order. For a hinge joining frame a (body A, offset
@@ -27,7 +28,8 @@ from .mechanism import Mechanism
 
 @dataclass(frozen=True)
 class HingeForces:
-    """Everything the hinges contribute at one state (n hinges, N = 3 n_bodies).
+    """
+    Everything the hinges contribute at one state (n hinges, N = 3 n_bodies).
 
     Q (N,): generalized forces (forces in N, moments in N m about each body's origin).
     dQ_dz, dQ_dv (N, N): exact Jacobians (None unless asked for).
@@ -62,12 +64,16 @@ class Assembly:
         self.phia = np.array([h.a.angle for h in hinges], dtype=float)
         self.phib = np.array([h.b.angle for h in hinges], dtype=float)
         # Global coordinate indices of (x_A, y_A, th_A, x_B, y_B, th_B) per hinge.
-        self.dofs = np.concatenate([3 * self.ia[:, None] + np.arange(3), 3 * self.ib[:, None] + np.arange(3)], axis=1)
+        self.dofs = np.concatenate(
+            [3 * self.ia[:, None] + np.arange(3), 3 * self.ib[:, None] + np.arange(3)], axis=1
+        )
         # Batches share a coordinate type and a law kind, so quadratic laws stay vectorised.
         groups: dict[tuple[str, bool], list[int]] = {}
         for i, h in enumerate(hinges):
             groups.setdefault((h.law.coordinates, isinstance(h.law, QuadraticLaw)), []).append(i)
-        self.groups = [(np.array(idx), LawBatch([hinges[i].law for i in idx])) for idx in groups.values()]
+        self.groups = [
+            (np.array(idx), LawBatch([hinges[i].law for i in idx])) for idx in groups.values()
+        ]
         # Scatter of each hinge's six local coordinates into the global vector:
         # S[a, h, j] = 1 where global coordinate a is local coordinate j of hinge h.
         n, N = len(hinges), 3 * self.n_bodies
@@ -80,16 +86,24 @@ class Assembly:
         self.compiled = all(isinstance(h.law, QuadraticLaw) for h in hinges)
         if self.compiled:
             offset = [1 if h.law.coordinates == "twistor" else 0 for h in hinges]
-            self._kind = np.array([kernels.TWISTOR if o else kernels.TWIST for o in offset], dtype=np.int64)
-            self._W = np.ascontiguousarray([h.law.metric()[o:, o:] for h, o in zip(hinges, offset)])
-            self._C = np.ascontiguousarray([h.law.dissipation_matrix()[o:, o:] for h, o in zip(hinges, offset)])
+            self._kind = np.array(
+                [kernels.TWISTOR if o else kernels.TWIST for o in offset], dtype=np.int64
+            )
+            self._W = np.ascontiguousarray(
+                [h.law.metric()[o:, o:] for h, o in zip(hinges, offset)]
+            )
+            self._C = np.ascontiguousarray(
+                [h.law.dissipation_matrix()[o:, o:] for h, o in zip(hinges, offset)]
+            )
             self._ia, self._ib = self.ia.astype(np.int64), self.ib.astype(np.int64)
             self._ca, self._cb = np.ascontiguousarray(self.ca), np.ascontiguousarray(self.cb)
 
     # ------------------------------------------------------------------ geometry
     def relative(self, z: np.ndarray, second: bool = True):
-        """r (n, 3), dr/dzz (n, 3, 6) and, if asked, d2r/dzz2 (n, 3, 6, 6), where zz are the
-        six coordinates (x_A, y_A, theta_A, x_B, y_B, theta_B) of each hinge's bodies.
+        """
+        Return r (n, 3), dr/dzz (n, 3, 6) and, if asked, d2r/dzz2 (n, 3, 6, 6).
+
+        zz are the six coordinates (x_A, y_A, theta_A, x_B, y_B, theta_B) of each hinge's bodies.
 
         With beta = theta_A + phi_a, w_a = R(theta_A) c_a, w_b = R(theta_B) c_b and
         Delta = P_B + w_b - P_A - w_a: p = R(beta)^T Delta, so
@@ -141,7 +155,9 @@ class Assembly:
         dp_dthA = dr[:, 1:, 2]
         d2 = np.zeros((n, 3, 6, 6))
         J_RbT = np.einsum("ij,njk->nik", J, RbT)
-        d2[:, 1:, 2, 2] = -dp_dthA @ J.T + np.einsum("ij,nj->ni", J, RbT_Jwa) + np.einsum("nij,nj->ni", RbT, wa)
+        d2[:, 1:, 2, 2] = (
+            -dp_dthA @ J.T + np.einsum("ij,nj->ni", J, RbT_Jwa) + np.einsum("nij,nj->ni", RbT, wa)
+        )
         d2[:, 1:, 2, 0:2] = J_RbT
         d2[:, 1:, 0:2, 2] = J_RbT
         d2[:, 1:, 2, 3:5] = -J_RbT
@@ -162,7 +178,8 @@ class Assembly:
         return S @ block.reshape(6 * n, 6 * n) @ S.T
 
     def generalized_forces(self, z: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, float, float]:
-        """Q, total potential energy and total dissipated power: the per-step hot path.
+        """
+        Q, total potential energy and total dissipated power: the per-step hot path.
 
         Uses the compiled kernel when every law is quadratic, else ``forces``.
         """
@@ -170,14 +187,31 @@ class Assembly:
         return Q, energy, dissipation
 
     def report(self, z: np.ndarray, v: np.ndarray):
-        """Q, deflections r (n, 3), wrenches on body B (n, 3), total energy and dissipated
-        power (as in ``forces``), by the compiled kernel when every law is quadratic."""
+        """
+        Q.
+
+        Deflections r (n, 3), wrenches on body B (n, 3), total energy and dissipated power (as in
+        ``forces``), by the compiled kernel when every law is quadratic.
+        """
         if self.compiled:
             n = len(self.ia)
             Q, r, wrench = np.empty(3 * self.n_bodies), np.empty((n, 3)), np.empty((n, 3))
             energy, dissipation = kernels.quadratic_forces(
-                np.asarray(z, dtype=float), np.asarray(v, dtype=float), self._ia, self._ib, self._ca, self._cb,
-                self.phia, self.phib, self._kind, self._W, self._C, Q, r, wrench)
+                np.asarray(z, dtype=float),
+                np.asarray(v, dtype=float),
+                self._ia,
+                self._ib,
+                self._ca,
+                self._cb,
+                self.phia,
+                self.phib,
+                self._kind,
+                self._W,
+                self._C,
+                Q,
+                r,
+                wrench,
+            )
             return Q, r, wrench, float(energy), float(dissipation)
         hf = self.forces(z, v)
         return hf.Q, hf.r, hf.wrench_b, float(hf.energy.sum()), float(hf.dissipation.sum())

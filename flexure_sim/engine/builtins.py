@@ -1,4 +1,5 @@
-"""Where the built-in mechanisms (the ``config/*.yaml`` files shipped with the package) live.
+"""
+Where the built-in mechanisms (the ``config/*.yaml`` files shipped with the package) live.
 
 The same files are found in three layouts:
 
@@ -42,7 +43,8 @@ _PACKAGE_DIR = Path(__file__).resolve().parents[1]
 
 
 def install_prefix(package_dir: Path = _PACKAGE_DIR) -> Optional[Path]:
-    """The prefix an installed package directory belongs to, or None if it is not installed.
+    """
+    Return the prefix an installed package directory belongs to, or None if it is not installed.
 
     ``<prefix>/lib/pythonX.Y/site-packages/<pkg>``, ``<prefix>/lib64/pythonX.Y/...`` and
     Debian's ``<prefix>/lib/python3/dist-packages/<pkg>`` give ``<prefix>``.
@@ -57,7 +59,7 @@ def install_prefix(package_dir: Path = _PACKAGE_DIR) -> Optional[Path]:
 
 
 def own_data_dir(package_dir: Path = _PACKAGE_DIR) -> Optional[Path]:
-    """The built-in mechanisms of the install (or checkout) ``package_dir`` belongs to."""
+    """Return the built-in mechanisms of the install (or checkout) ``package_dir`` belongs to."""
     prefix = install_prefix(package_dir)
     if prefix is not None:
         candidate = prefix / "share" / PACKAGE / SUBDIR
@@ -70,7 +72,8 @@ def own_data_dir(package_dir: Path = _PACKAGE_DIR) -> Optional[Path]:
 
 
 def ament_index_dir() -> Optional[Path]:
-    """``<share>/config`` of the first prefix on AMENT_PREFIX_PATH that registers the package.
+    """
+    ``<share>/config`` of the first prefix on AMENT_PREFIX_PATH that registers the package.
 
     None without ``ament_index_python`` (no ROS), without AMENT_PREFIX_PATH, or when no prefix
     registers the package.
@@ -92,7 +95,7 @@ def ament_index_dir() -> Optional[Path]:
 
 
 def builtin_dir() -> Optional[Path]:
-    """The directory the built-in mechanisms are read from (see the module docstring)."""
+    """Return the directory the built-in mechanisms are read from (see the module docstring)."""
     return own_data_dir() or ament_index_dir()
 
 
@@ -106,7 +109,7 @@ def builtin_names() -> list[str]:
 
 
 def find_builtin(name: str) -> Optional[Path]:
-    """The file of built-in mechanism ``name``, or None."""
+    """Return the file of built-in mechanism ``name``, or None."""
     folder = builtin_dir()
     if folder is None:
         return None

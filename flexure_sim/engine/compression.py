@@ -1,4 +1,5 @@
-"""Where and how a hinge's compression is measured (README "Conventions").
+"""
+Where and how a hinge's compression is measured (README "Conventions").
 
 The compression hinge (e.g. the stage's joint a) is measured at its centre of stiffness,
 along the drive axis: the displacement from rest of that point as carried by the hinge's
@@ -26,18 +27,22 @@ def point_displacement(i: int, c: np.ndarray, z: np.ndarray, z0: np.ndarray) -> 
 
 
 def stiffness_centre(K: np.ndarray) -> np.ndarray:
-    """Centre of stiffness of a hinge in its frame's coordinates: the point where the
-    stiffness at rest K = [[Ko, Kc^T], [Kc, Kt]] (moment first) decouples. Moving the frame
-    by p turns the coupling into Kc + Kt (-J p) (``kinematics.transform_stiffness``), which
-    vanishes at p = -J Kt^-1 Kc."""
+    """
+    Centre of stiffness of a hinge in its frame's coordinates.
+
+    The point where the stiffness at rest K = [[Ko, Kc^T], [Kc, Kt]] (moment first) decouples.
+    Moving the frame by p turns the coupling into Kc + Kt (-J p)
+    (``kinematics.transform_stiffness``), which vanishes at p = -J Kt^-1 Kc.
+    """
     K = np.asarray(K, dtype=float)
     return -J @ np.linalg.solve(K[1:, 1:], K[1:, 0])
 
 
 def compression_points(mech: Mechanism):
-    """((drive body, centre in its coordinates), (far body, centre), drive axis) for the
-    mechanism's compression hinge, or None.
+    """
+    Return the points and axis of the mechanism's compression hinge, or None.
 
+    The result is ((drive body, centre in its coordinates), (far body, centre), drive axis).
     The drive side is the hinge's body fewer hinges away from the driven body; when both
     are equally far, the one whose rest centre lies further back along the drive axis.
     The centre of stiffness comes from the law's Hessian at rest (any law).
@@ -61,7 +66,7 @@ def compression_points(mech: Mechanism):
 
 
 def _hinge_distance(mech: Mechanism, start: int) -> list:
-    """Number of hinges between each body and body ``start`` (inf where unconnected)."""
+    """Count the hinges between each body and body ``start`` (inf where unconnected)."""
     dist = [np.inf] * len(mech.bodies)
     dist[start] = 0
     frontier = [start]

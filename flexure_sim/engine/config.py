@@ -1,4 +1,5 @@
-"""Loading mechanisms from YAML, with validation that names the file, the key and the problem.
+"""
+Loading mechanisms from YAML, with validation that names the file, the key and the problem.
 
 Format (SI units; see config/microstage.yaml for a complete example)::
 
@@ -10,11 +11,11 @@ Format (SI units; see config/microstage.yaml for a complete example)::
       - {name: body1, mass: 0.0712, inertia: 8.8e-6, pose: [0, 0, 0]}     # pose: x, y, theta
     hinges:
       - name: a
-        a: {body: body2, at: [0.007, 0.012]}  # frame on body A, body coordinates [x, y(, angle)]
+        a: {body: body2, at: [0.007, 0.012]} # frame on body A, body coordinates [x, y(, angle)]
         b: {body: body6, at: [-0.007, 0.0]}
-        stiffness: notch                      # a name above, or an inline {model: ...}
-        law: twistor                          # twistor (Ch. 4) | twist (Ch. 3) | {polynomial: FILE}
-        damping: {t_char: 1.0e-3}             # B = t_char K, or {B: [[...], [...], [...]]}
+        stiffness: notch                     # a name above, or an inline {model: ...}
+        law: twistor                         # twistor (Ch. 4) | twist (Ch. 3) | {polynomial: FILE}
+        damping: {t_char: 1.0e-3}            # B = t_char K, or {B: [[...], [...], [...]]}
     constraints:
       - {type: fixed, body: body1}
       - {type: drive, body: body6, axis: [1, 0], response_time: 1.0e-3,
@@ -34,6 +35,7 @@ cantilever model may give the yield strength ``sigma_y`` (Pa); its hinges get ``
 to the mechanism file); such a hinge has no ``stiffness`` key: K is the law's Hessian at rest,
 and ``damping: {t_char}`` means B = t_char K as for the other laws.
 """
+
 from __future__ import annotations
 
 import math
@@ -99,7 +101,10 @@ def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str, Any]:
     if model in _STIFFNESS_KEYS:
         fn, names = _STIFFNESS_KEYS[model]
         _no_unknown(ctx, key, spec, {"model", *names})
-        args = [_number(ctx, f"{key}.{n}", _require(ctx, key, spec, n), positive=n != "nu") for n in names]
+        args = [
+            _number(ctx, f"{key}.{n}", _require(ctx, key, spec, n), positive=n != "nu")
+            for n in names
+        ]
         if model in ("notch", "cantilever"):
             nu = args[-1]
             if not 0 <= nu < 0.5:
@@ -151,7 +156,8 @@ def load_mechanism(name_or_path: str | Path) -> Mechanism:
 
 
 def resolve_mechanism_path(name_or_path: str | Path) -> Path:
-    """A path as given if it exists or looks like a file; else a built-in name.
+    """
+    Return a path as given if it exists or looks like a file; else a built-in name.
 
     Built-ins come from the running install's own share/flexure_sim/config (or the source
     checkout's config/), else from the ament index: engine/builtins.py says why.
@@ -198,7 +204,10 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
     if "output" in data:
         spec = _mapping(ctx, "output", data["output"])
         _no_unknown(ctx, "output", spec, {"body", "axis"})
-        output = Output(_body_ref(ctx, "output.body", spec, by_name), _axis(ctx, "output.axis", spec.get("axis", [1, 0])))
+        output = Output(
+            _body_ref(ctx, "output.body", spec, by_name),
+            _axis(ctx, "output.axis", spec.get("axis", [1, 0])),
+        )
     compression = data.get("compression_hinge")
     if compression is not None and not isinstance(compression, str):
         raise ctx.fail("compression_hinge", f"expected a hinge name, got {_shown(compression)}")
@@ -206,7 +215,9 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
         raise ctx.fail("compression_hinge", f"unknown hinge {_shown(compression)} (hinges: "
                        f"{', '.join(h.name for h in hinges)})")
     if compression is not None and not any(isinstance(c, Drive) for c in constraints):
-        raise ctx.fail("compression_hinge", "needs a drive constraint (measured along the drive axis)")
+        raise ctx.fail(
+            "compression_hinge", "needs a drive constraint (measured along the drive axis)"
+        )
     metadata = _mapping(ctx, "metadata", data.get("metadata", {}))
     sensor = _sensor(ctx, data["sensor"], output) if "sensor" in data else None
     return Mechanism(
@@ -253,7 +264,9 @@ def _bodies(ctx: _Ctx, raw: Any) -> list[Body]:
             raise ctx.fail(f"{key}.name", f"duplicate body name {name!r}")
         seen.add(name)
         mass = _number(ctx, f"{key}.mass", _require(ctx, key, spec, "mass"), positive=True)
-        inertia = _number(ctx, f"{key}.inertia", _require(ctx, key, spec, "inertia"), positive=True)
+        inertia = _number(
+            ctx, f"{key}.inertia", _require(ctx, key, spec, "inertia"), positive=True
+        )
         pose = _vector(ctx, f"{key}.pose", spec.get("pose", [0, 0, 0]), (2, 3))
         if len(pose) == 2:
             pose.append(0.0)
@@ -328,7 +341,9 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
     for i, spec in enumerate(raw):
         key = f"hinges[{i}]"
         spec = _mapping(ctx, key, spec)
-        _no_unknown(ctx, key, spec, {"name", "a", "b", "stiffness", "law", "damping", "description"})
+        _no_unknown(
+            ctx, key, spec, {"name", "a", "b", "stiffness", "law", "damping", "description"}
+        )
         name = _name(ctx, f"{key}.name", _require(ctx, key, spec, "name"))
         if name in seen:
             raise ctx.fail(f"{key}.name", f"duplicate hinge name {name!r}")
@@ -347,12 +362,18 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
         turn = abs(math.remainder(tha - thb, 2 * math.pi))
         if gap > COINCIDENCE_TOLERANCE or turn > 1e-9:
             raise ctx.fail(
-                key, f"frames a and b do not coincide in the unstressed pose: a at "
-                f"({pa[0]:.6g}, {pa[1]:.6g}, {tha:.6g} rad), b at ({pb[0]:.6g}, {pb[1]:.6g}, {thb:.6g} rad)"
+                key,
+                f"frames a and b do not coincide in the unstressed pose: a at "
+                f"({pa[0]:.6g}, {pa[1]:.6g}, {tha:.6g} rad), b at ({pb[0]:.6g}, {pb[1]:.6g}, "
+                f"{thb:.6g} rad)",
             )
         law_key = f"{key}.law" if "law" in spec else "defaults.law"
         law_name = spec.get("law", defaults.get("law", "twistor"))
-        poly = _polynomial_law(ctx, law_key, law_name, polynomials) if isinstance(law_name, dict) else None
+        poly = (
+            _polynomial_law(ctx, law_key, law_name, polynomials)
+            if isinstance(law_name, dict)
+            else None
+        )
         if poly is not None:
             if "stiffness" in spec:
                 raise ctx.fail(f"{key}.stiffness", "a polynomial law defines the stiffness (its Hessian at rest): "
@@ -380,8 +401,12 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
 
 
 def _polynomial_law(ctx: _Ctx, key: str, spec: dict, cache: dict) -> PolynomialLaw:
-    """``law: {polynomial: FILE}``: a fitted polynomial law (flexure-sim fit), FILE relative
-    to the mechanism file (to the working directory for documents without a file)."""
+    """
+    ``law.
+
+    {polynomial: FILE}``: a fitted polynomial law (flexure-sim fit), FILE relative to the mechanism
+    file (to the working directory for documents without a file).
+    """
     _no_unknown(ctx, key, spec, {"polynomial"})
     ref = _require(ctx, key, spec, "polynomial")
     if not isinstance(ref, str) or not ref or "\0" in ref:
@@ -399,7 +424,9 @@ def _polynomial_law(ctx: _Ctx, key: str, spec: dict, cache: dict) -> PolynomialL
 
 def _damping(ctx: _Ctx, key: str, spec: Any, K: np.ndarray) -> np.ndarray:
     if spec is None:
-        raise ctx.fail(key, "missing damping (give {t_char: seconds} or {B: 3x3}, here or in defaults)")
+        raise ctx.fail(
+            key, "missing damping (give {t_char: seconds} or {B: 3x3}, here or in defaults)"
+        )
     spec = _mapping(ctx, key, spec)
     _no_unknown(ctx, key, spec, {"t_char", "B"})
     if "t_char" in spec:
@@ -437,30 +464,46 @@ def _constraints(ctx, raw, by_name) -> list:
             c: Any = Fixed(body)
             coords = (0, 1, 2)
         elif kind == "drive":
-            _no_unknown(ctx, key, spec, {"type", "body", "axis", "response_time", "stroke", "slew_rate"})
+            _no_unknown(
+                ctx, key, spec, {"type", "body", "axis", "response_time", "stroke", "slew_rate"}
+            )
             stroke = _vector(ctx, f"{key}.stroke", _require(ctx, key, spec, "stroke"), (2,))
             if stroke[0] >= stroke[1]:
-                raise ctx.fail(f"{key}.stroke", f"expected [min, max] with min < max, got {stroke}")
+                raise ctx.fail(
+                    f"{key}.stroke", f"expected [min, max] with min < max, got {stroke}"
+                )
             c = Drive(
                 body,
                 _axis(ctx, f"{key}.axis", _require(ctx, key, spec, "axis")),
-                _number(ctx, f"{key}.response_time", _require(ctx, key, spec, "response_time"), positive=True),
+                _number(
+                    ctx,
+                    f"{key}.response_time",
+                    _require(ctx, key, spec, "response_time"),
+                    positive=True,
+                ),
                 (stroke[0], stroke[1]),
-                _number(ctx, f"{key}.slew_rate", _require(ctx, key, spec, "slew_rate"), positive=True),
+                _number(
+                    ctx, f"{key}.slew_rate", _require(ctx, key, spec, "slew_rate"), positive=True
+                ),
             )
             coords = (0, 1, 2)
             if any(isinstance(o, Drive) for o in out):
                 raise ctx.fail(key, "only one drive constraint is supported")
         elif kind == "sine_rate":
-            _no_unknown(ctx, key, spec, {"type", "body", "coordinate", "amplitude", "frequency", "phase"})
+            _no_unknown(
+                ctx, key, spec, {"type", "body", "coordinate", "amplitude", "frequency", "phase"}
+            )
             coord = _require(ctx, key, spec, "coordinate")
             if coord not in COORDINATE_NAMES:
                 raise ctx.fail(f"{key}.coordinate",
                                f"expected one of {COORDINATE_NAMES}, got {_shown(coord)}")
             c = SineRate(
-                body, coord,
+                body,
+                coord,
                 _number(ctx, f"{key}.amplitude", _require(ctx, key, spec, "amplitude")),
-                _number(ctx, f"{key}.frequency", _require(ctx, key, spec, "frequency"), positive=True),
+                _number(
+                    ctx, f"{key}.frequency", _require(ctx, key, spec, "frequency"), positive=True
+                ),
                 _number(ctx, f"{key}.phase", spec.get("phase", 0.0)),
             )
             coords = (COORDINATE_NAMES.index(coord),)
@@ -469,10 +512,15 @@ def _constraints(ctx, raw, by_name) -> list:
                            f"unknown constraint type {_shown(kind)} (fixed, drive, sine_rate)")
         for k in coords:
             if (body, k) in held:
-                raise ctx.fail(key, f"coordinate {COORDINATE_NAMES[k]} of body {body!r} is already "
-                               f"constrained by {held[(body, k)]}")
+                raise ctx.fail(
+                    key,
+                    f"coordinate {COORDINATE_NAMES[k]} of body {body!r} is already "
+                    f"constrained by {held[(body, k)]}",
+                )
             held[(body, k)] = key
         out.append(c)
     if not any(isinstance(c, Fixed) for c in out):
-        raise ctx.fail("constraints", "the mechanism has no fixed body (add {type: fixed, body: ...})")
+        raise ctx.fail(
+            "constraints", "the mechanism has no fixed body (add {type: fixed, body: ...})"
+        )
     return out

@@ -76,13 +76,17 @@ def no_unknown(ctx: Ctx, key: str, data: dict, allowed: set[str]) -> None:
 
 
 def shown(value: Any, limit: int = 60) -> str:
-    """repr of a value from the file, shortened so that a message stays one readable line."""
+    """Return the repr of a file's value, shortened so that a message stays one readable line."""
     text = repr(value)
     return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def key_text(key: Any) -> str:
-    """A mapping key of the file as it appears in a key path (quoted unless a plain word)."""
+    """
+    Return a mapping key of the file as it appears in a key path.
+
+    The key is quoted unless it is a plain word.
+    """
     return key if isinstance(key, str) and key.isidentifier() else shown(key, 30)
 
 

@@ -1,4 +1,5 @@
-"""The mutable side of a simulation (as MuJoCo's mjData): state, counters, integrator caches.
+"""
+The mutable side of a simulation (as MuJoCo's mjData): state, counters, integrator caches.
 
 A ``Data`` belongs to one run of one ``model.Model``; many may share the model (sweeps,
 the node's reset). Nothing here knows the mechanism: stepping, statics and snapshots
@@ -14,10 +15,14 @@ import numpy as np
 
 @dataclass
 class State:
-    """Simulation state. z, v: (x, y, theta) and (vx, vy, omega) per body in the root frame
-    (3 n_bodies, body order). u: actuator output (m) along the drive axis; command: the
-    actuator's current target (m). Energy bookkeeping since the last reset:
-    dissipated (J) by hinge damping and drive_work (J) done by the prescribed coordinates."""
+    """
+    Simulation state.
+
+    z, v: (x, y, theta) and (vx, vy, omega) per body in the root frame (3 n_bodies, body order). u:
+    actuator output (m) along the drive axis; command: the actuator's current target (m). Energy
+    bookkeeping since the last reset: dissipated (J) by hinge damping and drive_work (J) done by
+    the prescribed coordinates.
+    """
 
     t: float
     z: np.ndarray
@@ -42,8 +47,12 @@ class StepStats:
 
 @dataclass(frozen=True)
 class Linearization:
-    """Where and what: configuration z, Jacobian A, h phi_1(hA), h phi_2(hA), and the drive
-    work's rows (g, g^T Psi_1, g^T Psi_2) and scalars (``stepping.step_energy``)."""
+    """
+    Where and what.
+
+    Configuration z, Jacobian A, h phi_1(hA), h phi_2(hA), and the drive work's rows (g, g^T Psi_1,
+    g^T Psi_2) and scalars (``stepping.step_energy``).
+    """
 
     z: np.ndarray
     A: np.ndarray
@@ -54,7 +63,8 @@ class Linearization:
 
 
 class Data:
-    """State, statistics and the integrator's caches of one run.
+    """
+    State, statistics and the integrator's caches of one run.
 
     ``lin``: the current linearization (None: compute at the next step); ``cache``:
     (state, command, F, energy rates) at the last stepped state, to seed the next call;
@@ -70,8 +80,11 @@ class Data:
         self.clock: Optional[tuple] = None
 
     def reset(self) -> None:
-        """Back to the initial state (unstressed poses, at rest, actuator at 0, t = 0);
-        statistics and caches restart."""
+        """
+        Back to the initial state (unstressed poses, at rest, actuator at 0, t = 0).
+
+        Statistics and caches restart.
+        """
         self.state = State(0.0, self.z0.copy(), np.zeros_like(self.z0))
         self.stats = StepStats()
         self.lin = None

@@ -1,5 +1,7 @@
-"""Synthetic (displacement, wrench) data for fitting polynomial hinges, and the studies of
-docs/polynomial_hinges.md.
+"""
+Synthetic (displacement, wrench) data for fitting polynomial hinges.
+
+Also the studies of docs/polynomial_hinges.md.
 
 - ``law_data``: exact wrenches of any hinge law (e.g. the twistor quadratic law, 4.7) at
   given displacements.
@@ -10,9 +12,10 @@ docs/polynomial_hinges.md.
   (Appendix B) do it: 17 random configurations, random wrenches, order 4.
 - ``error_table``: held-out error against order N and data size.
 
-Run ``python -m flexure_sim.engine.datasets --help`` for the command-line front end (generate a CSV,
-print the held-out error table, reproduce Chapter 7.1).
+Run ``python -m flexure_sim.engine.datasets --help`` for the command-line front end (generate a
+CSV, print the held-out error table, reproduce Chapter 7.1).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,7 +42,7 @@ NOTCH_K = notch_stiffness(0.003, 0.00025, 0.02, 69.0e9, 0.33)
 
 def sample_box(n: int, alpha_max: float, p_max: Sequence[float],
                rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """n displacements uniform in |alpha| <= alpha_max, |p_i| <= p_max[i]."""
+    """Return n displacements uniform in |alpha| <= alpha_max, |p_i| <= p_max[i]."""
     alpha = rng.uniform(-alpha_max, alpha_max, n)
     p = rng.uniform(-1.0, 1.0, (n, 2)) * as_array("p_max", p_max, (2,))
     return alpha, p
@@ -51,20 +54,29 @@ def law_data(law, alpha: np.ndarray, p: np.ndarray, source: str = "<law>") -> Wr
 
 
 def add_noise(data: WrenchData, relative: float, rng: np.random.Generator) -> WrenchData:
-    """Gaussian noise on the wrench: standard deviation ``relative`` times the RMS of each
-    component (a measurement of finite resolution)."""
+    """
+    Gaussian noise on the wrench.
+
+    Standard deviation ``relative`` times the RMS of each component (a measurement of finite
+    resolution).
+    """
     sd = relative * np.sqrt(np.mean(data.wrench**2, axis=0))
-    return WrenchData(data.alpha, data.p, data.wrench + rng.normal(size=data.wrench.shape) * sd, data.source)
+    return WrenchData(
+        data.alpha, data.p, data.wrench + rng.normal(size=data.wrench.shape) * sd, data.source
+    )
 
 
 # --------------------------------------------------------- large-deflection cantilever
 
 @dataclass(frozen=True)
 class Leaf:
-    """A leaf (cantilever) hinge along the hinge frame's y axis, as stiffness.cantilever_stiffness:
-    length, thickness (in the plane), width (m), E (Pa), nu; shear correction 5/6.
-    Body A holds the end at (0, -length/2), body B the end at (0, +length/2); frames a and b
-    sit at the leaf's centre (its centre of stiffness), unrotated."""
+    """
+    A leaf (cantilever) hinge along the hinge frame's y axis, as stiffness.cantilever_stiffness.
+
+    length, thickness (in the plane), width (m), E (Pa), nu; shear correction 5/6. Body A holds the
+    end at (0, -length/2), body B the end at (0, +length/2); frames a and b sit at the leaf's
+    centre (its centre of stiffness), unrotated.
+    """
 
     length: float = 0.010
     thickness: float = 0.001
@@ -86,15 +98,21 @@ class Leaf:
         return self.shear_factor * shear_modulus(self.E, self.nu) * self.width * self.thickness
 
     def small_displacement_stiffness(self) -> np.ndarray:
-        """K at the centre for small displacements (linear Timoshenko beam): EI/L in rotation,
-        1/(L^3/(12 EI) + L/GA) in shear (x), EA/L axially (y); cantilever_stiffness without
-        the shear compliance."""
+        """
+        K at the centre for small displacements (linear Timoshenko beam).
+
+        EI/L in rotation, 1/(L^3/(12 EI) + L/GA) in shear (x), EA/L axially (y);
+        cantilever_stiffness without the shear compliance.
+        """
         L = self.length
         return np.diag([self.EI / L, 1.0 / (L**3 / (12 * self.EI) + L / self.GA), self.EA / L])
 
 
-def leaf_tip(leaf: Leaf, force: np.ndarray, base_moment: np.ndarray, steps: int = 400) -> tuple[np.ndarray, np.ndarray]:
-    """Integrate the planar Reissner beam from the held end, vectorised over n load cases.
+def leaf_tip(
+    leaf: Leaf, force: np.ndarray, base_moment: np.ndarray, steps: int = 400
+) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Integrate the planar Reissner beam from the held end, vectorised over n load cases.
 
     force (n, 2): the force body B exerts on the leaf (frame a; constant along the leaf);
     base_moment (n,): the moment the leaf carries at the held end. Along the arc length,
@@ -140,15 +158,20 @@ def leaf_tip(leaf: Leaf, force: np.ndarray, base_moment: np.ndarray, steps: int 
 
 def cantilever_data(n: int, rng: np.random.Generator, leaf: Leaf = Leaf(), load: float = 0.25,
                     steps: int = 400) -> WrenchData:
-    """n load cases of a leaf hinge at large deflection: base moment and force uniform in
-    |M| <= load EI/L, |V|, |N| <= 2 load EI/L^2 (load = 0.25 gives rotations up to about
-    0.5 rad and centre displacements up to 0.45 mm for the 10 mm leaf), integrated by
-    ``leaf_tip``."""
+    """
+    Return n load cases of a leaf hinge at large deflection.
+
+    Base moment and force uniform in |M| <= load EI/L, |V|, |N| <= 2 load EI/L^2 (load = 0.25 gives
+    rotations up to about 0.5 rad and centre displacements up to 0.45 mm for the 10 mm leaf),
+    integrated by ``leaf_tip``.
+    """
     EI, L = leaf.EI, leaf.length
     base = rng.uniform(-1.0, 1.0, n) * load * EI / L
     force = rng.uniform(-1.0, 1.0, (n, 2)) * 2.0 * load * EI / L**2
     r, w = leaf_tip(leaf, force, base, steps)
-    return WrenchData(r[:, 0], r[:, 1:], w, f"leaf L={L:g} m, t={leaf.thickness:g} m, load {load:g}")
+    return WrenchData(
+        r[:, 0], r[:, 1:], w, f"leaf L={L:g} m, t={leaf.thickness:g} m, load {load:g}"
+    )
 
 
 # ------------------------------------------------------------------ Chapter 7.1
@@ -160,12 +183,15 @@ RANDOMTEST = {"n_config": 17, "order": 4, "th_dist": math.pi / 4, "alpha_dist": 
 
 def randomtest_data(rng: np.random.Generator, n_config: int = 17, alpha_dist: float = math.pi / 4,
                     th_dist: float = math.pi / 4) -> WrenchData:
-    """Random configurations and wrenches as randomtest.sce draws them (Appendix B, 7.1-7.6):
-    alpha uniform in +-alpha_dist/2, translation of length 3 + 5 RN at an angle uniform in
-    +-th_dist/2, and m, f1, f2 uniform in (-1, 1). randomtest.sce forms
-    x = 0.5 (sigma I - sk(xi))^T p0b = 0.5 R(alpha/2) p0b, i.e. p0b is the translation in
-    frame b's axes; the displacement in frame a is p = R(alpha) p0b. (Scilab's generator
-    cannot be reproduced; the seed is NumPy's.)"""
+    """
+    Random configurations and wrenches as randomtest.sce draws them (Appendix B, 7.1-7.6).
+
+    Alpha uniform in +-alpha_dist/2, translation of length 3 + 5 RN at an angle uniform in
+    +-th_dist/2, and m, f1, f2 uniform in (-1, 1). randomtest.sce forms x = 0.5 (sigma I -
+    sk(xi))^T p0b = 0.5 R(alpha/2) p0b, i.e. p0b is the translation in frame b's axes; the
+    displacement in frame a is p = R(alpha) p0b. (Scilab's generator cannot be reproduced; the seed
+    is NumPy's.)
+    """
     th = th_dist * rng.random(n_config) - 0.5 * th_dist
     alpha = alpha_dist * rng.random(n_config) - 0.5 * alpha_dist
     radius = 3.0 + 5.0 * rng.random(n_config)
@@ -176,8 +202,12 @@ def randomtest_data(rng: np.random.Generator, n_config: int = 17, alpha_dist: fl
 
 
 def _delta(c: np.ndarray) -> np.ndarray:
-    """Delta of randomtest.sce: Q = 2 Delta m (eq. 7.7), one generalized force per twistor
-    parameter; 1/2 Delta_inv with Delta_inv Delta = I maps Q back to m."""
+    """
+    Delta of randomtest.sce.
+
+    Q = 2 Delta m (eq. 7.7), one generalized force per twistor parameter; 1/2 Delta_inv with
+    Delta_inv Delta = I maps Q back to m.
+    """
     sigma, xi, x1, x2 = c.T
     D = np.zeros((len(c), 4, 3))
     D[:, 0] = np.column_stack([-xi, -x1, -x2])
@@ -204,16 +234,24 @@ class GeneralizedForceFit:
     coefficients: np.ndarray
 
     def wrench(self, data: WrenchData) -> np.ndarray:
-        """m = 1/2 Delta_inv Q with Q = dU/dc (evalpoly4 of c_Sigma, c_Xi, c_X1, c_X2)."""
+        """Return m = 1/2 Delta_inv Q with Q = dU/dc (evalpoly4 of c_Sigma, c_Xi, c_X1, c_X2)."""
         c = twistor_coordinates(data.alpha, data.p).c
-        Q = np.einsum("nmk,m->nk", monomial_gradients(c, monomial_exponents(4, self.order)), self.coefficients)
+        Q = np.einsum(
+            "nmk,m->nk",
+            monomial_gradients(c, monomial_exponents(4, self.order)),
+            self.coefficients,
+        )
         return 0.5 * np.einsum("nij,nj->ni", _delta_inv(c), Q)
 
 
 def randomtest_fit(data: WrenchData, order: int = 4) -> GeneralizedForceFit:
-    """makeAB_Q.sci and randomtest.sce: rows A_i = dU/dc of every monomial of 4.69 at c_i
-    (unscaled sigma, xi, x1, x2), right-hand sides Q_i = 2 Delta m_i, c_U = pinv(A) B with
-    Scilab's pinv tolerance (max(size) * eps * largest singular value)."""
+    """
+    makeAB_Q.sci and randomtest.sce.
+
+    Rows A_i = dU/dc of every monomial of 4.69 at c_i (unscaled sigma, xi, x1, x2), right-hand
+    sides Q_i = 2 Delta m_i, c_U = pinv(A) B with Scilab's pinv tolerance (max(size) * eps *
+    largest singular value).
+    """
     c = twistor_coordinates(data.alpha, data.p).c
     exps = monomial_exponents(4, order)
     A = np.transpose(monomial_gradients(c, exps), (0, 2, 1)).reshape(4 * len(c), len(exps))
@@ -223,9 +261,13 @@ def randomtest_fit(data: WrenchData, order: int = 4) -> GeneralizedForceFit:
 
 
 def randomtest_report(seed: int = 22, alpha_dist: float = math.pi / 4) -> dict[str, Any]:
-    """Chapter 7.1 reproduced: the dissertation's fit on 17 random configurations (order 4)
-    and its error on the training rows and on 17 fresh rows; and flexure_sim's fit
-    (three equations per row) on the same rows, with sigma_degree 0 and 1."""
+    """
+    Chapter 7.1 reproduced.
+
+    The dissertation's fit on 17 random configurations (order 4) and its error on the training rows
+    and on 17 fresh rows; and flexure_sim's fit (three equations per row) on the same rows, with
+    sigma_degree 0 and 1.
+    """
     rng = np.random.default_rng(seed)
     train = randomtest_data(rng, alpha_dist=alpha_dist)
     fresh = randomtest_data(rng, alpha_dist=alpha_dist)
@@ -235,7 +277,11 @@ def randomtest_report(seed: int = 22, alpha_dist: float = math.pi / 4) -> dict[s
     def errs(pred: np.ndarray, data: WrenchData) -> dict[str, Any]:
         e = np.max(np.abs(pred - data.wrench), axis=0)
         peak = np.max(np.abs(data.wrench), axis=0)
-        return {"max_abs": e.tolist(), "max_measured": peak.tolist(), "max_rel": (e / peak).tolist()}
+        return {
+            "max_abs": e.tolist(),
+            "max_measured": peak.tolist(),
+            "max_rel": (e / peak).tolist(),
+        }
 
     n_coef = len(monomial_exponents(4, order))
     out: dict[str, Any] = {
@@ -265,9 +311,12 @@ def randomtest_report(seed: int = 22, alpha_dist: float = math.pi / 4) -> dict[s
 
 
 def randomtest_spread(n_seeds: int = 30, alpha_dist: float = math.pi / 4) -> dict[str, Any]:
-    """The dissertation-method training error of Chapter 7.1 over seeds 0..n_seeds-1: the
-    largest moment error (median, min, max) and the median condition number of the
-    68 x 70 makeAB_Q matrix (the spread shows that the error is set by rounding)."""
+    """
+    Return the dissertation-method training error of Chapter 7.1 over seeds 0..n_seeds-1.
+
+    The largest moment error (median, min, max) and the median condition number of the 68 x 70
+    makeAB_Q matrix (the spread shows that the error is set by rounding).
+    """
     errors, conds = [], []
     exps = monomial_exponents(4, RANDOMTEST["order"])
     for seed in range(n_seeds):
@@ -307,28 +356,55 @@ MODELS: dict[str, Callable[[int, np.random.Generator], WrenchData]] = {
 }
 
 
-def error_table(model: str, coordinates: str, orders: Sequence[int], sizes: Sequence[int], test_rows: int = 2000,
-                seed: int = 1, sigma_degree: int = 0, noise: float = 0.0) -> dict[str, Any]:
-    """Held-out error (test_max_rel, the worst component's max |error| / max |value|) of fits
+def error_table(
+    model: str,
+    coordinates: str,
+    orders: Sequence[int],
+    sizes: Sequence[int],
+    test_rows: int = 2000,
+    seed: int = 1,
+    sigma_degree: int = 0,
+    noise: float = 0.0,
+) -> dict[str, Any]:
+    """
+    Return the held-out error of fits of each order.
+
+    The error is test_max_rel (the worst component's max |error| / max |value|) of fits
     of each order to the first ``size`` rows of one training draw, on a separate test draw.
-    Entries are None where the order has more unknowns than the rows give equations."""
+    Entries are None where the order has more unknowns than the rows give equations.
+    """
     rng = np.random.default_rng(seed)
     make = MODELS[model]
     test = make(test_rows, rng)
     train_all = make(max(sizes), rng)
     if noise:
         train_all = add_noise(train_all, noise, rng)
-    table: dict[str, Any] = {"model": model, "coordinates": coordinates, "sigma_degree": sigma_degree,
-                             "noise": noise, "test_rows": test_rows, "seed": seed, "source": test.source,
-                             "orders": list(orders), "sizes": list(sizes), "test_max_rel": [], "train_max_rel": [],
-                             "unknowns": []}
+    table: dict[str, Any] = {
+        "model": model,
+        "coordinates": coordinates,
+        "sigma_degree": sigma_degree,
+        "noise": noise,
+        "test_rows": test_rows,
+        "seed": seed,
+        "source": test.source,
+        "orders": list(orders),
+        "sizes": list(sizes),
+        "test_max_rel": [],
+        "train_max_rel": [],
+        "unknowns": [],
+    }
     for N in orders:
         row, trow = [], []
         unknowns = None
         for size in sizes:
             try:
-                res = fit_polynomial(train_all.subset(slice(0, size)), N, coordinates, sigma_degree=sigma_degree,
-                                     test=test)
+                res = fit_polynomial(
+                    train_all.subset(slice(0, size)),
+                    N,
+                    coordinates,
+                    sigma_degree=sigma_degree,
+                    test=test,
+                )
             except FitError:
                 row.append(None)
                 trow.append(None)
@@ -349,7 +425,9 @@ def format_table(table: dict[str, Any]) -> str:
     lines = [head, sep]
     for N, unknowns, row in zip(table["orders"], table["unknowns"], table["test_max_rel"]):
         cells = ["too few rows" if v is None else f"{v:.2e}" for v in row]
-        lines.append(f"| {N} | {unknowns if unknowns is not None else '-'} | " + " | ".join(cells) + " |")
+        lines.append(
+            f"| {N} | {unknowns if unknowns is not None else '-'} | " + " | ".join(cells) + " |"
+        )
     return "\n".join(lines)
 
 
@@ -359,11 +437,15 @@ def _ints(text: str) -> list[int]:
     try:
         return [int(v) for v in text.split(",") if v.strip()]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated integers, got {text!r}"
+        ) from None
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m flexure_sim.engine.datasets", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m flexure_sim.engine.datasets", description=__doc__.split("\n\n")[0]
+    )
     sub = parser.add_subparsers(dest="command", required=True)
     gen = sub.add_parser("generate", help="write a CSV of synthetic measurements")
     gen.add_argument("model", choices=sorted(MODELS))
@@ -381,28 +463,47 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     st.add_argument("--sigma-degree", type=int, choices=(0, 1), default=0)
     st.add_argument("--noise", type=float, default=0.0)
     st.add_argument("--json", action="store_true")
-    rt = sub.add_parser("randomtest", help="reproduce Chapter 7.1 (17 random configurations, order 4)")
+    rt = sub.add_parser(
+        "randomtest", help="reproduce Chapter 7.1 (17 random configurations, order 4)"
+    )
     rt.add_argument("--seed", type=int, default=22)
     rt.add_argument("--alpha-dist", type=float, default=math.pi / 4)
-    rt.add_argument("--seeds", type=int, default=0, help="also report the training error over seeds 0..N-1")
+    rt.add_argument(
+        "--seeds", type=int, default=0, help="also report the training error over seeds 0..N-1"
+    )
     args = parser.parse_args(argv)
     if args.command == "generate":
         rng = np.random.default_rng(args.seed)
         data = MODELS[args.model](args.rows, rng)
         if args.noise:
             data = add_noise(data, args.noise, rng)
-        write_wrench_csv(args.output, data, f"{data.source}; {args.rows} rows, seed {args.seed}, noise {args.noise:g}\n"
-                         "alpha, px, py: frame b in frame a (rad, m); m, fx, fy: wrench of body B on the "
-                         "element in frame b (N m, N)")
+        write_wrench_csv(
+            args.output,
+            data,
+            f"{data.source}; {args.rows} rows, seed {args.seed}, noise {args.noise:g}\n"
+            "alpha, px, py: frame b in frame a (rad, m); m, fx, fy: wrench of body B on the "
+            "element in frame b (N m, N)",
+        )
         return 0
     if args.command == "study":
-        table = error_table(args.model, args.coords, args.orders, args.rows, args.test_rows, args.seed,
-                            args.sigma_degree, args.noise)
+        table = error_table(
+            args.model,
+            args.coords,
+            args.orders,
+            args.rows,
+            args.test_rows,
+            args.seed,
+            args.sigma_degree,
+            args.noise,
+        )
         if args.json:
             print(json.dumps(table))
         else:
-            print(f"{table['source']}; fit in {args.coords} coordinates; held-out max relative wrench error on "
-                  f"{args.test_rows} test rows (seed {args.seed})")
+            print(
+                f"{table['source']}; fit in {args.coords} coordinates; held-out max relative "
+                "wrench error on "
+                f"{args.test_rows} test rows (seed {args.seed})"
+            )
             print(format_table(table))
         return 0
     out = randomtest_report(args.seed, args.alpha_dist)

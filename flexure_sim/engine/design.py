@@ -1,4 +1,5 @@
-"""Design parameters of a mechanism file by path, and the Design they build.
+"""
+Design parameters of a mechanism file by path, and the Design they build.
 
 ``Parameters`` names any numeric key of the mechanism file by its path
 (``stiffness_models.notch.h``, ``hinges.a.a.at.0``, ``bodies.body4.mass``) and builds the
@@ -35,7 +36,8 @@ class ParameterError(FlexureSimError, ValueError):
 
 @dataclass
 class Design:
-    """Per-hinge and per-body numbers, floats or HyperDual (n hinges, N = 3 n_bodies).
+    """
+    Per-hinge and per-body numbers, floats or HyperDual (n hinges, N = 3 n_bodies).
 
     K, B (n, 3, 3): stiffness and damping in the hinge frame; ca, cb (n, 2), phia, phib
     (n,): frame a on body A and frame b on body B; mass (N,): diagonal mass matrix;
@@ -53,12 +55,19 @@ class Design:
 
 
 class Parameters:
-    """A mechanism file's numbers, addressable by path; ``design(overrides)`` rebuilds the
-    parametric parts with some of them replaced (hyper-dual or float)."""
+    """
+    A mechanism file's numbers, addressable by path.
+
+    ``design(overrides)`` rebuilds the parametric parts with some of them replaced (hyper-dual or
+    float).
+    """
 
     def __init__(self, name_or_path: str | Path, data: Optional[dict] = None):
-        """From a built-in name or YAML path, or (with ``data``) from a parsed document
-        whose name_or_path is only used in messages."""
+        """
+        From a built-in name or YAML path.
+
+        Or, with ``data``, from a parsed document whose name_or_path is only used in messages.
+        """
         source = str(name_or_path)
         if data is None:
             path = resolve_mechanism_path(name_or_path)
@@ -70,8 +79,12 @@ class Parameters:
 
     @property
     def twistor(self) -> np.ndarray:
-        """Per hinge: twistor law (True) or twist law (False); ParameterError for laws the
-        generic force chain does not cover (fitted polynomials)."""
+        """
+        Per hinge.
+
+        Twistor law (True) or twist law (False); ParameterError for laws the generic force chain
+        does not cover (fitted polynomials).
+        """
         return twistor_flags(self.mechanism)
 
     # ---------------------------------------------------------------- paths
@@ -106,7 +119,7 @@ class Parameters:
         return node
 
     def value(self, path: str) -> float:
-        """The number at ``path`` (ParameterError if missing or not numeric)."""
+        """Return the number at ``path`` (ParameterError if missing or not numeric)."""
         node = self._node(path.split("."))
         try:
             if isinstance(node, bool):
@@ -135,7 +148,11 @@ class Parameters:
 
     # --------------------------------------------------------------- design
     def design(self, overrides: Optional[dict[str, Any]] = None) -> Design:
-        """The Design with the numbers at the given paths replaced (values may be HyperDual)."""
+        """
+        Return the Design with the numbers at the given paths replaced.
+
+        The values may be HyperDual.
+        """
         overrides = dict(overrides or {})
         for path in overrides:
             self.check(path)
@@ -189,8 +206,12 @@ class Parameters:
 
 
 def _writable(data: dict, keys: list):
-    """The container at ``keys`` (names select entries of bodies/hinges), after replacing
-    every container on the way by a shallow copy: the document itself stays unchanged."""
+    """
+    Return the container at ``keys`` (names select entries of bodies/hinges).
+
+    After replacing every container on the way by a shallow copy: the document itself stays
+    unchanged.
+    """
     node = data
     for depth, key in enumerate(keys):
         if isinstance(node, dict):
@@ -213,7 +234,7 @@ def _writable(data: dict, keys: list):
 
 
 def _num(x):
-    """A number of the YAML document (PyYAML reads 69.0e9 as a string) or a HyperDual."""
+    """Return a number of the YAML document (PyYAML reads 69.0e9 as a string) or a HyperDual."""
     if isinstance(x, hd.HyperDual):
         return x
     if isinstance(x, (list, tuple)):
@@ -252,7 +273,7 @@ def _stress_geometry(spec: Optional[dict]) -> Optional[StressGeometry]:
 
 
 def _array(values):
-    """A float array, or a HyperDual array if any entry is hyper-dual."""
+    """Return a float array, or a HyperDual array if any entry is hyper-dual."""
     arr = np.asarray(values, dtype=object) if not isinstance(values, np.ndarray) else values
     if any(isinstance(v, hd.HyperDual) for v in np.asarray(arr, dtype=object).ravel()):
         return hd.from_objects(arr)
@@ -263,7 +284,7 @@ def _array(values):
 
 
 def design_of(mechanism: Mechanism) -> Design:
-    """The Design of a built mechanism (floats: its K, B, frames and masses as loaded)."""
+    """Return the Design of a built mechanism (floats: its K, B, frames and masses as loaded)."""
     hinges = mechanism.hinges
     mass = np.array([[b.mass, b.mass, b.inertia] for b in mechanism.bodies], dtype=float).ravel()
     return Design(
@@ -279,8 +300,12 @@ def design_of(mechanism: Mechanism) -> Design:
 
 
 def twistor_flags(mechanism: Mechanism) -> np.ndarray:
-    """Per hinge: True for the twistor law, False for the twist law (ParameterError for
-    laws this chain does not cover)."""
+    """
+    Per hinge.
+
+    True for the twistor law, False for the twist law (ParameterError for laws this chain does not
+    cover).
+    """
     for h in mechanism.hinges:
         if not hasattr(h.law, "metric"):
             raise ParameterError(

@@ -1,5 +1,8 @@
-"""Paths into a mechanism's YAML document: resolving ``hinges.a.stiffness.h`` to concrete
-steps, and setting a number at such a path without changing the document.
+"""
+Paths into a mechanism's YAML document.
+
+Resolving ``hinges.a.stiffness.h`` to concrete steps, and setting a number at such a path without
+changing the document.
 
 A path is dot-separated: mapping keys, list indices, or the ``name`` of an element of a list
 of named items (``hinges.a`` is the hinge named a). A path through a hinge's ``stiffness``
@@ -13,17 +16,22 @@ from typing import Any, Optional, Sequence
 
 
 def set_path(doc: Any, path: Sequence, value: float) -> Any:
-    """A copy of ``doc`` with the number at ``path`` replaced; only the containers along the
-    path are copied, the rest is shared with ``doc``."""
+    """
+    Return a copy of ``doc`` with the number at ``path`` replaced.
+
+    Only the containers along the path are copied, the rest is shared with ``doc``.
+    """
     return _replace(doc, path, value)
 
 
 def resolve_path(doc: dict, text: str, fail) -> tuple[tuple, Optional[tuple], float]:
-    """Resolve a dotted path against the mechanism document.
+    """
+    Resolve a dotted path against the mechanism document.
 
     Returns the concrete steps, the hinge stiffness the path reaches through (``(steps to
     the hinge's stiffness key, model name)``, or None) and the base value.
-    ``fail(problem)`` builds the error."""
+    ``fail(problem)`` builds the error.
+    """
     if not isinstance(text, str) or not text:
         raise fail(f"expected a dotted path such as stiffness_models.notch.h, got {text!r}")
     parts = text.split(".")
@@ -69,8 +77,12 @@ def _list_index(node: list, part: str, where: str, fail) -> int:
 
 
 def own_stiffness(doc: dict, through: tuple) -> dict:
-    """``doc`` with the hinge stiffness at ``through[0]`` replaced by its own copy of the
-    shared model ``through[1]`` (as ``doc`` has it, i.e. with any values already set)."""
+    """
+    Return ``doc`` with the hinge stiffness at ``through[0]`` replaced by its own model copy.
+
+    The copy is of the shared model ``through[1]`` (as ``doc`` has it, i.e. with any values
+    already set).
+    """
     steps, model = through
     node: Any = doc
     for step in steps:

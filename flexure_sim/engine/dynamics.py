@@ -1,4 +1,5 @@
-"""Fixed-step stiff-stable stepping of a ``Model``, updating a ``Data``.
+"""
+Fixed-step stiff-stable stepping of a ``Model``, updating a ``Data``.
 
 Stepping uses the **exponential trapezoidal rule**: with A an exact Jacobian dF/dy taken
 at some earlier state, F0 = F(y_n, t_n) and N(y, t) = F(y, t) - F0 - A (y - y_n),
@@ -26,8 +27,8 @@ from .model import Model, SolverError
 
 
 def linearize(model: Model, data: Data, y: np.ndarray, t: float, command: float) -> None:
-    """Exact Jacobian A at y and the matrices h phi_1(hA), h phi_2(hA) of the step, into
-    ``data.lin``.
+    """
+    Exact Jacobian A at y and the matrices h phi_1(hA), h phi_2(hA) of the step, into ``data.lin``.
 
     Both come from one exponential of the block matrix [[hA, I, 0], [0, 0, I], [0, 0, 0]]
     (its first block row is [e^{hA}, h phi_1(hA), h^2 phi_2(hA)] up to the powers of h).
@@ -64,7 +65,7 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command: float)
 
 
 def _shifted_phi1(A: np.ndarray, expA: np.ndarray, h: float, tau: float) -> np.ndarray:
-    """h phi_1(h (A - I/tau)) from e^{hA} by one solve (see ``linearize``)."""
+    """Return h phi_1(h (A - I/tau)) from e^{hA} by one solve (see ``linearize``)."""
     m = A.shape[0]
     shifted = A - np.eye(m) / tau
     try:
@@ -100,21 +101,26 @@ def _advance(model: Model, data: Data, n, y, t, command, F0, aux0):
 
 
 def jump_work(model: Model, s: State, command: float) -> float:
-    """Work of the drive's velocity jump when the command changes: the prescribed
-    velocities jump from those of ``s`` to those of the new command, which takes the
-    kinetic energy 1/2 M_P (v_P+^2 - v_P-^2) from the actuator (an impulse M_P dv_P acting
-    at the mean velocity)."""
+    """
+    Work of the drive's velocity jump when the command changes.
+
+    The prescribed velocities jump from those of ``s`` to those of the new command, which takes the
+    kinetic energy 1/2 M_P (v_P+^2 - v_P-^2) from the actuator (an impulse M_P dv_P acting at the
+    mean velocity).
+    """
     P = model.part.prescribed
     vP = model.prescribed(s.t, s.u, command)[1]
     return float(0.5 * model.mass[P] @ (vP * vP - s.v[P] * s.v[P]))
 
 
 def step(model: Model, data: Data, n: int = 1) -> None:
-    """Advance ``data`` n fixed steps with the actuator command held at state.command.
+    """
+    Advance ``data`` n fixed steps with the actuator command held at state.command.
 
     Time is origin + k dt, k the steps taken since the origin (the t of a state this data
     did not step itself), not a running sum: t stays on the step grid however long the
-    run, so stamps derived from it stay on the tick grid."""
+    run, so stamps derived from it stay on the tick grid.
+    """
     s = data.state
     command = s.command
     clock = data.clock

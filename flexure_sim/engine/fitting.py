@@ -1,4 +1,5 @@
-"""Fitting polynomial hinge laws to measured (displacement, wrench) pairs (Ch. 7, Appendix B).
+"""
+Fitting polynomial hinge laws to measured (displacement, wrench) pairs (Ch. 7, Appendix B).
 
 Data: rows of r = (alpha, px, py) -- rotation (rad) and translation (m) of frame b relative
 to frame a, in frame a -- and m_b = (m, fx, fy) -- the wrench exerted by body B on the
@@ -77,8 +78,12 @@ class FitError(FlexureSimError, ValueError):
 
 @dataclass(frozen=True)
 class WrenchData:
-    """Measured pairs: alpha (n,), p (n, 2) of frame b in frame a; wrench (n, 3) = m_b
-    (m, fx, fy) on the element in frame b, moment about b's origin."""
+    """
+    Measured pairs.
+
+    Alpha (n,), p (n, 2) of frame b in frame a; wrench (n, 3) = m_b (m, fx, fy) on the element in
+    frame b, moment about b's origin.
+    """
 
     alpha: np.ndarray
     p: np.ndarray
@@ -110,10 +115,14 @@ MAX_ABS_VALUE = 1e150
 
 
 def read_wrench_csv(path: str | Path) -> WrenchData:
-    """Read a data CSV: a header naming at least the columns alpha, px, py, m, fx, fy (any
-    order; other columns are ignored), then one row per measurement. Lines starting with '#'
-    are comments. The file must be UTF-8 text; every value must be a finite number of
-    magnitude at most MAX_ABS_VALUE, and |alpha| < pi. Errors name the file, line and column."""
+    """
+    Read a data CSV.
+
+    A header naming at least the columns alpha, px, py, m, fx, fy (any order; other columns are
+    ignored), then one row per measurement. Lines starting with '#' are comments. The file must be
+    UTF-8 text; every value must be a finite number of magnitude at most MAX_ABS_VALUE, and |alpha|
+    < pi. Errors name the file, line and column.
+    """
     path = Path(path)
     text = read_text(path, DataError)
     lines = [
@@ -149,13 +158,16 @@ def read_wrench_csv(path: str | Path) -> WrenchData:
     values = np.empty((len(rows) - 1, len(COLUMNS)))
     for r, (row, (lineno, _)) in enumerate(zip(rows[1:], lines[1:])):
         if len(row) != len(header):
-            raise DataError(f"{path}: line {lineno}: expected {len(header)} fields, got {len(row)}")
+            raise DataError(
+                f"{path}: line {lineno}: expected {len(header)} fields, got {len(row)}"
+            )
         for c, (name, col) in enumerate(zip(COLUMNS, where)):
             values[r, c] = _cell(path, lineno, name, row[col].strip())
     bad = np.nonzero(np.abs(values[:, 0]) >= math.pi)[0]
     if len(bad):
         raise DataError(
-            f"{path}: line {lines[1 + bad[0]][0]}, column 'alpha': {values[bad[0], 0]!r} rad is outside (-pi, pi)"
+            f"{path}: line {lines[1 + bad[0]][0]}, column 'alpha': {values[bad[0], 0]!r} rad is "
+            "outside (-pi, pi)"
         )
     return WrenchData(values[:, 0], values[:, 1:3], values[:, 3:6], str(path))
 
@@ -188,8 +200,12 @@ def write_wrench_csv(path: str | Path, data: WrenchData, comment: str = "") -> N
 # -------------------------------------------------------------- prediction, errors
 
 def predict_wrench(law, alpha: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """m_b (n, 3) of a law at displacements r = (alpha, p): the chain rule of
-    ``hinge_laws.evaluate`` (vectorised over rows of one law) and ``wrench_on_element``."""
+    """
+    m_b (n, 3) of a law at displacements r = (alpha, p).
+
+    The chain rule of ``hinge_laws.evaluate`` (vectorised over rows of one law) and
+    ``wrench_on_element``.
+    """
     alpha = np.asarray(alpha, dtype=float)
     cmap = COORDINATES[law.coordinates](alpha, np.asarray(p, dtype=float))
     _, Uc, _ = law.potential(cmap.c)
@@ -197,13 +213,18 @@ def predict_wrench(law, alpha: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 
 def wrench_errors(law, data: WrenchData) -> dict[str, Any]:
-    """Errors of the law's wrench against the data, per component (m, fx, fy):
-    rms and max_abs (N m, N, N), max_rel = max |error| / max |measured| of that component
-    (the figures of Chapter 7.1), and worst_rel = the largest max_rel."""
+    """
+    Errors of the law's wrench against the data, per component (m, fx, fy).
+
+    Rms and max_abs (N m, N, N), max_rel = max |error| / max |measured| of that component (the
+    figures of Chapter 7.1), and worst_rel = the largest max_rel.
+    """
     err = predict_wrench(law, data.alpha, data.p) - data.wrench
     peak = np.max(np.abs(data.wrench), axis=0)
     max_abs = np.max(np.abs(err), axis=0)
-    rel = np.where(peak > 0, max_abs / np.where(peak > 0, peak, 1.0), np.where(max_abs > 0, np.inf, 0.0))
+    rel = np.where(
+        peak > 0, max_abs / np.where(peak > 0, peak, 1.0), np.where(max_abs > 0, np.inf, 0.0)
+    )
     return {
         "rows": len(data),
         "rms": [float(v) for v in np.sqrt(np.mean(err**2, axis=0))],
@@ -217,10 +238,14 @@ def wrench_errors(law, data: WrenchData) -> dict[str, Any]:
 # ------------------------------------------------------------------------ fitting
 
 def basis_exponents(coordinates: str, order: int, sigma_degree: int = 0) -> np.ndarray:
-    """Exponents of the fitted terms: all monomials of order <= N in the scaled law
-    coordinates except the constant and the linear terms in the vector coordinates (fixed
-    by the unstressed equilibrium); for twistors only sigma-exponents <= sigma_degree
-    (0 or 1, the identifiable ones, see the module docstring). idx4.sci order."""
+    """
+    Exponents of the fitted terms.
+
+    All monomials of order <= N in the scaled law coordinates except the constant and the linear
+    terms in the vector coordinates (fixed by the unstressed equilibrium); for twistors only
+    sigma-exponents <= sigma_degree (0 or 1, the identifiable ones, see the module docstring).
+    idx4.sci order.
+    """
     if coordinates not in VARIABLES:
         raise FitError(f"coordinates must be twistor or twist, got {coordinates!r}")
     k = len(VARIABLES[coordinates])
@@ -230,7 +255,8 @@ def basis_exponents(coordinates: str, order: int, sigma_degree: int = 0) -> np.n
     if coordinates == "twistor":
         if sigma_degree not in (0, 1):
             raise FitError(
-                f"sigma_degree must be 0 or 1 (higher powers of sigma are not identifiable), got {sigma_degree!r}"
+                "sigma_degree must be 0 or 1 (higher powers of sigma are not identifiable), got "
+                f"{sigma_degree!r}"
             )
         keep &= exps[:, 0] <= sigma_degree
         keep |= (exps[:, 0] == 1) & (deg == 1) & (sigma_degree == 1)
@@ -253,8 +279,14 @@ def _scales(coordinates: str, c: np.ndarray) -> np.ndarray:
     return np.where(dev > 0, dev, 1.0)
 
 
-def _design(coordinates: str, exps: np.ndarray, data: WrenchData, scale: np.ndarray, energy: float) -> np.ndarray:
-    """A (n, 3, M): column j is m_b of the term energy * u^e_j at each row (u = scaled c)."""
+def _design(
+    coordinates: str, exps: np.ndarray, data: WrenchData, scale: np.ndarray, energy: float
+) -> np.ndarray:
+    """
+    Return a (n, 3, M).
+
+    Column j is m_b of the term energy * u^e_j at each row (u = scaled c).
+    """
     cmap = COORDINATES[coordinates](data.alpha, data.p)
     u = (cmap.c - np.array(REST[coordinates])) / scale
     dU_dc = monomial_gradients(u, exps) * (energy / scale)  # (n, M, k)
@@ -280,7 +312,8 @@ def fit_polynomial(
     sigma_degree: int = 0,
     test: Optional[WrenchData] = None,
 ) -> FitResult:
-    """Least-squares fit of an order-N polynomial law to measured wrenches (makeAB_Q.sci).
+    """
+    Least-squares fit of an order-N polynomial law to measured wrenches (makeAB_Q.sci).
 
     regularization: lambda >= 0 of the ridge min ||A y - b||^2 + lambda ||y||^2 on the
     scaled, column-equilibrated system (unit-norm columns, so lambda is dimensionless: singular
@@ -288,7 +321,11 @@ def fit_polynomial(
     an error that names the undetermined terms.
     test: held-out data, whose errors go into the report.
     """
-    if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or not 2 <= order <= MAX_ORDER:
+    if (
+        isinstance(order, bool)
+        or not isinstance(order, (int, np.integer))
+        or not 2 <= order <= MAX_ORDER
+    ):
         raise FitError(f"order must be an integer from 2 to {MAX_ORDER}, got {order!r}")
     order = int(order)
     if coordinates not in VARIABLES:
@@ -303,7 +340,8 @@ def fit_polynomial(
     n, M = len(data), len(exps)
     if 3 * n < M:
         raise FitError(
-            f"too few rows for order {order}: {n} rows give {3 * n} equations (3 per row), but an order-{order} "
+            f"too few rows for order {order}: {n} rows give {3 * n} equations (3 per row), but an "
+            f"order-{order} "
             f"polynomial in {coordinates} coordinates has {M} unknown coefficients; "
             f"give at least {math.ceil(M / 3)} rows or lower the order"
         )
@@ -326,8 +364,10 @@ def fit_polynomial(
     dead = np.nonzero(norms == 0)[0]
     if len(dead) and regularization == 0:
         raise FitError(
-            f"rank-deficient design: the data do not determine the term{'s' if len(dead) > 1 else ''} "
-            f"{', '.join(describe_monomial(exps[j], names) for j in dead[:6])}{' ...' if len(dead) > 6 else ''} "
+            "rank-deficient design: the data do not determine the "
+            f"term{'s' if len(dead) > 1 else ''} "
+            f"{', '.join(describe_monomial(exps[j], names) for j in dead[:6])}"
+            f"{' ...' if len(dead) > 6 else ''} "
             f"(their wrench is zero at every row: the data never move "
             f"{_unmoved(cmap.c, coordinates, exps[dead]) or 'the variables they involve'}); "
             f"use more varied data, a lower order, or --regularization"
@@ -346,9 +386,12 @@ def fit_polynomial(
         null = Vt[-1]
         top = np.argsort(-np.abs(null))[:4]
         raise FitError(
-            f"rank-deficient design: numerical rank {rank} < {M} unknowns (condition number {cond:.3g}); "
-            f"the data cannot separate the terms {', '.join(describe_monomial(exps[j], names) for j in top)} "
-            f"(the combination with weights {', '.join(f'{null[j]:+.2f}' for j in top)} leaves every "
+            f"rank-deficient design: numerical rank {rank} < {M} unknowns (condition number "
+            f"{cond:.3g}); "
+            "the data cannot separate the terms "
+            f"{', '.join(describe_monomial(exps[j], names) for j in top)} "
+            f"(the combination with weights {', '.join(f'{null[j]:+.2f}' for j in top)} leaves "
+            "every "
             f"wrench unchanged); use more varied data, a lower order, or --regularization"
         )
     if regularization > 0:
@@ -412,7 +455,8 @@ def summarize_errors(report: dict[str, Any], which: str = "test") -> str:
     part = report[which]
     units = ("N m", "N", "N")
     return "\n".join(
-        f"  {name:3s} max |error| {err:.3g} {unit} of max {peak:.3g} {unit} ({rel:.3g}), rms {rms:.3g} {unit}"
+        f"  {name:3s} max |error| {err:.3g} {unit} of max {peak:.3g} {unit} ({rel:.3g}), rms "
+        f"{rms:.3g} {unit}"
         for name, unit, err, peak, rel, rms in zip(
             COMPONENTS, units, part["max_abs"], part["max_measured"], part["max_rel"], part["rms"]
         )

@@ -1,4 +1,5 @@
-"""Hinge laws: potential energy, wrench and dissipation of an elastic element (Ch. 3, 4).
+"""
+Hinge laws: potential energy, wrench and dissipation of an elastic element (Ch. 3, 4).
 
 A hinge joins frame a (on body A) and frame b (on body B) that coincide when unstressed.
 Its state is the relative displacement of b in a, written r = (alpha, p1, p2): alpha the
@@ -41,9 +42,13 @@ from .kinematics import J, half_cot_derivatives, rot
 
 # ------------------------------------------------------------------ law coordinates
 
+
 def deflections(alpha, p, rdot=None):
-    """alpha (n,), p (n, 2) (and rdot (n, 3)) as float arrays, checked: a ValueError names
-    the argument of a wrong shape."""
+    """
+    Return alpha (n,), p (n, 2) (and rdot (n, 3)) as float arrays, checked.
+
+    A ValueError names the argument of a wrong shape.
+    """
     alpha = as_array("alpha", alpha, (None,))
     p = as_array("p", p, (alpha.shape[0], 2))
     if rdot is None:
@@ -51,10 +56,10 @@ def deflections(alpha, p, rdot=None):
     return alpha, p, as_array("rdot", rdot, (alpha.shape[0], 3))
 
 
-
 @dataclass(frozen=True)
 class CoordinateMap:
-    """Law coordinates c(r) with first and second derivatives with respect to r.
+    """
+    Law coordinates c(r) with first and second derivatives with respect to r.
 
     c: (n, k); dc: (n, k, 3) = dc/dr; d2c: (n, k, 3, 3) = d2c/dr2.
     """
@@ -65,7 +70,8 @@ class CoordinateMap:
 
 
 def twistor_coordinates(alpha: np.ndarray, p: np.ndarray, second: bool = True) -> CoordinateMap:
-    """Twistor parameters (sigma, xi, x1, x2) of r = (alpha, p) and their derivatives.
+    """
+    Twistor parameters (sigma, xi, x1, x2) of r = (alpha, p) and their derivatives.
 
     sigma = cos(alpha/2), xi = sin(alpha/2), x = 1/2 R(-alpha/2) p (eq. 2.178), with
     R(-alpha/2) = [[sigma, xi], [-xi, sigma]]. From d/dalpha R(-alpha/2) = -1/2 J R(-alpha/2):
@@ -96,14 +102,20 @@ def twistor_coordinates(alpha: np.ndarray, p: np.ndarray, second: bool = True) -
     d2c[:, 2, 0, 0] = -0.25 * x1
     d2c[:, 3, 0, 0] = -0.25 * x2
     # d2x/dalpha dp = -1/4 J R(-alpha/2) = -1/4 [[xi, -sigma], [sigma, xi]]
-    for i, j, val in ((2, 1, -0.25 * xi), (2, 2, 0.25 * sigma), (3, 1, -0.25 * sigma), (3, 2, -0.25 * xi)):
+    for i, j, val in (
+        (2, 1, -0.25 * xi),
+        (2, 2, 0.25 * sigma),
+        (3, 1, -0.25 * sigma),
+        (3, 2, -0.25 * xi),
+    ):
         d2c[:, i, 0, j] = val
         d2c[:, i, j, 0] = val
     return CoordinateMap(c, dc, d2c)
 
 
 def twist_coordinates(alpha: np.ndarray, p: np.ndarray, second: bool = True) -> CoordinateMap:
-    """Twist (tau, t1, t2) of r = (alpha, p) and its derivatives (eqs. 2.106-2.108).
+    """
+    Twist (tau, t1, t2) of r = (alpha, p) and its derivatives (eqs. 2.106-2.108).
 
     tau = alpha, t = f(alpha) p - (alpha/2) J p with f = (alpha/2) cot(alpha/2).
     """
@@ -134,7 +146,8 @@ COORDINATES = {"twistor": twistor_coordinates, "twist": twist_coordinates}
 
 @dataclass(frozen=True)
 class LawEvaluation:
-    """Laws evaluated at r = (alpha, p) with rates r_dot, for n hinges.
+    """
+    Laws evaluated at r = (alpha, p) with rates r_dot, for n hinges.
 
     energy (n,); grad (n, 3) = dU/dr; hess (n, 3, 3) = d2U/dr2;
     damping (n, 3, 3) = C_r, the matrix of the dissipation D = 1/2 r_dot^T C_r r_dot;
@@ -152,9 +165,13 @@ class LawEvaluation:
 
 @dataclass(frozen=True)
 class HingePower:
-    """Energy and power of n hinges (each (n,)): energy U (J); conservative = P_c = -dU/dt
-    (W), the power the elastic wrenches deliver to the bodies; dissipated = P_d =
-    r_dot^T C_r r_dot = 2 D >= 0 (W), the power the damping wrenches take from them."""
+    """
+    Energy and power of n hinges (each (n,)).
+
+    Energy U (J); conservative = P_c = -dU/dt (W), the power the elastic wrenches deliver to the
+    bodies; dissipated = P_d = r_dot^T C_r r_dot = 2 D >= 0 (W), the power the damping wrenches
+    take from them.
+    """
 
     energy: np.ndarray
     conservative: np.ndarray
@@ -174,8 +191,12 @@ class HingeLaw(Protocol):
 
 
 class LawPower:
-    """Energy and power of one law at m states r = (alpha (m,), p (m, 2)) with rates r_dot
-    (m, 3) (module docstring): the methods every law offers, through `LawBatch.power`."""
+    """
+    Energy and power of one law at m states.
+
+    The states are r = (alpha (m,), p (m, 2)) with rates r_dot (m, 3) (module docstring): the
+    methods every law offers, through `LawBatch.power`.
+    """
 
     def potential_energy(self: HingeLaw, alpha, p) -> np.ndarray:
         """Potential energy U(r) (J), shape (m,)."""
@@ -193,8 +214,10 @@ class LawPower:
 
 @dataclass(frozen=True)
 class QuadraticLaw(LawPower):
-    """Potential U = 1/2 c^T W c and dissipation D = 1/2 c_dot^T C c_dot in the law
-    coordinates c(r) -- the quadratic laws of eqs. 3.4 and 4.7 with the damping of 4.40.
+    """
+    Potential U = 1/2 c^T W c and dissipation D = 1/2 c_dot^T C c_dot in the law coordinates c(r).
+
+    The quadratic laws of eqs. 3.4 and 4.7 with the damping of 4.40.
 
     ``twistor`` (c = sigma, xi, x1, x2): U = 2 [xi; x]^T K [xi; x] (4.7, W = 4 K on
     (xi, x1, x2)) and D = 2 [xi_dot; x_dot]^T B [xi_dot; x_dot] (C = 4 B);
@@ -234,7 +257,8 @@ class QuadraticLaw(LawPower):
 
 
 class LawBatch:
-    """Hinges that share one coordinate type, evaluated together.
+    """
+    Hinges that share one coordinate type, evaluated together.
 
     Quadratic laws are evaluated all at once from their stacked metrics (built here,
     once); other laws one hinge at a time through ``potential``.
@@ -253,9 +277,13 @@ class LawBatch:
         self.W = np.stack([law.metric() for law in laws]) if self.quadratic else None
         self.C = np.stack([law.dissipation_matrix() for law in laws])
 
-    def evaluate(self, alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray, jacobian: bool = True) -> LawEvaluation:
-        """Energy, dU/dr and C_r r_dot by the chain rule through c(r); with ``jacobian``
-        also d2U/dr2, C_r and d(C_r r_dot)/dr (else those fields are None):
+    def evaluate(
+        self, alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray, jacobian: bool = True
+    ) -> LawEvaluation:
+        """
+        Energy, dU/dr and C_r r_dot by the chain rule through c(r).
+
+        With ``jacobian`` also d2U/dr2, C_r and d(C_r r_dot)/dr (else those fields are None):
 
         grad_r = dc^T U_c; hess_r = dc^T U_cc dc + sum_k U_c,k d2c_k; C_r = dc^T C dc;
         d(C_r r_dot)/dr = sum_k (C dc r_dot)_k d2c_k + dc^T C (d2c . r_dot).
@@ -289,26 +317,34 @@ class LawBatch:
         CJ = np.einsum("nkl,nlj->nkj", self.C, dc)
         damping = np.einsum("nki,nkj->nij", dc, CJ)
         d2c_rdot = np.einsum("nkjl,nl->nkj", d2c, rdot)
-        damping_force_dr = np.einsum("nk,nkij->nij", w, d2c) + np.einsum("nki,nkj->nij", CJ, d2c_rdot)
+        damping_force_dr = np.einsum("nk,nkij->nij", w, d2c) + np.einsum(
+            "nki,nkj->nij", CJ, d2c_rdot
+        )
         return LawEvaluation(energy, grad, hess, damping, damping_force, damping_force_dr)
 
-
     def power(self, alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray) -> HingePower:
-        """U, P_c = -(dU/dr) . r_dot and P_d = (C_r r_dot) . r_dot of each hinge (module
-        docstring; the wrench identities are in test_hinge_power.py)."""
+        """
+        U, P_c = -(dU/dr) .
+
+        r_dot and P_d = (C_r r_dot) . r_dot of each hinge (module docstring; the wrench identities
+        are in test_hinge_power.py).
+        """
         ev = self.evaluate(alpha, p, rdot, jacobian=False)
         rdot = np.asarray(rdot, dtype=float)
         return HingePower(ev.energy, -np.einsum("ni,ni->n", ev.grad, rdot),
                           np.einsum("ni,ni->n", ev.damping_force, rdot))
 
 
-def evaluate(laws: Sequence[HingeLaw], alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray) -> LawEvaluation:
+def evaluate(
+    laws: Sequence[HingeLaw], alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray
+) -> LawEvaluation:
     """Evaluate n hinges sharing one coordinate type, with all derivatives (see LawBatch)."""
     return LawBatch(laws).evaluate(alpha, p, rdot, jacobian=True)
 
 
 def wrench_on_element(alpha: np.ndarray, grad_r: np.ndarray) -> np.ndarray:
-    """m_b: wrench by body B on the element, frame b coordinates, about b's origin.
+    """
+    m_b: wrench by body B on the element, frame b coordinates, about b's origin.
 
     From dW = grad_r . delta r and delta r = (delta tau, R(alpha) delta t_b):
     m_b = (dU/dalpha, R(alpha)^T dU/dp) -- eqs. 3.53 and 4.35 (for the twistor quadratic

@@ -1,4 +1,5 @@
-"""Hyper-dual numbers: a value with two first derivatives and their mixed second derivative.
+"""
+Hyper-dual numbers: a value with two first derivatives and their mixed second derivative.
 
 A hyper-dual number is x = a + b e1 + c e2 + d e1e2 with e1^2 = e2^2 = 0 and e1 e2 = e2 e1
 (Fike and Alonso, "The development of hyper-dual numbers for exact second-derivative
@@ -77,7 +78,7 @@ class HyperDual:
         def pick(p):
             if p.ndim == 0:
                 return p
-            if trailing and p.shape[-(len(key) - 1) :] == s[-(len(key) - 1) :]:
+            if trailing and p.shape[-(len(key) - 1):] == s[-(len(key) - 1):]:
                 return p[key]  # indexes trailing axes only: keep the part's own leading shape
             return np.broadcast_to(p, s)[key]
 
@@ -212,9 +213,11 @@ def arctan(x):
 
 
 def arctan2(y, x):
-    """atan2(y, x) = theta0 + atan(w), w = (x0 y - y0 x) / (x0 x + y0 y) with x0, y0 the real
-    parts: w has real part 0, so atan(w) = w up to e1e2 (w^3 = 0), and theta0 carries the
-    quadrant."""
+    """
+    atan2(y, x) = theta0 + atan(w), w = (x0 y - y0 x) / (x0 x + y0 y) with x0, y0 the real parts.
+
+    W has real part 0, so atan(w) = w up to e1e2 (w^3 = 0), and theta0 carries the quadrant.
+    """
     ya, xa = _parts(y)[0], _parts(x)[0]
     w = (xa * _lift(y) - ya * _lift(x)) / (xa * _lift(x) + ya * _lift(y))
     return HyperDual(np.arctan2(ya, xa), w.b, w.c, w.d)
@@ -257,26 +260,33 @@ _UFUNCS: dict[Any, Any] = {
 
 
 def seed(value, e1: float = 0.0, e2: float = 0.0) -> HyperDual:
-    """value + e1 e1 + e2 e2: a parameter seeded for its derivatives (e1 = e2 = 1 for the
-    first and second derivative in one parameter)."""
+    """
+    Return value + e1 e1 + e2 e2.
+
+    A parameter seeded for its derivatives (e1 = e2 = 1 for the first and second derivative in one
+    parameter).
+    """
     return HyperDual(value, e1, e2, 0.0)
 
 
 def real(x) -> np.ndarray:
-    """The real part (x itself for plain numbers)."""
+    """Return the real part (x itself for plain numbers)."""
     return x.a if isinstance(x, HyperDual) else np.asarray(x, dtype=float)
 
 
 def parts_of(x) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(a, b, c, d) of x broadcast to a common shape (zeros for a plain number)."""
+    """Return (a, b, c, d) of x broadcast to a common shape (zeros for a plain number)."""
     x = _lift(x)
     s = x.shape
     return tuple(np.broadcast_to(p, s) for p in (x.a, x.b, x.c, x.d))
 
 
 def from_objects(values: Iterable) -> HyperDual:
-    """A HyperDual array from a (nested) sequence or object array of numbers and HyperDuals,
-    such as ``np.diag([Ko, k1, k2])`` of hyper-dual scalars."""
+    """
+    Return a HyperDual array from a (nested) sequence or object array of numbers and HyperDuals.
+
+    Such as ``np.diag([Ko, k1, k2])`` of hyper-dual scalars.
+    """
     arr = np.asarray(values, dtype=object)
     out = [np.empty(arr.shape) for _ in range(4)]
     for idx, v in np.ndenumerate(arr):

@@ -1,4 +1,5 @@
-"""Compiled hot path: generalized hinge forces of quadratic laws, without Jacobians.
+"""
+Compiled hot path: generalized hinge forces of quadratic laws, without Jacobians.
 
 This is the force evaluation the stepping loop performs once per step. It computes the
 same quantities as ``Assembly.forces`` (assembly.py, which remains the reference and the
@@ -41,9 +42,12 @@ _half_cot = njit(cache=True)(half_cot_scalar)
 
 @njit(cache=True, inline="always")
 def hinge_relative(xA, yA, thA, xB, yB, thB, ca1, ca2, cb1, cb2, phia, phib, dr):
-    """r = (alpha, p1, p2) of one hinge and dr/dzz into dr (3, 6), zz = (x_A, y_A, theta_A,
-    x_B, y_B, theta_B): the compiled twin of ``Assembly.relative`` (eq. 2.81 with the poses
-    of eq. 6.1; a test pins the two together at random inputs)."""
+    """
+    Return r = (alpha, p1, p2) of one hinge; write dr/dzz into dr (3, 6).
+
+    Here zz = (x_A, y_A, theta_A, x_B, y_B, theta_B): the compiled twin of ``Assembly.relative``
+    (eq. 2.81 with the poses of eq. 6.1; a test pins the two together at random inputs).
+    """
     cA, sA = math.cos(thA), math.sin(thA)
     cB, sB = math.cos(thB), math.sin(thB)
     beta = thA + phia
@@ -81,9 +85,13 @@ def hinge_relative(xA, yA, thA, xB, yB, thB, ca1, ca2, cb1, cb2, phia, phib, dr)
 
 @njit(cache=True, inline="always")
 def law_coordinates(kind, alpha, p1, p2, dv):
-    """Law coordinates (twistor vector part (xi, x1, x2), or twist (tau, t1, t2)) of
-    r = (alpha, p1, p2) and their derivative dv/dr into dv (3, 3): the compiled twin of
-    ``hinge_laws.twistor_coordinates`` / ``twist_coordinates`` (pinned by a test)."""
+    """
+    Return the law coordinates of r = (alpha, p1, p2); write their derivative dv/dr into dv (3, 3).
+
+    The law coordinates are the twistor vector part (xi, x1, x2), or twist (tau, t1, t2): the
+    compiled twin of ``hinge_laws.twistor_coordinates`` / ``twist_coordinates`` (pinned by a
+    test).
+    """
     if kind == TWISTOR:
         sg, xi = math.cos(0.5 * alpha), math.sin(0.5 * alpha)
         x1 = 0.5 * (sg * p1 + xi * p2)
@@ -102,7 +110,8 @@ def law_coordinates(kind, alpha, p1, p2, dv):
 
 @njit(cache=True)
 def quadratic_forces(z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q, r_out, wrench_out):
-    """Fill Q (3 n_bodies) with the hinge forces at (z, v); return (energy, dissipation).
+    """
+    Fill Q (3 n_bodies) with the hinge forces at (z, v); return (energy, dissipation).
 
     Also fills r_out (n, 3) with each hinge's deflection (alpha, p1, p2) and wrench_out (n, 3)
     with the wrench it exerts on body B in frame b (-m_b, eqs. 3.53/4.35), as in
@@ -116,8 +125,21 @@ def quadratic_forces(z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q, r_out, wre
     vv = np.zeros(6)
     for h in range(ia.shape[0]):
         A, B = 3 * ia[h], 3 * ib[h]
-        alpha, p1, p2 = hinge_relative(z[A], z[A + 1], z[A + 2], z[B], z[B + 1], z[B + 2],
-                                       ca[h, 0], ca[h, 1], cb[h, 0], cb[h, 1], phia[h], phib[h], dr)
+        alpha, p1, p2 = hinge_relative(
+            z[A],
+            z[A + 1],
+            z[A + 2],
+            z[B],
+            z[B + 1],
+            z[B + 2],
+            ca[h, 0],
+            ca[h, 1],
+            cb[h, 0],
+            cb[h, 1],
+            phia[h],
+            phib[h],
+            dr,
+        )
         for j in range(3):
             vv[j] = v[A + j]
             vv[3 + j] = v[B + j]

@@ -1,4 +1,5 @@
-"""Planar kinematics: rotations, twists and twistors (dissertation Ch. 2).
+"""
+Planar kinematics: rotations, twists and twistors (dissertation Ch. 2).
 
 Conventions (used everywhere in flexure_sim):
 - A planar displacement of frame b relative to frame a is (R, p): R = rot(alpha) is the
@@ -34,7 +35,8 @@ HALF_COT_SERIES = 1e-2
 
 
 class Twistor(NamedTuple):
-    """Twistor (Clifford) parameters of a planar displacement (eqs. 2.131-2.135).
+    """
+    Twistor (Clifford) parameters of a planar displacement (eqs. 2.131-2.135).
 
     sigma = cos(alpha/2), xi = sin(alpha/2), x = (x1, x2) the translation in the
     intermediate frame; sigma**2 + xi**2 == 1.
@@ -47,7 +49,7 @@ class Twistor(NamedTuple):
 
     @property
     def vector(self) -> np.ndarray:
-        """The vector part (xi, x1, x2), the argument of the quadratic potential (4.7)."""
+        """Return the vector part (xi, x1, x2), the argument of the quadratic potential (4.7)."""
         return np.array([self.xi, self.x1, self.x2])
 
 
@@ -63,14 +65,15 @@ def angle_of(R: np.ndarray) -> float:
 
 
 def hat(v: np.ndarray) -> np.ndarray:
-    """Moment map of a 2-vector, hat(v) = [-v2, v1] = J v (hat.sci)."""
+    """Return the moment map of a 2-vector, [-v2, v1] = J v (hat.sci)."""
     return v @ J.T
 
 
 # ----------------------------------------------------------------------------- twist
 
 def twist_from_displacement(R: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Twist (tau, t1, t2) of the displacement (R, p) (eqs. 2.95-2.108).
+    """
+    Twist (tau, t1, t2) of the displacement (R, p) (eqs. 2.95-2.108).
 
     tau = alpha, t = alpha * J^-1 (I - R)^-1 p = (alpha/2) (cot(alpha/2) I - J) p; the pure
     translation branch (alpha -> 0) gives t = p, and a series is used for small alpha.
@@ -87,7 +90,8 @@ def displacement_from_twist(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def half_cot_scalar(a: float) -> tuple[float, float, float]:
-    """f(a) = (a/2) cot(a/2) (f(0) = 1), f'(a) and f''(a) at one angle: the one definition.
+    """
+    f(a) = (a/2) cot(a/2) (f(0) = 1), f'(a) and f''(a) at one angle: the one definition.
 
     f' = cot(a/2)/2 - a / (4 sin^2(a/2)), f'' = -1/(2 sin^2(a/2)) + a cos(a/2) / (4 sin^3(a/2));
     below ``HALF_COT_SERIES`` the series f = 1 - a^2/12 - a^4/720 - a^6/30240 and its
@@ -138,7 +142,8 @@ def exp_translation_matrix(alpha) -> np.ndarray:
 # --------------------------------------------------------------------------- twistor
 
 def twistor_from_displacement(R: np.ndarray, p: np.ndarray) -> Twistor:
-    """Twistor of (R, p) as trans2cliff2.sci (eqs. 2.174-2.179).
+    """
+    Twistor of (R, p) as trans2cliff2.sci (eqs. 2.174-2.179).
 
     sigma = sqrt(tr R + 2) / 2 >= 0; xi from the antisymmetric part of R when sigma > 0.1,
     else xi = sqrt(1/2 - tr(R)/4) with the sign of (R21 - R12) and then sigma = (R21 - R12)
@@ -163,7 +168,8 @@ def twistor_from_displacement(R: np.ndarray, p: np.ndarray) -> Twistor:
 
 
 def displacement_from_twistor(q: Twistor) -> tuple[np.ndarray, np.ndarray]:
-    """(R, p) of a twistor (eqs. 2.171-2.172, p2R.sci):
+    """
+    (R, p) of a twistor (eqs. 2.171-2.172, p2R.sci):.
 
     R = (1 - 2 xi^2) I + 2 sigma sk(xi), p = 2 (sigma I + sk(xi)) x.
     """
@@ -191,7 +197,8 @@ def half_sine_ratio(alpha):
 # ------------------------------------------------------------------ frames / adjoint
 
 def adjoint(R: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Adjoint map Ad(R, p) of a planar displacement (eq. 4.38, 3.23), 3x3 on (omega, v1, v2).
+    """
+    Adjoint map Ad(R, p) of a planar displacement (eq. 4.38, 3.23), 3x3 on (omega, v1, v2).
 
     For a frame c' with pose (R, p) relative to frame c, Ad = [[1, 0], [-J p, R]] maps a
     twist expressed in c' (angular rate, velocity of c''s origin in c' coordinates) to the
@@ -207,7 +214,8 @@ def adjoint(R: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 
 def transform_stiffness(K: np.ndarray, R: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Stiffness for hinge frames moved by (R, p) on both bodies (Sections 3.3, 4.6).
+    """
+    Stiffness for hinge frames moved by (R, p) on both bodies (Sections 3.3, 4.6).
 
     With a' = a*(R, p) and b' = b*(R, p), the relative displacement is conjugated, so its
     twist (and the twistor's vector part, which is proportional to it) maps as

@@ -1,5 +1,7 @@
-"""Exact linearisation about a static equilibrium: natural modes, damped poles, frequency
-response and a named state-space model.
+"""
+Exact linearisation about a static equilibrium.
+
+Natural modes, damped poles, frequency response and a named state-space model.
 
 About the static equilibrium z* at drive input u* (``Simulation.static``), the engine's
 first-order system y' = F(y, command), y = (z_F, v_F, u) (solver.py), has the exact Jacobian
@@ -49,9 +51,12 @@ def jacobian_at(sim: Simulation, y: np.ndarray, t: float, command: float) -> np.
 
 @dataclass(frozen=True)
 class Layout:
-    """How the engine's state is laid out: free and prescribed coordinate indices, the
-    prescribed coordinates' drive-axis components d_u, masses (3 n_bodies), the rest pose z0
-    and the actuator time constant (None without a drive)."""
+    """
+    How the engine's state is laid out.
+
+    Free and prescribed coordinate indices, the prescribed coordinates' drive-axis components d_u,
+    masses (3 n_bodies), the rest pose z0 and the actuator time constant (None without a drive).
+    """
 
     free: np.ndarray
     prescribed: np.ndarray
@@ -62,7 +67,7 @@ class Layout:
 
 
 def layout(sim: Simulation) -> Layout:
-    """The state layout of a Simulation (see Layout)."""
+    """Return the state layout of a Simulation (see Layout)."""
     part = sim.part
     return Layout(
         part.free,
@@ -85,9 +90,12 @@ def tangent_at(sim: Simulation, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass
 class LinearModel:
-    """x' = A x + B command, y = C x + D command about the equilibrium at drive input u0.
-    x: deviations of (z_F, v_F, u) (m, rad, m/s, rad/s, m); outputs are deviations of the
-    named quantities from their static values ``y0``."""
+    """
+    x' = A x + B command, y = C x + D command about the equilibrium at drive input u0.
+
+    x: deviations of (z_F, v_F, u) (m, rad, m/s, rad/s, m); outputs are deviations of the named
+    quantities from their static values ``y0``.
+    """
 
     A: np.ndarray
     B: np.ndarray
@@ -132,7 +140,7 @@ def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True,
     Vx[F, nF + np.arange(nF)] = 1.0
     if drive:
         tau = lay.tau
-        B[nF : 2 * nF, 0] = dQv[np.ix_(F, P)] @ du / (tau * mF)
+        B[nF:2 * nF, 0] = dQv[np.ix_(F, P)] @ du / (tau * mF)
         B[2 * nF, 0] = 1.0 / tau
         Zx[P, 2 * nF] = du
         Vx[P, 2 * nF] = -du / tau
@@ -142,7 +150,7 @@ def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True,
     if mech.output is not None:
         e = np.zeros(N)
         i = mech.body_index(mech.output.body)
-        e[3 * i : 3 * i + 2] = mech.output.axis
+        e[3 * i:3 * i + 2] = mech.output.axis
         names.append("output"), Cs.append(e @ Zx), Ds.append(0.0), y0.append(snap.output)
     if drive and mech.compression_hinge is not None:
         h = mech.hinges[mech.hinge_index(mech.compression_hinge)]
@@ -210,14 +218,17 @@ def _frame_jacobian(mech, frame, z: np.ndarray) -> np.ndarray:
         ]
     )
     G = np.zeros((2, len(z)))
-    G[:, 3 * i : 3 * i + 2] = np.eye(2)
+    G[:, 3 * i:3 * i + 2] = np.eye(2)
     G[:, 3 * i + 2] = J @ w
     return G
 
 
 def wrench_jacobians(mech, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """d wrench / dz and d wrench / dv at rest at z, (n_hinges, 3, N) each: the e1 and e2
-    parts of one hyper-dual evaluation with z + e1 I and v = 0 + e2 I (N directions)."""
+    """
+    Return d wrench / dz and d wrench / dv at rest at z, (n_hinges, 3, N) each.
+
+    The e1 and e2 parts of one hyper-dual evaluation with z + e1 I and v = 0 + e2 I (N directions).
+    """
     N = len(z)
     ia, ib = hinge_indices(mech)
     eye = np.eye(N)
@@ -238,12 +249,15 @@ def wrench_jacobians(mech, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True)
 class Modes:
-    """Undamped modes: frequencies (Hz, ascending), shapes (nF, n) M-orthonormal columns on
-    the free coordinates ``free``; damped poles (complex, 1/s, by |pole|), their natural
-    frequencies |pole| / 2 pi (Hz) and damping ratios -Re/|pole| (1 for a real pole);
-    modal damping ratios phi^T C phi / (2 omega) of the undamped modes (exact for the
-    proportional damping B = t_char K, where they are omega t_char / 2: a mode above
-    zeta = 1 splits into two real poles, one near -1/t_char)."""
+    """
+    Undamped modes.
+
+    Frequencies (Hz, ascending), shapes (nF, n) M-orthonormal columns on the free coordinates
+    ``free``; damped poles (complex, 1/s, by |pole|), their natural frequencies |pole| / 2 pi (Hz)
+    and damping ratios -Re/|pole| (1 for a real pole); modal damping ratios phi^T C phi / (2 omega)
+    of the undamped modes (exact for the proportional damping B = t_char K, where they are omega
+    t_char / 2: a mode above zeta = 1 splits into two real poles, one near -1/t_char).
+    """
 
     frequencies: np.ndarray
     shapes: np.ndarray
@@ -255,7 +269,11 @@ class Modes:
 
 
 def modes(model: LinearModel) -> Modes:
-    """Undamped modes (generalised eigenproblem K phi = w^2 M phi) and damped poles (eig A)."""
+    """
+    Return undamped modes and damped poles.
+
+    Undamped modes: the generalised eigenproblem K phi = w^2 M phi; damped poles: eig A.
+    """
     w2, shapes = scipy.linalg.eigh(model.stiffness, np.diag(model.mass))
     if np.any(w2 <= 0):
         raise ValueError(
@@ -277,7 +295,8 @@ def modes(model: LinearModel) -> Modes:
 def frf(
     model: LinearModel, frequencies: Sequence[float], outputs: Optional[Sequence[str]] = None
 ) -> np.ndarray:
-    """G(i 2 pi f) = C (i w I - A)^-1 B + D for the drive input: (n_outputs, n_frequencies).
+    """
+    G(i 2 pi f) = C (i w I - A)^-1 B + D for the drive input: (n_outputs, n_frequencies).
 
     The first-order system has the engine's block structure x = (z, v, u) with z' = v, so
     the solve is done in second-order form: with s = i w, u = command / (1 + tau s) and
@@ -293,11 +312,11 @@ def frf(
     )
     s = 2j * np.pi * np.asarray(frequencies, dtype=float)
     A, nF = model.A, len(model.free)
-    Avz, Avv, Avu = A[nF : 2 * nF, :nF], A[nF : 2 * nF, nF : 2 * nF], A[nF : 2 * nF, 2 * nF]
+    Avz, Avv, Avu = A[nF:2 * nF, :nF], A[nF:2 * nF, nF:2 * nF], A[nF:2 * nF, 2 * nF]
     tau = -1.0 / A[2 * nF, 2 * nF]
     u = 1.0 / (1.0 + tau * s)
     M = (s * s)[:, None, None] * np.eye(nF) - s[:, None, None] * Avv - Avz
-    rhs = u[:, None] * Avu + model.B[nF : 2 * nF, 0]
+    rhs = u[:, None] * Avu + model.B[nF:2 * nF, 0]
     z = np.linalg.solve(M, rhs[..., None])[..., 0]
     x = np.concatenate([z, s[:, None] * z, u[:, None]], axis=1)
     return model.C[rows] @ x.T + model.D[rows]

@@ -1,4 +1,5 @@
-"""Mechanisms as plain data: bodies, hinges, constraints, drive (the MjModel of flexure_sim).
+"""
+Mechanisms as plain data: bodies, hinges, constraints, drive (the MjModel of flexure_sim).
 
 A mechanism holds constants only; the evolving state lives in ``solver.State``.
 
@@ -23,8 +24,12 @@ COORDINATE_NAMES = ("x", "y", "theta")
 
 @dataclass(frozen=True)
 class Body:
-    """A rigid body: mass (kg), rotational inertia about its mass centre (kg m^2), and the
-    initial (unstressed) pose (x, y, theta) of its body frame in the root frame."""
+    """
+    A rigid body.
+
+    Mass (kg), rotational inertia about its mass centre (kg m^2), and the initial (unstressed) pose
+    (x, y, theta) of its body frame in the root frame.
+    """
 
     name: str
     mass: float
@@ -69,8 +74,11 @@ class Fixed:
 
 @dataclass(frozen=True)
 class Drive:
-    """The driven input: the body's displacement along ``axis`` (unit vector in the root
-    frame) equals the actuator output u; its other coordinates are held.
+    """
+    The driven input.
+
+    The body's displacement along ``axis`` (unit vector in the root frame) equals the actuator
+    output u; its other coordinates are held.
 
     The actuator output follows the command through a first-order lag,
     du/dt = (command - u) / response_time: the slow pole of the dissertation's second-order
@@ -88,8 +96,11 @@ class Drive:
 
 @dataclass(frozen=True)
 class SineRate:
-    """Prescribed rate omega(t) = amplitude * sin(2 pi frequency t + phase) of one coordinate
-    (the four-bar driver omega2 = 0.5 pi^2 sin(10 pi t), eqs. 5.26 and 5.34)."""
+    """
+    Prescribed rate omega(t) = amplitude * sin(2 pi frequency t + phase) of one coordinate.
+
+    The four-bar driver is omega2 = 0.5 pi^2 sin(10 pi t), eqs. 5.26 and 5.34.
+    """
 
     body: str
     coordinate: str
@@ -121,10 +132,14 @@ class Output:
 
 @dataclass(frozen=True)
 class Mechanism:
-    """A planar flexure mechanism. ``compression_hinge`` names the hinge whose compression
-    (along the drive axis, at its centre of stiffness: its drive side's displacement minus
-    its far side's; see ``solver.compression_points``) is reported, as joint a of the
-    micropositioning stage (Figure 6.4)."""
+    """
+    A planar flexure mechanism.
+
+    ``compression_hinge`` names the hinge whose compression (along the drive axis, at its centre of
+    stiffness: its drive side's displacement minus its far side's; see
+    ``solver.compression_points``) is reported, as joint a of the micropositioning stage (Figure
+    6.4).
+    """
 
     name: str
     bodies: tuple[Body, ...]
@@ -154,6 +169,6 @@ class Mechanism:
 
     @property
     def drive(self) -> Optional[Drive]:
-        """The drive constraint, if the mechanism has one."""
+        """Return the drive constraint, if the mechanism has one."""
         drives = [c for c in self.constraints if isinstance(c, Drive)]
         return drives[0] if drives else None

@@ -1,4 +1,5 @@
-"""A mechanism prepared for stepping: the constants (as MuJoCo's mjModel), no state.
+"""
+A mechanism prepared for stepping: the constants (as MuJoCo's mjModel), no state.
 
 Constraints are handled by **exact elimination of prescribed coordinates**: every
 constraint of a mechanism prescribes whole coordinates (a fixed body; the driven body's
@@ -42,8 +43,12 @@ class SolverError(FlexureSimError, RuntimeError):
 
 @dataclass
 class Partition:
-    """Free and prescribed coordinate indices; per prescribed coordinate dz_P/du (the drive
-    axis component); the sine-rate constraints as (index into prescribed, constraint)."""
+    """
+    Free and prescribed coordinate indices.
+
+    Per prescribed coordinate dz_P/du (the drive axis component); the sine-rate constraints as
+    (index into prescribed, constraint).
+    """
 
     free: np.ndarray
     prescribed: np.ndarray
@@ -75,7 +80,8 @@ def partition(mech: Mechanism) -> Partition:
 
 
 class Model:
-    """The constants of a mechanism prepared for stepping with fixed step ``dt`` (s).
+    """
+    The constants of a mechanism prepared for stepping with fixed step ``dt`` (s).
 
     ``relinearize_tol``: recompute the Jacobian when the configuration has moved by more
     than that (rad for angles, metres / ``length_scale`` for positions) since the last
@@ -171,7 +177,7 @@ class Model:
         return z, v, aP
 
     def pack(self, state) -> np.ndarray:
-        """y = (z_F, v_F, u) of a state."""
+        """Return y = (z_F, v_F, u) of a state."""
         part = self.part
         parts = [state.z[part.free], state.v[part.free]]
         if self.drive:
@@ -208,9 +214,13 @@ class Model:
                                         part.du, self.motion[4], aP)
 
     def jacobian(self, y: np.ndarray, t: float, command: float, load_gradient: bool = False):
-        """Exact A = dF/dy for y = (z_F, v_F, u): rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v),
-        du/dt = (command - u)/tau, with z_P, v_P depending on u through the drive axis.
-        With ``load_gradient`` also g = dq/dy of the drive load q = du^T Q_P: (A, g)."""
+        """
+        Exact A = dF/dy for y = (z_F, v_F, u).
+
+        Rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v), du/dt = (command - u)/tau, with z_P, v_P
+        depending on u through the drive axis. With ``load_gradient`` also g = dq/dy of the drive
+        load q = du^T Q_P: (A, g).
+        """
         part = self.part
         nF = len(part.free)
         z, v, _ = self.unpack(y, t, command)
@@ -237,7 +247,7 @@ class Model:
 
     # --------------------------------------------------------------- measures
     def output_displacement(self, z: np.ndarray) -> Optional[float]:
-        """The output body's displacement from rest along the output axis (m), or None."""
+        """Return the output body's displacement from rest along the output axis (m), or None."""
         axis = self.output_axis
         if axis is None:
             return None
@@ -246,9 +256,12 @@ class Model:
 
     def drive_force(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
                     Q: Optional[np.ndarray] = None) -> float:
-        """Force the actuator applies to the driven body along the drive axis (N): the
-        drive-axis component of the constraint forces lambda_P = M_P a_P - Q_P (eq. 6.4);
-        0 without a drive. ``Q``: the generalized forces at (z, v), if already known."""
+        """
+        Force the actuator applies to the driven body along the drive axis (N).
+
+        The drive-axis component of the constraint forces lambda_P = M_P a_P - Q_P (eq. 6.4); 0
+        without a drive. ``Q``: the generalized forces at (z, v), if already known.
+        """
         if self.drive is None:
             return 0.0
         if Q is None:
@@ -257,9 +270,12 @@ class Model:
         return float((self.mass[P] * aP - Q[P]) @ self.part.du)
 
     def hinge_compression(self, z: np.ndarray) -> Optional[float]:
-        """Compression of the compression hinge at z (m, ``compression.compression_points``):
-        along the drive axis, at its centre of stiffness, its drive side's displacement
-        from rest minus its far side's; None without a compression hinge."""
+        """
+        Compression of the compression hinge at z (m, ``compression.compression_points``).
+
+        Along the drive axis, at its centre of stiffness, its drive side's displacement from rest
+        minus its far side's; None without a compression hinge.
+        """
         if self.compression is None:
             return None
         (i_drive, c_drive), (i_far, c_far), axis = self.compression

@@ -1,5 +1,7 @@
-"""The mechanism's hinge forces as a function of its coordinates *and* its design parameters,
-in arithmetic that accepts hyper-dual numbers (``hyperdual.py``).
+"""
+The mechanism's hinge forces as a function of its coordinates *and* its design parameters.
+
+It is written in arithmetic that accepts hyper-dual numbers (``hyperdual.py``).
 
 The engine's force paths (``assembly.py``, ``kernels.py``) take floats only. Sensitivities
 need the forces with derivative parts flowing from a parameter of the mechanism file (a
@@ -35,8 +37,12 @@ from .design import Design
 
 @dataclass
 class Forces:
-    """Q (..., N) generalized forces; r (..., n, 3) deflections; wrench (..., n, 3) on body B
-    in frame b (moment, fx, fy); energy (..., n)."""
+    """
+    Q (..., N) generalized forces.
+
+    R (..., n, 3) deflections; wrench (..., n, 3) on body B in frame b (moment, fx, fy); energy
+    (..., n).
+    """
 
     Q: Any
     r: Any
@@ -47,8 +53,12 @@ class Forces:
 def forces(
     design: Design, twistor: np.ndarray, ia: np.ndarray, ib: np.ndarray, z, v=None
 ) -> Forces:
-    """Hinge forces at coordinates z and velocities v (length N in the last axis; float or
-    HyperDual; v None: at rest, no damping terms), as in the module docstring."""
+    """
+    Return the hinge forces at coordinates z and velocities v, as in the module docstring.
+
+    z and v have length N in the last axis; float or HyperDual; v None: at rest, no damping
+    terms.
+    """
     A, B = 3 * ia, 3 * ib
     xA, yA, thA = z[..., A], z[..., A + 1], z[..., A + 2]
     xB, yB, thB = z[..., B], z[..., B + 1], z[..., B + 2]
@@ -96,9 +106,12 @@ def forces(
 
 
 def _dot(coefficients, values):
-    """sum_i a_i x_i, skipping the structural zeros and units of the coefficient lists (most
-    entries of dr/dzz and dc/dr, off-diagonal stiffness) -- they cost four array products
-    each in hyper-dual arithmetic."""
+    """
+    sum_i a_i x_i.
+
+    Skipping the structural zeros and units of the coefficient lists (most entries of dr/dzz and
+    dc/dr, off-diagonal stiffness) -- they cost four array products each in hyper-dual arithmetic.
+    """
     terms = []
     for a, x in zip(coefficients, values):
         if isinstance(a, float):
@@ -127,7 +140,7 @@ def _entries(M):
 
 
 def _law_coordinates(twistor, alpha, p1, p2):
-    """c (3 components) and dc/dr (3x3) for twistor (xi, x1, x2) or twist (tau, t1, t2)."""
+    """Return c (3 components) and dc/dr (3x3) for twistor (xi, x1, x2) or twist (tau, t1, t2)."""
     sg, xi = np.cos(0.5 * alpha), np.sin(0.5 * alpha)
     x1 = 0.5 * (sg * p1 + xi * p2)
     x2 = 0.5 * (-xi * p1 + sg * p2)
@@ -165,7 +178,7 @@ def _law_coordinates(twistor, alpha, p1, p2):
 
 
 def _half_cot(alpha):
-    """f = (a/2) cot(a/2) and f' (series below |a| = 1e-2, as hinge_laws)."""
+    """Return f = (a/2) cot(a/2) and f' (series below |a| = 1e-2, as hinge_laws)."""
     a_real = hd.real(alpha)
     small = np.abs(a_real) < 1e-2
     safe = _where(small, 1.0, alpha)
@@ -198,8 +211,11 @@ def _stack(items):
 
 
 def _scatter(q_local, ia, ib, N):
-    """Sum the per-hinge six forces into the N generalized forces: one product with the 0/1
-    scatter matrix (a linear map, applied part by part for HyperDuals)."""
+    """
+    Sum the per-hinge six forces into the N generalized forces.
+
+    One product with the 0/1 scatter matrix (a linear map, applied part by part for HyperDuals).
+    """
     n = len(ia)
     S = np.zeros((n, 6, N))
     rows = np.arange(n)

@@ -1,4 +1,5 @@
-"""Polynomial hinge laws: potentials of order N in twistor or twist coordinates (4.69, 3.67).
+"""
+Polynomial hinge laws: potentials of order N in twistor or twist coordinates (4.69, 3.67).
 
 The dissertation writes the potential of an elastic element as a polynomial of order N in
 its law coordinates c (Sections 3.6 and 4.7),
@@ -69,7 +70,9 @@ def _exponent_table(n_vars: int, order: int) -> np.ndarray:
     def rec(nv: int, budget: int) -> list[tuple[int, ...]]:
         if nv == 1:
             return [(i,) for i in range(budget + 1)]
-        return [head + (last,) for last in range(budget + 1) for head in rec(nv - 1, budget - last)]
+        return [
+            head + (last,) for last in range(budget + 1) for head in rec(nv - 1, budget - last)
+        ]
 
     table = np.array(rec(n_vars, order), dtype=int)
     table.setflags(write=False)
@@ -77,7 +80,8 @@ def _exponent_table(n_vars: int, order: int) -> np.ndarray:
 
 
 def monomial_exponents(n_vars: int, order: int) -> np.ndarray:
-    """All exponent tuples of total degree <= order, shape (C(order + n_vars, n_vars), n_vars).
+    """
+    All exponent tuples of total degree <= order, shape (C(order + n_vars, n_vars), n_vars).
 
     The order is that of evalpoly4.sci / idx4.sci (Appendix B): the last variable varies
     slowest and the first fastest, so row j holds the exponents of coefficient idx = j + 1.
@@ -91,8 +95,11 @@ def _index_map(n_vars: int, order: int) -> dict[tuple[int, ...], int]:
 
 
 def monomial_index(exponents, order: int) -> int:
-    """0-based position of a monomial in the coefficient array of an order-N polynomial
-    (idx4.sci returns this plus one)."""
+    """
+    Return the 0-based position of a monomial in the coefficient array of an order-N polynomial.
+
+    idx4.sci returns this plus one.
+    """
     e = tuple(int(v) for v in exponents)
     if min(e) < 0 or sum(e) > order:
         raise ValueError(f"exponents {list(e)} are not those of a monomial of order <= {order}")
@@ -121,8 +128,11 @@ def monomial_gradients(u: np.ndarray, exponents: np.ndarray) -> np.ndarray:
     return out
 
 
-def derivative_coefficients(coefficients: np.ndarray, n_vars: int, order: int, var: int) -> np.ndarray:
-    """Coefficients of dP/du_var for P given by a dense coefficient array of order N.
+def derivative_coefficients(
+    coefficients: np.ndarray, n_vars: int, order: int, var: int
+) -> np.ndarray:
+    """
+    Coefficients of dP/du_var for P given by a dense coefficient array of order N.
 
     Eqs. 4.75-4.78 (3.73-3.75): c_k(idx(i)) = (i_k + 1) c_U(idx(i + e_k)). The result is
     kept in the order-N index space (its degree-N entries are zero).
@@ -139,7 +149,8 @@ def derivative_coefficients(coefficients: np.ndarray, n_vars: int, order: int, v
 
 
 def compose_linear(coefficients: np.ndarray, n_vars: int, order: int, M: np.ndarray) -> np.ndarray:
-    """Dense coefficients of P(M u') for P given by dense order-N coefficients.
+    """
+    Dense coefficients of P(M u') for P given by dense order-N coefficients.
 
     Each homogeneous part of degree d is a symmetric tensor T (T[i1..id] = a_e / multinomial(e));
     substituting u = M u' contracts every slot with M. Exact up to rounding; the degree of
@@ -171,7 +182,7 @@ def compose_linear(coefficients: np.ndarray, n_vars: int, order: int, M: np.ndar
 
 
 def describe_monomial(exponents, names: tuple[str, ...]) -> str:
-    """A monomial as text, e.g. xi^2*x1 (the constant is "1")."""
+    """Return a monomial as text, e.g. xi^2*x1 (the constant is "1")."""
     parts = [n if e == 1 else f"{n}^{e}" for n, e in zip(names, exponents) if e]
     return "*".join(parts) or "1"
 
@@ -180,7 +191,10 @@ def describe_monomial(exponents, names: tuple[str, ...]) -> str:
 
 @dataclass(frozen=True)
 class PolynomialLaw(LawPower):
-    """Potential U(c) = E sum_j a_j prod_k ((c_k - rest_k) / s_k)^(e_jk) and dissipation
+    """
+    Polynomial hinge law: a potential U(c) and a dissipation D.
+
+    Potential U(c) = E sum_j a_j prod_k ((c_k - rest_k) / s_k)^(e_jk) and dissipation
     D = 1/2 c_dot^T C c_dot, C the damping B embedded as the quadratic laws embed it (4 B on
     (xi, x) for twistors, B for twists); E = energy, a = coefficients, s = scale,
     e = exponents. Energy and power: `hinge_laws.LawPower`.
@@ -207,7 +221,9 @@ class PolynomialLaw(LawPower):
 
     def __post_init__(self) -> None:
         if self.coordinates not in VARIABLES:
-            raise ValueError(f"coordinates must be one of {sorted(VARIABLES)}, got {self.coordinates!r}")
+            raise ValueError(
+                f"coordinates must be one of {sorted(VARIABLES)}, got {self.coordinates!r}"
+            )
         names = VARIABLES[self.coordinates]
         k = len(names)
         integer = isinstance(self.order, (int, np.integer)) and not isinstance(self.order, bool)
@@ -215,8 +231,14 @@ class PolynomialLaw(LawPower):
             raise ValueError(f"order must be an integer in 1..{MAX_ORDER}, got {self.order!r}")
         order = int(self.order)
         exps = np.asarray(self.exponents)
-        if exps.ndim != 2 or exps.shape[1] != k or (exps.size and not np.all(exps == np.round(exps))):
-            raise ValueError(f"exponents must be an (M, {k}) array of integers, got shape {exps.shape}")
+        if (
+            exps.ndim != 2
+            or exps.shape[1] != k
+            or (exps.size and not np.all(exps == np.round(exps)))
+        ):
+            raise ValueError(
+                f"exponents must be an (M, {k}) array of integers, got shape {exps.shape}"
+            )
         exps = exps.astype(int)
         coef = np.asarray(self.coefficients, dtype=float)
         if coef.shape != (exps.shape[0],):
@@ -225,16 +247,23 @@ class PolynomialLaw(LawPower):
             raise ValueError("coefficients must be finite")
         scale = np.asarray(self.scale, dtype=float)
         if scale.shape != (k,) or not np.all(np.isfinite(scale)) or np.any(scale <= 0):
-            raise ValueError(f"scale must be {k} positive numbers ({', '.join(names)}), got {self.scale!r}")
+            raise ValueError(
+                f"scale must be {k} positive numbers ({', '.join(names)}), got {self.scale!r}"
+            )
         if not (np.isfinite(self.energy) and self.energy > 0):
             raise ValueError(f"energy must be a positive number of joules, got {self.energy!r}")
         B = np.asarray(self.B, dtype=float)
-        if B.shape != (3, 3) or not np.all(np.isfinite(B)) or not np.allclose(B, B.T, rtol=1e-12, atol=0.0):
+        if (
+            B.shape != (3, 3)
+            or not np.all(np.isfinite(B))
+            or not np.allclose(B, B.T, rtol=1e-12, atol=0.0)
+        ):
             raise ValueError("B must be a symmetric 3x3 matrix")
         if np.any(exps < 0) or np.any(exps.sum(axis=1) > order):
             bad = int(np.nonzero((exps < 0).any(axis=1) | (exps.sum(axis=1) > order))[0][0])
             raise ValueError(
-                f"term {bad} ({describe_monomial(exps[bad], names)}) is not a monomial of order <= {order}"
+                f"term {bad} ({describe_monomial(exps[bad], names)}) is not a monomial of order "
+                f"<= {order}"
             )
         if len({tuple(e) for e in exps}) != len(exps):
             raise ValueError("exponents repeat a monomial (each term must appear once)")
@@ -244,7 +273,8 @@ class PolynomialLaw(LawPower):
             deg = int(e.sum())
             if a != 0.0 and (deg == 0 or (deg == 1 and names[int(np.argmax(e))] in vector)):
                 raise ValueError(
-                    f"term {describe_monomial(e, names)} has degree {deg}: the unstressed pose must be an "
+                    f"term {describe_monomial(e, names)} has degree {deg}: the unstressed pose "
+                    "must be an "
                     f"unstressed equilibrium (U = 0 and dU/dr = 0 at rest), so the constant term "
                     f"and the terms linear in {', '.join(vector)} must be absent"
                 )
@@ -296,19 +326,25 @@ class PolynomialLaw(LawPower):
 
     # ------------------------------------------------------------------- helpers
     def stiffness_at_rest(self) -> np.ndarray:
-        """K = d2U/dr2 at the unstressed pose (3x3, moment first, hinge frame): the
-        small-displacement stiffness (eq. 4.52), used for reporting and default damping."""
+        """
+        K = d2U/dr2 at the unstressed pose (3x3, moment first, hinge frame).
+
+        The small-displacement stiffness (eq. 4.52), used for reporting and default damping.
+        """
         ev = evaluate([self], np.zeros(1), np.zeros((1, 2)), np.zeros((1, 3)))
         H = ev.hess[0]
         return 0.5 * (H + H.T)
 
     def with_damping(self, B: np.ndarray) -> "PolynomialLaw":
-        """The same potential with damping matrix B (3x3)."""
+        """Return the same potential with damping matrix B (3x3)."""
         return dataclasses.replace(self, B=np.asarray(B, dtype=float))
 
     def dense_coefficients(self) -> np.ndarray:
-        """Coefficients of all monomials of order <= N, in idx4.sci order (first column of
-        the internal table)."""
+        """
+        Coefficients of all monomials of order <= N.
+
+        They are in idx4.sci order (first column of the internal table).
+        """
         return self._table[:, 0].copy()
 
     def _from_dense(self, dense: np.ndarray, B: np.ndarray) -> "PolynomialLaw":
@@ -317,15 +353,21 @@ class PolynomialLaw(LawPower):
         return dataclasses.replace(self, exponents=exps[keep], coefficients=dense[keep], B=B)
 
     def _linear_map(self, T: np.ndarray) -> "PolynomialLaw":
-        """The law P'(c') = P(T c') for c - rest = T (c' - rest) (a linear map of the vector
-        coordinates that fixes the rest pose)."""
+        """
+        Return the law P'(c') = P(T c') for c - rest = T (c' - rest).
+
+        T is a linear map of the vector coordinates that fixes the rest pose.
+        """
         k = len(self.scale)
         M = (T / self.scale[:, None]) * self.scale[None, :]
-        return self._from_dense(compose_linear(self.dense_coefficients(), k, self.order, M), self.B)
+        return self._from_dense(
+            compose_linear(self.dense_coefficients(), k, self.order, M), self.B
+        )
 
 
 def transform_frames(law: PolynomialLaw, R: np.ndarray, p: np.ndarray) -> PolynomialLaw:
-    """The law for hinge frames moved by G = (R, p) on both bodies (3.69, 4.70).
+    """
+    Return the law for hinge frames moved by G = (R, p) on both bodies (3.69, 4.70).
 
     The relative displacement is conjugated by G, so its twist maps as d = Ad(G) d' and the
     twistor as sigma = sigma', [xi; x] = Ad(G) [xi'; x'] (4.65, the vector part is
@@ -341,9 +383,13 @@ def transform_frames(law: PolynomialLaw, R: np.ndarray, p: np.ndarray) -> Polyno
 
 
 def swap_bodies(law: PolynomialLaw) -> PolynomialLaw:
-    """The law seen with bodies A and B exchanged: the displacement of a in b is the inverse
-    one, whose twist is -d and whose twistor is (sigma, -xi, -x). U'(c') = U(c) flips the sign
-    of every term of odd degree in the vector coordinates; the damping is unchanged."""
+    """
+    Return the law seen with bodies A and B exchanged.
+
+    The displacement of a in b is the inverse one, whose twist is -d and whose twistor is (sigma,
+    -xi, -x). U'(c') = U(c) flips the sign of every term of odd degree in the vector coordinates;
+    the damping is unchanged.
+    """
     k = len(law.scale)
     T = -np.eye(k)
     if law.coordinates == "twistor":
@@ -351,10 +397,15 @@ def swap_bodies(law: PolynomialLaw) -> PolynomialLaw:
     return law._linear_map(T)
 
 
-def quadratic_as_polynomial(K: np.ndarray, coordinates: str, B: np.ndarray | None = None) -> PolynomialLaw:
-    """The quadratic law of ``coordinates`` with stiffness K -- U = 2 [xi; x]^T K [xi; x]
-    (4.7) or U = 1/2 d^T K d (3.4) -- written as a PolynomialLaw of order 2 (unit scales,
-    E = 1 J): the same energy as QuadraticLaw(coordinates, K, B) everywhere."""
+def quadratic_as_polynomial(
+    K: np.ndarray, coordinates: str, B: np.ndarray | None = None
+) -> PolynomialLaw:
+    """
+    Return the quadratic law of ``coordinates`` with stiffness K.
+
+    U = 2 [xi; x]^T K [xi; x] (4.7) or U = 1/2 d^T K d (3.4) -- written as a PolynomialLaw of order
+    2 (unit scales, E = 1 J): the same energy as QuadraticLaw(coordinates, K, B) everywhere.
+    """
     W = QuadraticLaw(coordinates, np.asarray(K, dtype=float), np.zeros((3, 3))).metric()
     k = W.shape[0]
     exps, coefs = [], []
@@ -366,8 +417,15 @@ def quadratic_as_polynomial(K: np.ndarray, coordinates: str, B: np.ndarray | Non
                 e[j] += 1
                 exps.append(e)
                 coefs.append(0.5 * W[i, i] if i == j else W[i, j])
-    return PolynomialLaw(coordinates, 2, np.array(exps, dtype=int), np.array(coefs), np.ones(k), 1.0,
-                         np.zeros((3, 3)) if B is None else np.asarray(B, dtype=float))
+    return PolynomialLaw(
+        coordinates,
+        2,
+        np.array(exps, dtype=int),
+        np.array(coefs),
+        np.ones(k),
+        1.0,
+        np.zeros((3, 3)) if B is None else np.asarray(B, dtype=float),
+    )
 
 
 __all__ = [

@@ -1,5 +1,8 @@
-"""Polynomial hinge files: the YAML that ``flexure-sim fit`` writes and a mechanism's
-``law: {polynomial: FILE}`` reads, with validation that names the file, the key and the problem.
+"""
+Polynomial hinge files.
+
+The YAML that ``flexure-sim fit`` writes and a mechanism's ``law: {polynomial: FILE}`` reads, with
+validation that names the file, the key and the problem.
 
 The document holds the law of `polynomial.PolynomialLaw` (coordinates, order, scale, energy
 scale and the terms), plus informational sections (``stiffness_at_rest``, ``fit``,
@@ -28,7 +31,7 @@ class PolynomialFileError(FlexureSimError, ValueError):
 
 
 def law_to_dict(law: PolynomialLaw) -> dict[str, Any]:
-    """The YAML document of a law (without fit report or provenance)."""
+    """Return the YAML document of a law (without fit report or provenance)."""
     return {
         "format": FILE_FORMAT,
         "version": FILE_VERSION,
@@ -149,7 +152,7 @@ def _finite(fail, key: str, value: Any) -> float:
 
 
 def _shown(value: Any, limit: int = 60) -> str:
-    """repr of a value from the file, shortened so that a message stays one line."""
+    """Return the repr of a value from the file, shortened so that a message stays one line."""
     text = repr(value)
     return text if len(text) <= limit else text[:limit - 3] + "..."
 

@@ -1,4 +1,5 @@
-"""Exact first and second design sensitivities by hyper-dual numbers.
+"""
+Exact first and second design sensitivities by hyper-dual numbers.
 
 The static equilibrium Q_F(z, p) = 0 at drive input u defines z(p). Seeding parameters p
 (``parametric.Parameters``: any number of the mechanism file by path) as hyper-dual numbers
@@ -44,8 +45,12 @@ OUTPUTS = ("gain", "compression", "first_mode", "peak_stress")
 
 
 class Sensitivity:
-    """Static equilibrium, its tangent stiffness and first mode at drive input u, ready to
-    differentiate outputs by hyper-dual evaluation."""
+    """
+    Static equilibrium.
+
+    Its tangent stiffness and first mode at drive input u, ready to differentiate outputs by
+    hyper-dual evaluation.
+    """
 
     def __init__(self, params: Parameters, u: float, static_outputs: bool = True):
         self.params = params
@@ -138,7 +143,7 @@ class Sensitivity:
         return dx, dy
 
     def first_mode_derivative(self, path: str, z_p: Optional[np.ndarray] = None) -> float:
-        """d f_1 / dp (Hz per unit of p) by eigenvalue sensitivity; z_p = dz/dp if known."""
+        """Return d f_1 / dp (Hz per unit of p) by eigenvalue sensitivity; z_p = dz/dp if known."""
         v = self.params.check(path)
         design = self.params.design({path: hd.HyperDual(v, 0.0, 1.0, 0.0)})
         if z_p is None:
@@ -165,12 +170,16 @@ class Sensitivity:
 def sensitivities(
     params: Parameters, wrt: Sequence[str], of: Sequence[str] = OUTPUTS, u: Optional[float] = None
 ) -> dict:
-    """Values, gradients and second derivatives of the outputs ``of`` in the parameters
-    ``wrt`` at drive input u (default: the top of the drive's stroke).
+    """
+    Values.
+
+    Gradients and second derivatives of the outputs ``of`` in the parameters ``wrt`` at drive input
+    u (default: the top of the drive's stroke).
 
     Returns {"input", "values": {out: v}, "gradient": {out: {p: d}}, "second": {out:
     {"p|q": d}}}: with one parameter per evaluation d2/dp2 (seeds p + e1 + e2); with exactly
-    two parameters also the mixed d2/dp dq (seeds p + e1, q + e2)."""
+    two parameters also the mixed d2/dp dq (seeds p + e1, q + e2).
+    """
     unknown = [o for o in of if o not in OUTPUTS]
     if unknown:
         raise ParameterError(f"--of {unknown[0]!r}: outputs are {', '.join(OUTPUTS)}")

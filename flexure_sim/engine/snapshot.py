@@ -12,7 +12,8 @@ from .model import Model
 
 @dataclass(frozen=True)
 class Snapshot:
-    """What the simulation reports at one instant (SI units throughout).
+    """
+    What the simulation reports at one instant (SI units throughout).
 
     poses (n_bodies, 3): x, y (m), theta (rad) in the root frame; velocities likewise.
     deflections (n_hinges, 3): (alpha, p_x, p_y) of frame b relative to frame a, in frame a

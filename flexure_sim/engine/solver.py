@@ -1,4 +1,5 @@
-"""The simulation facade: a shared ``Model`` (constants) and its own ``Data`` (state).
+"""
+The simulation facade: a shared ``Model`` (constants) and its own ``Data`` (state).
 
 ``Simulation`` keeps the public API the node, the CLI and the tools use (constructor,
 ``step``, ``snapshot``, ``set_command``, ``reset``, ``static``, ``static_sweep``, the
@@ -36,7 +37,8 @@ __all__ = [
 
 
 class Simulation:
-    """A model, one run's data, and the stepping / static solvers.
+    """
+    A model, one run's data, and the stepping / static solvers.
 
     ``source``: a Mechanism (a Model is built for it with ``dt`` and ``relinearize_tol``)
     or a Model to share (then ``dt`` and ``relinearize_tol`` are the model's). See
@@ -68,7 +70,7 @@ class Simulation:
 
     @property
     def state(self) -> State:
-        """The current state (assign a State to continue from it)."""
+        """Return the current state; assign a State to continue from it."""
         return self.data.state
 
     @state.setter
@@ -93,8 +95,11 @@ class Simulation:
         self.data.reset()
 
     def step(self, n: int = 1) -> None:
-        """Advance n fixed steps with the actuator command held at state.command
-        (``dynamics.step``); t stays on the step grid."""
+        """
+        Advance n fixed steps with the actuator command held at state.command (``dynamics.step``).
+
+        T stays on the step grid.
+        """
         dynamics.step(self.model, self.data, n)
 
     def set_command(self, command: float) -> None:
@@ -107,11 +112,11 @@ class Simulation:
 
     def static(self, u: float, t: float = 0.0, tol: float = 1e-13,
                max_iter: int = 50) -> StaticResult:
-        """Static equilibrium with the actuator output held at u (``statics.static``)."""
+        """Return static equilibrium with the actuator output held at u (``statics.static``)."""
         return statics.static(self.model, u, t, tol, max_iter)
 
     def static_sweep(self, inputs, t: float = 0.0, tol: float = 1e-13) -> StaticSweep:
-        """Static equilibria for many drive inputs (``statics.static_sweep``)."""
+        """Return static equilibria for many drive inputs (``statics.static_sweep``)."""
         return statics.static_sweep(self.model, inputs, t, tol)
 
     def snapshot(self, state: Optional[State] = None) -> Snapshot:

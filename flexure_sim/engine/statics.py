@@ -1,5 +1,9 @@
-"""Static equilibrium of a ``Model``: Newton's method on Q_F(z) = 0 with the exact
-stiffness dQ_F/dz_F, for one drive input or a sweep of many."""
+"""
+Static equilibrium of a ``Model``.
+
+Newton's method on Q_F(z) = 0 with the exact stiffness dQ_F/dz_F, for one drive input or a sweep of
+many.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -24,8 +28,12 @@ class StaticResult:
 
 @dataclass(frozen=True)
 class StaticSweep:
-    """Static answers for a list of drive inputs (m): output displacement (m), compression
-    (m; NaN without a compression hinge), drive force (N), and total Newton iterations."""
+    """
+    Static answers for a list of drive inputs (m).
+
+    Output displacement (m), compression (m; NaN without a compression hinge), drive force (N), and
+    total Newton iterations.
+    """
 
     inputs: np.ndarray
     outputs: np.ndarray
@@ -36,7 +44,8 @@ class StaticSweep:
 
 def static(model: Model, u: float, t: float = 0.0, tol: float = 1e-13,
            max_iter: int = 50) -> StaticResult:
-    """Static equilibrium with the actuator output held at u (and timed constraints at t).
+    """
+    Return static equilibrium with the actuator output held at u (and timed constraints at t).
 
     Newton's method on Q_F(z_F) = 0 from the unstressed pose with the exact tangent
     stiffness dQ_F/dz_F (see ``newton``); converged when the update is below tol
@@ -52,8 +61,12 @@ def static(model: Model, u: float, t: float = 0.0, tol: float = 1e-13,
 
 
 def static_sweep(model: Model, inputs, t: float = 0.0, tol: float = 1e-13) -> StaticSweep:
-    """Static equilibria for many drive inputs, each started from the previous one and
-    reusing the factorised stiffness while Newton keeps contracting fast."""
+    """
+    Return static equilibria for many drive inputs.
+
+    Each started from the previous one and reusing the factorised stiffness while Newton keeps
+    contracting fast.
+    """
     inputs = np.asarray(inputs, dtype=float)
     if not np.all(np.isfinite(inputs)):
         raise ValueError("drive inputs must be finite")
@@ -82,10 +95,13 @@ def _z_static(model: Model, zF: np.ndarray, t: float, u: float) -> np.ndarray:
 
 
 def newton(model: Model, u, t, zF, lu, tol, max_iter):
-    """Newton on Q_F(z_F) = 0 with the exact stiffness. A factorisation from a nearby
-    solution (``lu``) is reused while its updates shrink at least tenfold; an update that
-    does not is discarded and the stiffness re-factorised at the current point, so the
-    iteration is never worse than Newton's. Returns (z_F, iterations, factorisation)."""
+    """
+    Newton on Q_F(z_F) = 0 with the exact stiffness.
+
+    A factorisation from a nearby solution (``lu``) is reused while its updates shrink at least
+    tenfold; an update that does not is discarded and the stiffness re-factorised at the current
+    point, so the iteration is never worse than Newton's. Returns (z_F, iterations, factorisation).
+    """
     if not np.isfinite(u):
         raise ValueError(f"drive input must be finite, got {u!r}")
     free = model.part.free

@@ -1,4 +1,5 @@
-"""The exponential trapezoidal rule, as one loop that Numba compiles when it can.
+"""
+The exponential trapezoidal rule, as one loop that Numba compiles when it can.
 
 For y' = F(y, t), an exact Jacobian A = dF/dy taken at some earlier state,
 F0 = F(y_n, t_n) and the remainder N(y, t) = F(y, t) - F0 - A (y - y_n), a step is
@@ -32,9 +33,15 @@ E_PSI0, E_DECAY, E_DRIVE_MASS, E_TAU, E_HAS_DRIVE, E_BALANCE = 0, 1, 2, 3, 4, 5
 
 
 @njit(cache=True)
-def prescribed_motion(t, u, command, tau, has_drive, zP0, du, sine_index, sine_amp, sine_w, sine_phase):
-    """z_P, v_P, a_P: held coordinates, the drive (first-order lag of the command along
-    its axis) and prescribed sine rates (omega = a sin(w t + phase))."""
+def prescribed_motion(
+    t, u, command, tau, has_drive, zP0, du, sine_index, sine_amp, sine_w, sine_phase
+):
+    """
+    z_P, v_P, a_P.
+
+    Held coordinates, the drive (first-order lag of the command along its axis) and prescribed sine
+    rates (omega = a sin(w t + phase)).
+    """
     udot = (command - u) / tau if has_drive else 0.0
     zP = zP0 + du * u
     vP = du * udot
@@ -50,7 +57,8 @@ def prescribed_motion(t, u, command, tau, has_drive, zP0, du, sine_index, sine_a
 
 @njit(cache=True)
 def kernel_rhs(y, t, command, args):
-    """F(y, t) and the energy rates (``AUX_*``) with the compiled quadratic-law forces.
+    """
+    F(y, t) and the energy rates (``AUX_*``) with the compiled quadratic-law forces.
 
     args = (free, prescribed, mass, zP0, du, tau, has_drive, sine_index, sine_amp, sine_w,
     sine_phase, ia, ib, ca, cb, phia, phib, kind, W, C) -- see Model._kernel_args.
@@ -59,7 +67,9 @@ def kernel_rhs(y, t, command, args):
      ia, ib, ca, cb, phia, phib, kind, W, C) = args
     nF = free.shape[0]
     u = y[2 * nF] if has_drive else 0.0
-    zP, vP, aP = prescribed_motion(t, u, command, tau, has_drive, zP0, du, sine_index, sine_amp, sine_w, sine_phase)
+    zP, vP, aP = prescribed_motion(
+        t, u, command, tau, has_drive, zP0, du, sine_index, sine_amp, sine_w, sine_phase
+    )
     N = mass.shape[0]
     z = np.empty(N)
     v = np.empty(N)
@@ -71,8 +81,9 @@ def kernel_rhs(y, t, command, args):
         v[prescribed[i]] = vP[i]
     Q = np.empty(N)
     n = ia.shape[0]
-    potential, dissipation = quadratic_forces(z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q, np.empty((n, 3)),
-                                              np.empty((n, 3)))
+    potential, dissipation = quadratic_forces(
+        z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q, np.empty((n, 3)), np.empty((n, 3))
+    )
     F = np.empty_like(y)
     for i in range(nF):
         F[i] = y[nF + i]
@@ -84,9 +95,12 @@ def kernel_rhs(y, t, command, args):
 
 @njit(cache=True, inline="always")
 def energy_rates(Q, v, potential, dissipation, prescribed, mass, du, sine_index, aP):
-    """The per-state energy figures the stepping loop integrates (indices ``AUX_*``):
-    drive load du . Q_P, power of the timed (sine-rate) constraints sum v_P (M a_P - Q_P),
-    dissipated power, and mechanical energy T + U (a tuple: no allocation per step)."""
+    """
+    Return the per-state energy figures the stepping loop integrates (indices ``AUX_*``).
+
+    Drive load du . Q_P, power of the timed (sine-rate) constraints sum v_P (M a_P - Q_P),
+    dissipated power, and mechanical energy T + U (a tuple: no allocation per step).
+    """
     load = 0.0
     for i in range(prescribed.shape[0]):
         load += du[i] * Q[prescribed[i]]
@@ -100,8 +114,27 @@ def energy_rates(Q, v, potential, dissipation, prescribed, mass, du, sine_index,
     return load, timed, dissipation, kinetic + potential
 
 
-def _advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_after, F0, aux0, erows, escal, args):
-    """Up to n steps from (y, t) with F0 = F(y, t) and aux0 its energy rates.
+def _advance(
+    n,
+    y,
+    t,
+    dt,
+    command,
+    A,
+    phi1,
+    phi2,
+    rtol,
+    atol,
+    max_iter,
+    slow_after,
+    F0,
+    aux0,
+    erows,
+    escal,
+    args,
+):
+    """
+    Up to n steps from (y, t) with F0 = F(y, t) and aux0 its energy rates.
 
     Returns (y, F, aux, dissipated, work, steps, iterations, status): the state, its F and
     energy rates after the steps taken (at t + steps dt; the caller keeps time), the
@@ -159,7 +192,8 @@ def _advance(n, y, t, dt, command, A, phi1, phi2, rtol, atol, max_iter, slow_aft
 
 @njit(cache=True, inline="always")
 def step_energy(y0, y1, F0, N1, aux0, aux1, command, h, erows, escal):
-    """Dissipated energy and drive work over one step of the exponential trapezoidal rule.
+    """
+    Dissipated energy and drive work over one step of the exponential trapezoidal rule.
 
     The drive's power is ud (du^T M_P a_P - q) with ud = (command - u)/tau its rate, which
     decays exactly as e^{-s/tau} over the step, and q = du^T Q_P(y) the drive load, which
@@ -199,9 +233,12 @@ def step_energy(y0, y1, F0, N1, aux0, aux1, command, h, erows, escal):
 
 
 def weighted_phi(A, phi1, phi2, h, tau, shifted_phi1):
-    """Psi_1, Psi_2 = int_0^h e^{-s/tau} (s phi_1(sA), s^2/h phi_2(sA)) ds, from
-    phi1 = h phi_1(hA), phi2 = h phi_2(hA) and shifted_phi1 = h phi_1(h (A - I/tau)):
-    swapping the order of integration in the variation-of-constants integrals gives
+    """
+    Psi_1.
+
+    Psi_2 = int_0^h e^{-s/tau} (s phi_1(sA), s^2/h phi_2(sA)) ds, from phi1 = h phi_1(hA), phi2 = h
+    phi_2(hA) and shifted_phi1 = h phi_1(h (A - I/tau)): swapping the order of integration in the
+    variation-of-constants integrals gives.
 
         Psi_1 = tau (h phi_1(h(A - I/tau)) - e^{-h/tau} h phi_1(hA)),
         Psi_2 = (tau^2 h phi_1(h(A - I/tau))

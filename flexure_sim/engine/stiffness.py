@@ -1,4 +1,5 @@
-"""Hinge stiffness from geometry (dissertation Ch. 5, Appendix A notch_stiff.sci, cant_stiff.sci).
+"""
+Hinge stiffness from geometry (dissertation Ch. 5, Appendix A notch_stiff.sci, cant_stiff.sci).
 
 Each function returns the planar 3x3 stiffness K = [[Ko, Kc], [Kc^T, Kt]] (moment first,
 forces second) in the hinge frame, at the hinge's centre of stiffness, in SI units.
@@ -12,10 +13,14 @@ from .hyperdual import HyperDual
 
 
 def _numbers(**named):
-    """The named arguments as NumPy scalars (arithmetic overflows to inf, which callers
-    check, instead of raising); arrays or non-numbers raise a ValueError naming the argument.
+    """
+    Return the named arguments as NumPy scalars.
+
+    Arithmetic overflows to inf, which callers check, instead of raising; arrays or
+    non-numbers raise a ValueError naming the argument.
     Hyper-dual numbers pass unchanged: the formulas are plain arithmetic, so exact design
-    sensitivities (engine/sensitivity.py) flow through them."""
+    sensitivities (engine/sensitivity.py) flow through them.
+    """
     return [value if isinstance(value, HyperDual) else as_array(name, value, ())[()]
             for name, value in named.items()]
 
@@ -26,7 +31,8 @@ def shear_modulus(E: float, nu: float) -> float:
 
 
 def notch_stiffness(D: float, h: float, t: float, E: float, nu: float) -> np.ndarray:
-    """Planar stiffness of a circular notch hinge (eqs. 5.27-5.33, notch_stiff.sci).
+    """
+    Planar stiffness of a circular notch hinge (eqs. 5.27-5.33, notch_stiff.sci).
 
     D: hole diameter, h: inter-hole spacing (thinnest section), t: plate thickness, all in
     metres; E: Young's modulus (Pa); nu: Poisson's ratio.
@@ -44,8 +50,11 @@ def notch_stiffness(D: float, h: float, t: float, E: float, nu: float) -> np.nda
     return np.diag([Ko, kappa_1t * E * t, kappa_3t * E * t])
 
 
-def cantilever_stiffness(length: float, thickness: float, width: float, E: float, nu: float) -> np.ndarray:
-    """Planar stiffness of a leaf (cantilever) hinge at its centroid (eq. 5.8, cant_stiff.sci).
+def cantilever_stiffness(
+    length: float, thickness: float, width: float, E: float, nu: float
+) -> np.ndarray:
+    """
+    Planar stiffness of a leaf (cantilever) hinge at its centroid (eq. 5.8, cant_stiff.sci).
 
     The leaf runs along the hinge frame's y axis (as in fourbar.sci): bending in the plane
     gives Ko = E I / L and the shear stiffness along x, 12 E I / L^3; the axial stiffness

@@ -1,4 +1,5 @@
-"""Peak stress in notch and leaf hinges from their wrench, and the stress ratio sigma / sigma_y.
+"""
+Peak stress in notch and leaf hinges from their wrench, and the stress ratio sigma / sigma_y.
 
 The wrench (m, f_x, f_y) is the one a hinge exerts on its body B, in frame b at the hinge's
 centre (solver.Snapshot.wrenches); its magnitude is the section load. Works on floats and
@@ -68,8 +69,11 @@ _ROARK_U_NOTCH_BENDING = (
 
 
 def u_notch_bending_factor(depth, radius, width):
-    """K_t of two opposite U-notches (depth a, radius r) in a member of gross width W under
-    in-plane bending (Roark, Table 17.1; module docstring); 0.25 <= a/r <= 50."""
+    """
+    Return K_t of two opposite U-notches (depth a, radius r) in a member of gross width W.
+
+    The member is under in-plane bending (Roark, Table 17.1; module docstring); 0.25 <= a/r <= 50.
+    """
     ar = depth / radius
     ar_real = float(hd.real(ar))
     if not 0.25 <= ar_real <= 50.0:
@@ -82,8 +86,11 @@ def u_notch_bending_factor(depth, radius, width):
 
 
 def notch_concentration(h, D):
-    """K_t of a circular notch hinge (neck h, holes D) in bending: semicircular U-notches,
-    a = r = D/2 in a member of width h + D (module docstring)."""
+    """
+    K_t of a circular notch hinge (neck h, holes D) in bending.
+
+    Semicircular U-notches, a = r = D/2 in a member of width h + D (module docstring).
+    """
     return u_notch_bending_factor(0.5 * D, 0.5 * D, h + D)
 
 

@@ -1,4 +1,5 @@
-"""Study files: design sweeps (a grid) and Monte Carlo tolerance studies of one mechanism.
+"""
+Study files: design sweeps (a grid) and Monte Carlo tolerance studies of one mechanism.
 
 A study names a base mechanism, parameters addressed by their path in the mechanism's YAML
 document, and the outputs wanted (see docs/sweeps.md)::
@@ -8,8 +9,8 @@ document, and the outputs wanted (see docs/sweeps.md)::
     seed: 20261124                   # Monte Carlo only
     batch_size: 250                  # designs per task (default 100)
     input: 2.0e-6                    # drive input (m) of the static outputs and the step
-    step: {duration: 0.05, dt: 1.0e-4, band: 0.02}   # dynamic run of settling_time/overshoot
     outputs: [gain, compression, drive_force]
+    step: {duration: 0.05, dt: 1.0e-4, band: 0.02}   # dynamic run of settling_time/overshoot
     parameters:
       - {path: hinges.a.stiffness.h, normal: {std: 5.0e-6}}              # mean: the base value
       - {path: stiffness_models.notch.D, uniform: {low: 2.9e-3, high: 3.1e-3}}
@@ -63,9 +64,13 @@ class StudyError(FlexureSimError, ValueError):
 
 @dataclass(frozen=True)
 class Parameter:
-    """One varied quantity: its column ``name``, the resolved ``paths`` it sets, their
-    ``base`` values, and where its values come from (``kind``: values | normal | uniform).
-    ``offset``: the value is a deviation added to each path's base value."""
+    """
+    One varied quantity.
+
+    Its column ``name``, the resolved ``paths`` it sets, their ``base`` values, and where its
+    values come from (``kind``: values | normal | uniform). ``offset``: the value is a deviation
+    added to each path's base value.
+    """
 
     name: str
     paths: tuple[tuple, ...]
@@ -121,7 +126,7 @@ class Study:
         return out
 
     def design(self, values: Sequence[float]) -> dict:
-        """The base document with the parameter values applied (the base is not changed)."""
+        """Return the base document with the parameter values applied (the base is not changed)."""
         doc = self.base
         # Shared values first, then each hinge that gets its own stiffness copies the shared
         # model as changed, then the hinge's own values.
@@ -140,7 +145,11 @@ class Study:
         return mechanism_from_dict(self.design(values), source=self.mechanism_source)
 
     def fingerprint(self) -> str:
-        """A hash of everything that determines the results (to refuse resuming another study)."""
+        """
+        Return a hash of everything that determines the results.
+
+        Used to refuse resuming another study.
+        """
         text = json.dumps([self.base, [p.__dict__ for p in self.parameters], self.outputs,
                            self.monte_carlo, self.samples, self.seed, self.batch_size,
                            self.input, self.step], sort_keys=True, default=str)

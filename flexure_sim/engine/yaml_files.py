@@ -9,8 +9,12 @@ import yaml
 
 
 def read_text(path: str | Path, error: type[Exception]) -> str:
-    """The UTF-8 text of a file; a file that cannot be read, or is binary or in another
-    encoding, raises ``error`` naming the file and where the first bad byte is."""
+    """
+    Return the UTF-8 text of a file.
+
+    A file that cannot be read, or is binary or in another encoding, raises ``error`` naming the
+    file and where the first bad byte is.
+    """
     path = Path(path)
     try:
         data = path.read_bytes()
@@ -39,8 +43,12 @@ def _looks_binary(data: bytes) -> bool:
 
 
 def read_yaml(path: str | Path, error: type[Exception]) -> Any:
-    """Parse a YAML file; unreadable, non-UTF-8 or invalid files raise ``error`` with a
-    one-line message naming the file (and the line and column of a syntax error)."""
+    """
+    Parse a YAML file.
+
+    unreadable, non-UTF-8 or invalid files raise ``error`` with a one-line message naming the file
+    (and the line and column of a syntax error).
+    """
     path = Path(path)
     text = read_text(path, error)
     try:

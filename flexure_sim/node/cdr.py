@@ -1,4 +1,5 @@
-"""Precompiled CDR packers for the few fixed-layout messages the stage node publishes.
+"""
+Precompiled CDR packers for the few fixed-layout messages the stage node publishes.
 
 ``rclpy.serialization.serialize_message`` costs ~6 us per message plus ~6 us to build the
 Python message; the node publishes ~26 messages per tick at up to 10 kHz, so it packs the
@@ -54,7 +55,7 @@ ENCAPSULATIONS = {
 
 @functools.lru_cache(maxsize=1)
 def middleware() -> str:
-    """The rmw implementation rclpy loaded (``RMW_IMPLEMENTATION`` if rclpy cannot say)."""
+    """Return the rmw implementation rclpy loaded (``RMW_IMPLEMENTATION`` if rclpy cannot say)."""
     try:
         import rclpy
         return rclpy.get_rmw_implementation_identifier()
@@ -63,7 +64,7 @@ def middleware() -> str:
 
 
 def packing_applies(type_name: str, rmw: str | None = None) -> bool:
-    """True if the node may publish ``type_name`` packed here rather than serialize it."""
+    """Return True if the node may publish ``type_name`` packed here rather than serialize it."""
     return (rmw or middleware()) in FAST_DDS and type_name in PACKED_TYPES
 
 
@@ -113,8 +114,10 @@ class _Layout:
 
 
 class StampedPacker:
-    """A message made of a std_msgs/Header with a fixed frame_id, optional fixed strings and
-    a fixed uint32 sequence count, then ``n_doubles`` float64 values.
+    """
+    A message made of a std_msgs/Header with a fixed frame_id.
+
+    Optional fixed strings and a fixed uint32 sequence count, then ``n_doubles`` float64 values.
 
     Covers PoseStamped, WrenchStamped, TransformStamped (child_frame_id as extra string) and
     PoseArray (pose count as ``count``). ``pack(sec, nanosec, *doubles)``.
@@ -179,8 +182,12 @@ _TIME = struct.Struct("<iI")
 
 
 def _align4(out: bytearray, padding: list[int] | None) -> None:
-    """Pad ``out`` (whose first 4 bytes are the encapsulation header, so alignment modulo 4
-    is unchanged by it) to a multiple of 4 bytes with zeros."""
+    """
+    Pad ``out`` to a multiple of 4 bytes with zeros.
+
+    The first 4 bytes of ``out`` are the encapsulation header, so alignment modulo 4 is
+    unchanged by it.
+    """
     pad = (-len(out)) % 4
     if pad:
         if padding is not None:
@@ -209,10 +216,13 @@ def pack_diagnostics(
     frame_id: str = "",
     padding: list[int] | None = None,
 ) -> bytes:
-    """diagnostic_msgs/DiagnosticArray holding one DiagnosticStatus with ``values`` as its
-    KeyValue pairs (strings). serialize_message needs ~300 us for the node's ~50 values, a
-    third of a 1 kHz tick; this takes ~30 us. ``padding``, if given, receives the offsets
-    of the padding bytes written (for comparison with serialize_message)."""
+    """
+    Serialize a diagnostic_msgs/DiagnosticArray holding one DiagnosticStatus.
+
+    ``values`` are its KeyValue pairs (strings). serialize_message needs ~300 us for the node's
+    ~50 values, a third of a 1 kHz tick; this takes ~30 us. ``padding``, if given, receives the
+    offsets of the padding bytes written (for comparison with serialize_message).
+    """
     out = bytearray(CDR_LE)
     out += _TIME.pack(sec, nanosec)
     _put_string(out, frame_id, padding)
@@ -240,9 +250,12 @@ _UINT32 = {"<": struct.Struct("<I"), ">": struct.Struct(">I")}
 
 
 def parse_float64(data: bytes, rmw: str | None = None) -> float:
-    """The value of a serialized ``std_msgs/msg/Float64`` in any encoding named in the module
-    docstring. Raises ValueError naming the problem (unknown or unsupported encapsulation,
-    too short, not a Float64)."""
+    """
+    Return the value of a serialized ``std_msgs/msg/Float64``.
+
+    Any encoding named in the module docstring is read. Raises ValueError naming the problem
+    (unknown or unsupported encapsulation, too short, not a Float64).
+    """
     if len(data) < 4:
         raise ValueError(f"{len(data)} bytes: too short for a serialized Float64")
     kind = int.from_bytes(data[:2], "big")
@@ -269,7 +282,7 @@ def parse_float64(data: bytes, rmw: str | None = None) -> float:
 
 
 def _deserialize(data: bytes, name: str) -> float:
-    """rclpy's deserialisation (the middleware's own type support) of a Float64."""
+    """Deserialise a Float64 by rclpy (the middleware's own type support)."""
     from rclpy.serialization import deserialize_message
     from std_msgs.msg import Float64
     try:

@@ -1,7 +1,9 @@
-"""Drive command intake of the stage node: the stepping thread takes what the command
-subscription's reader holds once per tick (`polled`), validates each command in order
-(`drive_input.CommandFilter`), warns at most once per second per kind, and records every
-received command — rejected ones included — at the tick's log time.
+"""
+Drive command intake of the stage node.
+
+The stepping thread takes what the command subscription's reader holds once per tick (`polled`),
+validates each command in order (`drive_input.CommandFilter`), warns at most once per second per
+kind, and records every received command — rejected ones included — at the tick's log time.
 """
 from __future__ import annotations
 
@@ -49,8 +51,11 @@ def decode_float64_batch(payloads: Sequence[bytes]) -> tuple[list[float], list[s
 
 
 class CommandIntake:
-    """Commands of one polled subscription into one `CommandFilter` (None: no drive) and onto
-    recording channel ``channel`` through ``record(items, stamp)``."""
+    """
+    Commands of one polled subscription into one `CommandFilter` and onto a recording channel.
+
+    The filter is None: no drive; the channel is ``channel``, through ``record(items, stamp)``.
+    """
 
     def __init__(self, subscription: Any, drive_filter: Optional[CommandFilter], channel: int,
                  record: Callable[[list[tuple[int, bytes]], int], None], log: Any,
@@ -66,9 +71,13 @@ class CommandIntake:
         self.time_s = 0.0
 
     def apply(self, stamp: int) -> None:
-        """Take the commands received since the last tick; validate them in order; record each
-        at log time ``stamp`` (ns). Per batch, not per command: one decode, one filter call,
-        one recording frame; the time it takes is summed in `time_s` (`count` commands)."""
+        """
+        Take the commands received since the last tick.
+
+        Validate them in order; record each at log time ``stamp`` (ns). Per batch, not per command:
+        one decode, one filter call, one recording frame; the time it takes is summed in `time_s`
+        (`count` commands).
+        """
         t0 = time.perf_counter()
         commands = take_raw(self.subscription, COMMAND_TAKE_LIMIT)
         if not commands:
@@ -97,8 +106,11 @@ class CommandIntake:
         take_raw(self.subscription, COMMAND_TAKE_LIMIT)
 
     def warn(self, kind: str, message: str, events: int = 1) -> None:
-        """A throttled warning about ``events`` commands of ``kind`` (a counter of the
-        filter); ``message`` describes the last of them."""
+        """
+        Log a throttled warning about ``events`` commands of ``kind``.
+
+        ``kind`` is a counter of the filter; ``message`` describes the last of them.
+        """
         count = self._throttle.event(kind, events)
         if count is not None:
             total = getattr(self.filter.counters, kind) if self.filter else count

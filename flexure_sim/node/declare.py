@@ -1,6 +1,9 @@
-"""The stage node's parameters declared to ROS: a ``ParameterDescriptor`` per `ParamSpec`
-(description with unit, range, read-only, constraints), and ``-p publish_rate:=500`` accepted
-for double parameters."""
+"""
+The stage node's parameters declared to ROS.
+
+A ``ParameterDescriptor`` per `ParamSpec` (description with unit, range, read-only, constraints),
+and ``-p publish_rate:=500`` accepted for double parameters.
+"""
 from __future__ import annotations
 
 from typing import Any
@@ -33,7 +36,7 @@ _CONSTRAINTS = {
 
 
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
-    """The ROS descriptor of one parameter."""
+    """Return the ROS descriptor of one parameter."""
     d = ParameterDescriptor(
         name=spec.name,
         type=_TYPE_CODES[spec.type],
@@ -55,8 +58,11 @@ def declare(node: Any, spec: ParamSpec) -> None:
 
 
 def coerce_integer_overrides(node: Any) -> None:
-    """Accept ``-p publish_rate:=500`` for double parameters (ROS would reject the int).
-    Must run before the parameters are declared."""
+    """
+    Accept ``-p publish_rate:=500`` for double parameters (ROS would reject the int).
+
+    Must run before the parameters are declared.
+    """
     overrides = getattr(node, "_parameter_overrides", None)
     if not isinstance(overrides, dict):
         return

@@ -1,5 +1,7 @@
-"""A small rclpy node that drives a running ``stage_node`` through a demo profile of steps,
-optionally recording exactly that part of the run, and reports the gain it saw live.
+"""
+A small rclpy node that drives a running ``stage_node`` through a demo profile of steps.
+
+It optionally records exactly that part of the run, and reports the gain it saw live.
 
     python -m flexure_sim.node.demo_drive [--fractions 0.25 0.5 0.75 1 0 | --levels M ...]
         [--rest 0.01] [--dwell 0.02] [--node stage_node] [--record] [--json] [--timeout 60]
@@ -48,9 +50,18 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--levels", nargs="+", type=float, metavar="M", help="command levels in metres")
     g.add_argument("--fractions", nargs="+", type=float, metavar="F",
                    help="levels as fractions of the node's stroke (default 0.25 0.5 0.75 1 0)")
-    p.add_argument("--rest", type=float, default=0.01, help="time at rest before the first step (s, default 0.01)")
-    p.add_argument("--dwell", type=float, default=0.02, help="time at each level (s, default 0.02)")
-    p.add_argument("--node", default="stage_node", help="name of the stage node (default stage_node)")
+    p.add_argument(
+        "--rest",
+        type=float,
+        default=0.01,
+        help="time at rest before the first step (s, default 0.01)",
+    )
+    p.add_argument(
+        "--dwell", type=float, default=0.02, help="time at each level (s, default 0.02)"
+    )
+    p.add_argument(
+        "--node", default="stage_node", help="name of the stage node (default stage_node)"
+    )
     p.add_argument("--record", action="store_true",
                    help="record exactly the profile (the node's ~/record service on, then off)")
     p.add_argument("--json", action="store_true", help="print the live values as one JSON object")
@@ -69,7 +80,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     for name in ("rest", "dwell", "timeout"):
         value = getattr(args, name)
         if not (value > 0 and math.isfinite(value)):
-            print(f"{PROG}: error: --{name} {value!r}: must be a positive number of seconds", file=sys.stderr)
+            print(
+                f"{PROG}: error: --{name} {value!r}: must be a positive number of seconds",
+                file=sys.stderr,
+            )
             return 2
     rclpy.init(args=argv)
     driver = None
@@ -98,8 +112,11 @@ def format_live(result: dict) -> str:
              f"{len(result['steps'])} step(s)"]
     for s in result["steps"]:
         gain = "-" if s["gain"] is None else f"{s['gain']:.6g}"
-        lines.append(f"  step {s['index']}: t = {s['t'] * 1e3:9.3f} ms, command {s['command_before'] * 1e6:g} -> "
-                     f"{s['command'] * 1e6:g} um, output {s['output'] * 1e6:.5g} um, live gain {gain}")
+        lines.append(
+            f"  step {s['index']}: t = {s['t'] * 1e3:9.3f} ms, command "
+            f"{s['command_before'] * 1e6:g} -> "
+            f"{s['command'] * 1e6:g} um, output {s['output'] * 1e6:.5g} um, live gain {gain}"
+        )
     if result.get("recording"):
         lines.append(f"recorded to {result['recording']}")
     return "\n".join(lines)
@@ -170,7 +187,9 @@ class DemoDriver:
     def _call(self, srv_type: Any, name: str, request: Any) -> Any:
         client = self.node.create_client(srv_type, name)
         try:
-            self._spin_until(client.service_is_ready, f"the service {name} (is {self.args.node} running?)")
+            self._spin_until(
+                client.service_is_ready, f"the service {name} (is {self.args.node} running?)"
+            )
             future = client.call_async(request)
             self._spin_until(future.done, f"the answer of {name}")
             return future.result()
@@ -189,8 +208,10 @@ class DemoDriver:
         v = answer.values
         params = {"stroke_min": v[0].double_value, "stroke_max": v[1].double_value,
                   "publish_rate": v[2].double_value, "time_mode": v[3].string_value}
-        if not all(math.isfinite(params[k]) for k in ("stroke_min", "stroke_max", "publish_rate")) \
-                or params["publish_rate"] <= 0:
+        if (
+            not all(math.isfinite(params[k]) for k in ("stroke_min", "stroke_max", "publish_rate"))
+            or params["publish_rate"] <= 0
+        ):
             raise DriveError(f"{name} returned unusable values {params}")
         return params
 
@@ -200,7 +221,9 @@ class DemoDriver:
         name = self._service_name("record")
         answer = self._call(SetBool, name, SetBool.Request(data=on))
         if not answer.success:
-            raise DriveError(f"{name} refused to turn recording {'on' if on else 'off'}: {answer.message}")
+            raise DriveError(
+                f"{name} refused to turn recording {'on' if on else 'off'}: {answer.message}"
+            )
         return answer.message
 
     # ------------------------------------------------------------------ the profile
@@ -245,7 +268,8 @@ class DemoDriver:
                 "recording": recording}
 
     def _run_lockstep(self, levels: list[float], period: float) -> list[dict]:
-        """Advance a lockstep node tick by tick with ~/step: exact, reproducible timing.
+        """
+        Advance a lockstep node tick by tick with ~/step: exact, reproducible timing.
 
         Before each command the values of the last tick are awaited (the node publishes every
         topic once per tick), so the live values are those of a known tick.
@@ -331,7 +355,9 @@ class DemoDriver:
             if t != last_progress[0]:
                 last_progress = (t, time.monotonic())
             elif time.monotonic() - last_progress[1] > args.timeout:
-                raise DriveError(f"time stood still for {args.timeout:g} s (did {args.node} stop?)")
+                raise DriveError(
+                    f"time stood still for {args.timeout:g} s (did {args.node} stop?)"
+                )
             if t < times[k]:
                 continue
             seen.append({"t": t / 1e9, "input": self.input, "output": self.output})

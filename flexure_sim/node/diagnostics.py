@@ -14,8 +14,11 @@ from . import interface as itf
 
 
 class Window:
-    """Accumulators of one diagnostics window (wall-clock timings of the stepping thread) and
-    the cumulative counters at its start."""
+    """
+    Accumulators of one diagnostics window and the cumulative counters at its start.
+
+    The accumulators are wall-clock timings of the stepping thread.
+    """
 
     __slots__ = ("ticks", "step_sum", "step_max", "snap_sum", "pub_sum", "pub_max", "tick_max",
                  "wall0", "sim0", "missed0", "lin0", "steps0", "counters0", "engine_failures0",
@@ -34,8 +37,11 @@ class Window:
         self.intake0 = intake0
 
     def add(self, step_time: float, snap_time: float, pub_time: float, tick_time: float) -> None:
-        """One tick's wall-clock times (s): engine steps, snapshot, pack + record + publish,
-        whole tick."""
+        """
+        One tick's wall-clock times (s).
+
+        Engine steps, snapshot, pack + record + publish, whole tick.
+        """
         self.ticks += 1
         self.step_sum += step_time
         self.snap_sum += snap_time
@@ -49,9 +55,12 @@ class Window:
 
 
 class Diagnostics:
-    """Builds and publishes the status of the stepping loop ``loop`` (a `SteppingLoop`):
-    recorded on channel ``channel`` of its recording session, then published by ``publisher``.
-    ``extra`` returns further (counters, notes, level) from the node (QoS problems)."""
+    """
+    Builds and publishes the status of the stepping loop ``loop`` (a `SteppingLoop`).
+
+    Recorded on channel ``channel`` of its recording session, then published by ``publisher``.
+    ``extra`` returns further (counters, notes, level) from the node (QoS problems).
+    """
 
     def __init__(self, loop: Any, publisher: Any, channel: int, name: str, hardware_id: str,
                  extra: Any = None) -> None:

@@ -1,4 +1,5 @@
-"""Validation of the piezo drive commands the stage node receives (pure Python, no ROS).
+"""
+Validation of the piezo drive commands the stage node receives (pure Python, no ROS).
 
 A command is a target displacement (m) of the actuator along the mechanism's drive axis.
 Before the simulation sees it, `CommandFilter`
@@ -68,7 +69,8 @@ def limits_problem(stroke_min: float, stroke_max: float, slew_rate: float) -> Op
 
 @dataclass
 class CommandCounters:
-    """Counts since the filter was created (they survive `CommandFilter.reset`).
+    """
+    Counts since the filter was created (they survive `CommandFilter.reset`).
 
     received: every command submitted; accepted: finite ones (clamped included);
     clamped: finite but outside the stroke; rejected: NaN or +-Inf, and malformed ones;
@@ -89,7 +91,8 @@ class CommandCounters:
 
 
 class CommandFilter:
-    """Turns a stream of raw commands into the actuator target the engine follows.
+    """
+    Turns a stream of raw commands into the actuator target the engine follows.
 
     Use: `submit` each received command in order (at the start of the tick in which it
     takes effect), then `begin_tick` once, then `advance` once per engine step and pass the
@@ -110,7 +113,7 @@ class CommandFilter:
         return self._limits
 
     def set_limits(self, limits: DriveLimits) -> None:
-        """New stroke / slew rate; the current target is clamped into the new stroke."""
+        """Apply a new stroke / slew rate; the current target is clamped into the new stroke."""
         self._limits = limits
         self.target = self._clamp(self.target)
         self._checked = False
@@ -145,9 +148,13 @@ class CommandFilter:
         c.malformed += 1
 
     def submit_many(self, values: Sequence[float]) -> tuple[int, int, float, float]:
-        """`submit` for each of ``values`` (floats) in order, in one call: the same target and
-        counters, without a Python call per command. Returns (rejected, clamped, last
-        rejected value, last clamped value as received); the values are NaN when none."""
+        """
+        `submit` for each of ``values`` (floats) in order, in one call.
+
+        The same target and counters, without a Python call per command. Returns (rejected,
+        clamped, last rejected value, last clamped value as received); the values are NaN when
+        none.
+        """
         lo, hi = self._limits.stroke_min, self._limits.stroke_max
         isfinite = math.isfinite
         target = self.target
@@ -177,8 +184,12 @@ class CommandFilter:
         return rejected, clamped, last_rejected, last_clamped
 
     def begin_tick(self, period: float) -> bool:
-        """Start of a publish tick of ``period`` seconds: count the new target as rate-limited
-        if the actuator cannot reach it within the tick. Returns True when it was counted."""
+        """
+        Start of a publish tick of ``period`` seconds.
+
+        Count the new target as rate-limited if the actuator cannot reach it within the tick.
+        Returns True when it was counted.
+        """
         if self._checked:
             return False
         self._checked = True
@@ -189,7 +200,11 @@ class CommandFilter:
 
     @property
     def settled(self) -> bool:
-        """True when the engine's target equals the accepted command (no ramp in progress)."""
+        """
+        Return True when the engine's target equals the accepted command.
+
+        That is, no ramp is in progress.
+        """
         return self.applied == self.target
 
     def advance(self, dt: float) -> float:
@@ -204,8 +219,11 @@ class CommandFilter:
         return self.applied
 
     def hold(self, value: float) -> None:
-        """Target and applied target both ``value`` (the engine could not follow the command:
-        the actuator stays where it was)."""
+        """
+        Set the target and applied target both to ``value``.
+
+        The engine could not follow the command: the actuator stays where it was.
+        """
         self.target = self.applied = float(value)
         self._checked = True
 
@@ -216,8 +234,11 @@ class CommandFilter:
 
 
 class WarningThrottle:
-    """At most one warning per kind every ``interval_s`` (wall clock), with the number of
-    events it stands for. ``clock`` is injectable for tests."""
+    """
+    At most one warning per kind every ``interval_s`` (wall clock).
+
+    Each warning comes with the number of events it stands for. ``clock`` is injectable for tests.
+    """
 
     def __init__(
         self, interval_s: float = 1.0, clock: Callable[[], float] = time.monotonic
@@ -228,8 +249,12 @@ class WarningThrottle:
         self._pending: dict[str, int] = {}
 
     def event(self, kind: str, count: int = 1) -> Optional[int]:
-        """Record ``count`` events of ``kind``; return how many events the warning to be
-        emitted now stands for (including these), or None if it is suppressed."""
+        """
+        Record ``count`` events of ``kind``.
+
+        Return how many events the warning to be emitted now stands for (including these), or None
+        if it is suppressed.
+        """
         pending = self._pending.get(kind, 0) + count
         now = self._clock()
         last = self._last.get(kind)

@@ -1,5 +1,7 @@
-"""What the engine can follow: refusing actuator strokes beyond it, holding the state when a
-step fails anyway (no ROS).
+"""
+What the engine can follow.
+
+Refusing actuator strokes beyond it, holding the state when a step fails anyway (no ROS).
 
 Two lines of defence keep input from ever stopping the node (issue 16.10):
 
@@ -24,9 +26,12 @@ from ..engine.solver import Simulation, SolverError
 
 
 class StrokeProbe:
-    """Static-equilibrium check of stroke ends on a simulation of its own (the node's is
-    stepped by another thread). Results are cached per value; the first check builds the
-    probe (tens of milliseconds)."""
+    """
+    Static-equilibrium check of stroke ends on a simulation of its own.
+
+    The node's simulation is stepped by another thread. Results are cached per value; the first
+    check builds the probe (tens of milliseconds).
+    """
 
     def __init__(self, mechanism: Mechanism, dt: float) -> None:
         self._mechanism = mechanism
@@ -58,7 +63,7 @@ class StrokeProbe:
 
 
 def snapshot_finite(snap: Any) -> bool:
-    """True if every number a tick publishes from ``snap`` is finite (~3 us)."""
+    """Return True if every number a tick publishes from ``snap`` is finite (~3 us)."""
     scalars = [getattr(snap, name, 0.0) for name in
                ("compression", "output", "drive_input", "drive_force")]
     return bool(np.isfinite(snap.poses).all() and np.isfinite(snap.wrenches).all()
@@ -67,8 +72,12 @@ def snapshot_finite(snap: Any) -> bool:
 
 
 class EngineHold:
-    """Saves the engine state (and the drive filter's targets) before a tick; `restore` puts
-    them back after a failed step. Counts failures (`failures`) and keeps the last reason."""
+    """
+    Saves the engine state (and the drive filter's targets) before a tick.
+
+    `restore` puts them back after a failed step. Counts failures (`failures`) and keeps the last
+    reason.
+    """
 
     def __init__(self) -> None:
         self.failures = 0
@@ -82,8 +91,12 @@ class EngineHold:
         self._targets = (drive_filter.target, drive_filter.applied) if drive_filter else None
 
     def restore(self, sim: Simulation, drive_filter: Any, exc: BaseException) -> str:
-        """Back to the saved state after ``exc``; the drive target returns to where the actuator
-        was (the command the engine could not follow is dropped). Returns the reason logged."""
+        """
+        Back to the saved state after ``exc``.
+
+        The drive target returns to where the actuator was (the command the engine could not follow
+        is dropped). Returns the reason logged.
+        """
         self.failures += 1
         sim.state = self._state.copy()
         dropped = ""

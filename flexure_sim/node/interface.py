@@ -1,5 +1,8 @@
-"""The stage node's ROS interface as data: topic table (names, types, units, frames, QoS)
-and the conversion of an engine ``Snapshot`` into messages.
+"""
+The stage node's ROS interface as data.
+
+Topic table (names, types, units, frames, QoS) and the conversion of an engine ``Snapshot`` into
+messages.
 
 Two equivalent conversions exist: `StageInterface.messages` builds rclpy message objects
 (the reference, readable), `StageInterface.encode` packs the same messages straight to CDR
@@ -48,17 +51,20 @@ def _reliable_volatile(depth: int) -> QoSProfile:
 
 
 def stream_qos() -> QoSProfile:
-    """QoS of every published topic: reliable, keep last `QUEUE_DEPTH`, volatile."""
+    """Return the QoS of every published topic: reliable, keep last `QUEUE_DEPTH`, volatile."""
     return _reliable_volatile(QUEUE_DEPTH)
 
 
 def command_qos(reliability: str = "reliable") -> QoSProfile:
-    """QoS of the drive command subscription: ``reliability`` (``reliable``: only reliable
-    publishers match; ``best_effort``: reliable and best-effort ones), keep last
-    `COMMAND_DEPTH`, volatile.
+    """
+    Return the QoS of the drive command subscription.
+
+    ``reliability`` (``reliable``: only reliable publishers match; ``best_effort``: reliable and
+    best-effort ones), keep last `COMMAND_DEPTH`, volatile.
 
     The reader is emptied once per tick (`polled`), so it must hold a tick's worth of
-    commands: 1000 is a 1 MHz stream at 1 kHz ticks, or 200 ms of a 5 kHz stream at 5 Hz."""
+    commands: 1000 is a 1 MHz stream at 1 kHz ticks, or 200 ms of a 5 kHz stream at 5 Hz.
+    """
     qos = _reliable_volatile(COMMAND_DEPTH)
     if reliability == "best_effort":
         qos.reliability = ReliabilityPolicy.BEST_EFFORT
@@ -85,8 +91,12 @@ def check_names(mechanism: Mechanism) -> None:
 
 @dataclass(frozen=True)
 class TopicSpec:
-    """One topic: ``key`` (internal), relative ``name``, message class and ``pkg/msg/Type``,
-    unit, frame id of its header (``""`` when unstamped) and what it carries."""
+    """
+    One topic.
+
+    ``key`` (internal), relative ``name``, message class and ``pkg/msg/Type``, unit, frame id of
+    its header (``""`` when unstamped) and what it carries.
+    """
 
     key: str
     name: str
@@ -97,9 +107,13 @@ class TopicSpec:
     description: str
 
 
-def _spec(key: str, name: str, msg_type: type, unit: str, frame_id: str, description: str) -> TopicSpec:
+def _spec(
+    key: str, name: str, msg_type: type, unit: str, frame_id: str, description: str
+) -> TopicSpec:
     module = msg_type.__module__.split(".")[0]
-    return TopicSpec(key, name, msg_type, f"{module}/msg/{msg_type.__name__}", unit, frame_id, description)
+    return TopicSpec(
+        key, name, msg_type, f"{module}/msg/{msg_type.__name__}", unit, frame_id, description
+    )
 
 
 def yaw_quaternion(yaw: float) -> tuple[float, float, float, float]:
@@ -109,7 +123,8 @@ def yaw_quaternion(yaw: float) -> tuple[float, float, float, float]:
 
 
 class StageInterface:
-    """Topic table of one mechanism in one time mode, and snapshot -> messages.
+    """
+    Topic table of one mechanism in one time mode, and snapshot -> messages.
 
     ``tick_topics`` lists, in publishing order, the topics published every tick (``/clock``
     first in fast and lockstep modes); ``diagnostics`` and ``command`` are the diagnostics
@@ -135,14 +150,38 @@ class StageInterface:
 
         specs: list[TopicSpec] = []
         if self.publishes_clock:
-            specs.append(_spec("clock", topics.CLOCK, Clock, "s", "",
-                                "simulated time (fast and lockstep modes only)"))
-        specs.append(_spec("poses", topics.POSE_ARRAY, PoseArray, "m, rad", ROOT_FRAME,
-                            "pose of every body frame (at the mass centre) in the root frame, "
-                            f"in body order ({', '.join(bodies)})"))
+            specs.append(
+                _spec(
+                    "clock",
+                    topics.CLOCK,
+                    Clock,
+                    "s",
+                    "",
+                    "simulated time (fast and lockstep modes only)",
+                )
+            )
+        specs.append(
+            _spec(
+                "poses",
+                topics.POSE_ARRAY,
+                PoseArray,
+                "m, rad",
+                ROOT_FRAME,
+                "pose of every body frame (at the mass centre) in the root frame, "
+                f"in body order ({', '.join(bodies)})",
+            )
+        )
         for b in bodies:
-            specs.append(_spec(f"pose:{b}", topics.body_pose(b), PoseStamped, "m, rad", ROOT_FRAME,
-                                f"pose of body {b}'s frame (at its mass centre) in the root frame"))
+            specs.append(
+                _spec(
+                    f"pose:{b}",
+                    topics.body_pose(b),
+                    PoseStamped,
+                    "m, rad",
+                    ROOT_FRAME,
+                    f"pose of body {b}'s frame (at its mass centre) in the root frame",
+                )
+            )
         for h in mech.hinges:
             specs.append(_spec(
                 f"wrench:{h.name}", topics.hinge_wrench(h.name), WrenchStamped, "N, N m",
@@ -150,11 +189,18 @@ class StageInterface:
                 f"wrench hinge {h.name} exerts on its body B ({h.b.body}), in its frame b "
                 f"({hinge_frame(h.name)}), torque about b's origin; the opposite acts on "
                 f"body A ({h.a.body})"))
-            specs.append(_spec(
-                f"deflection:{h.name}", topics.hinge_deflection(h.name), TransformStamped, "m, rad",
-                hinge_frame_a(h.name),
-                f"deflection of hinge {h.name}: pose of frame b ({hinge_frame(h.name)}) in frame a "
-                f"({hinge_frame_a(h.name)}); translation (p_x, p_y, 0), yaw alpha"))
+            specs.append(
+                _spec(
+                    f"deflection:{h.name}",
+                    topics.hinge_deflection(h.name),
+                    TransformStamped,
+                    "m, rad",
+                    hinge_frame_a(h.name),
+                    f"deflection of hinge {h.name}: pose of frame b ({hinge_frame(h.name)}) in "
+                    "frame a "
+                    f"({hinge_frame_a(h.name)}); translation (p_x, p_y, 0), yaw alpha",
+                )
+            )
         if self.compression_hinge is not None:
             c = self.compression_hinge
             specs.append(_spec(
@@ -176,9 +222,17 @@ class StageInterface:
                 "drive_input", topics.DRIVE_INPUT, Float64, "m", "",
                 "actuator output actually applied (after validation, slew limiting and the "
                 "actuator lag), along the drive axis"))
-            specs.append(_spec(
-                "drive_force", topics.DRIVE_FORCE, Float64, "N", "",
-                f"force the actuator applies to the driven body {mech.drive.body} along the drive axis"))
+            specs.append(
+                _spec(
+                    "drive_force",
+                    topics.DRIVE_FORCE,
+                    Float64,
+                    "N",
+                    "",
+                    f"force the actuator applies to the driven body {mech.drive.body} along the "
+                    "drive axis",
+                )
+            )
         self.tick_topics: tuple[TopicSpec, ...] = tuple(specs)
         #: Indices in `tick_topics` of the control topics (published every tick whatever
         #: ``monitor_rate``): everything but poses, wrenches and deflections.
@@ -209,7 +263,7 @@ class StageInterface:
         ]
 
     def packers(self) -> list[Any]:
-        """The packer of each tick topic, in `tick_topics` order (for the padding test)."""
+        """Return the packer of each tick topic, in `tick_topics` order (for the padding test)."""
         out: list[Any] = []
         if self.publishes_clock:
             out.append(self._clock)
@@ -337,8 +391,12 @@ def encode_diagnostics(
     message: str,
     values: Sequence[tuple[str, Any]],
 ) -> bytes:
-    """CDR of `diagnostics_message` with the same arguments, packed by `cdr.pack_diagnostics`
-    (serialized by serialize_message where packing does not apply)."""
+    """
+    CDR of `diagnostics_message` with the same arguments.
+
+    Packed by `cdr.pack_diagnostics` (serialized by serialize_message where packing does not
+    apply).
+    """
     if not packing_applies("diagnostic_msgs/msg/DiagnosticArray"):
         return serialize_message(
             diagnostics_message(stamp_ns, name, hardware_id, level, message, values))
@@ -355,8 +413,12 @@ def diagnostics_message(
     message: str,
     values: Sequence[tuple[str, Any]],
 ) -> DiagnosticArray:
-    """One DiagnosticStatus in a DiagnosticArray; values are formatted with str()
-    (floats with repr precision). The reference for `encode_diagnostics`."""
+    """
+    One DiagnosticStatus in a DiagnosticArray.
+
+    Values are formatted with str() (floats with repr precision). The reference for
+    `encode_diagnostics`.
+    """
     status = DiagnosticStatus()
     status.level = bytes([level])
     status.name = name
@@ -370,8 +432,11 @@ def diagnostics_message(
 
 
 def value_text(value: Any) -> str:
-    """A parameter or diagnostics value as text, as ROS writes it on the command line:
-    true/false, floats with repr precision, everything else with str()."""
+    """
+    Return a parameter or diagnostics value as text, as ROS writes it on the command line.
+
+    true/false, floats with repr precision, everything else with str().
+    """
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, float):

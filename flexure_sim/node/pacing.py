@@ -1,4 +1,5 @@
-"""Real-time pacing of the stage node's publish ticks against a steady clock (no ROS).
+"""
+Real-time pacing of the stage node's publish ticks against a steady clock (no ROS).
 
 Tick k is due at the absolute deadline ``D_k = t0 + k * period`` of a monotonic clock
 (``time.perf_counter``): the loop sleeps until shortly before ``D_k``, busy-waits the rest
@@ -29,8 +30,12 @@ _BINS = 20_000
 
 @dataclass
 class PacingStats:
-    """Counters since `Pacer.start`: ticks run, ticks missed (finished after the next
-    deadline), slips (re-anchorings) and ticks skipped by them, worst start lateness (s)."""
+    """
+    Counters since `Pacer.start`.
+
+    Ticks run, ticks missed (finished after the next deadline), slips (re-anchorings) and ticks
+    skipped by them, worst start lateness (s).
+    """
 
     ticks: int = 0
     missed: int = 0
@@ -48,9 +53,12 @@ class PacingStats:
             self.max_late_s = late
 
     def late_percentiles(self, *qs: float) -> tuple[float, ...]:
-        """Start lateness (s) below which a fraction q of the ticks started (bin upper edge),
-        for each q. Called from the paced loop (diagnostics), so it costs a bounded ~20 us
-        whatever the distribution: one cumulative sum of the histogram, binary searches."""
+        """
+        Start lateness (s) below which a fraction q of the ticks started (bin upper edge).
+
+        One value for each q. Called from the paced loop (diagnostics), so it costs a bounded ~20
+        us whatever the distribution: one cumulative sum of the histogram, binary searches.
+        """
         if self.observed == 0:
             return tuple(0.0 for _ in qs)
         cumulative = np.cumsum(self.late_histogram)
@@ -65,9 +73,12 @@ class PacingStats:
 
 
 class Pacer:
-    """Absolute-deadline scheduler. ``spin_s``: the last part of each wait is busy-waited
-    instead of slept (sleep overshoots by ~0.1 ms and lets the core idle). ``clock`` and
-    ``sleep`` are injectable for tests."""
+    """
+    Absolute-deadline scheduler.
+
+    ``spin_s``: the last part of each wait is busy-waited instead of slept (sleep overshoots by
+    ~0.1 ms and lets the core idle). ``clock`` and ``sleep`` are injectable for tests.
+    """
 
     def __init__(
         self,
@@ -104,8 +115,11 @@ class Pacer:
         self.max_lag_s = max(self.max_lag_s, 2.0 * self.period)
 
     def reanchor(self) -> None:
-        """Forget lateness (after a pause such as a reset): the next tick is due one period
-        from now, without counting a slip."""
+        """
+        Forget lateness (after a pause such as a reset).
+
+        The next tick is due one period from now, without counting a slip.
+        """
         self._t0 = self._clock() - self._k * self.period
 
     def wait(self) -> float:
@@ -144,13 +158,16 @@ class Pacer:
 
 
 def set_thread_nice(nice: int) -> tuple[int, str]:
-    """Ask the kernel to run the calling thread at niceness ``nice`` (Linux: each thread has
-    its own). Returns the niceness in effect and, if the request was refused or is not
-    supported here, why (empty when granted).
+    """
+    Ask the kernel to run the calling thread at niceness ``nice`` (Linux: each thread has its own).
+
+    Returns the niceness in effect and, if the request was refused or is not supported here, why
+    (empty when granted).
 
     A thread below the niceness of the other processes takes a shared core from them as
     soon as it wakes; on a busy 2-core machine that is what keeps paced ticks on time.
-    Lowering niceness needs CAP_SYS_NICE or an RLIMIT_NICE that allows it."""
+    Lowering niceness needs CAP_SYS_NICE or an RLIMIT_NICE that allows it.
+    """
     if not sys.platform.startswith("linux"):
         return 0, f"per-thread niceness is Linux only (platform {sys.platform})"
     tid = threading.get_native_id()

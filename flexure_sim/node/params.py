@@ -1,4 +1,5 @@
-"""The stage node's parameters as data, and their validation (pure Python, no side effects).
+"""
+The stage node's parameters as data, and their validation (pure Python, no side effects).
 
 The node declares each `ParamSpec` with a ``ParameterDescriptor`` (description, range,
 read-only), validates every change with `validate` in its on-set callback, and applies
@@ -28,8 +29,12 @@ STEPPING_NICE = -10
 
 @dataclass(frozen=True)
 class ParamSpec:
-    """One parameter: name, default, Python type (float, int, bool or str), unit, read-only,
-    numeric range [low, high] (None if unbounded) and description."""
+    """
+    One parameter.
+
+    name, default, Python type (float, int, bool or str), unit, read-only, numeric range [low,
+    high] (None if unbounded) and description.
+    """
 
     name: str
     default: Any
@@ -41,9 +46,15 @@ class ParamSpec:
     description: str
 
 
-def parameter_specs(drive_defaults: Optional[tuple[float, float, float]] = None) -> list[ParamSpec]:
-    """All parameters. ``drive_defaults`` = (stroke_min, stroke_max, slew_rate) of the
-    mechanism's drive, or None when it has no drive (the limits are then unused)."""
+def parameter_specs(
+    drive_defaults: Optional[tuple[float, float, float]] = None,
+) -> list[ParamSpec]:
+    """
+    All parameters.
+
+    ``drive_defaults`` = (stroke_min, stroke_max, slew_rate) of the mechanism's drive, or None when
+    it has no drive (the limits are then unused).
+    """
     smin, smax, slew = drive_defaults if drive_defaults is not None else (0.0, 0.0, 1.0)
     unused = "" if drive_defaults is not None else " Unused: the mechanism has no drive."
     return [
@@ -101,7 +112,8 @@ def parameter_specs(drive_defaults: Optional[tuple[float, float, float]] = None)
 
 
 def as_declared_type(spec: Optional[ParamSpec], value: Any) -> Any:
-    """A value for a double parameter given as an integer or a numeric string, as a float.
+    """
+    Return a value for a double parameter given as an integer or a numeric string, as a float.
 
     ``ros2 param set`` guesses a value's type with YAML 1.1, which reads ``2`` as an integer
     and ``1e-6`` (an exponent without a dot) as a string; rclpy would refuse either for a
@@ -121,8 +133,11 @@ def as_declared_type(spec: Optional[ParamSpec], value: Any) -> Any:
 
 
 def steps_per_tick(publish_rate: float, sim_step: float) -> tuple[int, Optional[str]]:
-    """Engine steps per tick, round(1 / (publish_rate * sim_step)), and the reason why the
-    pair is invalid (None when valid)."""
+    """
+    Engine steps per tick.
+
+    round(1 / (publish_rate * sim_step)), and the reason why the pair is invalid (None when valid).
+    """
     if not (isinstance(publish_rate, (int, float)) and math.isfinite(publish_rate)
             and 1.0 <= publish_rate <= MAX_PUBLISH_RATE):
         return 0, f"publish_rate: must be in [1, {MAX_PUBLISH_RATE:g}] Hz, got {publish_rate!r}"

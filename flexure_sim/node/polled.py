@@ -1,4 +1,5 @@
-"""Subscriptions read by the stepping thread at each tick instead of by the executor.
+"""
+Subscriptions read by the stepping thread at each tick instead of by the executor.
 
 Every executor wake-up costs the node ~0.4 ms of GIL time: rclpy rebuilds its wait set in
 Python from every entity of the node, and the node's ~26 publishers each bring QoS event
@@ -34,12 +35,19 @@ class PolledGroup(CallbackGroup):
 
 
 def never_called(_message: Any) -> None:
-    """The callback of a polled subscription (rclpy requires one; the executor never runs it)."""
+    """
+    Serve as the callback of a polled subscription.
+
+    rclpy requires one; the executor never runs it.
+    """
 
 
 def take_raw(subscription: Subscription, limit: int) -> list[bytes]:
-    """Up to ``limit`` serialized messages waiting in ``subscription``'s reader, oldest first
-    (the rest stay for the next call). Empty once the node is being destroyed."""
+    """
+    Up to ``limit`` serialized messages waiting in ``subscription``'s reader.
+
+    Oldest first (the rest stay for the next call). Empty once the node is being destroyed.
+    """
     taken: list[bytes] = []
     try:
         with subscription.handle:

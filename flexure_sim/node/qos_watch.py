@@ -1,4 +1,5 @@
-"""Incompatible QoS on the stage node's topics: counted, logged, shown in the diagnostics.
+"""
+Incompatible QoS on the stage node's topics: counted, logged, shown in the diagnostics.
 
 A DDS reader and writer whose QoS do not match never exchange a message, and nothing else
 says so. The node therefore handles rmw's incompatible-QoS events:
@@ -26,8 +27,11 @@ from . import interface as itf
 
 
 class QosWatch:
-    """Counters and WARN lines of incompatible-QoS events (executor thread); read by the
-    diagnostics (stepping thread)."""
+    """
+    Counters and WARN lines of incompatible-QoS events (executor thread).
+
+    Read by the diagnostics (stepping thread).
+    """
 
     def __init__(self, log: Any, command_reliability: str) -> None:
         self._log = log

@@ -1,5 +1,8 @@
-"""The recorder process's side of `record_process`: reads the frames the node sends on stdin
-and writes them with `McapRecorder` (protocol, loss policy and test hooks: `record_process`).
+"""
+The recorder process's side of `record_process`.
+
+Reads the frames the node sends on stdin and writes them with `McapRecorder` (protocol, loss policy
+and test hooks: `record_process`).
 
 Run as ``python -m flexure_sim.node.record_child`` by `record_process.RecorderProcess`.
 """
@@ -28,10 +31,13 @@ from .record_process import (
 
 
 def _lower_priority() -> None:
-    """Let the node's paced thread take a shared core from the recorder as soon as it wakes.
-    The recorder works in bursts (a compressed chunk every few hundred ms) that, at equal
-    priority, the scheduler may let finish first: a late tick. The pipe and the backlog
-    absorb the recorder's delay instead."""
+    """
+    Let the node's paced thread take a shared core from the recorder as soon as it wakes.
+
+    The recorder works in bursts (a compressed chunk every few hundred ms) that, at equal priority,
+    the scheduler may let finish first: a late tick. The pipe and the backlog absorb the recorder's
+    delay instead.
+    """
     try:
         os.nice(RECORDER_NICE)
     except OSError:
@@ -59,7 +65,7 @@ def _output(path: Path, claimed: bool = False) -> Path | BinaryIO:
 
 
 def _open(spec: dict[str, Any]) -> McapRecorder:
-    """A recorder for an ``O`` frame; the child never drops (it waits for its writer)."""
+    """Return a recorder for an ``O`` frame; the child never drops (it waits for its writer)."""
     path = Path(spec["path"])
     # claimed: the node created the empty file with O_EXCL (session), so it is ours to fill.
     claimed = bool(spec.get("claimed")) and path.is_file() and path.stat().st_size == 0

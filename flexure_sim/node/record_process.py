@@ -1,4 +1,5 @@
-"""MCAP recording in a helper process, so writing the file costs the stepping loop no GIL time.
+"""
+MCAP recording in a helper process, so writing the file costs the stepping loop no GIL time.
 
 At 1 kHz the node records ~26 000 messages/s. `McapRecorder` already writes on a background
 thread, but in the node's process that thread competes with the stepping loop for the GIL
@@ -103,9 +104,13 @@ class RecorderProcess:
     # ------------------------------------------------------------------ pipe
     def send(self, opcode: bytes, body: bytes, *, droppable: bool = False,
              wait: bool = True) -> bool:
-        """Queue one frame and write what the pipe takes. A ``droppable`` frame is refused
-        (False) when the backlog is full. ``wait``: write the whole backlog, waiting for the
-        pipe; otherwise never wait (what does not fit stays in the backlog)."""
+        """
+        Queue one frame and write what the pipe takes.
+
+        A ``droppable`` frame is refused (False) when the backlog is full. ``wait``: write the
+        whole backlog, waiting for the pipe; otherwise never wait (what does not fit stays in the
+        backlog).
+        """
         frame = FRAME_HEADER.pack(opcode, len(body)) + body
         with self._lock:
             if droppable and self._backlog_bytes + len(frame) > self.max_backlog:
@@ -139,7 +144,7 @@ class RecorderProcess:
                 backlog[0] = frame[n:]
 
     def answer(self, timeout: float = ANSWER_TIMEOUT_S) -> dict[str, Any]:
-        """The child's JSON answer to an open or close (one line on its stdout)."""
+        """Return the child's JSON answer to an open or close (one line on its stdout)."""
         assert self.proc.stdout is not None
         fd = self.proc.stdout.fileno()
         deadline = time.monotonic() + timeout
@@ -198,7 +203,8 @@ class RecorderProcess:
 
 
 class ProcessRecording:
-    """One MCAP file written by a `RecorderProcess`.
+    """
+    One MCAP file written by a `RecorderProcess`.
 
     ``topics``: (absolute name, ``pkg/msg/Type``, QoS) in channel order; `write_batch` takes
     the payloads of one tick as (channel index, bytes) pairs. ``lossless`` (default): wait for
@@ -239,9 +245,11 @@ class ProcessRecording:
         self._closed = False
 
     def write_batch(self, items: Sequence[tuple[int, bytes]], stamp: int) -> bool:
-        """Send one tick's messages (channel index, CDR bytes), log time ``stamp`` (ns).
+        """
+        Send one tick's messages (channel index, CDR bytes), log time ``stamp`` (ns).
 
-        False if the batch was dropped (only when not ``lossless``; counted)."""
+        False if the batch was dropped (only when not ``lossless``; counted).
+        """
         parts = [FRAME_STAMP.pack(stamp)]
         for channel, data in items:
             parts.append(FRAME_ITEM.pack(channel, len(data)))
@@ -265,7 +273,11 @@ class ProcessRecording:
         self._unreported = {}
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
-        """A Metadata record; never dropped, and in real time it never waits for the pipe."""
+        """
+        Send a Metadata record.
+
+        It is never dropped, and in real time it never waits for the pipe.
+        """
         self.process.send(b"M", json.dumps({"name": name, "data": dict(data)}).encode(),
                           wait=self.lossless)
 
@@ -278,8 +290,12 @@ class ProcessRecording:
         return self.dropped
 
     def close(self) -> dict[str, Any]:
-        """Finish the file; returns the child's counts (``dropped``: every message dropped on
-        the way, the parent's included). Raises RecordingError on failure."""
+        """
+        Finish the file.
+
+        Returns the child's counts (``dropped``: every message dropped on the way, the parent's
+        included). Raises RecordingError on failure.
+        """
         if self._closed:
             return {}
         self._closed = True

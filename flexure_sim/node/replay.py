@@ -1,6 +1,8 @@
-"""``flexure-sim replay RUN.mcap`` (also ``ros2 run flexure_sim replay RUN.mcap``): publish the
-recorded topics again over ROS 2 with the recorded timing, and /clock, so that RViz, Foxglove,
-PlotJuggler or your own nodes with ``use_sim_time`` see the run as it happened.
+"""
+``flexure-sim replay RUN.mcap`` (also ``ros2 run flexure_sim replay RUN.mcap``).
+
+Publish the recorded topics again over ROS 2 with the recorded timing, and /clock, so that RViz,
+Foxglove, PlotJuggler or your own nodes with ``use_sim_time`` see the run as it happened.
 
     flexure-sim replay runs/stage.mcap [-r RATE] [--start-offset S] [--loop]
                        [--topics T ...] [--exclude T ...] [--no-clock] [--clock-rate HZ]
@@ -29,10 +31,10 @@ from typing import Any, Iterator, Optional, Sequence
 from ..recording.command_line import check_path, report_reading, tool_errors, warn
 from ..recording.ordered import OrderedLog
 from ..recording.errors import EXIT_OK, EXIT_USAGE, RunError
+from ..topics import CLOCK as CLOCK_TOPIC
 
 PROG = "flexure-sim replay"
 NODE_NAME = "flexure_sim_replay"
-from ..topics import CLOCK as CLOCK_TOPIC
 #: Longest sleep between checks for Ctrl-C and /clock fill-in (s).
 MAX_SLEEP_S = 0.05
 #: How long the end of a replay waits for reliable subscribers to acknowledge (s).
@@ -40,30 +42,64 @@ ACK_TIMEOUT_S = 2.0
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("run", metavar="RUN.mcap", help="MCAP file recorded by stage_node (or ros2 bag record)")
-    p.add_argument("-r", "--rate", type=float, default=1.0,
-                   help="playback speed factor (default 1: recorded timing; 0.1: ten times slower)")
+    p.add_argument(
+        "run", metavar="RUN.mcap", help="MCAP file recorded by stage_node (or ros2 bag record)"
+    )
+    p.add_argument(
+        "-r",
+        "--rate",
+        type=float,
+        default=1.0,
+        help="playback speed factor (default 1: recorded timing; 0.1: ten times slower)",
+    )
     p.add_argument("--start-offset", type=float, default=0.0, metavar="S",
                    help="start this many seconds of log time into the recording (default 0)")
-    p.add_argument("-l", "--loop", action="store_true", help="play again from the start offset until interrupted")
+    p.add_argument(
+        "-l",
+        "--loop",
+        action="store_true",
+        help="play again from the start offset until interrupted",
+    )
     p.add_argument("--topics", nargs="+", metavar="TOPIC", help="replay only these topics")
-    p.add_argument("--exclude", nargs="+", metavar="TOPIC", default=[], help="do not replay these topics")
-    p.add_argument("--no-clock", action="store_true", help="publish no /clock (neither recorded nor generated)")
-    p.add_argument("--clock-rate", type=float, default=100.0, metavar="HZ",
-                   help="generated /clock: rate of replayed time between messages (default 100; 0: only "
-                   "at message times)")
-    p.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="S",
-                   help="before playing, wait up to S seconds until every replayed topic has a subscriber")
+    p.add_argument(
+        "--exclude", nargs="+", metavar="TOPIC", default=[], help="do not replay these topics"
+    )
+    p.add_argument(
+        "--no-clock",
+        action="store_true",
+        help="publish no /clock (neither recorded nor generated)",
+    )
+    p.add_argument(
+        "--clock-rate",
+        type=float,
+        default=100.0,
+        metavar="HZ",
+        help="generated /clock: rate of replayed time between messages (default 100; 0: only "
+        "at message times)",
+    )
+    p.add_argument(
+        "--wait-for-subscribers",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="before playing, wait up to S seconds until every replayed topic has a subscriber",
+    )
     p.add_argument("--delay", type=float, default=0.0, metavar="S",
                    help="sleep S seconds after creating the publishers (lets discovery finish)")
-    p.add_argument("--recover", action="store_true",
-                   help="replay the readable part of a truncated or damaged file instead of failing")
+    p.add_argument(
+        "--recover",
+        action="store_true",
+        help="replay the readable part of a truncated or damaged file instead of failing",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no summary at the end")
 
 
 def register(subparsers: Any) -> None:
-    p = subparsers.add_parser("replay", help="re-publish a recorded run over ROS 2 with its timing and /clock",
-                              description=__doc__.split("\n\n")[0].replace("``", ""))
+    p = subparsers.add_parser(
+        "replay",
+        help="re-publish a recorded run over ROS 2 with its timing and /clock",
+        description=__doc__.split("\n\n")[0].replace("``", ""),
+    )
     add_arguments(p)
     p.set_defaults(handler=run)
 
@@ -81,7 +117,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         user_args = remove_ros_args(argv)[1:]
     except ImportError:
         user_args = argv[1:]
-    parser = argparse.ArgumentParser(prog="replay", description=__doc__.split("\n\n")[0].replace("``", ""))
+    parser = argparse.ArgumentParser(
+        prog="replay", description=__doc__.split("\n\n")[0].replace("``", "")
+    )
     add_arguments(parser)
     args = parser.parse_args(user_args)
     args.ros_argv = argv
@@ -98,7 +136,10 @@ def _check(args: argparse.Namespace) -> None:
         raise RunError(f"--clock-rate {args.clock_rate!r}: must be >= 0 Hz", EXIT_USAGE)
     for name in ("wait_for_subscribers", "delay"):
         if not getattr(args, name) >= 0:
-            raise RunError(f"--{name.replace('_', '-')} {getattr(args, name)!r}: must be >= 0 seconds", EXIT_USAGE)
+            raise RunError(
+                f"--{name.replace('_', '-')} {getattr(args, name)!r}: must be >= 0 seconds",
+                EXIT_USAGE,
+            )
 
 
 def plan(log: OrderedLog, topics: Optional[Sequence[str]], exclude: Sequence[str],
@@ -174,7 +215,9 @@ def play(args: argparse.Namespace) -> int:
             try:
                 cls = _message_class(type_name)
             except (ImportError, AttributeError):
-                warn(PROG, f"{topic}: message type {type_name} is not installed here; not replayed")
+                warn(
+                    PROG, f"{topic}: message type {type_name} is not installed here; not replayed"
+                )
                 continue
             publishers[topic] = node.create_publisher(cls, topic, _qos(log.topics[topic]))
         if not publishers:
@@ -207,9 +250,12 @@ def play(args: argparse.Namespace) -> int:
             span = player.span_s
             clock = ("/clock generated" if clock_pub else
                      "/clock as recorded" if CLOCK_TOPIC in publishers else "no /clock")
-            print(f"replayed {player.published} message(s) on {len(publishers)} topic(s), {span:.6g} s of "
-                  f"log time in {wall:.3g} s ({passes} pass(es), rate {args.rate:g}, {clock}; "
-                  f"at most {player.max_late_s * 1e3:.3g} ms late)")
+            print(
+                f"replayed {player.published} message(s) on {len(publishers)} topic(s), "
+                f"{span:.6g} s of "
+                f"log time in {wall:.3g} s ({passes} pass(es), rate {args.rate:g}, {clock}; "
+                f"at most {player.max_late_s * 1e3:.3g} ms late)"
+            )
     except (KeyboardInterrupt, ExternalShutdownException):
         code = EXIT_OK  # Ctrl-C ends a replay, as it ends ros2 bag play
     finally:
@@ -234,7 +280,9 @@ def _wait_for_subscribers(node: Any, publishers: list, timeout: float) -> None:
         if not missing:
             return
         if time.monotonic() > deadline:
-            shown = ", ".join(missing[:4]) + (f" and {len(missing) - 4} more" if len(missing) > 4 else "")
+            shown = ", ".join(missing[:4]) + (
+                f" and {len(missing) - 4} more" if len(missing) > 4 else ""
+            )
             warn(PROG, f"no subscriber after {timeout:g} s on {shown}; playing anyway")
             return
         time.sleep(0.02)
@@ -283,7 +331,11 @@ class _Player:
                 if not ok():
                     return
                 wait = min(target - now, MAX_SLEEP_S)
-                if self.clock_pub is not None and self.clock_period_ns and self._last_clock is not None:
+                if (
+                    self.clock_pub is not None
+                    and self.clock_period_ns
+                    and self._last_clock is not None
+                ):
                     # Fill the gap with clock ticks of the replayed time.
                     next_ns = self._last_clock + self.clock_period_ns
                     if next_ns < log_time_ns:

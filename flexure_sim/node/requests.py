@@ -1,4 +1,5 @@
-"""Hand-over of work from the executor (services, parameter changes) to the stepping thread.
+"""
+Hand-over of work from the executor (services, parameter changes) to the stepping thread.
 
 The stepping thread owns the simulation and the recording; nothing else touches them while
 it runs. A service callback queues a function with `RequestQueue.call` and waits for its

@@ -1,5 +1,7 @@
-"""Recordings of the stage node: file names, metadata, and the session of files one node
-writes (`RecordingSession`).
+"""
+Recordings of the stage node.
+
+File names, metadata, and the session of files one node writes (`RecordingSession`).
 
 Each recording holds a channel per published topic plus the drive command topic, and a
 metadata record ``flexure_sim`` (mechanism, parameters, engine settings); the node records
@@ -29,8 +31,11 @@ MAX_SUFFIX = 10_000
 
 
 def node_token(fully_qualified_name: str) -> str:
-    """The node's namespace and name as one file-name part: ``/left/stage_node`` becomes
-    ``left_stage_node``."""
+    """
+    Return the node's namespace and name as one file-name part.
+
+    ``/left/stage_node`` becomes ``left_stage_node``.
+    """
     parts = [p for p in fully_qualified_name.split("/") if p]
     return "_".join(parts) or "stage_node"
 
@@ -61,10 +66,12 @@ def claim_recording_path(
     now: Optional[_dt.datetime] = None,
     node: str = "",
 ) -> Path:
-    """Claim the first free name for the ``index``-th recording of this node (0 first):
-    create the (empty) file with ``O_EXCL``, so no other process can take it, and return its
-    path. The recorder then writes into it. Creates the directory if missing; raises OSError
-    if it cannot be written.
+    """
+    Claim the first free name for the ``index``-th recording of this node (0 first).
+
+    Create the (empty) file with ``O_EXCL``, so no other process can take it, and return its path.
+    The recorder then writes into it. Creates the directory if missing; raises OSError if it cannot
+    be written.
 
     ``record_path`` set: that file for index 0, then ``<stem>_<index><suffix>`` (the next
     free suffix if taken). Otherwise ``<record_dir>/<mechanism>_<node>_<UTC
@@ -99,8 +106,11 @@ def release_claim(path: Path) -> None:
 def run_metadata(values: Mapping[str, Any], mechanism: Mechanism, mechanism_path: Path,
                  interface: Any, node: str, steps_per_tick: int, relinearize_tol: Any, run: int,
                  sim_time: float) -> dict[str, str]:
-    """The ``flexure_sim`` metadata record of one recording: every parameter by name, the
-    mechanism (its YAML text included) and the engine settings."""
+    """
+    Return the ``flexure_sim`` metadata record of one recording.
+
+    Every parameter by name, the mechanism (its YAML text included) and the engine settings.
+    """
     try:
         yaml_text = mechanism_path.read_text()
     except (OSError, UnicodeDecodeError):
@@ -125,7 +135,8 @@ def run_metadata(values: Mapping[str, Any], mechanism: Mechanism, mechanism_path
 
 
 class RecordingSession:
-    """The node's recordings, one after the other, written by one `RecorderProcess`.
+    """
+    The node's recordings, one after the other, written by one `RecorderProcess`.
 
     Used by the stepping thread only (and before it starts / after it ended). A write that
     fails ends the recording: the reason is kept in `error` (diagnostics ERROR) and logged.
@@ -199,7 +210,7 @@ class RecordingSession:
             self._failed(exc)
 
     def note(self, name: str, data: Mapping[str, str]) -> None:
-        """A metadata record in the current file (if any)."""
+        """Write a metadata record in the current file (if any)."""
         if self.current is not None:
             self.current.add_metadata(name, data)
 

@@ -1,4 +1,5 @@
-"""`StageNode`: the rclpy node around the engine, a thin shell.
+"""
+`StageNode`: the rclpy node around the engine, a thin shell.
 
 It loads the mechanism, declares and validates the parameters (`params`, `declare`), creates
 the publishers, the polled command subscription (`polled`, `commands`) and the services, and
@@ -53,8 +54,11 @@ class StartupError(FlexureSimError, RuntimeError):
 
 
 def load(mechanism_arg: Any) -> tuple[Any, Path]:
-    """The mechanism named by the ``mechanism`` parameter and its file; StartupError with the
-    loader's one-line message (file: key: problem) if it does not load."""
+    """
+    Return the mechanism named by the ``mechanism`` parameter and its file.
+
+    StartupError with the loader's one-line message (file: key: problem) if it does not load.
+    """
     if not isinstance(mechanism_arg, str) or not mechanism_arg.strip():
         raise StartupError("parameter mechanism: expected a built-in name or a YAML path, got "
                            f"{mechanism_arg!r}")
@@ -334,14 +338,16 @@ class StageNode(Node):
 
 
 def spin_until_stopped(executor: Executor, stopped: Future, context: Context) -> None:
-    """rclpy.spin, except that it also ends when `stopped` is done (the stepping thread ended).
+    """
+    rclpy.spin, except that it also ends when `stopped` is done (the stepping thread ended).
 
     Only services, parameters and that end wake the executor, and a timeout once per
     SPIN_TIMEOUT_S: a safety net should a shutdown ever fail to wake it. A shutdown ends it
     wherever it lands. rclpy's signal handler shuts the context down concurrently with the
     executor, and when that lands while the executor builds its wait set, rclpy raises
     RCLError ("the given context is not valid") rather than ExternalShutdownException: the
-    same shutdown, not a failure."""
+    same shutdown, not a failure.
+    """
     try:
         while context.ok() and not stopped.done():
             executor.spin_until_future_complete(stopped, timeout_sec=SPIN_TIMEOUT_S)

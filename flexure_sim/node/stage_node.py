@@ -1,4 +1,5 @@
-"""``stage_node``: the executable of the stage node (`shell.StageNode`).
+"""
+``stage_node``: the executable of the stage node (`shell.StageNode`).
 
     ros2 run flexure_sim stage_node [--ros-args -p mechanism:=<name|file.yaml> -p NAME:=VALUE]
 
@@ -66,8 +67,12 @@ class SignalGuard:
             raise Interrupted(signum)
 
     def started(self) -> None:
-        """Start-up is over: from now on signals are only noted (rclpy's handler, installed
-        on top of this one, ends the spin)."""
+        """
+        Start-up is over.
+
+        From now on signals are only noted (rclpy's handler, installed on top of this one, ends the
+        spin).
+        """
         self.starting = False
 
     @property
@@ -100,7 +105,7 @@ class _Run:
 
 
 def _user_args(argv: list[str]) -> list[str]:
-    """The arguments that are not ROS arguments; UsageError if the ROS ones do not parse."""
+    """Return the arguments that are not ROS arguments; UsageError if the ROS ones do not parse."""
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
     from rclpy.utilities import remove_ros_args
 
@@ -133,8 +138,11 @@ def _start_and_spin(argv: list[str], run: _Run, guard: SignalGuard) -> None:
 
 
 def _startup_error(exc: Optional[BaseException]) -> Optional[str]:
-    """The one-line reason of a start-up failure found in an exception chain, if any (no
-    import: if `shell` is not loaded, no StartupError can have been raised)."""
+    """
+    Return the one-line reason of a start-up failure found in an exception chain.
+
+    If any (no import: if `shell` is not loaded, no StartupError can have been raised).
+    """
     startup_error = getattr(sys.modules.get(f"{__package__}.shell"), "StartupError", None)
     while exc is not None and startup_error is not None:
         if isinstance(exc, startup_error):
@@ -219,10 +227,13 @@ def _exit_now(code: int) -> int:
 
 
 def _ignore_signals() -> None:
-    """The exit is decided: ignore SIGINT/SIGTERM in every thread until the process ends.
-    (At exit Python resets signals that have a Python handler to their default action, which
-    would let a late Ctrl-C kill the process instead of letting it exit with its code; it
-    leaves ignored ones alone.)"""
+    """
+    Ignore SIGINT/SIGTERM in every thread until the process ends: the exit is decided.
+
+    (At exit Python resets signals that have a Python handler to their default action, which would
+    let a late Ctrl-C kill the process instead of letting it exit with its code; it leaves ignored
+    ones alone.)
+    """
     for sig in SIGNALS:
         signal.signal(sig, signal.SIG_IGN)
 

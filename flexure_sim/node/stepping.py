@@ -1,7 +1,10 @@
-"""The stage node's stepping thread: it owns the `Simulation` and the recording, and per
-publish tick applies the drive commands received since the last tick (`commands`),
-advances the engine by round(1 / (publish_rate * sim_step)) steps and publishes the state
-(`interface`), packing each message to CDR once and publishing and recording the same bytes.
+"""
+The stage node's stepping thread.
+
+It owns the `Simulation` and the recording, and per publish tick applies the drive commands
+received since the last tick (`commands`), advances the engine by round(1 / (publish_rate *
+sim_step)) steps and publishes the state (`interface`), packing each message to CDR once and
+publishing and recording the same bytes.
 
 Real-time mode paces ticks with absolute deadlines of a steady clock (`pacing.Pacer`); fast
 mode runs flat out; lockstep mode runs one tick per ``~/step`` request. Between ticks the
@@ -81,9 +84,12 @@ class SteppingLoop:
 
     # ------------------------------------------------------------------ thread
     def start(self, on_end: Any, on_failure: Any) -> None:
-        """Run the loop in its own thread. ``on_end(ok)`` is called when it ends;
-        ``on_failure(exc)`` first if it raised: it reports and returns whether that is a
-        failure (False: the node was shutting down anyway)."""
+        """
+        Run the loop in its own thread.
+
+        ``on_end(ok)`` is called when it ends; ``on_failure(exc)`` first if it raised: it reports
+        and returns whether that is a failure (False: the node was shutting down anyway).
+        """
         self._on_end, self._on_failure = on_end, on_failure
         self._thread = threading.Thread(target=self._run, name="stage-stepping", daemon=True)
         self._thread.start()
@@ -130,7 +136,7 @@ class SteppingLoop:
             self._on_end(self.failure is None)
 
     def restart_clocks(self) -> None:
-        """A new run or window starts now (wall clock and simulated time)."""
+        """Start a new run or window now (wall clock and simulated time)."""
         if self.diagnostics is not None:
             self.diagnostics.window = self.diagnostics.new_window()
         self.run_wall0, self.run_sim0 = time.perf_counter(), self.sim.state.t
@@ -143,7 +149,7 @@ class SteppingLoop:
         return True, f"t = {self.sim.state.t:.9g} s"
 
     def _advance_engine(self) -> None:
-        """The tick's engine steps, following the drive filter's ramp."""
+        """Take the tick's engine steps, following the drive filter's ramp."""
         sim = self.sim
         filt = self.filter
         if filt is None:
@@ -163,8 +169,11 @@ class SteppingLoop:
                 sim.step(1)
 
     def tick(self) -> bool:
-        """One publish tick: commands, engine steps, publish + record every topic. Returns
-        False when the engine failed: the state is then held and only diagnostics go out."""
+        """
+        One publish tick: commands, engine steps, publish + record every topic.
+
+        Returns False when the engine failed: the state is then held and only diagnostics go out.
+        """
         perf = time.perf_counter
         t0 = perf()
         sim = self.sim

@@ -1,6 +1,8 @@
-"""MCAP recording in the rosbag2 (ROS 2 Jazzy) format: write with `McapRecorder`, read back
-streaming with `LogReader` (or whole with `read_log`), summarise with `log_info`. Needs mcap
-and mcap-ros2-support; never imports rclpy.
+"""
+MCAP recording in the rosbag2 (ROS 2 Jazzy) format.
+
+Write with `McapRecorder`, read back streaming with `LogReader` (or whole with `read_log`),
+summarise with `log_info`. Needs mcap and mcap-ros2-support; never imports rclpy.
 """
 from .bag_metadata import (
     TopicRecord,

@@ -1,4 +1,5 @@
-"""rosbag2 bag metadata (version 9, as Jazzy writes it).
+"""
+rosbag2 bag metadata (version 9, as Jazzy writes it).
 
 In an MCAP file, rosbag2 stores the metadata as a Metadata record named ``rosbag2`` whose key
 ``serialized_metadata`` holds the YAML of the metadata struct itself (keys ``version``,
@@ -40,7 +41,7 @@ def build_bag_metadata(
     custom_data: Mapping[str, str] | None = None,
     ros_distro: str = "jazzy",
 ) -> dict[str, Any]:
-    """The metadata struct of a one-file MCAP bag, keys in rosbag2's order."""
+    """Return the metadata struct of a one-file MCAP bag, keys in rosbag2's order."""
     message_count = sum(t.message_count for t in topics)
     duration = max(0, end_ns - start_ns) if message_count else 0
     starting_time = start_ns if message_count else 0

@@ -1,8 +1,9 @@
-"""What every program that reads a log shares (the flexure-sim tools and the replay node):
-opening a log given on the command line, warnings, and `tool_errors`, the one place where bad
-files and bad usage become one line on stderr and an exit code (`EXIT_BAD_FILE` for a bad or
-unusable file, `EXIT_USAGE` for bad usage). No traceback reaches the user, whatever the file
-holds.
+"""
+What every program that reads a log shares (the flexure-sim tools and the replay node).
+
+Opening a log given on the command line, warnings, and `tool_errors`, the one place where bad files
+and bad usage become one line on stderr and an exit code (`EXIT_BAD_FILE` for a bad or unusable
+file, `EXIT_USAGE` for bad usage). No traceback reaches the user, whatever the file holds.
 """
 from __future__ import annotations
 
@@ -37,7 +38,7 @@ def check_path(path: str | os.PathLike[str]) -> Path:
 def open_log(
     path: str | os.PathLike[str], recover: bool = False, strict: bool = False
 ) -> LogReader:
-    """A `LogReader` of a checked path, ready for its one pass."""
+    """Return a `LogReader` of a checked path, ready for its one pass."""
     return LogReader(check_path(path), recover=recover, strict=strict)
 
 
@@ -52,8 +53,12 @@ def warn(prog: str, message: str) -> None:
 
 
 def report_reading(prog: str, reader: Any) -> None:
-    """After the pass, say on stderr what was not read: the part of a damaged file lost
-    (``--recover``) and the messages skipped because they do not decode (one line each)."""
+    """
+    After the pass, say on stderr what was not read.
+
+    The part of a damaged file lost (``--recover``) and the messages skipped because they do not
+    decode (one line each).
+    """
     path = getattr(reader, "path", "")
     note = getattr(reader, "note", "")
     if note:
@@ -76,7 +81,8 @@ def _no_broken_pipe() -> Iterator[None]:
 
 
 def tool_errors(prog: str, work: Callable[[], int], can_recover: bool = True) -> int:
-    """Run ``work`` and turn every expected failure into a message and an exit code.
+    """
+    Run ``work`` and turn every expected failure into a message and an exit code.
 
     ``can_recover``: the command has a ``--recover`` option the user did not give, so a
     damaged file with readable messages gets the hint to use it.
@@ -118,5 +124,5 @@ def tool_errors(prog: str, work: Callable[[], int], can_recover: bool = True) ->
 
 
 def _plain(exc: CorruptLogError) -> str:
-    """The error without the library's Python hint (``recover=True``)."""
+    """Return the error without the library's Python hint (``recover=True``)."""
     return str(exc).split("; open it with recover=True")[0]

@@ -17,7 +17,8 @@ class RecordingError(FlexureSimError):
 
 
 class RunError(RecordingError):
-    """A log that reads but cannot be used as asked (missing topics...), or bad usage.
+    """
+    A log that reads but cannot be used as asked (missing topics...), or bad usage.
 
     ``exit_code`` is `EXIT_BAD_FILE` or `EXIT_USAGE`.
     """
@@ -40,7 +41,8 @@ class RecorderFailedError(RecordingError):
 
 
 class CorruptLogError(RecordingError):
-    """A log file is empty, truncated, damaged or not a rosbag2 (profile ``ros2``) MCAP file.
+    """
+    A log file is empty, truncated, damaged or not a rosbag2 (profile ``ros2``) MCAP file.
 
     Attributes say what is wrong and how much of the file was readable:
     ``reason``, ``readable_messages`` (messages in intact chunks), ``readable_bytes`` (length

@@ -1,5 +1,8 @@
-"""`log_info`: what ``ros2 bag info`` shows of a log, plus the ``flexure_sim`` metadata record,
-checked against the file's contents.
+"""
+`log_info`.
+
+What ``ros2 bag info`` shows of a log, plus the ``flexure_sim`` metadata record, checked against
+the file's contents.
 
 The summary section alone cannot tell a damaged chunk from an intact one, so `log_info` reads
 the whole file once (streaming, one chunk in memory): every chunk CRC is checked and, with
@@ -24,7 +27,8 @@ DROPPED_KEY = "flexure_sim.dropped_messages"
 
 @dataclass(frozen=True)
 class LogInfo(TopicTable):
-    """Summary of a log; times in ns (``start_ns``/``end_ns`` are first/last log times).
+    """
+    Summary of a log; times in ns (``start_ns``/``end_ns`` are first/last log times).
 
     ``metadata``: last Metadata record of each name; ``metadata_records``: all, in file order;
     ``undecodable``: messages per topic that do not decode as the topic's type;
@@ -56,7 +60,11 @@ class LogInfo(TopicTable):
 
     @property
     def flexure_sim(self) -> dict[str, str]:
-        """The ``flexure_sim`` metadata record (mechanism and parameters), empty if absent."""
+        """
+        Return the ``flexure_sim`` metadata record (mechanism and parameters).
+
+        Empty if absent.
+        """
         return dict(self.metadata.get(RECORD_NAME, {}))
 
     @property
@@ -89,8 +97,11 @@ class LogInfo(TopicTable):
 
 
 def dropped_messages(bag_metadata: Optional[Mapping[str, Any]]) -> Optional[str]:
-    """The recorder's count of dropped messages in rosbag2 metadata, tolerating files of other
-    writers (no metadata, ``custom_data: null``)."""
+    """
+    Return the recorder's count of dropped messages in rosbag2 metadata.
+
+    Tolerating files of other writers (no metadata, ``custom_data: null``).
+    """
     custom = (bag_metadata or {}).get("custom_data")
     if not isinstance(custom, Mapping):
         return None
@@ -102,8 +113,12 @@ def log_info(
     path: str | os.PathLike[str], recover: bool = False, decode: bool = True,
     strict: bool = False,
 ) -> LogInfo:
-    """Summarise ``path`` after reading it through; see the module docstring (``strict``:
-    raise `UndecodableMessageError` for a message that does not decode)."""
+    """
+    Summarise ``path`` after reading it through.
+
+    See the module docstring (``strict``: raise `UndecodableMessageError` for a message that does
+    not decode).
+    """
     path = Path(path)
     reader = LogReader(path, recover=recover, strict=strict)
     reader.read_through(decode=decode)

@@ -1,4 +1,5 @@
-"""The recorder's background thread: it owns the output stream and the `mcap` library's `Writer`.
+"""
+The recorder's background thread: it owns the output stream and the `mcap` library's `Writer`.
 
 The file is written by ``mcap.writer.Writer`` (profile ``ros2``, uncompressed chunks with
 CRCs, a data-section CRC, message and chunk indexes, statistics, summary offsets): the layout
@@ -46,8 +47,11 @@ DROPPED_KEY = "flexure_sim.dropped_messages"
 
 
 class PositionStream:
-    """The output stream as the Writer sees it: ``tell()`` counts the bytes written, so pipes
-    and other unseekable streams work too."""
+    """
+    The output stream as the Writer sees it.
+
+    ``tell()`` counts the bytes written, so pipes and other unseekable streams work too.
+    """
 
     def __init__(self, stream: BinaryIO) -> None:
         self.stream = stream
@@ -80,8 +84,12 @@ class PositionStream:
 def start_writer(
     stream: BinaryIO, file_name: str, library: str, chunk_size: int
 ) -> tuple[Writer, PositionStream]:
-    """A started Writer on ``stream``; the header is flushed at once, so a stream that cannot
-    be written fails here (`RecordingError`) rather than in the background thread."""
+    """
+    Return a started Writer on ``stream``.
+
+    The header is flushed at once, so a stream that cannot be written fails here (`RecordingError`)
+    rather than in the background thread.
+    """
     out = PositionStream(stream)
     writer = Writer(
         out,
@@ -122,7 +130,8 @@ class Close:
 
 
 class Worker:
-    """The background thread and everything it owns. Holds no reference to the recorder.
+    """
+    The background thread and everything it owns. Holds no reference to the recorder.
 
     Queue items: ``(stamp_ns, [(channel_id, payload), ...])`` tuples (messages), `AddTopic`,
     `AddMetadata`, `Close`. ``dropped`` returns the total count of dropped messages when the
@@ -157,8 +166,12 @@ class Worker:
         self.thread.start()
 
     def put_control(self, item: object, timeout_s: float | None) -> None:
-        """Enqueue an item that must not be dropped, waiting for room at most ``timeout_s``
-        (None: as long as the thread runs); fail if the thread is gone, failed or stuck."""
+        """
+        Enqueue an item that must not be dropped.
+
+        Waiting for room at most ``timeout_s`` (None: as long as the thread runs); fail if the
+        thread is gone, failed or stuck.
+        """
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         while True:
             if self.error is not None:
@@ -279,7 +292,7 @@ def describe(exc: BaseException) -> str:
 
 
 def metadata_items(data: Mapping[str, str]) -> dict[str, str]:
-    """A Metadata record's key/value map, checked: keys and values must be str."""
+    """Return a Metadata record's key/value map, checked: keys and values must be str."""
     items = dict(data)
     for key, value in items.items():
         if not isinstance(key, str) or not isinstance(value, str):

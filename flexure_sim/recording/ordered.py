@@ -1,4 +1,5 @@
-"""The messages of a log in log-time order, as a replay needs them.
+"""
+The messages of a log in log-time order, as a replay needs them.
 
 A properly closed, intact file is first read through once (every CRC checked, nothing
 decoded or kept), then played from its chunk index with the mcap library's indexed reader,
@@ -18,8 +19,12 @@ from .reader import LogReader
 
 
 class OrderedLog:
-    """A log opened for playing: ``topics``, ``start_ns`` (first log time), ``complete`` and
-    ``note`` as `LogReader` gives them, and `messages` (any number of passes)."""
+    """
+    A log opened for playing.
+
+    ``topics``, ``start_ns`` (first log time), ``complete`` and ``note`` as `LogReader` gives them,
+    and `messages` (any number of passes).
+    """
 
     def __init__(self, path: str | os.PathLike[str], recover: bool = False) -> None:
         reader = LogReader(path, recover=recover)
@@ -39,8 +44,11 @@ class OrderedLog:
         self.undecodable: dict[str, int] = {}
 
     def messages(self, topics: Collection[str], start_ns: int) -> Iterator[tuple[int, str, bytes]]:
-        """(log time ns, topic, payload) of ``topics`` logged at or after ``start_ns``, in
-        log-time order."""
+        """
+        (log time ns, topic, payload) of ``topics`` logged at or after ``start_ns``.
+
+        They come in log-time order.
+        """
         wanted = set(topics)
         if self._held is not None:
             for item in self._held:

@@ -1,4 +1,5 @@
-"""QoS profiles as rosbag2 (Jazzy, metadata version 9) writes them in ``offered_qos_profiles``.
+"""
+QoS profiles as rosbag2 (Jazzy, metadata version 9) writes them in ``offered_qos_profiles``.
 
 The value is the YAML of a list of profiles, each with the keys, in order: history, depth,
 reliability, durability, deadline {sec, nsec}, lifespan {sec, nsec}, liveliness,
@@ -62,12 +63,12 @@ class QosDescription:
 
     @classmethod
     def reliable(cls, depth: int = 10) -> QosDescription:
-        """rclpy's ``QoSProfile(depth=depth)``: keep_last, reliable, volatile."""
+        """Return rclpy's ``QoSProfile(depth=depth)``: keep_last, reliable, volatile."""
         return cls(depth=depth)
 
     @classmethod
     def sensor_data(cls) -> QosDescription:
-        """rclpy's ``qos_profile_sensor_data``: keep_last 5, best_effort, volatile."""
+        """Return rclpy's ``qos_profile_sensor_data``: keep_last 5, best_effort, volatile."""
         return cls(depth=5, reliability="best_effort")
 
     @classmethod
@@ -108,7 +109,7 @@ class QosDescription:
             raise ValueError(f"QoS profile lacks the key {exc.args[0]!r}") from None
 
     def to_dict(self) -> dict[str, Any]:
-        """The profile as rosbag2 v9 encodes it, keys in rosbag2's order."""
+        """Return the profile as rosbag2 v9 encodes it, keys in rosbag2's order."""
         return {
             "history": self.history,
             "depth": self.depth,
@@ -137,7 +138,11 @@ def as_qos_description(qos: QosLike) -> QosDescription:
 
 
 def qos_profiles_yaml(profiles: Iterable[QosLike]) -> str:
-    """The ``offered_qos_profiles`` string: a YAML list, ``""`` for no profiles (as rosbag2)."""
+    """
+    Return the ``offered_qos_profiles`` string.
+
+    A YAML list, ``""`` for no profiles (as rosbag2).
+    """
     items = [as_qos_description(p).to_dict() for p in profiles]
     if not items:
         return ""

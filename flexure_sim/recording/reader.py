@@ -1,4 +1,5 @@
-"""Reading a rosbag2 MCAP log in one streaming pass: `LogReader`, and `read_log` on top of it.
+"""
+Reading a rosbag2 MCAP log in one streaming pass: `LogReader`, and `read_log` on top of it.
 
 `LogReader(path)` checks what can be checked before reading the messages (the header, the
 ``ros2`` profile, the summary of a properly closed file, the channels); `LogReader.messages`
@@ -49,8 +50,11 @@ class LogMessage:
 
 
 def undecodable_note(undecodable: Mapping[str, int]) -> str:
-    """One line for the messages skipped because they do not decode, e.g.
-    ``1 undecodable message on /drive/displacement`` ('' if none)."""
+    """
+    One line for the messages skipped because they do not decode.
+
+    e.g. ``1 undecodable message on /drive/displacement`` ('' if none).
+    """
     return ", ".join(
         f"{n} undecodable message{'' if n == 1 else 's'} on {topic}"
         for topic, n in sorted(undecodable.items())
@@ -59,7 +63,8 @@ def undecodable_note(undecodable: Mapping[str, int]) -> str:
 
 
 class LogReader:
-    """A rosbag2 MCAP log opened for one streaming pass (see the module docstring).
+    """
+    A rosbag2 MCAP log opened for one streaming pass (see the module docstring).
 
     Before the pass, ``topics`` and ``metadata_records`` come from the summary (empty for a
     file without a valid one, read with ``recover``); after it, from what was read,
@@ -100,7 +105,8 @@ class LogReader:
     def messages(
         self, select: Callable[[TopicInfo], bool] | None = None, decode: bool = True
     ) -> Iterator[LogMessage]:
-        """Yield the messages of the selected topics (all by default), in file order.
+        """
+        Yield the messages of the selected topics (all by default), in file order.
 
         ``select`` is asked once per topic. Messages that do not decode are skipped and
         counted (``strict``: raise). Raises `CorruptLogError` at the end of the pass if the
@@ -214,13 +220,14 @@ class LogReader:
 
     @property
     def note(self) -> str:
-        """What was lost from a damaged file read with ``recover`` ('' for an intact file)."""
+        """Return what a damaged file read with ``recover`` lost ('' for an intact file)."""
         return recovery_note(self.scan) if self.scan is not None else ""
 
 
 @dataclass(frozen=True)
 class McapLog(TopicTable):
-    """Contents of a log; ``complete`` is False for a recovered part, explained in ``note``.
+    """
+    Contents of a log; ``complete`` is False for a recovered part, explained in ``note``.
 
     ``metadata`` maps each Metadata record name to its last record; ``metadata_records`` holds
     every record, in file order (e.g. successive parameter changes under one name).
@@ -252,8 +259,12 @@ def read_log(
     path: str | os.PathLike[str], recover: bool = False, decode: bool = True,
     strict: bool = False,
 ) -> McapLog:
-    """Every message of ``path`` in one list (for small logs and tests; tools stream with
-    `LogReader`). Decoded unless ``decode`` is False."""
+    """
+    Return every message of ``path`` in one list.
+
+    For small logs and tests; tools stream with `LogReader`. Decoded unless ``decode`` is
+    False.
+    """
     reader = LogReader(path, recover=recover, strict=strict)
     messages = list(reader.messages(decode=decode))
     return McapLog(
@@ -273,7 +284,7 @@ def read_log(
 
 
 def recovery_note(scan: FileScan) -> str:
-    """What a pass over a damaged file read and lost ('' for an intact file)."""
+    """Return what a pass over a damaged file read and lost ('' for an intact file)."""
     if scan.problem is None:
         return ""
     if scan.stopped:
@@ -295,7 +306,7 @@ def recovery_note(scan: FileScan) -> str:
 def corrupt(
     path: Path, scan: FileScan, reason: str | None = None, hint: str = ""
 ) -> CorruptLogError:
-    """A `CorruptLogError` for ``scan`` (its problem unless ``reason`` is given)."""
+    """Return a `CorruptLogError` for ``scan`` (its problem unless ``reason`` is given)."""
     return CorruptLogError(
         path,
         reason or scan.problem or "unreadable",

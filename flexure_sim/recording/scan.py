@@ -1,4 +1,5 @@
-"""Validated reading of MCAP files at the record level (no ROS semantics).
+"""
+Validated reading of MCAP files at the record level (no ROS semantics).
 
 `iter_file` reads a file linearly, in bounded memory (one chunk at a time), yielding the
 Message records of every intact chunk while it fills a `FileScan` with what it saw. It checks
@@ -36,7 +37,8 @@ from .summary import MAGIC, SummarySection, read_summary, summary_crc_problem
 
 @dataclass
 class DamagedChunk:
-    """A chunk whose contents fail their CRC or do not parse: its messages are lost.
+    """
+    A chunk whose contents fail their CRC or do not parse: its messages are lost.
 
     ``offset``/``end``: bytes of the chunk record; ``start_ns``/``end_ns``: the log times its
     record header (or the chunk index) declares; ``messages``: how many its message index
@@ -63,7 +65,8 @@ class DamagedChunk:
 
 @dataclass
 class FileScan:
-    """What a linear pass read; ``problem`` is None for an intact, complete file.
+    """
+    What a linear pass read; ``problem`` is None for an intact, complete file.
 
     ``counts``: messages read per channel id (damaged chunks excluded); ``unchecked_chunks``:
     chunks written without a CRC (some writers, e.g. rosbags, write none); ``stopped``: why the
@@ -121,8 +124,11 @@ def scan_file(path: Path) -> FileScan:
 
 
 def start_scan(section: SummarySection) -> FileScan:
-    """An empty `FileScan`, knowing the schemas and channels of ``section`` if it is intact:
-    a damaged chunk may hold the only Schema or Channel record of a topic."""
+    """
+    Return an empty `FileScan`, knowing the schemas and channels of ``section`` if it is intact.
+
+    A damaged chunk may hold the only Schema or Channel record of a topic.
+    """
     scan = FileScan(total_bytes=section.total_bytes)
     if section.problem is None:
         scan.schemas.update(section.schemas)
@@ -133,7 +139,8 @@ def start_scan(section: SummarySection) -> FileScan:
 def iter_file(
     path: Path, scan: FileScan, chunk_index: Sequence[ChunkIndex] = ()
 ) -> Iterator[Message]:
-    """Yield the Message records of ``path`` in file order, filling ``scan`` as it goes.
+    """
+    Yield the Message records of ``path`` in file order, filling ``scan`` as it goes.
 
     Messages of damaged chunks are not yielded. ``chunk_index`` (the summary's, when it is
     intact) lets the pass step over a record whose framing is broken, to the next chunk it
@@ -199,8 +206,11 @@ def iter_file(
 def _step_over(
     scan: FileScan, exc: BaseException, start: int, chunk_index: Sequence[ChunkIndex]
 ) -> int | None:
-    """Where to resume after a record at ``start`` that does not parse: the next chunk the
-    index lists (the damage is recorded), or None (stop)."""
+    """
+    Where to resume after a record at ``start`` that does not parse.
+
+    The next chunk the index lists (the damage is recorded), or None (stop).
+    """
     later = sorted(
         (ci for ci in chunk_index if ci.chunk_start_offset > start),
         key=lambda ci: ci.chunk_start_offset,
@@ -294,7 +304,7 @@ def _take(scan: FileScan, record: object, start: int, end: int) -> Iterator[Mess
 
 
 def _chunk_records(scan: FileScan, chunk: Chunk, start: int, end: int) -> list[object]:
-    """The records of an intact chunk; [] (and an entry in ``scan.damaged``) otherwise."""
+    """Return the records of an intact chunk; [] (and an entry in ``scan.damaged``) otherwise."""
     try:
         inner = breakup_chunk(chunk, validate_crc=True)
         channels = set(scan.channels) | {r.id for r in inner if isinstance(r, Channel)}

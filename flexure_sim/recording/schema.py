@@ -1,4 +1,5 @@
-"""ROS 2 message schemas for MCAP, built as rosbag2 (Jazzy) builds them.
+"""
+ROS 2 message schemas for MCAP, built as rosbag2 (Jazzy) builds them.
 
 The schema of ``pkg/msg/Type`` is the text of ``share/pkg/msg/Type.msg`` followed by every
 message type it depends on, once each, depth-first, dependencies of one definition taken in
@@ -40,7 +41,8 @@ _MAX_DEPTH = 50
 
 @dataclass(frozen=True)
 class MessageSchema:
-    """Schema record contents of one message type.
+    """
+    Schema record contents of one message type.
 
     ``name`` is ``pkg/msg/Type``; ``text`` the concatenated definitions; ``type_hash`` the
     ``RIHS01_...`` string, or ``""`` when the package ships no ``.json`` type description.
@@ -89,7 +91,8 @@ def parse_dependencies(msg_text: str, package: str) -> list[str]:
 
 
 class SchemaResolver:
-    """Builds and caches `MessageSchema` objects from the .msg/.json files of ament prefixes.
+    """
+    Builds and caches `MessageSchema` objects from the .msg/.json files of ament prefixes.
 
     One resolver per recorder: the cache lives in the instance.
     """
@@ -102,7 +105,7 @@ class SchemaResolver:
         self._schemas: dict[str, MessageSchema] = {}
 
     def schema(self, type_name: str) -> MessageSchema:
-        """The schema of ``type_name`` (``pkg/msg/Type`` or ``pkg/Type``)."""
+        """Return the schema of ``type_name`` (``pkg/msg/Type`` or ``pkg/Type``)."""
         full_name = normalize_type_name(type_name)
         cached = self._schemas.get(full_name)
         if cached is None:
@@ -115,7 +118,11 @@ class SchemaResolver:
         return cached
 
     def full_text(self, type_name: str) -> str:
-        """The ros2msg schema text: the type's .msg, then each dependency once, depth-first."""
+        """
+        Return the ros2msg schema text.
+
+        The type's .msg, then each dependency once, depth-first.
+        """
         seen: set[tuple[str, str, str]] = set()
 
         def append(key: tuple[str, str, str], depth: int) -> str:
@@ -185,5 +192,5 @@ class SchemaResolver:
 def load_schema(
     type_name: str, prefixes: Sequence[str | os.PathLike[str]] | None = None
 ) -> MessageSchema:
-    """Schema of one type, searched in ``prefixes`` (default: `ament_prefixes()`)."""
+    """Return the schema of one type, searched in ``prefixes`` (default: `ament_prefixes()`)."""
     return SchemaResolver(prefixes).schema(type_name)

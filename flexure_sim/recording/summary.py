@@ -1,5 +1,9 @@
-"""The summary section of an MCAP file, read without the chunks: `read_summary`, and the
-summary CRC check `iter_file` also uses. Reports damage in ``problem``, never raises."""
+"""
+The summary section of an MCAP file, read without the chunks.
+
+`read_summary`, and the summary CRC check `iter_file` also uses. Reports damage in ``problem``,
+never raises.
+"""
 from __future__ import annotations
 
 import io

@@ -1,4 +1,5 @@
-"""`McapRecorder`: records serialized ROS 2 messages to an MCAP file as rosbag2 (Jazzy) does.
+"""
+`McapRecorder`: records serialized ROS 2 messages to an MCAP file as rosbag2 (Jazzy) does.
 
 The caller (the simulation loop) only enqueues; a background thread (`mcap_writer.Worker`,
 on the `mcap` library's ``Writer``) owns the file.
@@ -86,7 +87,8 @@ class _Counters:
 
 
 class McapRecorder:
-    """Context-managed rosbag2-compatible MCAP recorder fed with CDR payloads.
+    """
+    Context-managed rosbag2-compatible MCAP recorder fed with CDR payloads.
 
     ``output`` is a path (created; an existing file is an error unless ``overwrite``) or a
     binary stream (closed by `close`). Payloads are the bytes of
@@ -142,7 +144,7 @@ class McapRecorder:
     # -- properties -------------------------------------------------------------------------
     @property
     def path(self) -> Path | None:
-        """The file written, or None when recording to a stream."""
+        """Return the file written, or None when recording to a stream."""
         return self._path
 
     @property
@@ -157,7 +159,7 @@ class McapRecorder:
 
     @property
     def stats(self) -> RecordingStats:
-        """Accepted and dropped counts per topic, and messages still queued."""
+        """Accept and dropped counts per topic, and messages still queued."""
         return self._counters.snapshot(self._worker.queue.qsize())
 
     @property
@@ -171,7 +173,8 @@ class McapRecorder:
         type_name: str,
         qos: QosLike | Sequence[QosLike] | None = None,
     ) -> None:
-        """Add a channel for topic ``name`` (absolute, ``/...``) of type ``pkg/msg/Type``.
+        """
+        Add a channel for topic ``name`` (absolute, ``/...``) of type ``pkg/msg/Type``.
 
         ``qos`` is the publisher's offered QoS: an rclpy ``QoSProfile``, a `QosDescription`,
         a rosbag2-style dict, or a list of those (default: `QosDescription.reliable()`).
@@ -222,7 +225,8 @@ class McapRecorder:
                 self._counters.dropped[name] = 0
 
     def write(self, topic: str, payload: bytes | bytearray | memoryview, stamp_ns: int) -> bool:
-        """Queue one CDR-serialized message; log_time = publish_time = ``stamp_ns`` (sim time).
+        """
+        Queue one CDR-serialized message; log_time = publish_time = ``stamp_ns`` (sim time).
 
         Returns False if the message was dropped because the queue stayed full for
         ``max_block_s`` (counted in `stats`); with ``max_block_s=None`` it waits for room and
@@ -236,8 +240,11 @@ class McapRecorder:
         messages: Sequence[tuple[str, bytes | bytearray | memoryview]],
         stamp_ns: int,
     ) -> bool:
-        """Queue several messages (topic, CDR payload) with one log time, e.g. one tick of the
-        simulation: one queue entry, kept or dropped whole (as `write` says)."""
+        """
+        Queue several messages (topic, CDR payload) with one log time.
+
+        e.g. one tick of the simulation: one queue entry, kept or dropped whole (as `write` says).
+        """
         channels = self._channels
         items = []
         for topic, payload in messages:
@@ -263,8 +270,12 @@ class McapRecorder:
         return kept
 
     def _enqueue(self, item: tuple[int, list[tuple[int, bytes]]]) -> bool:
-        """Put a batch on the queue, waiting at most ``max_block_s`` for room (None: until
-        there is room, unless the writer thread fails)."""
+        """
+        Put a batch on the queue.
+
+        Waiting at most ``max_block_s`` for room (None: until there is room, unless the writer
+        thread fails).
+        """
         pending = self._worker.queue
         try:
             pending.put_nowait(item)
@@ -293,8 +304,12 @@ class McapRecorder:
             self._worker.put_control(AddMetadata(name, items), _CONTROL_TIMEOUT_S)
 
     def add_dropped(self, topic: str, count: int) -> None:
-        """Count ``count`` messages of ``topic`` that a producer dropped before they reached
-        this recorder (e.g. ticks a full pipe refused): in `stats` and the file's metadata."""
+        """
+        Count ``count`` messages of ``topic`` that a producer dropped.
+
+        They were dropped before they reached this recorder (e.g. ticks a full pipe refused); the
+        count goes in `stats` and the file's metadata.
+        """
         if topic not in self._channels:
             raise ValueError(f"topic: {topic!r} was not added (call add_topic first)")
         if isinstance(count, bool) or not isinstance(count, int) or count < 0:
@@ -305,7 +320,8 @@ class McapRecorder:
                 self._counters.dropped[topic] += count
 
     def close(self, timeout_s: float = 30.0) -> RecordingStats:
-        """Drain the queue, write the bag metadata and summary, close the file.
+        """
+        Drain the queue, write the bag metadata and summary, close the file.
 
         Idempotent: later calls return the same stats. Raises `RecorderFailedError` (first call
         only) if the file could not be finished.

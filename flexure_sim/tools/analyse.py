@@ -30,9 +30,12 @@ PROG = "flexure-sim analyse"
 
 def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
-        "analyse", aliases=["analyze"],
-        help="gain, settling time, overshoot, hinge loads and drive force per step of a recorded run",
-        description=__doc__.split("\n\n")[0].replace("``", ""))
+        "analyse",
+        aliases=["analyze"],
+        help="gain, settling time, overshoot, hinge loads and drive force per step of a "
+        "recorded run",
+        description=__doc__.split("\n\n")[0].replace("``", ""),
+    )
     add_file_arguments(p)
     p.add_argument("--json", action="store_true",
                    help="print a JSON list of steps (SI units; overshoot as a fraction)")
@@ -79,7 +82,7 @@ def _signal(run: Run, topic: str) -> Optional[tuple[np.ndarray, np.ndarray]]:
 
 
 def find_steps(run: Run) -> tuple[list[analysis.Step], str]:
-    """The steps of the drive and where they were found (a topic name)."""
+    """Return the steps of the drive and where they were found (a topic name)."""
     u = run.scalar(DRIVE_INPUT)
     cmd = run.scalar(COMMAND)
     if cmd is not None and not cmd.empty:
@@ -91,7 +94,9 @@ def find_steps(run: Run) -> tuple[list[analysis.Step], str]:
             pass
         initial = float(u.values[0]) if u is not None and not u.empty else (
             min(max(0.0, stroke[0]), stroke[1]) if stroke else 0.0)
-        return analysis.command_steps(cmd.t, cmd.values, initial=initial, stroke=stroke), run.topic(COMMAND)
+        return analysis.command_steps(
+            cmd.t, cmd.values, initial=initial, stroke=stroke
+        ), run.topic(COMMAND)
     if u is None or u.empty:
         return [], run.topic(DRIVE_INPUT)
     return analysis.input_steps(u.t, u.values), run.topic(DRIVE_INPUT)
@@ -101,7 +106,10 @@ def static_gains(run: Run, steps: list[analysis.StepMetrics]) -> tuple[dict[int,
     """Gain of the engine's static solve between each step's applied inputs (by step index)."""
     mech = run.mechanism()
     if mech is None:
-        return {}, f"no static comparison: cannot load the run's mechanism ({run.mechanism_problem})"
+        return (
+            {},
+            f"no static comparison: cannot load the run's mechanism ({run.mechanism_problem})",
+        )
     if mech.drive is None or mech.output is None:
         return {}, f"no static comparison: mechanism {mech.name} has no drive or no output"
     from ..engine.solver import Simulation, SolverError
@@ -127,7 +135,7 @@ def static_gains(run: Run, steps: list[analysis.StepMetrics]) -> tuple[dict[int,
 
 
 def analyse_run(run: Run, band: float = analysis.DEFAULT_BAND, static: bool = True) -> dict:
-    """Steps and their metrics as dicts, with notes for the user."""
+    """Step and their metrics as dicts, with notes for the user."""
     require_stage_run(run, "analyse")
     notes: list[str] = []
     if run.clock_mapped:
@@ -172,8 +180,12 @@ def analyse_run(run: Run, band: float = analysis.DEFAULT_BAND, static: bool = Tr
 
 
 def stress_peaks(run: Run, steps: list[dict]) -> tuple[dict[int, Optional[dict]], str]:
-    """Per step index: the hinge with the largest stress ratio sigma / sigma_y over the step's
-    wrench samples, {"hinge", "stress" (Pa), "ratio"}, or None; and a note if there is none."""
+    """
+    Per step index.
+
+    The hinge with the largest stress ratio sigma / sigma_y over the step's wrench samples,
+    {"hinge", "stress" (Pa), "ratio"}, or None; and a note if there is none.
+    """
     import yaml
 
     from ..engine.config import ConfigError, mechanism_from_dict
@@ -223,15 +235,28 @@ def _fixed(v: Optional[float], scale: float, decimals: int) -> str:
 def format_result(run: Run, result: dict) -> str:
     steps = result["steps"]
     mech = run.mechanism_name or "unknown mechanism"
-    lines = [f"{run.path}: {mech}, {len(steps)} step(s) in {result['duration']:.6g} s of simulation "
-             f"time (steps of {result['source']})"]
+    lines = [
+        f"{run.path}: {mech}, {len(steps)} step(s) in {result['duration']:.6g} s of simulation "
+        f"time (steps of {result['source']})"
+    ]
     if not steps:
         lines.append("no steps: the drive command never changed")
         return "\n".join(lines)
     hinge = steps[0].get("compression_hinge") or "a"
-    header = ["step", "t [ms]", "input [um]", "gain", "static gain", "settling [ms]", "overshoot [%]",
-              "rise [ms]", f"joint-{hinge} compr. [nm]", "drive force [N]", "peak drive force [N]",
-              "peak stress/yield"]
+    header = [
+        "step",
+        "t [ms]",
+        "input [um]",
+        "gain",
+        "static gain",
+        "settling [ms]",
+        "overshoot [%]",
+        "rise [ms]",
+        f"joint-{hinge} compr. [nm]",
+        "drive force [N]",
+        "peak drive force [N]",
+        "peak stress/yield",
+    ]
     rows = []
     for s in steps:
         rows.append([
@@ -269,8 +294,10 @@ def format_result(run: Run, result: dict) -> str:
         lines += [f"step {i}: {n}" for i, n in notes]
     if any(not s["settled"] for s in steps):
         lines.append("* not settled before the next step (or the end): no gain reported")
-    lines.append(f"gain = output change / applied input change between settled values; settling "
-                 f"time to within {result['band'] * 100:g} % of the output change, from the command; "
-                 "static gain: the engine's static solve at the same inputs; peak stress/yield: "
-                 "the largest hinge stress ratio sigma/sigma_y during the step (hinge).")
+    lines.append(
+        f"gain = output change / applied input change between settled values; settling "
+        f"time to within {result['band'] * 100:g} % of the output change, from the command; "
+        "static gain: the engine's static solve at the same inputs; peak stress/yield: "
+        "the largest hinge stress ratio sigma/sigma_y during the step (hinge)."
+    )
     return "\n".join(lines)

@@ -1,4 +1,5 @@
-"""Step detection and step-response metrics: pure functions on NumPy arrays (no files, no ROS).
+"""
+Step detection and step-response metrics: pure functions on NumPy arrays (no files, no ROS).
 
 Definitions (used by ``flexure-sim analyse`` and documented in docs/tools.md):
 
@@ -40,8 +41,11 @@ DEFAULT_HOLD = 0.2
 
 @dataclass(frozen=True)
 class Step:
-    """One step of the drive: onset time ``t`` (s), command ``target`` after it and the
-    target before it (m)."""
+    """
+    One step of the drive.
+
+    Onset time ``t`` (s), command ``target`` after it and the target before it (m).
+    """
 
     t: float
     target: float
@@ -62,7 +66,9 @@ class Response:
     settled: bool
 
 
-def _arrays(t: Sequence[float], y: Sequence[float], name: str = "y") -> tuple[np.ndarray, np.ndarray]:
+def _arrays(
+    t: Sequence[float], y: Sequence[float], name: str = "y"
+) -> tuple[np.ndarray, np.ndarray]:
     t = np.asarray(t, dtype=float)
     y = np.asarray(y, dtype=float)
     if t.ndim != 1:
@@ -80,7 +86,8 @@ def command_steps(
     stroke: Optional[tuple[float, float]] = None,
     tolerance: float = 0.0,
 ) -> list[Step]:
-    """Steps of a command signal (times ``t``, values ``command``).
+    """
+    Step of a command signal (times ``t``, values ``command``).
 
     ``initial``: the target before the first command. ``stroke``: (min, max) the commands
     are clamped to. A command changes the target when it differs from it by more than
@@ -110,7 +117,8 @@ def command_steps(
 
 
 def input_steps(t: Sequence[float], u: Sequence[float], rel_tolerance: float = 1e-4) -> list[Step]:
-    """Steps recovered from the applied drive input when the command was not recorded.
+    """
+    Step recovered from the applied drive input when the command was not recorded.
 
     A step starts where the input moves by more than ``rel_tolerance`` of its range between
     two samples (its onset is the sample before), and ends where it stops moving; the target
@@ -155,7 +163,8 @@ def settling_time(
     t: Sequence[float], y: Sequence[float], t0: float, initial: float, final: float,
     band: float = DEFAULT_BAND,
 ) -> Optional[float]:
-    """Time from ``t0`` until ``y`` stays within ``band`` x |final - initial| of ``final``.
+    """
+    Time from ``t0`` until ``y`` stays within ``band`` x |final - initial| of ``final``.
 
     ``t``, ``y``: samples after the step (t > t0), ending where the window ends. None if the
     change is zero or ``y`` is outside the band at the last sample.
@@ -191,7 +200,11 @@ def overshoot(y: Sequence[float], initial: float, final: float) -> float:
 def crossing_time(
     t: Sequence[float], y: Sequence[float], t0: float, initial: float, level: float
 ) -> Optional[float]:
-    """First time (interpolated) the signal, starting at ``initial`` at ``t0``, reaches ``level``."""
+    """
+    Return the first time the signal reaches ``level``.
+
+    The time is interpolated; the signal starts at ``initial`` at ``t0``.
+    """
     t, y = _arrays(t, y)
     tt = np.concatenate(([t0], t))
     yy = np.concatenate(([initial], y))
@@ -223,7 +236,7 @@ def rise_time(
 
 
 def peak(values: Sequence[float]) -> Optional[float]:
-    """The signed sample of largest magnitude (None for no samples)."""
+    """Return the signed sample of largest magnitude (None for no samples)."""
     v = np.asarray(values, dtype=float)
     if v.shape[0] == 0:
         return None
@@ -234,7 +247,8 @@ def step_response(
     t: Sequence[float], y: Sequence[float], t0: float, initial: float,
     t_end: Optional[float] = None, band: float = DEFAULT_BAND, hold: float = DEFAULT_HOLD,
 ) -> Response:
-    """Metrics of ``y`` (samples after the step, t > t0) for a step at ``t0`` from ``initial``.
+    """
+    Metrics of ``y`` (samples after the step, t > t0) for a step at ``t0`` from ``initial``.
 
     The final value is the last sample; ``t_end`` (default: the last sample time) is where
     the window ends, for the settled test.
@@ -246,7 +260,9 @@ def step_response(
     t_end = float(t[-1]) if t_end is None else float(t_end)
     ts = settling_time(t, y, t0, initial, final, band)
     window = t_end - t0
-    settled = ts is not None and (t_end - (t0 + ts)) >= hold * window - 1e-15 * max(1.0, abs(t_end))
+    settled = ts is not None and (t_end - (t0 + ts)) >= hold * window - 1e-15 * max(
+        1.0, abs(t_end)
+    )
     if final == initial:
         settled = bool(np.all(y == final))
     return Response(
@@ -324,8 +340,12 @@ def analyse_steps(
     band: float = DEFAULT_BAND,
     hold: float = DEFAULT_HOLD,
 ) -> list[StepMetrics]:
-    """Metrics of every step. Signals are (t, values) with t increasing; wrenches hold
-    (n, 3) arrays of (moment, f_x, f_y). ``t_end``: end of the run (default: last output)."""
+    """
+    Metrics of every step.
+
+    Signals are (t, values) with t increasing; wrenches hold (n, 3) arrays of (moment, f_x, f_y).
+    ``t_end``: end of the run (default: last output).
+    """
     out_t, out_y = _arrays(*output, name="output")
     if out_t.shape[0] == 0:
         return []
@@ -335,8 +355,15 @@ def analyse_steps(
         t0 = step.t
         t1 = steps[i + 1].t if i + 1 < len(steps) else end
         wt, wy = _window((out_t, out_y), t0, t1)
-        m = StepMetrics(index=i + 1, t=t0, input=step.target, input_before=step.previous,
-                        duration=t1 - t0, samples=int(wt.shape[0]), compression_hinge=compression_hinge)
+        m = StepMetrics(
+            index=i + 1,
+            t=t0,
+            input=step.target,
+            input_before=step.previous,
+            duration=t1 - t0,
+            samples=int(wt.shape[0]),
+            compression_hinge=compression_hinge,
+        )
         results.append(m)
         if wt.shape[0] == 0:
             m.notes.append("no samples after the step")
@@ -389,8 +416,11 @@ def analyse_steps(
 
 
 def wrench_peaks(w: np.ndarray) -> dict[str, float]:
-    """Peaks of (n, 3) wrench samples (moment, f_x, f_y): signed moment, f_x, f_y of largest
-    magnitude, and the largest in-plane force magnitude |f|."""
+    """
+    Peaks of (n, 3) wrench samples (moment, f_x, f_y).
+
+    Signed moment, f_x, f_y of largest magnitude, and the largest in-plane force magnitude |f|.
+    """
     w = np.asarray(w, dtype=float)
     if w.ndim != 2 or w.shape[1] != 3:
         raise ValueError(f"w: expected shape (n, 3), got {w.shape}")

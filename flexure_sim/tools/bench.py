@@ -1,5 +1,8 @@
-"""Benchmarks: ``python -m flexure_sim.tools.bench`` (or ``flexure-sim bench``) prints a table and
-writes JSON. Every figure is measured in the same run as its baseline.
+"""
+Benchmarks.
+
+``python -m flexure_sim.tools.bench`` (or ``flexure-sim bench``) prints a table and writes JSON.
+Every figure is measured in the same run as its baseline.
 
 Wall times are medians of several runs (7 for flexure_sim, 3 for the baseline).
 
@@ -54,9 +57,13 @@ def _output_trajectory(sim: Simulation, every: int, n_samples: int) -> np.ndarra
 
 
 def reference_trajectory(mech, dt: float, duration: float) -> tuple[np.ndarray, float]:
-    """Converged output on the grid k*dt: steps dt/20 and dt/40, Richardson-extrapolated
-    for the method's second order. Returns the trajectory and its estimated error (the
-    extrapolation's correction, relative to the largest output)."""
+    """
+    Converged output on the grid k*dt.
+
+    Steps dt/20 and dt/40, Richardson-extrapolated for the method's second order. Returns the
+    trajectory and its estimated error (the extrapolation's correction, relative to the largest
+    output).
+    """
     n = int(round(duration / dt))
     runs = []
     for sub in (20, 40):
@@ -115,7 +122,9 @@ def _radau_baseline(mech, dt: float, n: int, ref: np.ndarray) -> dict:
     model = sim.model
     y0 = model.pack(sim.state)
     # atol: 1e-8 of each component's scale of motion in this run.
-    scale = np.concatenate([np.where(sim.part.free % 3 == 2, 1e-3, 1e-5), np.where(sim.part.free % 3 == 2, 1.0, 1e-2)])
+    scale = np.concatenate(
+        [np.where(sim.part.free % 3 == 2, 1e-3, 1e-5), np.where(sim.part.free % 3 == 2, 1.0, 1e-2)]
+    )
     if sim.drive is not None:
         scale = np.append(scale, U_STEP)
     atol = 1e-8 * scale
@@ -130,10 +139,14 @@ def _radau_baseline(mech, dt: float, n: int, ref: np.ndarray) -> dict:
     walls = []
     for _ in range(BASELINE_REPEATS):
         start = time.perf_counter()
-        sol = solve_ivp(fun, (0.0, DURATION), y0, method="Radau", jac=jac, rtol=1e-8, atol=atol, t_eval=grid)
+        sol = solve_ivp(
+            fun, (0.0, DURATION), y0, method="Radau", jac=jac, rtol=1e-8, atol=atol, t_eval=grid
+        )
         walls.append(time.perf_counter() - start)
     wall = float(np.median(walls))
-    out = np.array([model.output_displacement(model.unpack(y, t, U_STEP)[0]) for y, t in zip(sol.y.T, sol.t)])
+    out = np.array(
+        [model.output_displacement(model.unpack(y, t, U_STEP)[0]) for y, t in zip(sol.y.T, sol.t)]
+    )
     return {
         "baseline": "scipy solve_ivp Radau, rtol 1e-8, exact Jacobian",
         "baseline_wall_s": wall,
@@ -170,12 +183,14 @@ def bench_step_cost(dt: float = DEFAULT_STEP, sim_seconds: float = 1.0) -> dict:
         "step_us": wall / n * 1e6,
         "force_evaluation_us": force * 1e6,
         "jacobian_us": jac * 1e6,
-        "matrix_exponential_us": (lin - jac) * 1e6,  # both exponentials (phi-functions, drive work)
+        "matrix_exponential_us": (lin - jac)
+        * 1e6,  # both exponentials (phi-functions, drive work)
         "iterations_per_step": stats.iterations / stats.steps,
         "linearizations": stats.linearizations,
-        "note": "a step is one force evaluation per remainder iteration plus 3 small matrix-vector products; the "
-                "Jacobian and the matrix exponential (phi-functions) are paid per linearization "
-                "(once per run for the stage), there is no linear solve",
+        "note": "a step is one force evaluation per remainder iteration plus 3 small "
+        "matrix-vector products; the "
+        "Jacobian and the matrix exponential (phi-functions) are paid per linearization "
+        "(once per run for the stage), there is no linear solve",
     }
 
 
@@ -198,8 +213,11 @@ def bench_static_sweep(levels: int = 1000) -> dict:
 #: The 20 design parameters of the sensitivity benchmark (each hinge's h and D, four masses,
 #: the notch material's E and the plate thickness t).
 SENSITIVITY_PARAMETERS = (
-    [f"hinges.{h}.stiffness.h" for h in "abcdefg"] + [f"hinges.{h}.stiffness.D" for h in "abcdefg"]
-    + [f"bodies.body{i}.mass" for i in (2, 3, 4, 5)] + ["stiffness_models.notch.E", "stiffness_models.notch.t"])
+    [f"hinges.{h}.stiffness.h" for h in "abcdefg"]
+    + [f"hinges.{h}.stiffness.D" for h in "abcdefg"]
+    + [f"bodies.body{i}.mass" for i in (2, 3, 4, 5)]
+    + ["stiffness_models.notch.E", "stiffness_models.notch.t"]
+)
 
 
 def bench_analyses(frequencies: int = 1000) -> dict:
@@ -237,8 +255,12 @@ def bench_analyses(frequencies: int = 1000) -> dict:
 
 
 def _stage_tolerance_study(designs: int, batch_size: int):
-    """The shipped stage tolerance study (config/studies/stage_tolerance.yaml) with
-    ``designs`` designs: the seven hinges' h with a normal error of 5 um each."""
+    """
+    Return the shipped stage tolerance study with ``designs`` designs.
+
+    The study is config/studies/stage_tolerance.yaml: the seven hinges' h with a normal error
+    of 5 um each.
+    """
     from ..engine.study import study_from_dict
     from .sweep_outputs import OUTPUTS
 
@@ -251,12 +273,15 @@ def _stage_tolerance_study(designs: int, batch_size: int):
 
 
 def bench_sweep(designs: int = 1000, batch_size: int = 50, overhead_tasks: int = 100) -> dict:
-    """Designs per second of the stage tolerance study: in this process without Dask
-    (``evaluate_batch``), and through ``run_study`` (tasks, Parquet parts, merge) on a
-    LocalCluster of 1 and of 2 single-threaded worker processes, each started and warmed up
-    (kernels loaded) outside the timing. Parallel efficiency: rate(2) / (2 rate(1)). Batch
-    overhead: wall time per task of ``overhead_tasks`` one-design batches on the 1-worker
-    cluster, minus the in-process time per design."""
+    """
+    Designs per second of the stage tolerance study.
+
+    In this process without Dask (``evaluate_batch``), and through ``run_study`` (tasks, Parquet
+    parts, merge) on a LocalCluster of 1 and of 2 single-threaded worker processes, each started
+    and warmed up (kernels loaded) outside the timing. Parallel efficiency: rate(2) / (2 rate(1)).
+    Batch overhead: wall time per task of ``overhead_tasks`` one-design batches on the 1-worker
+    cluster, minus the in-process time per design.
+    """
     import logging
     import tempfile
 
@@ -306,8 +331,10 @@ CONTROLLER_TOPICS = (topics.OUTPUT, topics.DRIVE_FORCE, topics.hinge_compression
 
 
 def bench_node(duration: float = 30.0) -> dict:
-    """stage_node on the stage at 1 kHz, all topics, recording on (tools/measure.py): fast
-    mode; real-time mode with the defaults; with a short wake_spin; and next to a controller
+    """
+    stage_node on the stage at 1 kHz, all topics, recording on (tools/measure.py).
+
+    Fast mode; real-time mode with the defaults; with a short wake_spin; and next to a controller
     process (an rclpy node subscribed to three topics at 1 kHz each), with the default
     stepping-thread niceness and with none."""
     from . import closed_loop, measure  # needs ROS 2
@@ -374,14 +401,25 @@ def print_table(res: dict) -> None:
     print(f"  flexure_sim (exp. trapezoidal, dt {s['dt']:g} s): wall {s['wall_s'] * 1e3:8.2f} ms  "
           f"RTF {s['rtf']:7.1f}  max rel error {s['max_rel_error']:.2e}")
     if "baseline_wall_s" in s:
-        print(f"  scipy Radau (rtol 1e-8, exact J):           wall {s['baseline_wall_s'] * 1e3:8.2f} ms  "
-              f"RTF {DURATION / s['baseline_wall_s']:7.2f}  max rel error {s['baseline_max_rel_error']:.2e}")
-        print(f"  speedup: {s['speedup']:.1f}x   (reference error estimate {s['reference_rel_error_estimate']:.1e})")
+        print(
+            "  scipy Radau (rtol 1e-8, exact J):           wall "
+            f"{s['baseline_wall_s'] * 1e3:8.2f} ms  "
+            f"RTF {DURATION / s['baseline_wall_s']:7.2f}  max rel error "
+            f"{s['baseline_max_rel_error']:.2e}"
+        )
+        print(
+            f"  speedup: {s['speedup']:.1f}x   (reference error estimate "
+            f"{s['reference_rel_error_estimate']:.1e})"
+        )
     c = res["step_cost"]
     print(f"\nsteps per second at dt {c['dt']:g} s: {c['steps_per_s']:,.0f}  (RTF {c['rtf']:.1f})")
-    print(f"  per step {c['step_us']:.2f} us ({c['iterations_per_step']:.2f} iterations); force evaluation "
-          f"{c['force_evaluation_us']:.2f} us; per linearization: Jacobian {c['jacobian_us']:.0f} us, "
-          f"matrix exponential {c['matrix_exponential_us']:.0f} us")
+    print(
+        f"  per step {c['step_us']:.2f} us ({c['iterations_per_step']:.2f} iterations); force "
+        "evaluation "
+        f"{c['force_evaluation_us']:.2f} us; per linearization: Jacobian {c['jacobian_us']:.0f} "
+        "us, "
+        f"matrix exponential {c['matrix_exponential_us']:.0f} us"
+    )
     w = res["static_sweep"]
     print(f"\nstatic sweep, {w['levels']} levels over the stroke: {w['wall_s'] * 1e3:.1f} ms "
           f"({w['newton_iterations']} Newton iterations)")
@@ -402,12 +440,20 @@ def print_table(res: dict) -> None:
               f"{sw['cluster_start_s_2']:.1f} s (2 workers)")
     if "node" in res:
         nd = res["node"]
-        print(f"\nstage_node at 1 kHz, all topics, recording on: fast-mode RTF {nd.get('fast_rtf', float('nan')):.2f}; "
-              f"real-time missed ticks {nd.get('missed_tick_fraction', float('nan')):.4%}, "
-              f"jitter p50 {nd.get('jitter_p50_s', float('nan')) * 1e6:.0f} us, "
-              f"p99 {nd.get('jitter_p99_s', float('nan')) * 1e6:.0f} us")
-        for key in ("realtime", "realtime_low_spin", "realtime_controller", "realtime_controller_nice0",
-                    "realtime_flood"):
+        print(
+            "\nstage_node at 1 kHz, all topics, recording on: fast-mode RTF "
+            f"{nd.get('fast_rtf', float('nan')):.2f}; "
+            f"real-time missed ticks {nd.get('missed_tick_fraction', float('nan')):.4%}, "
+            f"jitter p50 {nd.get('jitter_p50_s', float('nan')) * 1e6:.0f} us, "
+            f"p99 {nd.get('jitter_p99_s', float('nan')) * 1e6:.0f} us"
+        )
+        for key in (
+            "realtime",
+            "realtime_low_spin",
+            "realtime_controller",
+            "realtime_controller_nice0",
+            "realtime_flood",
+        ):
             r = nd.get(key)
             if r:
                 print(f"  real-time, wake_spin {r['wake_spin_s'] * 1e3:.2f} ms, stepping nice {r['stepping_nice']}"
@@ -428,7 +474,10 @@ def print_table(res: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> dict:
-    res: dict = {"machine": machine(), "command": " ".join(["python -m flexure_sim.tools.bench", *sys.argv[1:]])}
+    res: dict = {
+        "machine": machine(),
+        "command": " ".join(["python -m flexure_sim.tools.bench", *sys.argv[1:]]),
+    }
     res["stage_step"] = bench_stage_step(args.dt, radau=not args.no_baseline)
     res["step_cost"] = bench_step_cost(args.dt)
     res["steps_per_s"] = res["step_cost"]["steps_per_s"]
@@ -442,16 +491,29 @@ def run(args: argparse.Namespace) -> dict:
 
 
 def build_parser(parser: Optional[argparse.ArgumentParser] = None) -> argparse.ArgumentParser:
-    parser = parser or argparse.ArgumentParser(prog="python -m flexure_sim.tools.bench", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--dt", type=float, default=DEFAULT_STEP, help=f"step (s), default {DEFAULT_STEP:g}")
-    parser.add_argument("--json", type=Path, default=Path("bench.json"), help="where to write the JSON (default bench.json)")
+    parser = parser or argparse.ArgumentParser(
+        prog="python -m flexure_sim.tools.bench", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument(
+        "--dt", type=float, default=DEFAULT_STEP, help=f"step (s), default {DEFAULT_STEP:g}"
+    )
+    parser.add_argument(
+        "--json",
+        type=Path,
+        default=Path("bench.json"),
+        help="where to write the JSON (default bench.json)",
+    )
     parser.add_argument("--no-baseline", action="store_true", help="skip the scipy Radau baseline")
     parser.add_argument("--sweep", action="store_true",
                         help="also measure flexure-sim sweep on LocalClusters of 1 and 2 workers")
     parser.add_argument("--sweep-designs", type=int, default=1000,
                         help="designs of the sweep measurement (default 1000)")
-    parser.add_argument("--node", action="store_true", help="also measure stage_node (needs ROS 2)")
-    parser.add_argument("--node-seconds", type=float, default=30.0, help="real-time node measurement length (s)")
+    parser.add_argument(
+        "--node", action="store_true", help="also measure stage_node (needs ROS 2)"
+    )
+    parser.add_argument(
+        "--node-seconds", type=float, default=30.0, help="real-time node measurement length (s)"
+    )
     return parser
 
 
@@ -465,7 +527,9 @@ def handle(args: argparse.Namespace) -> int:
 
 def register(subparsers) -> None:
     """``flexure-sim bench``."""
-    p = subparsers.add_parser("bench", help="benchmarks (speed against scipy Radau, steps/s, static sweep)")
+    p = subparsers.add_parser(
+        "bench", help="benchmarks (speed against scipy Radau, steps/s, static sweep)"
+    )
     build_parser(p)
     p.set_defaults(handler=handle)
 

@@ -1,8 +1,11 @@
-"""Registry of the ``flexure-sim`` subcommands that live in the tools package.
-
-Each module (named relative to the flexure_sim package) defines ``register(subparsers)``, which adds its subparser and sets
-``handler=<function(args) -> exit code>`` with ``set_defaults``. Add one line per module.
 """
+Registry of the ``flexure-sim`` subcommands that live in the tools package.
+
+Each module (named relative to the flexure_sim package) defines ``register(subparsers)``, which
+adds its subparser and sets ``handler=<function(args) -> exit code>`` with ``set_defaults``. Add
+one line per module.
+"""
+
 from __future__ import annotations
 
 import importlib

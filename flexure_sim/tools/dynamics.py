@@ -1,4 +1,5 @@
-"""``flexure-sim modes | frf | linearize``: the designer's linear analyses (engine/linear.py).
+"""
+``flexure-sim modes | frf | linearize``: the designer's linear analyses (engine/linear.py).
 
 flexure-sim modes microstage [--input U] [--count N] [--json] [-o DIR]
 flexure-sim frf microstage --from drive --to output [--to hinges.a.force_x] [--fmin F --fmax F
@@ -104,8 +105,12 @@ def run_modes(args) -> int:
 
 
 def plot_modes(mech, model, md, count: int, out_dir: Path) -> list[Path]:
-    """One PNG per mode: bodies (lines from each body's centre to its hinge points) at rest
-    in grey and displaced by the mode shape (scaled to 12 % of the mechanism's size)."""
+    """
+    One PNG per mode.
+
+    Bodies (lines from each body's centre to its hinge points) at rest in grey and displaced by the
+    mode shape (scaled to 12 % of the mechanism's size).
+    """
     import matplotlib
 
     matplotlib.use("Agg", force=True)
@@ -150,16 +155,20 @@ def plot_modes(mech, model, md, count: int, out_dir: Path) -> list[Path]:
 
 
 def _mode_points(mech, points, z, dz):
-    """Per body: (rest, displaced) arrays of [centre, hinge points...] in the root frame
-    (the displacement to first order: d(P + R c) = dP + dtheta J R c)."""
+    """
+    Per body.
+
+    (rest, displaced) arrays of [centre, hinge points...] in the root frame (the displacement to
+    first order: d(P + R c) = dP + dtheta J R c).
+    """
     out = {}
     for i, body in enumerate(mech.bodies):
-        x, y, th = z[3 * i : 3 * i + 3]
+        x, y, th = z[3 * i:3 * i + 3]
         c, s = np.cos(th), np.sin(th)
         rest = [np.array([x, y])] + [
             np.array([x + c * p[0] - s * p[1], y + s * p[0] + c * p[1]]) for p in points[body.name]
         ]
-        dx, dy, dth = dz[3 * i : 3 * i + 3]
+        dx, dy, dth = dz[3 * i:3 * i + 3]
         disp = [q + np.array([dx, dy]) + dth * np.array([-(q[1] - y), q[0] - x]) for q in rest]
         out[body.name] = (np.array(rest), np.array(disp))
     return out
@@ -244,7 +253,7 @@ def plot_bode(mech, model, f, G, outputs, path: Path) -> Path:
 
 
 def export_model(model: linear.LinearModel, path: Path, mechanism: str) -> Path:
-    """A, B, C, D with names: .npz (numpy), .mat (MATLAB, scipy.io.savemat), .json."""
+    """Return a, B, C, D with names: .npz (numpy), .mat (MATLAB, scipy.io.savemat), .json."""
     meta = {
         "mechanism": mechanism,
         "input_u0": model.u0,

@@ -1,5 +1,7 @@
-"""``flexure-sim export RUN.mcap --csv DIR``: one CSV file per topic, for PlotJuggler,
-spreadsheets and pandas.
+"""
+``flexure-sim export RUN.mcap --csv DIR``.
+
+One CSV file per topic, for PlotJuggler, spreadsheets and pandas.
 
     flexure-sim export runs/stage.mcap --csv runs/csv [--topics /output/displacement ...]
                        [--recover] [--strict]
@@ -97,8 +99,12 @@ def _check_topics(requested: list[str], topics: dict[str, Any], run_path: str) -
 
 
 class _Spool:
-    """The rows of one topic, flattened as they stream past and kept on disk (one JSON line
-    each), with the union of their columns, until the CSV can be written with all columns."""
+    """
+    The rows of one topic.
+
+    Flattened as they stream past and kept on disk (one JSON line each), with the union of their
+    columns, until the CSV can be written with all columns.
+    """
 
     def __init__(self, path: Path) -> None:
         self.path = path

@@ -1,4 +1,5 @@
-"""A drive-command flood from a process of its own, as a misbehaving controller would send it.
+"""
+A drive-command flood from a process of its own, as a misbehaving controller would send it.
 
     python -m flexure_sim.tools.flood --rate 10000 --duration 10 [--json]
 
@@ -32,8 +33,11 @@ SLEEP_S = 5e-4
 
 def flood(rate: float, duration: float, topic: str = topics.COMMAND, wait_s: float = 30.0,
           started: Optional[Callable[[], None]] = None) -> dict[str, Any]:
-    """Publish at ``rate`` Hz for ``duration`` s once a subscriber matched (``started`` is
-    called then); the counts."""
+    """
+    Publish at ``rate`` Hz for ``duration`` s once a subscriber matched; return the counts.
+
+    ``started`` is called when the subscriber matched.
+    """
     import rclpy
     from rclpy.context import Context
     from std_msgs.msg import Float64
@@ -72,8 +76,11 @@ def flood(rate: float, duration: float, topic: str = topics.COMMAND, wait_s: flo
 
 
 class FloodProcess:
-    """`flood` in a process of its own (this interpreter, environment ``env``), for
-    tools/measure.py: `wait_started` until it floods, `result` when it ended."""
+    """
+    `flood` in a process of its own (this interpreter, environment ``env``), for tools/measure.py.
+
+    `wait_started` until it floods, `result` when it ended.
+    """
 
     def __init__(self, rate: float, duration: float, env: dict[str, str]) -> None:
         self.proc = subprocess.Popen(
@@ -96,7 +103,7 @@ class FloodProcess:
         raise RuntimeError("the command flood did not start")
 
     def result(self, timeout: float = 60.0) -> dict[str, Any]:
-        """The flood's JSON summary (it ends on its own)."""
+        """Return the flood's JSON summary (it ends on its own)."""
         out, _ = self.proc.communicate(timeout=timeout)
         lines = [line for line in out.splitlines() if line.startswith("{")]
         if self.proc.returncode != 0 or not lines:

@@ -1,5 +1,8 @@
-"""``flexure-sim info RUN.mcap``: topics, types, counts, rates, duration, and the mechanism and
-parameters of the run (the ``flexure_sim`` metadata record stage_node writes when recording).
+"""
+``flexure-sim info RUN.mcap``.
+
+topics, types, counts, rates, duration, and the mechanism and parameters of the run (the
+``flexure_sim`` metadata record stage_node writes when recording).
 
     flexure-sim info runs/stage.mcap [--json] [--yaml] [--recover] [--strict] [--no-decode]
 
@@ -28,8 +31,18 @@ PARAMETER_UNITS = {
     "stroke_max": "m", "slew_rate": "m/s", "record": "", "record_dir": "", "record_path": "",
 }
 MECHANISM_KEYS = ("mechanism_name", "mechanism_path", "mechanism_yaml")
-RUN_KEYS = ("node", "flexure_sim_version", "run", "started_utc", "sim_time_start", "steps_per_tick",
-            "relinearize_tol", "root_frame", "bodies", "hinges")
+RUN_KEYS = (
+    "node",
+    "flexure_sim_version",
+    "run",
+    "started_utc",
+    "sim_time_start",
+    "steps_per_tick",
+    "relinearize_tol",
+    "root_frame",
+    "bodies",
+    "hinges",
+)
 
 
 def register(subparsers: Any) -> None:
@@ -62,17 +75,34 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def summarize(info: LogInfo) -> dict:
-    """The info of a log as a JSON-ready dict (times in s, sizes in bytes)."""
+    """Return the info of a log as a JSON-ready dict (times in s, sizes in bytes)."""
     duration = info.duration_ns / 1e9
     topics = []
     for name, topic in sorted(info.topics.items()):
-        rate = (topic.message_count - 1) / duration if duration > 0 and topic.message_count > 1 else None
+        rate = (
+            (topic.message_count - 1) / duration
+            if duration > 0 and topic.message_count > 1
+            else None
+        )
         qos = topic.qos[0] if topic.qos else None
-        topics.append({
-            "name": name, "type": topic.type, "count": topic.message_count, "rate_hz": rate,
-            "qos": None if qos is None else {"reliability": qos.reliability, "durability": qos.durability,
-                                             "history": qos.history, "depth": qos.depth},
-        })
+        topics.append(
+            {
+                "name": name,
+                "type": topic.type,
+                "count": topic.message_count,
+                "rate_hz": rate,
+                "qos": (
+                    None
+                    if qos is None
+                    else {
+                        "reliability": qos.reliability,
+                        "durability": qos.durability,
+                        "history": qos.history,
+                        "depth": qos.depth,
+                    }
+                ),
+            }
+        )
     meta = info.flexure_sim
     changes = [dict(d) for name, d in info.metadata_records if name == PARAMETER_CHANGE_NAME]
     other_records = sorted({name for name, _ in info.metadata_records}
@@ -91,17 +121,24 @@ def summarize(info: LogInfo) -> dict:
         "end": info.end_ns / 1e9 if info.message_count else None,
         "duration": duration,
         "topics": topics,
-        "mechanism": {
-            "name": meta.get("mechanism_name") or meta.get("mechanism"),
-            "path": meta.get("mechanism_path"),
-            "yaml": meta.get("mechanism_yaml"),
-            "bodies": [b for b in meta.get("bodies", "").split(",") if b],
-            "hinges": [h for h in meta.get("hinges", "").split(",") if h],
-        } if meta else None,
+        "mechanism": (
+            {
+                "name": meta.get("mechanism_name") or meta.get("mechanism"),
+                "path": meta.get("mechanism_path"),
+                "yaml": meta.get("mechanism_yaml"),
+                "bodies": [b for b in meta.get("bodies", "").split(",") if b],
+                "hinges": [h for h in meta.get("hinges", "").split(",") if h],
+            }
+            if meta
+            else None
+        ),
         "parameters": {k: meta[k] for k in PARAMETER_UNITS if k in meta},
         "run": {k: meta[k] for k in RUN_KEYS if k in meta},
-        "other_metadata": {k: v for k, v in sorted(meta.items())
-                           if k not in PARAMETER_UNITS and k not in RUN_KEYS and k not in MECHANISM_KEYS},
+        "other_metadata": {
+            k: v
+            for k, v in sorted(meta.items())
+            if k not in PARAMETER_UNITS and k not in RUN_KEYS and k not in MECHANISM_KEYS
+        },
         "parameter_changes": changes,
         "other_metadata_records": other_records,
         "dropped_messages": info.dropped_messages,
@@ -120,7 +157,8 @@ def format_summary(s: dict, show_yaml: bool = False) -> str:
     state = "complete" if s["complete"] else "INCOMPLETE (recovered part)"
     lines = [
         f"File:         {s['path']}  ({_size(s['size_bytes'])}, {state})",
-        f"Format:       MCAP, profile {s['profile']} (rosbag2), written by {s['library'] or 'unknown'}; "
+        f"Format:       MCAP, profile {s['profile']} (rosbag2), written by "
+        f"{s['library'] or 'unknown'}; "
         f"{s['chunk_count']} chunk(s)",
     ]
     if s["message_count"]:
@@ -153,15 +191,27 @@ def format_summary(s: dict, show_yaml: bool = False) -> str:
     else:
         yaml_text = mech["yaml"] or ""
         stored = f"; YAML recorded, {len(yaml_text.splitlines())} lines" if yaml_text else ""
-        lines.append(f"Mechanism:    {mech['name'] or 'unknown'}  ({mech['path'] or 'path not recorded'}{stored})")
+        lines.append(
+            f"Mechanism:    {mech['name'] or 'unknown'}  "
+            f"({mech['path'] or 'path not recorded'}{stored})"
+        )
         if mech["bodies"] or mech["hinges"]:
-            lines.append(f"              bodies {', '.join(mech['bodies'])}; hinges {', '.join(mech['hinges'])}")
+            lines.append(
+                f"              bodies {', '.join(mech['bodies'])}; hinges "
+                f"{', '.join(mech['hinges'])}"
+            )
         run = s["run"]
         if run:
-            parts = [f"node {run['node']}" if "node" in run else "",
-                     f"flexure_sim {run['flexure_sim_version']}" if "flexure_sim_version" in run else "",
-                     f"run {run['run']}" if "run" in run else "",
-                     f"started {run['started_utc']}" if "started_utc" in run else ""]
+            parts = [
+                f"node {run['node']}" if "node" in run else "",
+                (
+                    f"flexure_sim {run['flexure_sim_version']}"
+                    if "flexure_sim_version" in run
+                    else ""
+                ),
+                f"run {run['run']}" if "run" in run else "",
+                f"started {run['started_utc']}" if "started_utc" in run else "",
+            ]
             lines.append(f"Recorded by:  {', '.join(p for p in parts if p)}")
         if s["parameters"]:
             lines.append("Parameters:")
@@ -173,8 +223,11 @@ def format_summary(s: dict, show_yaml: bool = False) -> str:
                     extra = f"  ({run['steps_per_tick']} engine steps per tick)"
                 shown = v if v != "" else "''"
                 lines.append(f"  {k:<{width}}  {shown}{' ' + unit if unit else ''}{extra}")
-        rest = {k: v for k, v in s["run"].items()
-                if k not in ("node", "flexure_sim_version", "run", "started_utc", "bodies", "hinges")}
+        rest = {
+            k: v
+            for k, v in s["run"].items()
+            if k not in ("node", "flexure_sim_version", "run", "started_utc", "bodies", "hinges")
+        }
         rest.update(s["other_metadata"])
         if rest:
             lines.append("Run settings:")

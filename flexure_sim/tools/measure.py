@@ -1,4 +1,5 @@
-"""Measure the stage node: real-time factor in fast mode and missed ticks in real-time mode.
+"""
+Measure the stage node: real-time factor in fast mode and missed ticks in real-time mode.
 
     python -m flexure_sim.tools.measure                      # both modes, 1 kHz, recording on
     python -m flexure_sim.tools.measure --mode realtime --duration 30 --subscribe
@@ -60,7 +61,8 @@ def run_node(
     flood_hz: float = 0.0,
     companion: Optional[Callable[[dict[str, str], Path], Any]] = None,
 ) -> dict[str, Any]:
-    """Run the node in ``mode`` for warm-up + ``duration`` seconds and return the figures.
+    """
+    Run the node in ``mode`` for warm-up + ``duration`` seconds and return the figures.
 
     ``params``: further node parameters (name -> value as on the command line). The node
     runs in ``keep_dir`` (kept) or in a temporary directory (removed afterwards).
@@ -85,8 +87,14 @@ def run_node(
     root = str(Path(__file__).resolve().parents[2])
     env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     node_params: dict[str, Any] = {
-        "mechanism": mechanism, "time_mode": mode, "publish_rate": float(rate),
-        "sim_step": float(sim_step), "record": record, "record_path": "measure.mcap", **(params or {})}
+        "mechanism": mechanism,
+        "time_mode": mode,
+        "publish_rate": float(rate),
+        "sim_step": float(sim_step),
+        "record": record,
+        "record_path": "measure.mcap",
+        **(params or {}),
+    }
     args = [sys.executable, "-m", "flexure_sim.node.stage_node", "--ros-args"]
     for name, value in node_params.items():
         args += ["-p", f"{name}:={value_text(value)}"]
@@ -99,8 +107,12 @@ def run_node(
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     samples: list[tuple[float, dict[str, str]]] = []
-    node.create_subscription(DiagnosticArray, "/diagnostics",
-                             lambda m: samples.append((time.monotonic(), _diag_values(m))), QoSProfile(depth=1000))
+    node.create_subscription(
+        DiagnosticArray,
+        "/diagnostics",
+        lambda m: samples.append((time.monotonic(), _diag_values(m))),
+        QoSProfile(depth=1000),
+    )
     received = {"count": 0}
     if subscribe:
         itf = StageInterface(load_mechanism(mechanism), mode)
@@ -214,7 +226,9 @@ def run_node(
         result.update(recording_complete=log.complete, recorded_messages=log.message_count,
                       recording_bytes=path.stat().st_size,
                       recording_dropped=int(log.dropped_messages or 0))
-        result["topics_per_tick"] = sum(1 for t in log.topics if t not in ("/diagnostics", "/drive/displacement"))
+        result["topics_per_tick"] = sum(
+            1 for t in log.topics if t not in ("/diagnostics", "/drive/displacement")
+        )
     if keep_dir:
         result["workdir"] = str(workdir)
     else:
@@ -222,9 +236,15 @@ def run_node(
     return result
 
 
-def profile(rate: float, sim_step: float, ticks: int = 300, mechanism: str = "microstage") -> dict[str, float]:
-    """Where one tick's time goes, in this process and without DDS traffic: engine steps,
-    snapshot, CDR packing vs rclpy message building + serialize_message, publish, record."""
+def profile(
+    rate: float, sim_step: float, ticks: int = 300, mechanism: str = "microstage"
+) -> dict[str, float]:
+    """
+    Where one tick's time goes, in this process and without DDS traffic.
+
+    Engine steps, snapshot, CDR packing vs rclpy message building + serialize_message, publish,
+    record.
+    """
     import rclpy
     from rclpy.context import Context
     from rclpy.serialization import serialize_message
@@ -273,7 +293,10 @@ def profile(rate: float, sim_step: float, ticks: int = 300, mechanism: str = "mi
     rclpy.init(context=context, domain_id=random.randint(1, 100))
     node = rclpy.create_node("stage_node_profile", context=context)
     try:
-        pubs = [node.create_publisher(s.msg_type, f"/profile{i}", stream_qos()) for i, s in enumerate(itf.tick_topics)]
+        pubs = [
+            node.create_publisher(s.msg_type, f"/profile{i}", stream_qos())
+            for i, s in enumerate(itf.tick_topics)
+        ]
         t = perf()
         for _ in range(ticks):
             for p, data in zip(pubs, payloads):
@@ -303,7 +326,9 @@ def profile(rate: float, sim_step: float, ticks: int = 300, mechanism: str = "mi
         out["record_in_process_drain_us"] = (perf() - t) / ticks * 1e6
         process = RecorderProcess()
         try:
-            topics = [(name, spec.type_name, stream_qos()) for name, spec in zip(names, itf.tick_topics)]
+            topics = [
+                (name, spec.type_name, stream_qos()) for name, spec in zip(names, itf.tick_topics)
+            ]
             recording = ProcessRecording(process, Path(tmp) / "q.mcap", topics, {}, "flexure_sim",
                                          lossless=False)  # the real-time hand-off: never waits
             t = perf()
@@ -320,19 +345,30 @@ def profile(rate: float, sim_step: float, ticks: int = 300, mechanism: str = "mi
 
 
 def _print_run(r: dict[str, Any]) -> None:
-    print(f"== {r['mode']} mode: {r['mechanism']}, {r['publish_rate']:g} Hz x {r['steps_per_tick']} steps of "
-          f"{r['sim_step']:g} s, recording {'on' if r['record'] else 'off'}"
-          + (f", subscribed: {r['subscribed']}" if r["subscribed"] else "")
-          + "".join(f", {k}:={v}" for k, v in r["params"].items()))
+    print(
+        f"== {r['mode']} mode: {r['mechanism']}, {r['publish_rate']:g} Hz x {r['steps_per_tick']} "
+        "steps of "
+        f"{r['sim_step']:g} s, recording {'on' if r['record'] else 'off'}"
+        + (f", subscribed: {r['subscribed']}" if r["subscribed"] else "")
+        + "".join(f", {k}:={v}" for k, v in r["params"].items())
+    )
     print(f"   window {r['wall_s']:.1f} s wall, {r['sim_s']:.3f} s simulated, {r['ticks']} ticks")
     print(f"   real-time factor {r['real_time_factor']:.3f}")
     if r.get("paced_ticks"):
-        print(f"   missed ticks {r['missed_ticks']} of {r['paced_ticks']} ({100 * r['missed_fraction']:.2f} %), "
-              f"slips {r['slips']}, worst wake-up lateness {r['max_late_us']:.0f} us")
-    print(f"   per tick: engine {r['step_time_mean_us']:.0f} us ({r['engine_step_time_mean_us']:.1f} us/step, "
-          f"{r['solver_iterations_per_step']:.2f} iterations/step), snapshot {r['snapshot_time_mean_us']:.0f} us, "
-          f"pack+publish+record {r['publish_time_mean_us']:.0f} us; mean {r['tick_time_mean_us']:.0f} us, "
-          f"max {r['tick_time_max_us']:.0f} us")
+        print(
+            f"   missed ticks {r['missed_ticks']} of {r['paced_ticks']} "
+            f"({100 * r['missed_fraction']:.2f} %), "
+            f"slips {r['slips']}, worst wake-up lateness {r['max_late_us']:.0f} us"
+        )
+    print(
+        f"   per tick: engine {r['step_time_mean_us']:.0f} us "
+        f"({r['engine_step_time_mean_us']:.1f} us/step, "
+        f"{r['solver_iterations_per_step']:.2f} iterations/step), snapshot "
+        f"{r['snapshot_time_mean_us']:.0f} us, "
+        f"pack+publish+record {r['publish_time_mean_us']:.0f} us; mean "
+        f"{r['tick_time_mean_us']:.0f} us, "
+        f"max {r['tick_time_max_us']:.0f} us"
+    )
     if r.get("node_cpu_cores") is not None:
         print(f"   node process CPU: {r['node_cpu_cores']:.2f} cores; stepping thread niceness "
               f"{r['stepping_nice']}")
@@ -344,19 +380,30 @@ def _print_run(r: dict[str, Any]) -> None:
     if r.get("messages_received_per_s") is not None:
         print(f"   subscriber received {r['messages_received_per_s']:.0f} messages/s")
     if r["record"]:
-        print(f"   recording complete={r['recording_complete']}: {r['recorded_messages']} messages, "
-              f"{r['recording_bytes'] / 1e6:.1f} MB, dropped {r['recording_dropped']}, "
-              f"{r['topics_per_tick']} topics per tick")
+        print(
+            f"   recording complete={r['recording_complete']}: {r['recorded_messages']} messages, "
+            f"{r['recording_bytes'] / 1e6:.1f} MB, dropped {r['recording_dropped']}, "
+            f"{r['topics_per_tick']} topics per tick"
+        )
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m flexure_sim.tools.measure",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--mode", choices=("fast", "realtime", "both"), default="both")
-    parser.add_argument("--duration", type=float, default=10.0, help="measuring window, s (default 10)")
+    parser.add_argument(
+        "--duration", type=float, default=10.0, help="measuring window, s (default 10)"
+    )
     parser.add_argument("--warmup", type=float, default=2.0, help="ignored start, s (default 2)")
-    parser.add_argument("--rate", type=float, default=1000.0, help="publish_rate, Hz (default 1000)")
-    parser.add_argument("--sim-step", type=float, default=DEFAULT_STEP, help=f"sim_step, s (default {DEFAULT_STEP:g})")
+    parser.add_argument(
+        "--rate", type=float, default=1000.0, help="publish_rate, Hz (default 1000)"
+    )
+    parser.add_argument(
+        "--sim-step",
+        type=float,
+        default=DEFAULT_STEP,
+        help=f"sim_step, s (default {DEFAULT_STEP:g})",
+    )
     parser.add_argument("--mechanism", default="microstage")
     parser.add_argument("--no-record", action="store_true", help="recording off (default on)")
     parser.add_argument("--subscribe", nargs="?", const="all", default="",
@@ -369,7 +416,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--domain-id", type=int, default=None)
     parser.add_argument("--keep", type=Path, default=None, metavar="DIR",
                         help="run the node in DIR and keep its recording and logs there")
-    parser.add_argument("--profile", action="store_true", help="break one tick's cost down (no node)")
+    parser.add_argument(
+        "--profile", action="store_true", help="break one tick's cost down (no node)"
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     params: dict[str, str] = {}

@@ -1,5 +1,9 @@
-"""The mechanism a recorded run simulated, reloaded from the run's ``flexure_sim`` metadata
-record, and what it adds to the recorded poses (hinge frame displacements, Figure 6.4)."""
+"""
+The mechanism a recorded run simulated.
+
+Reloaded from the run's ``flexure_sim`` metadata record, and what it adds to the recorded poses
+(hinge frame displacements, Figure 6.4).
+"""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -11,9 +15,12 @@ from .series import Series
 
 
 def load_recorded_mechanism(meta: dict[str, str]) -> tuple[Any, str]:
-    """(mechanism, '') or (None, why not). Tried in order: the YAML text stored in the
-    metadata (what actually ran), the file at the recorded path, the built-in of the recorded
-    name."""
+    """
+    (mechanism, '') or (None, why not).
+
+    Tried in order: the YAML text stored in the metadata (what actually ran), the file at the
+    recorded path, the built-in of the recorded name.
+    """
     from ..engine.config import ConfigError, load_mechanism, mechanism_from_dict
 
     problems = []
@@ -44,8 +51,10 @@ def load_recorded_mechanism(meta: dict[str, str]) -> tuple[Any, str]:
 def hinge_frame_displacements(
     mech: Any, hinge: str, poses: dict[str, Series]
 ) -> Optional[tuple[np.ndarray, np.ndarray, np.ndarray, str, str]]:
-    """Displacement from rest (root frame, m) of a hinge's frame on body A and on body B,
-    from the recorded body poses and the mechanism's frame positions.
+    """
+    Displacement from rest (root frame, m) of a hinge's frame on body A and on body B.
+
+    It is computed from the recorded body poses and the mechanism's frame positions.
 
     Returns (t, disp_a (n, 2), disp_b (n, 2), body A, body B), or None when the hinge or the
     poses of its two bodies (sampled at the same times) are not available.

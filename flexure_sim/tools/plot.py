@@ -1,4 +1,5 @@
-"""``flexure-sim plot RUN.mcap -o DIR``: PNG figures of a recorded run.
+"""
+``flexure-sim plot RUN.mcap -o DIR``: PNG figures of a recorded run.
 
     flexure-sim plot runs/stage.mcap -o runs/plots [--recover] [--strict] [--dpi 120]
 
@@ -45,7 +46,13 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser("plot", help="PNG figures of a recorded run",
                               description=__doc__.split("\n\n")[0].replace("``", ""))
     add_file_arguments(p)
-    p.add_argument("-o", "--output", metavar="DIR", required=True, help="directory for the PNG files (created)")
+    p.add_argument(
+        "-o",
+        "--output",
+        metavar="DIR",
+        required=True,
+        help="directory for the PNG files (created)",
+    )
     p.add_argument("--dpi", type=int, default=120, help="resolution (default 120)")
     p.set_defaults(handler=run)
 
@@ -128,16 +135,26 @@ def plot_run(run: Run, out_dir: Path, dpi: int = 120) -> list[tuple[Path, str]]:
             if u is not None and not u.empty and u.t[0] < ct[0]:
                 ct, cv = np.append(u.t[0], ct), np.append(u.values[0], cv)
             ct, cv = _staircase(ct, cv, run.end_ns / 1e9)
-            ax_in.plot(tx(ct), cv * 1e6, label="drive command", color="C1", linestyle="--", linewidth=1)
+            ax_in.plot(
+                tx(ct), cv * 1e6, label="drive command", color="C1", linestyle="--", linewidth=1
+            )
         ax_in.set_ylabel("input displacement [µm]")
         ax_in.legend(loc="best", fontsize="small")
         ax_in.grid(alpha=0.3)
         mark_steps(ax_in)
         if out is not None:
-            ax_out.plot(tx(out.t), out.values * 1e6, color="C2", label="output displacement (body x)")
+            ax_out.plot(
+                tx(out.t), out.values * 1e6, color="C2", label="output displacement (body x)"
+            )
             for s in _settled_gains(run):
-                ax_out.annotate(f"gain {s['gain']:.4g}", (s["t_end"] * scale, s["output"] * 1e6),
-                                textcoords="offset points", xytext=(-4, 6), ha="right", fontsize="small")
+                ax_out.annotate(
+                    f"gain {s['gain']:.4g}",
+                    (s["t_end"] * scale, s["output"] * 1e6),
+                    textcoords="offset points",
+                    xytext=(-4, 6),
+                    ha="right",
+                    fontsize="small",
+                )
         ax_out.margins(y=0.12)  # room for the gain labels
         ax_out.set_ylabel("output displacement [µm]")
         ax_out.set_xlabel(tlabel)
@@ -155,15 +172,24 @@ def plot_run(run: Run, out_dir: Path, dpi: int = 120) -> list[tuple[Path, str]]:
             title = f"Joint {hinge} displacement on {body_a} and {body_b}"
             fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(8, 6))
             ax1.plot(tx(ft), da[:, 0] * 1e6, label=f"frame of joint {hinge} on {body_a}")
-            ax1.plot(tx(ft), db[:, 0] * 1e6, label=f"frame of joint {hinge} on {body_b}", linestyle="--")
+            ax1.plot(
+                tx(ft), db[:, 0] * 1e6, label=f"frame of joint {hinge} on {body_b}", linestyle="--"
+            )
             ax1.set_ylabel("x-displacement [µm]")
             ax1.legend(loc="best", fontsize="small")
             ax1.grid(alpha=0.3)
             mark_steps(ax1)
             if comp is not None:
-                ax2.plot(tx(comp.t), comp.values * 1e9, color="C3", label=f"compression ({body_b} - {body_a})")
+                ax2.plot(
+                    tx(comp.t),
+                    comp.values * 1e9,
+                    color="C3",
+                    label=f"compression ({body_b} - {body_a})",
+                )
             else:
-                ax2.plot(tx(ft), (db[:, 0] - da[:, 0]) * 1e9, color="C3", label=f"{body_b} - {body_a}")
+                ax2.plot(
+                    tx(ft), (db[:, 0] - da[:, 0]) * 1e9, color="C3", label=f"{body_b} - {body_a}"
+                )
             ax2.set_ylabel(f"joint {hinge} compression [nm]")
             ax2.set_xlabel(tlabel)
             ax2.legend(loc="best", fontsize="small")
@@ -177,8 +203,11 @@ def plot_run(run: Run, out_dir: Path, dpi: int = 120) -> list[tuple[Path, str]]:
             ax2.set_xlabel(tlabel)
             ax2.grid(alpha=0.3)
             mark_steps(ax2)
-            ax2.set_title(f"(frame displacements need the mechanism: {run.mechanism_problem or 'poses missing'})",
-                          fontsize="small")
+            ax2.set_title(
+                "(frame displacements need the mechanism: "
+                f"{run.mechanism_problem or 'poses missing'})",
+                fontsize="small",
+            )
         else:
             title = ""
         if title:
@@ -198,7 +227,9 @@ def plot_run(run: Run, out_dir: Path, dpi: int = 120) -> list[tuple[Path, str]]:
             ax.grid(alpha=0.3)
             mark_steps(ax)
         axes[0].legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
-        axes[0].set_title("wrench each hinge exerts on its body B, in its frame b", fontsize="small")
+        axes[0].set_title(
+            "wrench each hinge exerts on its body B, in its frame b", fontsize="small"
+        )
         axes[-1].set_xlabel(tlabel)
         save(fig, "hinge_wrenches", TITLES["hinge_wrenches"])
 
@@ -209,7 +240,9 @@ def plot_run(run: Run, out_dir: Path, dpi: int = 120) -> list[tuple[Path, str]]:
         ax.plot(tx(force.t), force.values, color="C4")
         ax.set_ylabel("drive force [N]")
         ax.set_xlabel(tlabel)
-        ax.set_title("force the actuator applies to the driven body, along the drive axis", fontsize="small")
+        ax.set_title(
+            "force the actuator applies to the driven body, along the drive axis", fontsize="small"
+        )
         ax.grid(alpha=0.3)
         mark_steps(ax)
         save(fig, "drive_force", TITLES["drive_force"])
@@ -222,7 +255,9 @@ def plot_run(run: Run, out_dir: Path, dpi: int = 120) -> list[tuple[Path, str]]:
             rest = p.values[0]
             for k, (ax, f) in enumerate(zip(axes, (1e3, 1e3, 1.0))):
                 ax.plot(tx(p.t), (p.values[:, k] - rest[k]) * f, label=name)
-        for ax, label in zip(axes, ("x - x(start) [mm]", "y - y(start) [mm]", "yaw - yaw(start) [rad]")):
+        for ax, label in zip(
+            axes, ("x - x(start) [mm]", "y - y(start) [mm]", "yaw - yaw(start) [rad]")
+        ):
             ax.set_ylabel(label)
             ax.grid(alpha=0.3)
         axes[0].legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
@@ -268,7 +303,7 @@ def _settled_gains(run: Run) -> list[dict]:
 
 
 def figure_title(path: Path) -> Optional[str]:
-    """The title stored in a PNG written by `plot_run` (for tests and scripts)."""
+    """Return the title stored in a PNG written by `plot_run` (for tests and scripts)."""
     from PIL import Image
 
     with Image.open(path) as img:

@@ -1,4 +1,5 @@
-"""A recorded run as typed time series, read in one streaming pass.
+"""
+A recorded run as typed time series, read in one streaming pass.
 
 `load_run` reads a rosbag2 MCAP file written by ``stage_node`` (or by ``ros2 bag record`` of
 the same topics) and keeps only what the tools use, as numeric arrays (`series`), never the
@@ -44,7 +45,8 @@ _SIGNALS = (OUTPUT, DRIVE_INPUT, COMMAND, DRIVE_FORCE)
 
 @dataclass
 class Run:
-    """A run's topics, metadata and time series (arrays of log times and values per topic).
+    """
+    A run's topics, metadata and time series (arrays of log times and values per topic).
 
     ``raw`` maps a topic to (log times ns, values, row lengths or None) as `SeriesBuilder`
     made them; the typed views below turn them into `Series` in simulation time.
@@ -66,7 +68,7 @@ class Run:
     # ------------------------------------------------------------------ file level
     @property
     def metadata(self) -> dict[str, str]:
-        """The ``flexure_sim`` metadata record (mechanism, parameters), empty if absent."""
+        """Return the ``flexure_sim`` metadata record (mechanism, parameters), empty if absent."""
         records = [d for name, d in self.metadata_records if name == METADATA_NAME]
         return dict(records[-1]) if records else {}
 
@@ -94,8 +96,11 @@ class Run:
 
     @property
     def clock_mapped(self) -> bool:
-        """True when log times are not simulation time (e.g. ``ros2 bag record`` without
-        ``--use-sim-time`` of a fast-mode run) and the recorded /clock maps them to it."""
+        """
+        Return True when log times are not simulation time and the recorded /clock maps them to it.
+
+        E.g. ``ros2 bag record`` without ``--use-sim-time`` of a fast-mode run.
+        """
         return self.timebase.mapped
 
     @property
@@ -120,7 +125,7 @@ class Run:
         return SeriesBuilder(expected).arrays()  # no message read on this topic
 
     def scalar(self, relative: str) -> Optional[Series]:
-        """A ``std_msgs/Float64`` topic as a Series of shape (n,), or None if absent."""
+        """Return a ``std_msgs/Float64`` topic as a Series of shape (n,), or None if absent."""
         if not self.has(relative):
             return None
         t, values, _ = self._raw(relative, FLOAT64)
@@ -196,8 +201,11 @@ class Run:
 
     # ------------------------------------------------------------------ mechanism
     def mechanism(self) -> Any:
-        """The mechanism the run simulated (flexure_sim.engine.mechanism.Mechanism), or None;
-        `mechanism_problem` says why it is None (`load_recorded_mechanism`)."""
+        """
+        Return the mechanism the run simulated (flexure_sim.engine.mechanism.Mechanism), or None.
+
+        `mechanism_problem` says why it is None (`load_recorded_mechanism`).
+        """
         if "mechanism" not in self._cache:
             self._cache["mechanism"], self._cache["mechanism_problem"] = (
                 load_recorded_mechanism(self.metadata))
@@ -211,8 +219,11 @@ class Run:
     def hinge_frame_displacements(
         self, hinge: str
     ) -> Optional[tuple[np.ndarray, np.ndarray, np.ndarray, str, str]]:
-        """`mechanism_reload.hinge_frame_displacements` of this run (None without the
-        mechanism or the poses)."""
+        """
+        Return `mechanism_reload.hinge_frame_displacements` of this run.
+
+        None without the mechanism or the poses.
+        """
         mech = self.mechanism()
         if mech is None:
             return None
@@ -225,10 +236,12 @@ def _ordered(found: set[str], listed: str) -> list[str]:
 
 
 def find_namespace(log: Any, requested: Optional[str] = None) -> str:
-    """The namespace of the stage run in ``log`` (its ``path`` and ``topics``; '' for the root).
+    """
+    Return the namespace of the stage run in ``log`` ('' for the root).
 
-    ``requested`` (``--namespace``) is checked; otherwise it is inferred from the topics
-    ending in output/displacement, drive/input, bodies/poses or drive/force.
+    Uses the log's ``path`` and ``topics``. ``requested`` (``--namespace``) is checked; otherwise
+    it is inferred from the topics ending in output/displacement, drive/input, bodies/poses or
+    drive/force.
     """
     path, topics = log.path, set(log.topics)
     if requested is not None:
@@ -250,9 +263,12 @@ def find_namespace(log: Any, requested: Optional[str] = None) -> str:
 
 
 def _wanted(name: str, namespace: Optional[str], poses: bool) -> bool:
-    """Whether the series of topic ``name`` are needed: /clock, the signals, hinge wrenches
-    and compressions and (``poses``) body poses of the stage in ``namespace`` (of any stage
-    when the namespace is not known yet)."""
+    """
+    Whether the series of topic ``name`` are needed.
+
+    /clock, the signals, hinge wrenches and compressions and (``poses``) body poses of the stage in
+    ``namespace`` (of any stage when the namespace is not known yet).
+    """
     if name == CLOCK:
         return True
     if namespace is None:
@@ -284,9 +300,12 @@ def load_run(
     strict: bool = False,
     poses: bool = True,
 ) -> Run:
-    """Read ``path`` (strictly, or its readable part with ``recover``) as a stage run, keeping
-    the series of the signals, the hinge wrenches and compression, /clock and, with
-    ``poses``, the body poses (analyse needs no poses: reading them costs time)."""
+    """
+    Read ``path`` (strictly, or its readable part with ``recover``) as a stage run.
+
+    Keeping the series of the signals, the hinge wrenches and compression, /clock and, with
+    ``poses``, the body poses (analyse needs no poses: reading them costs time).
+    """
     reader = open_log(path, recover=recover, strict=strict)
     ns: Optional[str] = None
     if reader.summary_ok:  # topics known before the pass: read only this stage's

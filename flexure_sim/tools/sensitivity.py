@@ -1,6 +1,8 @@
-"""``flexure-sim sensitivity MECH --wrt PARAM[,PARAM...] --of OUTPUT[,OUTPUT...]``: exact
-first and second design sensitivities by hyper-dual numbers (engine/sensitivity.py) of
-gain, compression, first_mode and peak_stress.
+"""
+``flexure-sim sensitivity MECH --wrt PARAM[,PARAM...] --of OUTPUT[,OUTPUT...]``.
+
+Exact first and second design sensitivities by hyper-dual numbers (engine/sensitivity.py) of gain,
+compression, first_mode and peak_stress.
 
 PARAM is any numeric key of the mechanism file by path: ``stiffness_models.notch.h``,
 ``hinges.a.a.at.0``, ``bodies.body4.mass``; ``hinges.<h>.stiffness.<key>`` varies one hinge's

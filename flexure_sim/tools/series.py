@@ -1,4 +1,5 @@
-"""Time series of a recorded run, built message by message in compact arrays.
+"""
+Time series of a recorded run, built message by message in compact arrays.
 
 A run's numeric topics are kept as `array.array` buffers while the log streams past (8 bytes
 per time stamp and per value, no decoded message objects), and become NumPy arrays at the

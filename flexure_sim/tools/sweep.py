@@ -1,4 +1,5 @@
-"""``flexure-sim sweep STUDY.yaml -o results.parquet``: design sweeps and Monte Carlo studies.
+"""
+``flexure-sim sweep STUDY.yaml -o results.parquet``: design sweeps and Monte Carlo studies.
 
     flexure-sim sweep config/studies/stage_tolerance.yaml -o tol.parquet
     flexure-sim sweep STUDY.yaml -o out.parquet --workers 1          # in this process
@@ -101,8 +102,11 @@ def _fail(message: str, code: int) -> int:
 
 
 class _Reporter:
-    """Progress on stderr: a tqdm bar on a terminal, else a line per tenth of the study.
-    ``computed``: designs computed by this run (not resumed from an earlier one)."""
+    """
+    Progress on stderr: a tqdm bar on a terminal, else a line per tenth of the study.
+
+    ``computed``: designs computed by this run (not resumed from an earlier one).
+    """
 
     def __init__(self, study: Any):
         self.total = study.samples

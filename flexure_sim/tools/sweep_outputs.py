@@ -1,4 +1,5 @@
-"""What a sweep computes for each design: the output registry and the batch evaluation.
+"""
+What a sweep computes for each design: the output registry and the batch evaluation.
 
 Every output is one small function of a ``Design`` (the mechanism of one sample with its
 simulation and lazily computed, shared results), registered with ``@output``. Adding one
@@ -25,10 +26,14 @@ from . import analysis
 
 
 class Design:
-    """One design: its simulation (one model for the static solve and the dynamic run), the
-    drive input of the study, and results computed once and shared by the outputs that need
-    them (the static solve, the step response). The static solve starts from the unstressed
-    pose whatever the state, so the outputs do not depend on their order."""
+    """
+    One design.
+
+    Its simulation (one model for the static solve and the dynamic run), the drive input of the
+    study, and results computed once and shared by the outputs that need them (the static solve,
+    the step response). The static solve starts from the unstressed pose whatever the state, so the
+    outputs do not depend on their order.
+    """
 
     def __init__(self, mechanism: Mechanism, study: Study):
         self.mechanism = mechanism
@@ -44,7 +49,7 @@ class Design:
         self._modes: Optional[linear.Modes] = None
 
     def static(self) -> StaticResult:
-        """Static equilibrium at the study's drive input."""
+        """Return static equilibrium at the study's drive input."""
         if self._static is None:
             self._static = self.sim.static(self.input)
         return self._static
@@ -58,8 +63,12 @@ class Design:
         return self._modes
 
     def step_response(self) -> analysis.Response:
-        """Output response to a step of the command from 0 to the input, from rest, over the
-        study's ``step.duration`` at ``step.dt``; metrics as ``flexure-sim analyse``."""
+        """
+        Output response to a step of the command from 0 to the input.
+
+        The step starts from rest and runs over the study's ``step.duration`` at ``step.dt``;
+        metrics as ``flexure-sim analyse``.
+        """
         if self._step is None:
             dt, duration = self.study.step["dt"], self.study.step["duration"]
             n = int(round(duration / dt))
@@ -75,8 +84,12 @@ class Design:
 
 
 def output_displacement(sim: Simulation) -> float:
-    """Output body's displacement from rest along the output axis (m), of the current state
-    (Snapshot.output without the rest of the snapshot, for sampling every step)."""
+    """
+    Output body's displacement from rest along the output axis (m).
+
+    It is that of the current state (Snapshot.output without the rest of the snapshot, for sampling
+    every step).
+    """
     mech = sim.mechanism
     if mech.output is None:
         raise ValueError(f"mechanism {mech.name!r} names no output body")
@@ -98,7 +111,7 @@ OUTPUTS: dict[str, Output] = {}
 
 
 def output(name: str, unit: str, description: str):
-    """Register ``fn(design) -> float | None`` as an output (None: no value, stored as NaN)."""
+    """Register ``fn(design) -> float | None`` as an output; None means no value, stored as NaN."""
     def register(fn: Callable[[Design], Optional[float]]):
         OUTPUTS[name] = Output(name, unit, description, fn)
         return fn
@@ -160,8 +173,12 @@ OK, FAILED = "ok", "failed"
 
 
 def evaluate_batch(study: Study, start: int, stop: int) -> dict:
-    """Designs ``start``..``stop - 1`` as columns: ``sample`` (int64), one float64 column per
-    parameter and per output (NaN where there is no value), ``status`` and ``error``."""
+    """
+    Designs ``start``..``stop - 1`` as columns.
+
+    ``sample`` (int64), one float64 column per parameter and per output (NaN where there is no
+    value), ``status`` and ``error``.
+    """
     n = stop - start
     cols: dict = {"sample": np.arange(start, stop, dtype=np.int64)}
     params = np.empty((n, len(study.parameters)))

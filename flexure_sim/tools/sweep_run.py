@@ -1,5 +1,8 @@
-"""Running a study: batches as Dask tasks, each finished batch stored once as a Parquet part,
-merged at the end (the engine of ``flexure-sim sweep``, see tools/sweep.py).
+"""
+Running a study.
+
+Batches as Dask tasks, each finished batch stored once as a Parquet part, merged at the end (the
+engine of ``flexure-sim sweep``, see tools/sweep.py).
 
 Locally a ``distributed.LocalCluster`` runs one single-threaded worker process per core, or
 Dask's synchronous scheduler runs the batches in this process (``workers=1``); or an existing
@@ -42,10 +45,14 @@ METADATA_KEY = "flexure_sim.study"
 
 
 def schema(study: Study) -> pa.Schema:
-    """Columns of the results: sample, parameters, outputs (float64), status, error; the
-    schema's metadata ``flexure_sim.study`` holds what produced them (JSON: study, mechanism,
-    seed, samples, batch size, input, parameters with their paths and distributions, output
-    units, the study's fingerprint)."""
+    """
+    Columns of the results.
+
+    sample, parameters, outputs (float64), status, error; the schema's metadata
+    ``flexure_sim.study`` holds what produced them (JSON: study, mechanism, seed, samples, batch
+    size, input, parameters with their paths and distributions, output units, the study's
+    fingerprint).
+    """
     about = {
         "name": study.name, "study": study.source, "mechanism": study.mechanism_source,
         "monte_carlo": study.monte_carlo, "seed": study.seed, "samples": study.samples,
@@ -65,8 +72,12 @@ def schema(study: Study) -> pa.Schema:
 
 # ------------------------------------------------------------------------------ parts
 class PartStore:
-    """Finished batches as Parquet part files in ``<output>.parts/``, with a manifest holding
-    the study's fingerprint (a study may only be resumed by itself)."""
+    """
+    Finished batches as Parquet part files in ``<output>.parts/``.
+
+    They come with a manifest holding the study's fingerprint (a study may only be resumed by
+    itself).
+    """
 
     def __init__(self, output: Path, study: Study, resume: bool):
         self.dir = output.with_name(output.name + ".parts")
@@ -153,7 +164,8 @@ class Progress:
 def run_study(study: Study, output: Path, workers: Optional[int] = None,
               scheduler: Optional[str] = None, resume: bool = False, client: Any = None,
               on_batch: Optional[Callable[[Progress], None]] = None) -> pa.Table:
-    """Run the study's missing batches, store each as it finishes, merge into ``output``.
+    """
+    Run the study's missing batches, store each as it finishes, merge into ``output``.
 
     ``client``: an existing ``distributed.Client`` to use; else ``scheduler`` (an address), else
     a LocalCluster of ``workers`` processes (default: one per core), or with ``workers == 1``
@@ -232,10 +244,13 @@ def _run_distributed(study, todo, batches, stored, prog, client, scheduler, work
 
 @contextlib.contextmanager
 def _sigint_ignored() -> Iterator[None]:
-    """Ignore SIGINT while local workers are spawned: a process started with SIGINT ignored
-    keeps ignoring it, so Ctrl-C at the terminal (sent to the whole process group) reaches
-    only this process, which stops the study cleanly, not the workers (which would print
-    tracebacks). Only in the main thread (elsewhere nothing can be changed)."""
+    """
+    Ignore SIGINT while local workers are spawned.
+
+    A process started with SIGINT ignored keeps ignoring it, so Ctrl-C at the terminal (sent to the
+    whole process group) reaches only this process, which stops the study cleanly, not the workers
+    (which would print tracebacks). Only in the main thread (elsewhere nothing can be changed).
+    """
     if threading.current_thread() is not threading.main_thread():
         yield
         return

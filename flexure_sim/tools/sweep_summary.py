@@ -1,5 +1,8 @@
-"""Summary of a sweep's results: statistics per output, parameters ranked by correlation,
-a tornado plot and histograms (PNG, Agg backend).
+"""
+Summary of a sweep's results.
+
+Statistics per output, parameters ranked by correlation, a tornado plot and histograms (PNG, Agg
+backend).
 
 Per output, over the designs that solved and gave a value: count, mean, sample standard
 deviation (ddof 1), 1st and 99th percentiles (numpy's linear interpolation), min, max, and
@@ -75,8 +78,11 @@ def print_summary(result: dict, study: Study) -> None:
 
 
 def plot(table: pa.Table, study: Study, summary: dict, output: Path) -> list[Path]:
-    """``<output stem>_tornado.png`` (r of each parameter, per output) and
-    ``<output stem>_histograms.png``; returns the paths written."""
+    """
+    Write ``<output stem>_tornado.png`` and ``<output stem>_histograms.png``.
+
+    The tornado shows r of each parameter, per output. Returns the paths written.
+    """
     import matplotlib
 
     matplotlib.use("Agg", force=True)

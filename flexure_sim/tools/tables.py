@@ -15,14 +15,14 @@ def format_si(value: Optional[float], unit: str, scale: float = 1.0, digits: int
 
 
 def time_unit(duration_s: float) -> tuple[str, float]:
-    """Unit and scale for a time axis spanning ``duration_s``."""
+    """Return unit and scale for a time axis spanning ``duration_s``."""
     if duration_s < 2.0:
         return "ms", 1e3
     return "s", 1.0
 
 
 def columns(rows: Sequence[Sequence[str]], header: Sequence[str], align: str = "") -> str:
-    """A plain text table (first column left-aligned, the rest right-aligned)."""
+    """Return a plain text table (first column left-aligned, the rest right-aligned)."""
     table = [list(header)] + [list(r) for r in rows]
     widths = [max(len(r[i]) for r in table) for i in range(len(header))]
     out = []

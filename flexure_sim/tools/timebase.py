@@ -1,4 +1,5 @@
-"""From log time to simulation time.
+"""
+From log time to simulation time.
 
 stage_node stamps every recorded message with log time = simulation time, so usually the map
 is the identity. ``ros2 bag record`` without ``--use-sim-time`` of a fast-mode run logs the
@@ -19,8 +20,12 @@ CLOCK_MISMATCH_NS = 500_000_000
 
 @dataclass(frozen=True)
 class TimeBase:
-    """``clock``: (log times, sim times) of the recorded /clock, sorted by log time, when
-    log times are not simulation time; None when they are."""
+    """
+    ``clock``.
+
+    (log times, sim times) of the recorded /clock, sorted by log time, when log times are not
+    simulation time; None when they are.
+    """
 
     clock: Optional[tuple[np.ndarray, np.ndarray]] = None
 
@@ -29,7 +34,7 @@ class TimeBase:
         return self.clock is not None
 
     def sim_ns(self, log_times_ns: np.ndarray) -> np.ndarray:
-        """Simulation time (ns) of messages logged at ``log_times_ns``."""
+        """Return the simulation time (ns) of messages logged at ``log_times_ns``."""
         log_times_ns = np.asarray(log_times_ns, dtype=np.int64)
         if self.clock is None:
             return log_times_ns
@@ -42,7 +47,11 @@ class TimeBase:
 
 
 def time_base(clock_log_ns: Optional[np.ndarray], clock_sim_ns: Optional[np.ndarray]) -> TimeBase:
-    """The time base of a run from its recorded /clock (log times and values, ns), if any."""
+    """
+    Return the time base of a run from its recorded /clock, if any.
+
+    The /clock is given as log times and values, ns.
+    """
     if clock_log_ns is None or clock_sim_ns is None or clock_log_ns.shape[0] == 0:
         return TimeBase()
     if float(np.median(np.abs(clock_log_ns - clock_sim_ns))) <= CLOCK_MISMATCH_NS:
