@@ -1,5 +1,8 @@
-"""The stage closed by the example controller (pi_controller), both real processes, in the
-stage's lockstep mode: deterministic, and the step response settles to the setpoint.
+"""
+The stage closed by the example controller (pi_controller).
+
+Both real processes, in the stage's lockstep mode: deterministic, and the step response settles to
+the setpoint.
 
 Handshake (README "Developing a controller against the stage"): the test calls the stage's
 ``~/step`` for tick k + 1 only after the controller's ``~/answered`` reached k; the controller

@@ -1,6 +1,9 @@
-"""The benchmark's command-to-applied latency (tools/closed_loop.command_latency) on a
-recording written like the node's (real MCAP, real reader): commands applied at the next
-tick count as late 0, each tick later as one more (no timing measured here)."""
+"""
+The benchmark's command-to-applied latency (tools/closed_loop.command_latency).
+
+On a recording written like the node's (real MCAP, real reader): commands applied at the next
+tick count as late 0, each tick later as one more (no timing measured here).
+"""
 from __future__ import annotations
 
 from rclpy.serialization import serialize_message

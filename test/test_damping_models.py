@@ -1,7 +1,10 @@
-"""Rayleigh and modal damping built from the stage's modes at rest (engine/damping_models.py),
-checked by an independent method: the eigenvalues of the damped state matrix
-[[0, I], [-M^-1 K, -M^-1 C]] (their ratios -Re/|lambda|), and the logarithmic decrement of a
-free decay of the first mode, ln(x_k / x_{k+1}) = 2 pi zeta / sqrt(1 - zeta^2)."""
+"""
+Rayleigh and modal damping built from the stage's modes at rest (engine/damping_models.py).
+
+Checked by an independent method: the eigenvalues of the damped state matrix [[0, I], [-M^-1 K,
+-M^-1 C]] (their ratios -Re/|lambda|), and the logarithmic decrement of a free decay of the first
+mode, ln(x_k / x_{k+1}) = 2 pi zeta / sqrt(1 - zeta^2).
+"""
 from __future__ import annotations
 
 import math

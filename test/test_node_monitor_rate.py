@@ -1,8 +1,11 @@
-"""monitor_rate: the monitoring topics (poses, wrenches, deflections) every n-th tick, the
-control topics every tick, published and recorded alike (a real node in lockstep mode)."""
+"""
+monitor_rate.
+
+The monitoring topics (poses, wrenches, deflections) every n-th tick, the control topics every
+tick, published and recorded alike (a real node in lockstep mode).
+"""
 from __future__ import annotations
 
-import pytest
 from geometry_msgs.msg import PoseArray
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64

@@ -1,5 +1,8 @@
-"""The output sensor in a real stage_node: `output/measured` published and recorded per tick
-next to the true `output/displacement`, measured back from the recording (fast mode).
+"""
+The output sensor in a real stage_node.
+
+`output/measured` published and recorded per tick next to the true `output/displacement`, measured
+back from the recording (fast mode).
 
 Statistical tolerances: the sample RMS s of N independent normal draws of RMS sigma has a
 relative standard deviation of 1/sqrt(2N) (var(s^2) = 2 sigma^4 / N, delta method); the
@@ -44,8 +47,11 @@ def stage_file(path, sensor: dict) -> str:
 
 
 def recorded_run(tmp_path, domain, sensor: dict, command: float = 1.0e-6):
-    """output/displacement and output/measured of one fast-mode run of TICKS ticks (with a
-    drive step early on), from the node's recording, as arrays aligned by log time."""
+    """
+    Return output/displacement and output/measured of one fast-mode run of TICKS ticks.
+
+    With a drive step early on, from the node's recording, as arrays aligned by log time.
+    """
     mech = stage_file(tmp_path / "stage.yaml", sensor)
     node = NodeProcess(tmp_path / "node", domain, dict(
         mechanism=mech, time_mode="fast", publish_rate=1000.0, sim_step=1e-4, record=True,

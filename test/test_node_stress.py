@@ -1,5 +1,9 @@
-"""The stage node's diagnostics report the largest hinge stress ratio sigma / sigma_y (and the
-hinge), WARN above 1: a real node in fast mode against the engine's static stress table."""
+"""
+The stage node's diagnostics report the largest hinge stress ratio sigma / sigma_y.
+
+With the hinge, WARN above 1: a real node in fast mode against the engine's static stress
+table.
+"""
 from pathlib import Path
 
 import pytest
@@ -15,8 +19,11 @@ FULL_STROKE = 2.0e-6
 
 
 def _weak_stage(tmp_path: Path) -> Path:
-    """microstage.yaml with a yield strength of 20 MPa instead of 276 MPa: full stroke
-    (about 33 MPa in the most loaded hinge) is beyond it."""
+    """
+    microstage.yaml with a yield strength of 20 MPa instead of 276 MPa.
+
+    Full stroke (about 33 MPa in the most loaded hinge) is beyond it.
+    """
     text = resolve_mechanism_path("microstage").read_text()
     assert text.count("sigma_y: 276.0e6") == 1
     path = tmp_path / "weak_stage.yaml"

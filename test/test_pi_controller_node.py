@@ -1,6 +1,9 @@
-"""pi_controller as users start it (`ros2 run flexure_sim pi_controller`, installed): one
-command per measurement, the setpoint topic followed, the law's answer (checked against the
-pure law), one-line errors. The closed loop with the stage: test_closed_loop.py."""
+"""
+pi_controller as users start it (`ros2 run flexure_sim pi_controller`, installed).
+
+One command per measurement, the setpoint topic followed, the law's answer (checked against the
+pure law), one-line errors. The closed loop with the stage: test_closed_loop.py.
+"""
 from __future__ import annotations
 
 import signal

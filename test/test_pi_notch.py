@@ -1,7 +1,10 @@
-"""The PI + notch law (flexure_sim/control/pi_notch.py) without ROS, against scipy.signal:
-the linear law is C(z) N(z) with C(z) = kp + ki T z / (z - 1) and N(z) the bilinear
-transform (pre-warped) of the analog notch; the notch's gain at f_0 is its depth; the
-anti-windup keeps the command off the limit once the error reverses."""
+"""
+The PI + notch law (flexure_sim/control/pi_notch.py) without ROS, against scipy.signal.
+
+The linear law is C(z) N(z) with C(z) = kp + ki T z / (z - 1) and N(z) the bilinear transform
+(pre-warped) of the analog notch; the notch's gain at f_0 is its depth; the anti-windup keeps the
+command off the limit once the error reverses.
+"""
 from __future__ import annotations
 
 import math
@@ -16,7 +19,7 @@ T = 1e-3
 
 
 def analog_notch_discretised(f0: float, zeta: float, depth: float):
-    """scipy's bilinear transform of N(s) with w0 pre-warped to (2/T) tan(w0 T / 2)."""
+    """Return scipy's bilinear transform of N(s) with w0 pre-warped to (2/T) tan(w0 T / 2)."""
     wa = 2.0 / T * math.tan(math.pi * f0 * T)
     return signal.bilinear([1.0, 2 * depth * zeta * wa, wa**2], [1.0, 2 * zeta * wa, wa**2],
                            fs=1 / T)

@@ -1,6 +1,9 @@
-"""The output sensor (engine/sensor.py) without ROS, against closed forms: the first-order
-step response 1 - exp(-t/tau), exact latency, quantisation, seeded noise; and the
-``sensor:`` block's validation."""
+"""
+The output sensor (engine/sensor.py) without ROS, against closed forms.
+
+The first-order step response 1 - exp(-t/tau), exact latency, quantisation, seeded noise; and the
+``sensor:`` block's validation.
+"""
 from __future__ import annotations
 
 import math

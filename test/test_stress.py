@@ -142,8 +142,12 @@ def test_static_stress_with_a_polynomial_hinge_covers_the_notch_hinges(capsys):
 
 
 def _two_hinge_doc(sigma_y="250.0e6"):
-    """One body on a notch hinge (named model, sigma_y as PyYAML reads 250.0e6: a string) and
-    a leaf hinge (inline, no sigma_y), and a matrix hinge: no file behind it."""
+    """
+    Return a mechanism document with one body on a notch hinge, a leaf hinge and a matrix hinge.
+
+    The notch uses a named model with sigma_y as PyYAML reads 250.0e6 (a string), the leaf is
+    inline without sigma_y; no file behind it.
+    """
     return {
         "name": "two_hinges",
         "defaults": {"law": "twistor", "damping": {"t_char": 1e-4}},
@@ -167,8 +171,11 @@ def _two_hinge_doc(sigma_y="250.0e6"):
 
 
 def test_stress_geometry_is_part_of_the_loaded_mechanism_with_the_stiffness_numbers():
-    """Each hinge's stress geometry comes with the mechanism (no file to re-read): the numbers
-    its stiffness formula used, sigma_y as a number; none for a matrix hinge."""
+    """
+    Each hinge's stress geometry comes with the mechanism (no file to re-read).
+
+    The numbers its stiffness formula used, sigma_y as a number; none for a matrix hinge.
+    """
     from flexure_sim.engine.stiffness import cantilever_stiffness, notch_stiffness
 
     mech = mechanism_from_dict(_two_hinge_doc(), source="<no file>")

@@ -108,12 +108,15 @@ def test_outputs_do_not_depend_on_their_order():
 
 
 def test_monte_carlo_spread_of_the_gain_agrees_with_the_first_order_prediction(tmp_path):
-    """2000 designs of the stage study (h +- 5 um on all seven hinges, independent): to first
-    order the standard deviation of the gain is sqrt(sum (dg/dh_i)^2) * 5 um, with dg/dh_i the
-    exact sensitivities (engine/sensitivity.py, hyper-dual). The sample standard deviation of
-    n normal values has a relative standard error 1/sqrt(2 (n - 1)): agreement within 4 of
-    those, plus 1 % for the neglected second-order terms (the second derivatives times
-    (5 um)^2 are below 1e-3 of the first-order spread)."""
+    """
+    2000 designs of the stage study (h +- 5 um on all seven hinges, independent).
+
+    To first order the standard deviation of the gain is sqrt(sum (dg/dh_i)^2) * 5 um, with dg/dh_i
+    the exact sensitivities (engine/sensitivity.py, hyper-dual). The sample standard deviation of n
+    normal values has a relative standard error 1/sqrt(2 (n - 1)): agreement within 4 of those,
+    plus 1 % for the neglected second-order terms (the second derivatives times (5 um)^2 are below
+    1e-3 of the first-order spread).
+    """
     from flexure_sim.engine.design import Parameters
     from flexure_sim.engine.sensitivity import sensitivities
 
@@ -131,8 +134,11 @@ def test_monte_carlo_spread_of_the_gain_agrees_with_the_first_order_prediction(t
 
 
 def _rider_doc(mass=0.02, k=(2.0, 3e6, 5e5), inertia=4e-6, t_char=1e-5, sigma_y="276.0e6"):
-    """A driven body held to ground by a leaf along the drive axis (y), and a free body riding
-    on the driven one through a matrix hinge at its mass centre."""
+    """
+    Return a driven body held to ground by a leaf along the drive axis (y).
+
+    With it, a free body riding on the driven one through a matrix hinge at its mass centre.
+    """
     leaf = {"model": "cantilever", "length": 0.01, "thickness": 0.001, "width": 0.005,
             "E": "69.0e9", "nu": 0.33}
     if sigma_y is not None:
@@ -164,9 +170,13 @@ def _rider_study(tmp_path, outputs, masses=(0.02, 0.05), **doc):
 
 
 def test_first_mode_and_its_damping_ratio_of_a_mass_on_a_spring_are_the_closed_forms(tmp_path):
-    """The rider: first mode sqrt(k_min / m) / 2 pi of its three springs (k = 2 N m/rad on
-    I = 4e-6 kg m^2 for the light rider: 112.5 Hz; 5e5 N/m along y on the 2 kg one: 79.6 Hz);
-    damping ratio c / (2 sqrt(k m)) with c = t_char k."""
+    """
+    The rider.
+
+    First mode sqrt(k_min / m) / 2 pi of its three springs (k = 2 N m/rad on I = 4e-6 kg m^2 for
+    the light rider: 112.5 Hz; 5e5 N/m along y on the 2 kg one: 79.6 Hz); damping ratio c / (2
+    sqrt(k m)) with c = t_char k.
+    """
     t_char = 1e-5
     cols = evaluate_batch(_rider_study(tmp_path, ["first_mode", "first_mode_damping"],
                                        masses=(0.02, 2.0), t_char=t_char), 0, 2)
@@ -181,10 +191,13 @@ def test_first_mode_and_its_damping_ratio_of_a_mass_on_a_spring_are_the_closed_f
 
 
 def test_first_mode_is_the_ringing_period_of_a_free_vibration_time_simulation(tmp_path):
-    """The 2 kg rider rings at its first mode after a step of the drive (base excitation):
-    once the actuator's 1 ms lag has died out the motion is a free damped vibration, whose
-    zero crossings (time-domain engine, dt = 10 us) are half a period 1 / (f sqrt(1 - zeta^2))
-    apart, with f and zeta the sweep's first_mode and first_mode_damping."""
+    """
+    The 2 kg rider rings at its first mode after a step of the drive (base excitation).
+
+    Once the actuator's 1 ms lag has died out the motion is a free damped vibration, whose zero
+    crossings (time-domain engine, dt = 10 us) are half a period 1 / (f sqrt(1 - zeta^2)) apart,
+    with f and zeta the sweep's first_mode and first_mode_damping.
+    """
     study = _rider_study(tmp_path, ["first_mode", "first_mode_damping"], masses=(2.0,))
     cols = evaluate_batch(study, 0, 1)
     f, zeta = cols["first_mode"][0], cols["first_mode_damping"][0]
@@ -207,8 +220,12 @@ def test_first_mode_is_the_ringing_period_of_a_free_vibration_time_simulation(tm
 
 
 def test_peak_stress_ratio_of_a_leaf_stretched_along_its_axis_is_e_strain_over_yield(tmp_path):
-    """The drive stretches the leaf by u along its axis: sigma = E u / L (Hooke), no bending,
-    over sigma_y. 69 GPa * 2 um / 10 mm = 13.8 MPa; / 276 MPa = 0.05."""
+    """
+    The drive stretches the leaf by u along its axis.
+
+    Sigma = E u / L (Hooke), no bending, over sigma_y. 69 GPa * 2 um / 10 mm = 13.8 MPa; / 276 MPa
+    = 0.05.
+    """
     cols = evaluate_batch(_rider_study(tmp_path, ["peak_stress_ratio"]), 0, 2)
     assert cols["status"] == ["ok", "ok"]
     np.testing.assert_allclose(cols["peak_stress_ratio"], 69e9 * 2e-6 / 0.01 / 276e6,
@@ -219,8 +236,12 @@ def test_peak_stress_ratio_of_a_leaf_stretched_along_its_axis_is_e_strain_over_y
 
 
 def test_stage_first_mode_outputs_are_what_the_modes_command_reports(tmp_path):
-    """first_mode and first_mode_damping of the nominal stage at 2 um equal `flexure-sim modes
-    microstage --input 2e-6 --json` (the command, run as a user runs it)."""
+    """
+    Check first_mode and first_mode_damping of the nominal stage at 2 um.
+
+    They equal `flexure-sim modes microstage --input 2e-6 --json` (the command, run as a user
+    runs it).
+    """
     cols = evaluate_batch(_grid([2.5e-4], outputs=("first_mode", "first_mode_damping",
                                                    "peak_stress_ratio"), input=2e-6), 0, 1)
     out = subprocess.run([sys.executable, "-m", "flexure_sim.cli", "modes", "microstage",

@@ -1,2 +1,5 @@
-"""Control laws for closing a loop around the stage (pure Python, no ROS): the example
-controller node `flexure_sim.node.pi_controller` is a thin shell around `pi_notch`."""
+"""
+Control laws for closing a loop around the stage (pure Python, no ROS).
+
+The example controller node `flexure_sim.node.pi_controller` is a thin shell around `pi_notch`.
+"""

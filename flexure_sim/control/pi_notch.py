@@ -1,5 +1,7 @@
-"""A discrete PI controller with an optional notch filter and anti-windup, one update per
-sample of period T (the stage's tick).
+"""
+A discrete PI controller with an optional notch filter and anti-windup.
+
+One update per sample of period T (the stage's tick).
 
 Per sample k, with error e_k = setpoint - measurement:
 
@@ -24,9 +26,13 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class PIConfig:
-    """Gains and limits. kp: command per error (m/m of output); ki: 1/s; period: T (s);
-    u_min, u_max: command limits (m); notch_frequency: Hz (0: no notch), below the Nyquist
-    frequency 1 / (2 T); notch_damping: zeta > 0; notch_depth: d in [0, 1]."""
+    """
+    Gains and limits.
+
+    kp: command per error (m/m of output); ki: 1/s; period: T (s); u_min, u_max: command limits
+    (m); notch_frequency: Hz (0: no notch), below the Nyquist frequency 1 / (2 T); notch_damping:
+    zeta > 0; notch_depth: d in [0, 1].
+    """
 
     kp: float
     ki: float
@@ -39,9 +45,19 @@ class PIConfig:
 
     def problem(self) -> str:
         """Why this configuration cannot be used ("" if it can)."""
-        if not all(math.isfinite(v) for v in (self.kp, self.ki, self.period, self.u_min,
-                                               self.u_max, self.notch_frequency,
-                                               self.notch_damping, self.notch_depth)):
+        if not all(
+            math.isfinite(v)
+            for v in (
+                self.kp,
+                self.ki,
+                self.period,
+                self.u_min,
+                self.u_max,
+                self.notch_frequency,
+                self.notch_damping,
+                self.notch_depth,
+            )
+        ):
             return "every gain and limit must be finite"
         if self.period <= 0.0:
             return f"period must be positive, got {self.period!r}"
@@ -77,8 +93,11 @@ def notch_coefficients(frequency: float, damping: float, depth: float,
 
 
 class Biquad:
-    """y_k = b0 x_k + b1 x_{k-1} + b2 x_{k-2} - a1 y_{k-1} - a2 y_{k-2} (transposed direct
-    form II), starting at rest."""
+    """
+    y_k = b0 x_k + b1 x_{k-1} + b2 x_{k-2} - a1 y_{k-1} - a2 y_{k-2} (transposed direct form II).
+
+    Starting at rest.
+    """
 
     def __init__(self, b: Coefficients, a: Coefficients) -> None:
         self.b, self.a = b, a
@@ -116,7 +135,7 @@ class PIController:
             self.notch.reset()
 
     def update(self, setpoint: float, measurement: float) -> float:
-        """The command for this sample, given the setpoint and the measurement (m)."""
+        """Return the command for this sample, given the setpoint and the measurement (m)."""
         c = self.config
         f = setpoint - measurement
         if self.notch is not None:

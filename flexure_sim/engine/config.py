@@ -87,8 +87,11 @@ _STIFFNESS_KEYS: dict[str, tuple[Callable[..., np.ndarray], tuple[str, ...]]] = 
 
 
 def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str, Any]:
-    """(K, model name, the hinge's StressGeometry or None) of a stiffness specification; the
-    stress geometry holds the same numbers the stiffness formula was given."""
+    """
+    (K, model name, the hinge's StressGeometry or None) of a stiffness specification.
+
+    The stress geometry holds the same numbers the stiffness formula was given.
+    """
     spec = _mapping(ctx, key, spec)
     model = _require(ctx, key, spec, "model")
     if not isinstance(model, str):
@@ -235,7 +238,7 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
 
 
 def _sensor(ctx: _Ctx, raw: Any, output: Any) -> SensorSpec:
-    """The ``sensor:`` block (engine/sensor.py): every key optional, none negative."""
+    """Read the ``sensor:`` block (engine/sensor.py): every key optional, none negative."""
     spec = _mapping(ctx, "sensor", raw)
     _no_unknown(ctx, "sensor", spec, {"noise_rms", "resolution", "bandwidth", "latency", "seed"})
     if output is None:
@@ -376,8 +379,11 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
         )
         if poly is not None:
             if "stiffness" in spec:
-                raise ctx.fail(f"{key}.stiffness", "a polynomial law defines the stiffness (its Hessian at rest): "
-                               "remove this key")
+                raise ctx.fail(
+                    f"{key}.stiffness",
+                    "a polynomial law defines the stiffness (its Hessian at rest): "
+                    "remove this key",
+                )
             K, source, geometry = poly.stiffness_at_rest(), f"polynomial:{poly.source}", None
             _check_spd(ctx, law_key, K, "stiffness at rest (Hessian of the polynomial law)")
         else:

@@ -1,6 +1,8 @@
-"""Damping models built from the modes at rest (issue 12 item 1; not yet wired into the
-engine's stepping): Rayleigh damping C = alpha M + beta K and modal damping with a chosen
-ratio per mode.
+"""
+Damping models built from the modes at rest.
+
+Rayleigh damping C = alpha M + beta K and modal damping with a chosen ratio per mode (issue
+12 item 1; not yet wired into the engine's stepping).
 
 Both act on the free coordinates of a linearisation (`linear.LinearModel`: diagonal mass M,
 tangent stiffness K) about the rest configuration, with the M-orthonormal mode shapes Phi
@@ -35,8 +37,11 @@ def rayleigh_ratios(alpha: float, beta: float, omega: np.ndarray) -> np.ndarray:
 
 def rayleigh_coefficients(zeta_1: float, omega_1: float, zeta_2: float,
                           omega_2: float) -> tuple[float, float]:
-    """(alpha, beta) giving ratio zeta_1 at omega_1 and zeta_2 at omega_2 (rad/s, distinct):
-    the solution of the two equations of `rayleigh_ratios`."""
+    """
+    (alpha, beta) giving ratio zeta_1 at omega_1 and zeta_2 at omega_2 (rad/s, distinct).
+
+    The solution of the two equations of `rayleigh_ratios`.
+    """
     if omega_1 <= 0 or omega_2 <= 0 or omega_1 == omega_2:
         raise ValueError("omega_1, omega_2: must be positive and distinct")
     a = np.array([[1.0 / (2 * omega_1), omega_1 / 2], [1.0 / (2 * omega_2), omega_2 / 2]])
@@ -53,8 +58,12 @@ def rayleigh_matrix(alpha: float, beta: float, mass: np.ndarray,
 
 def modal_matrix(mass: np.ndarray, shapes: np.ndarray, omega: np.ndarray,
                  zeta: np.ndarray | float) -> np.ndarray:
-    """C = M Phi diag(2 zeta_i omega_i) Phi^T M for M-orthonormal ``shapes`` Phi (columns) of
-    natural frequencies ``omega`` (rad/s); ``zeta``: one ratio per mode, or one for all."""
+    """
+    Return the modal damping matrix C = M Phi diag(2 zeta_i omega_i) Phi^T M.
+
+    ``shapes`` Phi are M-orthonormal (columns), of natural frequencies ``omega`` (rad/s);
+    ``zeta``: one ratio per mode, or one for all.
+    """
     m = np.diag(mass) if np.ndim(mass) == 1 else np.asarray(mass, dtype=float)
     shapes = np.asarray(shapes, dtype=float)
     omega = np.asarray(omega, dtype=float)

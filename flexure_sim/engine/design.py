@@ -42,7 +42,8 @@ class Design:
     K, B (n, 3, 3): stiffness and damping in the hinge frame; ca, cb (n, 2), phia, phib
     (n,): frame a on body A and frame b on body B; mass (N,): diagonal mass matrix;
     geometry: per hinge its stress.StressGeometry (None without one), built as config.py
-    builds Hinge.stress, with the design's (hyper-dual) numbers."""
+    builds Hinge.stress, with the design's (hyper-dual) numbers.
+    """
 
     K: Any
     B: Any
@@ -257,14 +258,18 @@ def _stiffness(spec: dict):
 
 
 def _law_stiffness(hinge) -> np.ndarray:
-    """K (3x3) of a hinge's law: the quadratic laws hold it, a fitted polynomial law's is its
-    Hessian at rest (so that a mechanism with one still reaches the check that refuses it)."""
+    """
+    K (3x3) of a hinge's law.
+
+    The quadratic laws hold it, a fitted polynomial law's is its Hessian at rest (so that a
+    mechanism with one still reaches the check that refuses it).
+    """
     K = getattr(hinge.law, "K", None)
     return np.asarray(K if K is not None else hinge.law.stiffness_at_rest(), dtype=float)
 
 
 def _stress_geometry(spec: Optional[dict]) -> Optional[StressGeometry]:
-    """The StressGeometry of a stiffness specification (as config.py: the formula's numbers)."""
+    """Return the StressGeometry of a stiffness specification (config.py's numbers)."""
     if spec is None or spec.get("model") not in STRESS_KEYS:
         return None
     sigma_y = spec.get("sigma_y")

@@ -120,8 +120,11 @@ class LinearModel:
 
 def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True,
               static: Optional[StaticResult] = None) -> LinearModel:
-    """The exact linear model about the static equilibrium at drive input u (module doc);
-    ``static``: that equilibrium if already solved (``sim.static(u)``)."""
+    """
+    Return the exact linear model about the static equilibrium at drive input u (module doc).
+
+    ``static``: that equilibrium if already solved (``sim.static(u)``).
+    """
     mech = sim.mechanism
     st = static if static is not None else sim.static(u)
     z = st.z

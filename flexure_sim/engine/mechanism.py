@@ -50,12 +50,14 @@ class Frame:
 
 @dataclass(frozen=True)
 class Hinge:
-    """An elastic element joining frame ``a`` on body A and frame ``b`` on body B, which
-    coincide in the unstressed pose. ``law`` evaluates potential and dissipation (see
+    """
+    An elastic element joining frame ``a`` on body A and frame ``b`` on body B.
+
+    Which coincide in the unstressed pose. ``law`` evaluates potential and dissipation (see
     hinge_laws; its stiffness and damping are 3x3, moment first, in the hinge frame);
-    ``stiffness_source`` says where the stiffness came from (model name, matrix, file);
-    ``stress``: the geometry of its stress (engine/stress.py), None without a notch or
-    cantilever model."""
+    ``stiffness_source`` says where the stiffness came from (model name, matrix, file); ``stress``:
+    the geometry of its stress (engine/stress.py), None without a notch or cantilever model.
+    """
 
     name: str
     a: Frame

@@ -1,5 +1,7 @@
-"""A displacement sensor on the mechanism's output (a capacitive gauge): bandwidth, noise,
-resolution and latency, sampled once per publish tick.
+"""
+A displacement sensor on the mechanism's output (a capacitive gauge).
+
+bandwidth, noise, resolution and latency, sampled once per publish tick.
 
 The chain, per tick k of period T (the true output x_k is the value at the end of the tick):
 
@@ -31,10 +33,12 @@ import numpy as np
 
 @dataclass(frozen=True)
 class SensorSpec:
-    """Configuration of the output sensor (mechanism file block ``sensor:``).
+    """
+    Configuration of the output sensor (mechanism file block ``sensor:``).
 
     noise_rms: m, >= 0; resolution: m, >= 0 (0: none); bandwidth: Hz, >= 0 (0: unlimited);
-    latency: ticks, integer >= 0; seed: integer >= 0 of the noise generator."""
+    latency: ticks, integer >= 0; seed: integer >= 0 of the noise generator.
+    """
 
     noise_rms: float = 0.0
     resolution: float = 0.0
@@ -44,9 +48,12 @@ class SensorSpec:
 
 
 def lowpass_pole(bandwidth: float, period: float) -> float:
-    """a = exp(-T / tau), tau = 1 / (2 pi f_c): the exact zero-order-hold discretisation of a
-    first-order low-pass of bandwidth f_c (Hz) at sample period T (s). 0 when f_c is 0 (no
-    filter: y_k = x_k)."""
+    """
+    Return the pole a = exp(-T / tau), tau = 1 / (2 pi f_c).
+
+    It is the exact zero-order-hold discretisation of a first-order low-pass of bandwidth f_c
+    (Hz) at sample period T (s). 0 when f_c is 0 (no filter: y_k = x_k).
+    """
     if bandwidth <= 0.0:
         return 0.0
     return math.exp(-2.0 * math.pi * bandwidth * period)
@@ -63,7 +70,7 @@ class Sensor:
         self.reset()
 
     def set_period(self, period: float) -> None:
-        """A new tick period (publish rate changed): the filter's pole follows."""
+        """Take a new tick period (publish rate changed): the filter's pole follows."""
         self.period = period
         self._a = lowpass_pole(self.spec.bandwidth, period)
 
@@ -74,7 +81,7 @@ class Sensor:
         self._delay: deque[float] = deque()
 
     def sample(self, x: float) -> float:
-        """The reading published at this tick, given the true output ``x`` (m) at its end."""
+        """Return the reading published at this tick, for the true output ``x`` (m) at its end."""
         spec = self.spec
         a = self._a
         y = x if self._y is None else a * self._y + (1.0 - a) * x

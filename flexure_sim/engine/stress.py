@@ -116,10 +116,13 @@ _STRESS_FUNCTIONS = {"notch": notch_stress, "cantilever": leaf_stress}
 
 @dataclass(frozen=True)
 class StressGeometry:
-    """What one hinge's stress needs: its stiffness ``model`` (notch or cantilever), the
-    ``dimensions`` (m) of that model in the order of STRESS_KEYS[model], and the yield
-    strength ``sigma_y`` (Pa) or None. Floats in a loaded mechanism; HyperDual values where
-    design.py varies them."""
+    """
+    What one hinge's stress needs.
+
+    Its stiffness ``model`` (notch or cantilever), the ``dimensions`` (m) of that model in the
+    order of STRESS_KEYS[model], and the yield strength ``sigma_y`` (Pa) or None. Floats in a
+    loaded mechanism; HyperDual values where design.py varies them.
+    """
 
     model: str
     dimensions: tuple
@@ -135,12 +138,16 @@ class StressGeometry:
         return cls(model, tuple(values[k] for k in keys), sigma_y)
 
     def stress(self, wrench):
-        """Peak stress (Pa) under wrench(es) (..., 3) (module docstring)."""
+        """Return the peak stress, Pa, under one wrench or an array (..., 3) (module docstring)."""
         return _STRESS_FUNCTIONS[self.model](wrench, *self.dimensions)
 
     def ratio_coefficients(self) -> np.ndarray:
-        """c (3,) with sigma / sigma_y = c . |wrench|: both formulas are sums of positive
-        factors times |m|, |f_x|, |f_y|, so c is the stress of unit wrenches over sigma_y."""
+        """
+        Return the coefficients c (3,) with sigma / sigma_y = c .
+
+        |wrench|: both formulas are sums of positive factors times |m|, |f_x|, |f_y|, so c is the
+        stress of unit wrenches over sigma_y.
+        """
         if self.sigma_y is None:
             raise ValueError(f"a {self.model} hinge without sigma_y has no stress ratio")
         return np.asarray(self.stress(np.eye(3)), dtype=float) / float(self.sigma_y)
@@ -152,8 +159,12 @@ def hinge_stress(wrench, geometry: Optional[StressGeometry]) -> Optional[Any]:
 
 
 def stress_table(wrenches, mechanism: "Mechanism") -> dict:
-    """Per notch/leaf hinge of the mechanism: stress (Pa), yield strength (Pa or None) and
-    their ratio (None without a yield strength); wrenches (n, 3) floats (Snapshot.wrenches)."""
+    """
+    Per notch/leaf hinge of the mechanism.
+
+    Stress (Pa), yield strength (Pa or None) and their ratio (None without a yield strength);
+    wrenches (n, 3) floats (Snapshot.wrenches).
+    """
     out = {}
     for hinge, w in zip(mechanism.hinges, np.asarray(wrenches, dtype=float)):
         g = hinge.stress
@@ -166,9 +177,12 @@ def stress_table(wrenches, mechanism: "Mechanism") -> dict:
 
 
 def ratio_map(mechanism: "Mechanism") -> tuple[list[str], np.ndarray, np.ndarray]:
-    """The hinges with a yield strength: (names, their indices, C (k, 3)) such that
-    (C * |wrenches[indices]|).sum(1) are their stress ratios -- a few microseconds per call,
-    for the node's per-tick diagnostics."""
+    """
+    Return the hinges with a yield strength.
+
+    Returns (names, their indices, C (k, 3)) such that (C * |wrenches[indices]|).sum(1) are
+    their stress ratios -- a few microseconds per call, for the node's per-tick diagnostics.
+    """
     rows = [(h.name, i, h.stress.ratio_coefficients()) for i, h in enumerate(mechanism.hinges)
             if h.stress is not None and h.stress.sigma_y is not None]
     return ([r[0] for r in rows], np.array([r[1] for r in rows], dtype=int),
@@ -182,9 +196,13 @@ def peak_ratio(table: dict) -> Optional[tuple[str, float]]:
 
 
 def stroke_limit(sim, tol: float = 1e-9, max_iter: int = 30) -> tuple[float, str]:
-    """Drive input (m) at which the first hinge reaches yield: the secant method on
-    max_h sigma_h / sigma_y,h (u) = 1 with static solves (``Simulation.static``), from the
-    linear estimate u / ratio(u) at the drive's stroke. Returns (input, hinge)."""
+    """
+    Drive input (m) at which the first hinge reaches yield.
+
+    The secant method on max_h sigma_h / sigma_y,h (u) = 1 with static solves
+    (``Simulation.static``), from the linear estimate u / ratio(u) at the drive's stroke. Returns
+    (input, hinge).
+    """
     def ratio(u):
         snap = sim.static(u).snapshot
         found = peak_ratio(stress_table(snap.wrenches, sim.mechanism))

@@ -1,7 +1,10 @@
-"""The stage node's ``diagnostics`` topic: one ``DiagnosticStatus`` per window of ticks (~10 Hz
-of simulated time) with timings, pacing, solver work, command counters, engine failures,
-recording state, QoS problems and the largest hinge stress ratio, at level OK, WARN or ERROR
-(README "Diagnostics")."""
+"""
+The stage node's ``diagnostics`` topic.
+
+One ``DiagnosticStatus`` per window of ticks (~10 Hz of simulated time) with timings, pacing,
+solver work, command counters, engine failures, recording state, QoS problems and the largest hinge
+stress ratio, at level OK, WARN or ERROR (README "Diagnostics").
+"""
 from __future__ import annotations
 
 import time
@@ -75,8 +78,12 @@ class Diagnostics:
         self.window = self.new_window()
 
     def stress_ratio(self) -> tuple[list[tuple[str, Any]], list[str], int]:
-        """(values, notes, level): the largest hinge stress ratio sigma / sigma_y at the
-        window's last tick (engine/stress.py), WARN above 1; nothing if no hinge has sigma_y."""
+        """
+        (values, notes, level).
+
+        The largest hinge stress ratio sigma / sigma_y at the window's last tick
+        (engine/stress.py), WARN above 1; nothing if no hinge has sigma_y.
+        """
         names, index, coefficients = self._stress
         snap = self.loop.snapshot
         if not names or snap is None:

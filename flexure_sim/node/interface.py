@@ -278,9 +278,12 @@ class StageInterface:
 
     def encode(self, snap: Any, stamp_ns: int, measured: float = 0.0,
                monitor: bool = True) -> list[bytes]:
-        """CDR payloads of every tick topic, in `tick_topics` order, stamped ``stamp_ns``;
+        """
+        CDR payloads of every tick topic, in `tick_topics` order, stamped ``stamp_ns``.
+
         ``measured`` is the sensor's reading of the tick (used if the mechanism has one).
-        ``monitor`` False: only the control topics (those of `control_indices`, in order)."""
+        ``monitor`` False: only the control topics (those of `control_indices`, in order).
+        """
         if not self.packed:
             messages = self.messages(snap, stamp_ns, measured)
             if not monitor:
@@ -325,7 +328,7 @@ class StageInterface:
 
     # ------------------------------------------------------ reference messages
     def messages(self, snap: Any, stamp_ns: int, measured: float = 0.0) -> list[Any]:
-        """The same messages as `encode`, as rclpy message objects (the reference)."""
+        """Return the same messages as `encode`, as rclpy message objects (the reference)."""
         stamp = stamp_msg(stamp_ns)
         out: list[Any] = []
         if self.publishes_clock:

@@ -58,56 +58,168 @@ def parameter_specs(
     smin, smax, slew = drive_defaults if drive_defaults is not None else (0.0, 0.0, 1.0)
     unused = "" if drive_defaults is not None else " Unused: the mechanism has no drive."
     return [
-        ParamSpec("mechanism", "microstage", str, "", True, None, None,
-                  "Built-in mechanism name (microstage, fourbar_cantilever, fourbar_mixed) or path "
-                  "of a mechanism YAML file."),
-        ParamSpec("publish_rate", 1000.0, float, "Hz", False, 1.0, MAX_PUBLISH_RATE,
-                  "Ticks per second: each tick advances the simulation by 1/publish_rate s and "
-                  "publishes every topic once (diagnostics at ~10 Hz). 1/publish_rate must be a "
-                  "whole multiple of sim_step."),
-        ParamSpec("monitor_rate", 0.0, float, "Hz", False, 0.0, MAX_PUBLISH_RATE,
-                  "Rate of the monitoring topics (body poses, hinge wrenches and deflections): "
-                  "published and recorded every round(publish_rate / monitor_rate)-th tick, "
-                  "while the control topics (output, output/measured, drive, compression, "
-                  "/clock) keep every tick. 0: every tick."),
-        ParamSpec("sim_step", DEFAULT_STEP, float, "s", True, 0.0, MAX_SIM_STEP,
-                  "Fixed engine step, in (0, 0.01] s; must divide the publish period. Read-only."),
-        ParamSpec("time_mode", "realtime", str, "", True, None, None,
-                  "realtime: ticks paced by a steady clock; fast: as fast as possible, publishes "
-                  "/clock; lockstep: one tick per ~/step call, publishes /clock. Read-only."),
-        ParamSpec("stroke_min", smin, float, "m", False, None, None,
-                  "Lower end of the actuator stroke; commands below it are clamped." + unused),
-        ParamSpec("stroke_max", smax, float, "m", False, None, None,
-                  "Upper end of the actuator stroke; commands above it are clamped." + unused),
-        ParamSpec("slew_rate", slew, float, "m/s", False, 0.0, None,
-                  "Actuator speed limit (> 0): the commanded target moves towards each new "
-                  "command at most this fast." + unused),
-        ParamSpec("wake_spin", WAKE_SPIN_S, float, "s", False, 0.0, 1.0,
-                  "Real-time mode: the last part of the wait for each tick that is busy-waited "
-                  "instead of slept (at most the publish period: then the stepping thread never "
-                  "sleeps). A sleeping core can take milliseconds to wake, above all on virtual "
-                  "machines, and the tick then starts late; spinning costs CPU time."),
-        ParamSpec("stepping_nice", STEPPING_NICE, int, "", True, -20, 19,
-                  "Niceness asked for the stepping thread at start-up (Linux). Below the other "
-                  "processes' it gets a shared core first, which keeps real-time ticks on time "
-                  "next to busy nodes. Needs CAP_SYS_NICE or an RLIMIT_NICE allowing it; if "
-                  "refused, the node says so once and runs unchanged. Read-only."),
-        ParamSpec("command_reliability", "reliable", str, "", True, None, None,
-                  "Reliability of the drive command subscription: reliable (only reliable "
-                  "publishers are heard) or best_effort (reliable and best-effort publishers "
-                  "alike; a command lost on the wire is not resent). A publisher that does not "
-                  "match gets a warning and a diagnostics count. Read-only."),
-        ParamSpec("record", True, bool, "", False, None, None,
-                  "Record every published topic and the received drive commands to MCAP "
-                  "(same as ~/record)."),
-        ParamSpec("record_dir", "runs", str, "", False, None, None,
-                  "Directory of the recordings (relative to the working directory), created if "
-                  "missing; files are named <mechanism>_<namespace_node>_<UTC time>.mcap, with "
-                  "_1, _2, ... when the name is taken (names are claimed atomically)."),
-        ParamSpec("record_path", "", str, "", False, None, None,
-                  "Explicit file for the next recording (later ones get _1, _2, ... before the "
-                  "suffix, or the next free one); empty: a new name in record_dir. Existing files "
-                  "are never overwritten."),
+        ParamSpec(
+            "mechanism",
+            "microstage",
+            str,
+            "",
+            True,
+            None,
+            None,
+            "Built-in mechanism name (microstage, fourbar_cantilever, fourbar_mixed) or path "
+            "of a mechanism YAML file.",
+        ),
+        ParamSpec(
+            "publish_rate",
+            1000.0,
+            float,
+            "Hz",
+            False,
+            1.0,
+            MAX_PUBLISH_RATE,
+            "Ticks per second: each tick advances the simulation by 1/publish_rate s and "
+            "publishes every topic once (diagnostics at ~10 Hz). 1/publish_rate must be a "
+            "whole multiple of sim_step.",
+        ),
+        ParamSpec(
+            "monitor_rate",
+            0.0,
+            float,
+            "Hz",
+            False,
+            0.0,
+            MAX_PUBLISH_RATE,
+            "Rate of the monitoring topics (body poses, hinge wrenches and deflections): "
+            "published and recorded every round(publish_rate / monitor_rate)-th tick, "
+            "while the control topics (output, output/measured, drive, compression, "
+            "/clock) keep every tick. 0: every tick.",
+        ),
+        ParamSpec(
+            "sim_step",
+            DEFAULT_STEP,
+            float,
+            "s",
+            True,
+            0.0,
+            MAX_SIM_STEP,
+            "Fixed engine step, in (0, 0.01] s; must divide the publish period. Read-only.",
+        ),
+        ParamSpec(
+            "time_mode",
+            "realtime",
+            str,
+            "",
+            True,
+            None,
+            None,
+            "realtime: ticks paced by a steady clock; fast: as fast as possible, publishes "
+            "/clock; lockstep: one tick per ~/step call, publishes /clock. Read-only.",
+        ),
+        ParamSpec(
+            "stroke_min",
+            smin,
+            float,
+            "m",
+            False,
+            None,
+            None,
+            "Lower end of the actuator stroke; commands below it are clamped." + unused,
+        ),
+        ParamSpec(
+            "stroke_max",
+            smax,
+            float,
+            "m",
+            False,
+            None,
+            None,
+            "Upper end of the actuator stroke; commands above it are clamped." + unused,
+        ),
+        ParamSpec(
+            "slew_rate",
+            slew,
+            float,
+            "m/s",
+            False,
+            0.0,
+            None,
+            "Actuator speed limit (> 0): the commanded target moves towards each new "
+            "command at most this fast." + unused,
+        ),
+        ParamSpec(
+            "wake_spin",
+            WAKE_SPIN_S,
+            float,
+            "s",
+            False,
+            0.0,
+            1.0,
+            "Real-time mode: the last part of the wait for each tick that is busy-waited "
+            "instead of slept (at most the publish period: then the stepping thread never "
+            "sleeps). A sleeping core can take milliseconds to wake, above all on virtual "
+            "machines, and the tick then starts late; spinning costs CPU time.",
+        ),
+        ParamSpec(
+            "stepping_nice",
+            STEPPING_NICE,
+            int,
+            "",
+            True,
+            -20,
+            19,
+            "Niceness asked for the stepping thread at start-up (Linux). Below the other "
+            "processes' it gets a shared core first, which keeps real-time ticks on time "
+            "next to busy nodes. Needs CAP_SYS_NICE or an RLIMIT_NICE allowing it; if "
+            "refused, the node says so once and runs unchanged. Read-only.",
+        ),
+        ParamSpec(
+            "command_reliability",
+            "reliable",
+            str,
+            "",
+            True,
+            None,
+            None,
+            "Reliability of the drive command subscription: reliable (only reliable "
+            "publishers are heard) or best_effort (reliable and best-effort publishers "
+            "alike; a command lost on the wire is not resent). A publisher that does not "
+            "match gets a warning and a diagnostics count. Read-only.",
+        ),
+        ParamSpec(
+            "record",
+            True,
+            bool,
+            "",
+            False,
+            None,
+            None,
+            "Record every published topic and the received drive commands to MCAP "
+            "(same as ~/record).",
+        ),
+        ParamSpec(
+            "record_dir",
+            "runs",
+            str,
+            "",
+            False,
+            None,
+            None,
+            "Directory of the recordings (relative to the working directory), created if "
+            "missing; files are named <mechanism>_<namespace_node>_<UTC time>.mcap, with "
+            "_1, _2, ... when the name is taken (names are claimed atomically).",
+        ),
+        ParamSpec(
+            "record_path",
+            "",
+            str,
+            "",
+            False,
+            None,
+            None,
+            "Explicit file for the next recording (later ones get _1, _2, ... before the "
+            "suffix, or the next free one); empty: a new name in record_dir. Existing files "
+            "are never overwritten.",
+        ),
     ]
 
 
@@ -156,8 +268,11 @@ def steps_per_tick(publish_rate: float, sim_step: float) -> tuple[int, Optional[
 
 
 def monitor_every(publish_rate: float, monitor_rate: float) -> int:
-    """Ticks per publication of the monitoring topics: round(publish_rate / monitor_rate),
-    1 for monitor_rate 0."""
+    """
+    Ticks per publication of the monitoring topics.
+
+    round(publish_rate / monitor_rate), 1 for monitor_rate 0.
+    """
     return 1 if monitor_rate <= 0 else max(1, round(publish_rate / monitor_rate))
 
 

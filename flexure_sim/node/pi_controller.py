@@ -1,4 +1,5 @@
-"""``pi_controller``: an example controller closing the loop around ``stage_node``.
+"""
+``pi_controller``: an example controller closing the loop around ``stage_node``.
 
     ros2 run flexure_sim pi_controller [--ros-args -p kp:=0.01 -p ki:=20.0 ...]
 
@@ -71,7 +72,7 @@ class StartupError(Exception):
 
 
 def config_from(values: dict[str, Any]) -> PIConfig:
-    """The law's configuration from parameter values (by name)."""
+    """Return the law's configuration from parameter values (by name)."""
     return PIConfig(
         kp=float(values["kp"]), ki=float(values["ki"]), period=float(values["period"]),
         u_min=float(values["command_min"]), u_max=float(values["command_max"]),
@@ -80,7 +81,7 @@ def config_from(values: dict[str, Any]) -> PIConfig:
 
 
 def make_node() -> Any:
-    """The controller node (rclpy imported here: the module loads without ROS)."""
+    """Build the controller node (rclpy imported here: the module loads without ROS)."""
     from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
     from rclpy.duration import Duration
     from rclpy.node import Node
@@ -154,8 +155,11 @@ def make_node() -> Any:
                 self.setpoint = float(values["setpoint"])
 
         def on_reset(self, _request: Any, response: Any) -> Any:
-            """Integral and notch back to rest, answer count to 0, setpoint to the parameter
-            (with the stage's ~/reset: a new run)."""
+            """
+            Integral and notch back to rest.
+
+            Answer count to 0, setpoint to the parameter (with the stage's ~/reset: a new run).
+            """
             self.law.reset()
             self.answered = 0
             self.setpoint = float(self.get_parameter("setpoint").value)

@@ -222,7 +222,7 @@ class SteppingLoop:
 
     # ------------------------------------------------------------- live changes
     def set_pacing(self, rate: float, wake_spin: float, monitor_rate: float = 0.0) -> None:
-        """New publish rate, busy-wait and monitoring rate (stepping thread)."""
+        """Apply a new publish rate, busy-wait and monitoring rate (stepping thread)."""
         self.monitor_rate = monitor_rate
         self.monitor_every = monitor_every(rate, monitor_rate)
         if self.pacer is not None:

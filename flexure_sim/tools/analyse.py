@@ -1,7 +1,9 @@
-"""``flexure-sim analyse RUN.mcap``: per step of the drive, the gain, 2 % settling time,
-overshoot, steady-state joint-a compression, peak wrench per hinge, peak drive force and the
-peak hinge stress ratio sigma / sigma_y (engine/stress.py, from the recorded wrenches and the
-recorded mechanism's Hinge.stress geometry).
+"""
+``flexure-sim analyse RUN.mcap``.
+
+Per step of the drive, the gain, 2 % settling time, overshoot, steady-state joint-a compression,
+peak wrench per hinge, peak drive force and the peak hinge stress ratio sigma / sigma_y
+(engine/stress.py, from the recorded wrenches and the recorded mechanism's Hinge.stress geometry).
 
     flexure-sim analyse runs/stage.mcap [--json] [--recover] [--strict] [--band 0.02] [--no-static]
 

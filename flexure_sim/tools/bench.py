@@ -336,7 +336,8 @@ def bench_node(duration: float = 30.0) -> dict:
 
     Fast mode; real-time mode with the defaults; with a short wake_spin; and next to a controller
     process (an rclpy node subscribed to three topics at 1 kHz each), with the default
-    stepping-thread niceness and with none."""
+    stepping-thread niceness and with none.
+    """
     from . import closed_loop, measure  # needs ROS 2
 
     def realtime(subscribe=False, flood_hz=0.0, **params) -> dict:
@@ -456,14 +457,21 @@ def print_table(res: dict) -> None:
         ):
             r = nd.get(key)
             if r:
-                print(f"  real-time, wake_spin {r['wake_spin_s'] * 1e3:.2f} ms, stepping nice {r['stepping_nice']}"
-                      + (f", subscriber on {r['subscribed']}" if r["subscribed"] else "")
-                      + (f", {r['flood_sent_per_s']:.0f} commands/s from another process "
-                         f"({r['command_time_mean_us'] or float('nan'):.1f} us each)"
-                         if r.get("flood_hz") else "")
-                      + f": missed {r['missed_ticks']} of {r['paced_ticks']} ticks ({r['missed_fraction']:.3%}), "
-                      f"node CPU {r['node_cpu_cores'] or float('nan'):.2f} cores, "
-                      f"worst lateness {r['max_late_us'] / 1e3:.1f} ms")
+                print(
+                    f"  real-time, wake_spin {r['wake_spin_s'] * 1e3:.2f} ms, "
+                    f"stepping nice {r['stepping_nice']}"
+                    + (f", subscriber on {r['subscribed']}" if r["subscribed"] else "")
+                    + (
+                        f", {r['flood_sent_per_s']:.0f} commands/s from another process "
+                        f"({r['command_time_mean_us'] or float('nan'):.1f} us each)"
+                        if r.get("flood_hz")
+                        else ""
+                    )
+                    + f": missed {r['missed_ticks']} of {r['paced_ticks']} ticks "
+                    f"({r['missed_fraction']:.3%}), "
+                    f"node CPU {r['node_cpu_cores'] or float('nan'):.2f} cores, "
+                    f"worst lateness {r['max_late_us'] / 1e3:.1f} ms"
+                )
         from .closed_loop import summary
 
         for key, label in (("realtime_closed_loop", ""),

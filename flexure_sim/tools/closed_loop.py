@@ -1,5 +1,8 @@
-"""The closed loop at 1 kHz, measured: stage_node in real-time mode (recording on) with
-``pi_controller`` in a second process answering every measurement.
+"""
+The closed loop at 1 kHz, measured.
+
+stage_node in real-time mode (recording on) with ``pi_controller`` in a second process answering
+every measurement.
 
     python -m flexure_sim.tools.closed_loop --duration 10 [--monitor-rate 100] [--json]
 
@@ -61,7 +64,7 @@ class ControllerProcess:
 
 
 def sensor_stage(path: Path) -> Path:
-    """The built-in stage with `SENSOR`, written to ``path``."""
+    """Write the built-in stage with `SENSOR` to ``path`` and return the path."""
     data = yaml.safe_load(resolve_mechanism_path("microstage").read_text())
     data["sensor"] = dict(SENSOR)
     path.write_text(yaml.safe_dump(data))
@@ -110,8 +113,11 @@ def command_latency(recording: Path, trace: Path, period: float) -> dict[str, An
 
 
 def run(duration: float = 10.0, params: Optional[dict[str, str]] = None) -> dict[str, Any]:
-    """One real-time closed-loop run of ``duration`` s (after the warm-up); the node's
-    figures (`measure.run_node`) plus `command_latency`."""
+    """
+    One real-time closed-loop run of ``duration`` s (after the warm-up).
+
+    The node's figures (`measure.run_node`) plus `command_latency`.
+    """
     from . import measure  # needs ROS 2
 
     workdir = Path(tempfile.mkdtemp(prefix="stage_closed_loop_"))

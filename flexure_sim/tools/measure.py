@@ -69,7 +69,8 @@ def run_node(
     ``flood_hz``: during the measuring window another process (`flood`) publishes drive
     commands at that rate; the figures then include the commands received and the node's
     intake cost per command. ``companion(env, workdir)``: started once the node runs (before
-    the warm-up), returns an object whose ``stop()`` ends it before the node stops."""
+    the warm-up), returns an object whose ``stop()`` ends it before the node stops.
+    """
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.context import Context
@@ -123,7 +124,9 @@ def run_node(
         wanted = None if subscribe is True else {t.lstrip("/") for t in subscribe}
         for spec in itf.tick_topics:
             if wanted is None or spec.name.lstrip("/") in wanted:
-                node.create_subscription(spec.msg_type, spec.name, count, QoSProfile(depth=1000), raw=True)
+                node.create_subscription(
+                    spec.msg_type, spec.name, count, QoSProfile(depth=1000), raw=True
+                )
     other = None
     try:
         deadline = time.monotonic() + 60.0

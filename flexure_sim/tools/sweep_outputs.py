@@ -55,8 +55,11 @@ class Design:
         return self._static
 
     def modes(self) -> linear.Modes:
-        """Undamped modes and damped poles about the static equilibrium at the input
-        (engine/linear.py, as ``flexure-sim modes --input``)."""
+        """
+        Return the undamped modes and damped poles about the static equilibrium at the input.
+
+        As ``flexure-sim modes --input`` computes them (engine/linear.py).
+        """
         if self._modes is None:
             self._modes = linear.modes(linear.linearize(self.sim, self.input, wrenches=False,
                                                         static=self.static()))
