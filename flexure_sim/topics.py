@@ -62,3 +62,47 @@ def hinge_frame(hinge: str) -> str:
 def hinge_frame_a(hinge: str) -> str:
     """Frame a of a hinge (on its body A)."""
     return f"hinge_{hinge}_a"
+
+
+#: Topic of the stage drawn for RViz/Foxglove (visualization_msgs/MarkerArray).
+MARKERS = "markers"
+#: TF topics (absolute, as tf2 listeners expect).
+TF = "/tf"
+TF_STATIC = "/tf_static"
+
+
+def frame_prefix_problem(prefix: object) -> str | None:
+    """Why ``prefix`` cannot prefix frame ids (None if it can): tf2 frame ids have no
+    leading slash and no whitespace."""
+    if not isinstance(prefix, str):
+        return f"frame_prefix: expected a string, got {prefix!r}"
+    if prefix.startswith("/"):
+        return f"frame_prefix: frame ids have no leading slash (tf2), got {prefix!r}"
+    if any(c.isspace() for c in prefix):
+        return f"frame_prefix: no whitespace allowed in frame ids, got {prefix!r}"
+    return None
+
+
+class Frames:
+    """Every frame id the node publishes, with its ``frame_prefix`` (e.g. ``stage1/``)
+    prepended, so two stages can share one TF tree and one RViz view. The one place frame
+    ids are made: headers, child_frame_ids, markers and TF all take them from here."""
+
+    def __init__(self, prefix: str = "") -> None:
+        problem = frame_prefix_problem(prefix)
+        if problem:
+            raise ValueError(problem)
+        self.prefix = prefix
+        self.root = prefix + ROOT_FRAME
+
+    def body(self, body: str) -> str:
+        """Frame of one body (at its mass centre)."""
+        return self.prefix + body
+
+    def hinge_b(self, hinge: str) -> str:
+        """Frame b of a hinge (`hinge_frame`)."""
+        return self.prefix + hinge_frame(hinge)
+
+    def hinge_a(self, hinge: str) -> str:
+        """Frame a of a hinge (`hinge_frame_a`)."""
+        return self.prefix + hinge_frame_a(hinge)

@@ -205,6 +205,8 @@ class Diagnostics:
             values += [("drive_target", loop.filter.target),
                        ("drive_applied", loop.filter.applied)]
         values += extra_values + stress_values
+        if loop.display is not None:
+            values += loop.display.values()
         values += [
             ("recording", rec is not None),
             ("recording_path", str(rec.path) if rec is not None else ""),

@@ -12,7 +12,8 @@ the packed layouts do not apply (middleware other than Fast DDS, a type without 
 
 Conventions (README "## stage_node"):
 - frames: root ``stage``; one frame per body, named after it; per hinge ``hinge_<name>``
-  (its frame b, on body B) and ``hinge_<name>_a`` (its frame a, on body A). No leading
+  (its frame b, on body B) and ``hinge_<name>_a`` (its frame a, on body A), each with the
+  node's ``frame_prefix`` in front (`topics.Frames`, the one place they are made). No leading
   slashes. Planar poses become 3D poses with z = 0 and a yaw-only quaternion.
 - all topic names are relative (namespaces and remapping apply), except ``/clock``.
 """
@@ -32,7 +33,7 @@ from std_msgs.msg import Float64
 
 from ..engine.mechanism import Mechanism
 from .. import topics
-from ..topics import ROOT_FRAME, hinge_frame, hinge_frame_a
+from ..topics import ROOT_FRAME, Frames, hinge_frame, hinge_frame_a
 from .cdr import (
     ClockPacker, Float64Packer, StampedPacker, pack_diagnostics, packing_applies, split_stamp)
 
@@ -122,6 +123,32 @@ def yaw_quaternion(yaw: float) -> tuple[float, float, float, float]:
     return 0.0, 0.0, math.sin(half), math.cos(half)
 
 
+def tf_qos() -> QoSProfile:
+    """QoS of /tf as tf2's TransformBroadcaster offers it: reliable, keep last 100, volatile."""
+    return _reliable_volatile(100)
+
+
+def tf_static_qos() -> QoSProfile:
+    """QoS of /tf_static as tf2's StaticTransformBroadcaster offers it: reliable, keep last
+    1, transient local (late subscribers get the static transforms)."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class _Named:
+    """Name and ``pkg/msg/Type`` of a topic whose type may not be importable (TF)."""
+
+    def __init__(self, name: str, type_name: str) -> None:
+        self.name, self.type_name = name, type_name
+
+
+#: Display topics (display.py): markers at the display rate; TF where tf2_msgs exists.
+MARKERS = _Named(topics.MARKERS, "visualization_msgs/msg/MarkerArray")
+TF = _Named(topics.TF, "tf2_msgs/msg/TFMessage")
+TF_STATIC = _Named(topics.TF_STATIC, "tf2_msgs/msg/TFMessage")
+
+
 class StageInterface:
     """
     Topic table of one mechanism in one time mode, and snapshot -> messages.
@@ -131,10 +158,13 @@ class StageInterface:
     topic and the drive command subscription (None if the mechanism has no drive).
     """
 
-    def __init__(self, mechanism: Mechanism, time_mode: str = "realtime") -> None:
+    def __init__(self, mechanism: Mechanism, time_mode: str = "realtime",
+                 frame_prefix: str = "") -> None:
         if time_mode not in TIME_MODES:
             raise ValueError(f"time_mode: expected one of {TIME_MODES}, got {time_mode!r}")
         check_names(mechanism)
+        #: Frame ids of this node (prefixed).
+        self.frames = fr = Frames(frame_prefix)
         self.mechanism = mechanism
         self.time_mode = time_mode
         self.publishes_clock = time_mode in CLOCK_MODES
@@ -166,7 +196,7 @@ class StageInterface:
                 topics.POSE_ARRAY,
                 PoseArray,
                 "m, rad",
-                ROOT_FRAME,
+                fr.root,
                 "pose of every body frame (at the mass centre) in the root frame, "
                 f"in body order ({', '.join(bodies)})",
             )
@@ -178,16 +208,16 @@ class StageInterface:
                     topics.body_pose(b),
                     PoseStamped,
                     "m, rad",
-                    ROOT_FRAME,
+                    fr.root,
                     f"pose of body {b}'s frame (at its mass centre) in the root frame",
                 )
             )
         for h in mech.hinges:
             specs.append(_spec(
                 f"wrench:{h.name}", topics.hinge_wrench(h.name), WrenchStamped, "N, N m",
-                hinge_frame(h.name),
+                fr.hinge_b(h.name),
                 f"wrench hinge {h.name} exerts on its body B ({h.b.body}), in its frame b "
-                f"({hinge_frame(h.name)}), torque about b's origin; the opposite acts on "
+                f"({fr.hinge_b(h.name)}), torque about b's origin; the opposite acts on "
                 f"body A ({h.a.body})"))
             specs.append(
                 _spec(
@@ -195,10 +225,10 @@ class StageInterface:
                     topics.hinge_deflection(h.name),
                     TransformStamped,
                     "m, rad",
-                    hinge_frame_a(h.name),
-                    f"deflection of hinge {h.name}: pose of frame b ({hinge_frame(h.name)}) in "
+                    fr.hinge_a(h.name),
+                    f"deflection of hinge {h.name}: pose of frame b ({fr.hinge_b(h.name)}) in "
                     "frame a "
-                    f"({hinge_frame_a(h.name)}); translation (p_x, p_y, 0), yaw alpha",
+                    f"({fr.hinge_a(h.name)}); translation (p_x, p_y, 0), yaw alpha",
                 )
             )
         if self.compression_hinge is not None:
@@ -255,11 +285,12 @@ class StageInterface:
         nb = len(self.body_names)
         self._clock = ClockPacker()
         self._float = Float64Packer()
-        self._pose_array = StampedPacker(ROOT_FRAME, 7 * nb, count=nb)
-        self._poses = [StampedPacker(ROOT_FRAME, 7) for _ in self.body_names]
-        self._wrenches = [StampedPacker(hinge_frame(h), 6) for h in self.hinge_names]
+        fr = self.frames
+        self._pose_array = StampedPacker(fr.root, 7 * nb, count=nb)
+        self._poses = [StampedPacker(fr.root, 7) for _ in self.body_names]
+        self._wrenches = [StampedPacker(fr.hinge_b(h), 6) for h in self.hinge_names]
         self._deflections = [
-            StampedPacker(hinge_frame_a(h), 7, strings=(hinge_frame(h),)) for h in self.hinge_names
+            StampedPacker(fr.hinge_a(h), 7, strings=(fr.hinge_b(h),)) for h in self.hinge_names
         ]
 
     def packers(self) -> list[Any]:
@@ -330,12 +361,13 @@ class StageInterface:
     def messages(self, snap: Any, stamp_ns: int, measured: float = 0.0) -> list[Any]:
         """Return the same messages as `encode`, as rclpy message objects (the reference)."""
         stamp = stamp_msg(stamp_ns)
+        fr = self.frames
         out: list[Any] = []
         if self.publishes_clock:
             out.append(Clock(clock=stamp))
         array = PoseArray()
         array.header.stamp = stamp
-        array.header.frame_id = ROOT_FRAME
+        array.header.frame_id = fr.root
         poses = []
         for (x, y, th) in snap.poses.tolist():
             pose = Pose()
@@ -348,7 +380,7 @@ class StageInterface:
         for pose in poses:
             msg = PoseStamped()
             msg.header.stamp = stamp
-            msg.header.frame_id = ROOT_FRAME
+            msg.header.frame_id = fr.root
             msg.pose = pose
             out.append(msg)
         for name, (m, fx, fy), (a, px, py) in zip(
@@ -356,14 +388,14 @@ class StageInterface:
         ):
             w = WrenchStamped()
             w.header.stamp = stamp
-            w.header.frame_id = hinge_frame(name)
+            w.header.frame_id = fr.hinge_b(name)
             w.wrench.force.x, w.wrench.force.y, w.wrench.force.z = fx, fy, 0.0
             w.wrench.torque.x, w.wrench.torque.y, w.wrench.torque.z = 0.0, 0.0, m
             out.append(w)
             d = TransformStamped()
             d.header.stamp = stamp
-            d.header.frame_id = hinge_frame_a(name)
-            d.child_frame_id = hinge_frame(name)
+            d.header.frame_id = fr.hinge_a(name)
+            d.child_frame_id = fr.hinge_b(name)
             t = d.transform.translation
             t.x, t.y, t.z = px, py, 0.0
             r = d.transform.rotation

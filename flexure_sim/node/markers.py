@@ -35,6 +35,11 @@ ARROW_M_PER_N = 2e-4
 #: Colour of the body outlines (r, g, b, a).
 BODY_RGBA = (0.55, 0.6, 0.7, 1.0)
 DRIVE_RGBA = (0.2, 0.4, 1.0, 1.0)
+#: Drive arrow: shaft diameter, head diameter, head length, m.
+ARROW_SCALE_M = (0.4e-3, 0.8e-3, 1.0e-3)
+#: visualization_msgs/Marker types used (Marker.msg constants).
+ARROW, CYLINDER, LINE_STRIP = 0, 3, 4
+_IDENTITY = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 
 
 def _hull(points: np.ndarray) -> np.ndarray:
@@ -163,49 +168,63 @@ class MarkerScene:
         return {"outlines": outlines, "hinges": centres, "ratios": np.asarray(ratios),
                 "arrow": arrow}
 
+    def specs(self, poses: np.ndarray, wrenches: np.ndarray, drive_force: float,
+              ratios: Optional[np.ndarray] = None) -> list["MarkerSpec"]:
+        """Return the markers of one tick as plain data (what `message` and
+        `marker_cdr.MarkerArrayPacker` both turn into a MarkerArray: one definition)."""
+        g = self.geometry(poses, wrenches, drive_force, ratios)
+        out = []
+        for k, (body, pts) in enumerate(zip(self.mechanism.bodies, g["outlines"])):
+            out.append(MarkerSpec("bodies", k, LINE_STRIP, body.name, _IDENTITY,
+                                  (LINE_WIDTH_M, 0.0, 0.0), BODY_RGBA,
+                                  [(float(x), float(y), 0.0) for x, y in pts]))
+        for k, (hinge, centre, ratio) in enumerate(zip(self.mechanism.hinges, g["hinges"],
+                                                       g["ratios"])):
+            pose = (float(centre[0]), float(centre[1]), 0.0, 0.0, 0.0, 0.0, 1.0)
+            out.append(MarkerSpec("hinges", k, CYLINDER, hinge.name, pose,
+                                  (HINGE_DISC_M[0], HINGE_DISC_M[0], HINGE_DISC_M[1]),
+                                  load_colour(float(ratio)), []))
+        if g["arrow"] is not None:
+            out.append(MarkerSpec("drive", 0, ARROW, "", _IDENTITY, ARROW_SCALE_M, DRIVE_RGBA,
+                                  [(float(p[0]), float(p[1]), 0.0) for p in g["arrow"]]))
+        return out
+
     def message(self, poses: np.ndarray, wrenches: np.ndarray, drive_force: float,
                 stamp_ns: int, ratios: Optional[np.ndarray] = None):
-        """Return the ``visualization_msgs/MarkerArray`` of one tick."""
+        """Return the ``visualization_msgs/MarkerArray`` of one tick (rclpy objects: the
+        reference the node's packed bytes are tested against)."""
         from builtin_interfaces.msg import Time
         from geometry_msgs.msg import Point
         from visualization_msgs.msg import Marker, MarkerArray
 
-        g = self.geometry(poses, wrenches, drive_force, ratios)
         stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
         frame = self.frame_prefix + ROOT_FRAME
         markers = []
-
-        def marker(ns: str, ident: int, kind: int) -> Marker:
+        for spec in self.specs(poses, wrenches, drive_force, ratios):
             m = Marker()
             m.header.stamp = stamp
             m.header.frame_id = frame
-            m.ns = ns
-            m.id = ident
-            m.type = kind
-            m.action = Marker.ADD
-            m.pose.orientation.w = 1.0
-            return m
-
-        for k, (body, pts) in enumerate(zip(self.mechanism.bodies, g["outlines"])):
-            m = marker("bodies", k, Marker.LINE_STRIP)
-            m.text = body.name
-            m.scale.x = LINE_WIDTH_M
-            m.color.r, m.color.g, m.color.b, m.color.a = BODY_RGBA
-            m.points = [Point(x=float(x), y=float(y), z=0.0) for x, y in pts]
-            markers.append(m)
-        for k, (hinge, centre, ratio) in enumerate(zip(self.mechanism.hinges, g["hinges"],
-                                                       g["ratios"])):
-            m = marker("hinges", k, Marker.CYLINDER)
-            m.text = hinge.name
-            m.pose.position.x, m.pose.position.y = float(centre[0]), float(centre[1])
-            m.scale.x = m.scale.y = HINGE_DISC_M[0]
-            m.scale.z = HINGE_DISC_M[1]
-            m.color.r, m.color.g, m.color.b, m.color.a = load_colour(float(ratio))
-            markers.append(m)
-        if g["arrow"] is not None:
-            m = marker("drive", 0, Marker.ARROW)
-            m.points = [Point(x=float(p[0]), y=float(p[1]), z=0.0) for p in g["arrow"]]
-            m.scale.x, m.scale.y, m.scale.z = 0.4e-3, 0.8e-3, 1.0e-3
-            m.color.r, m.color.g, m.color.b, m.color.a = DRIVE_RGBA
+            m.ns, m.id, m.type, m.action = spec.ns, spec.id, spec.type, Marker.ADD
+            m.text = spec.text
+            p, q = m.pose.position, m.pose.orientation
+            p.x, p.y, p.z, q.x, q.y, q.z, q.w = spec.pose
+            m.scale.x, m.scale.y, m.scale.z = spec.scale
+            m.color.r, m.color.g, m.color.b, m.color.a = spec.rgba
+            m.points = [Point(x=x, y=y, z=z) for x, y, z in spec.points]
             markers.append(m)
         return MarkerArray(markers=markers)
+
+
+@dataclass(frozen=True)
+class MarkerSpec:
+    """One marker as data: namespace, id, type (visualization_msgs/Marker constants), text,
+    pose (x, y, z, qx, qy, qz, qw), scale, colour (r, g, b, a) and points (x, y, z)."""
+
+    ns: str
+    id: int
+    type: int
+    text: str
+    pose: tuple
+    scale: tuple
+    rgba: tuple
+    points: list

@@ -13,6 +13,7 @@ from typing import Any, Mapping, Optional
 
 from ..engine.solver import DEFAULT_STEP
 from .drive_input import limits_problem
+from ..topics import frame_prefix_problem
 from .interface import TIME_MODES
 
 #: Largest relative mismatch between publish period and steps_per_tick * sim_step.
@@ -186,6 +187,43 @@ def parameter_specs(
             "match gets a warning and a diagnostics count. Read-only.",
         ),
         ParamSpec(
+            "frame_prefix",
+            "",
+            str,
+            "",
+            True,
+            None,
+            None,
+            "Put in front of every frame id the node publishes (root stage, body and "
+            "hinge frames; headers, child frames, markers, TF), e.g. stage1/, so two "
+            "stages can share one TF tree and one view. No leading slash. Read-only.",
+        ),
+        ParamSpec(
+            "display_rate",
+            30.0,
+            float,
+            "Hz",
+            False,
+            0.0,
+            MAX_PUBLISH_RATE,
+            "Rate of the markers (and TF) in simulated time: every round(publish_rate / "
+            "display_rate) ticks, at most every tick; 0 turns them off. In real-time mode "
+            "that is wall time too; in fast mode it is display_rate times the real-time "
+            "factor.",
+        ),
+        ParamSpec(
+            "display_scale",
+            1.0,
+            float,
+            "",
+            False,
+            0.0,
+            None,
+            "Magnification of the displacements drawn by the markers about the rest pose "
+            "(micrometre motions are invisible at 1); published poses, wrenches and TF "
+            "stay true. At 1 the outlines sit on the TF body frames.",
+        ),
+        ParamSpec(
             "record",
             True,
             bool,
@@ -300,6 +338,13 @@ def validate(values: Mapping[str, Any]) -> Optional[str]:
     if values["command_reliability"] not in COMMAND_RELIABILITIES:
         return (f"command_reliability: expected one of {', '.join(COMMAND_RELIABILITIES)}, "
                 f"got {values['command_reliability']!r}")
+    for name in ("display_rate", "display_scale"):
+        v = values[name]
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0):
+            return f"{name}: must be a finite number >= 0, got {v!r}"
+    problem = frame_prefix_problem(values["frame_prefix"])
+    if problem:
+        return problem
     if not isinstance(values["mechanism"], str) or not values["mechanism"].strip():
         return "mechanism: expected a built-in name or a YAML path, got an empty string"
     if not isinstance(values["record_dir"], str) or not values["record_dir"].strip():

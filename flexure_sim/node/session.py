@@ -124,7 +124,7 @@ def run_metadata(values: Mapping[str, Any], mechanism: Mechanism, mechanism_path
         "flexure_sim_version": __version__,
         "steps_per_tick": str(steps_per_tick),
         "relinearize_tol": repr(relinearize_tol),
-        "root_frame": ROOT_FRAME,
+        "root_frame": interface.frames.root,
         "bodies": ",".join(interface.body_names),
         "hinges": ",".join(interface.hinge_names),
         "run": str(run),

@@ -34,6 +34,8 @@ from . import interface as itf
 from .commands import CommandIntake
 from .declare import coerce_integer_overrides, declare
 from .diagnostics import Diagnostics
+from .display import Display, DisplayOutput, display_every, static_transforms, tf_message
+from .display import tf_message_class
 from .drive_input import CommandFilter, DriveLimits
 from .engine_guard import StrokeProbe
 from .params import as_declared_type, parameter_specs, validate
@@ -109,7 +111,8 @@ class StageNode(Node):
         time_mode = values["time_mode"]
         dt = float(values["sim_step"])
         try:
-            self.interface = itf.StageInterface(self.mechanism, time_mode)
+            self.interface = itf.StageInterface(self.mechanism, time_mode,
+                                                 values["frame_prefix"])
         except ValueError as exc:
             raise StartupError(str(exc)) from exc
         sim = Simulation(self.mechanism, dt=dt, relinearize_tol=RELINEARIZE_TOL)
@@ -156,6 +159,7 @@ class StageNode(Node):
                                         self.session.write, self._log, loop.throttle)
         loop.diagnostics = Diagnostics(loop, diag_pub, len(tick_pubs), self.get_name(),
                                        self.mechanism.name, watch.diagnostics)
+        self._build_display(values, qos, watch, len(tick_pubs) + 1 + (self._command_sub is not None))
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/record", self._on_record)
         self.create_service(Trigger, "~/step", self._on_step)
@@ -179,6 +183,36 @@ class StageNode(Node):
         gc.collect()
         gc.freeze()
         loop.start(self._stepping_ended, self._stepping_failed)
+
+    def _build_display(self, values: dict[str, Any], qos: Any, watch: QosWatch,
+                       first_channel: int) -> None:
+        """Markers publisher, TF publishers where tf2_msgs is importable, and the display
+        output of the stepping thread (recording channels from ``first_channel`` on)."""
+        from visualization_msgs.msg import MarkerArray
+
+        frames = self.interface.frames
+        display = Display(self.mechanism, frames, float(values["display_scale"]))
+        pub = self.create_publisher(MarkerArray, itf.MARKERS.name, qos,
+                                    event_callbacks=watch.publisher_callbacks(itf.MARKERS.name))
+        #: Extra recorded topics: (resolved name, type name, QoS), in channel order.
+        self._display_topics = [(pub.topic_name, itf.MARKERS.type_name, qos)]
+        tf_class, why = tf_message_class()
+        tf_pub = None
+        if tf_class is None:
+            self._log.info(f"TF off: {why}; poses are on bodies/poses and bodies/<body>/pose")
+        else:
+            tf_pub = self.create_publisher(tf_class, itf.TF.name, itf.tf_qos())
+            static_pub = self.create_publisher(tf_class, itf.TF_STATIC.name, itf.tf_static_qos())
+            static_pub.publish(tf_message(static_transforms(self.mechanism, frames),
+                                          self.get_clock().now().nanoseconds, tf_class))
+            self._tf_static_pub = static_pub
+            self._display_topics += [(tf_pub.topic_name, itf.TF.type_name, itf.tf_qos()),
+                                     (static_pub.topic_name, itf.TF_STATIC.type_name,
+                                      itf.tf_static_qos())]
+        channels = list(range(first_channel, first_channel + len(self._display_topics)))
+        loop = self.loop
+        loop.display = DisplayOutput(display, pub, self.session, channels, tf_pub, tf_class)
+        loop.display_every = display_every(loop.rate, float(values["display_rate"]))
 
     @property
     def time_mode(self) -> str:
@@ -234,6 +268,12 @@ class StageNode(Node):
             rate, spin = float(values["publish_rate"]), float(values["wake_spin"])
             monitor = float(values["monitor_rate"])
             loop.requests.call(lambda: loop.set_pacing(rate, spin, monitor))
+        if names & {"publish_rate", "display_rate"}:
+            every = display_every(float(values["publish_rate"]), float(values["display_rate"]))
+            loop.requests.call(lambda: setattr(loop, "display_every", every))
+        if "display_scale" in names:
+            scale = float(values["display_scale"])
+            loop.requests.call(lambda: setattr(loop.display.display.scene, "display_scale", scale))
         if "record" in names and not self._sync_record_param:
             ok, message = self._set_recording(bool(values["record"]))
             (self._log.info if ok else self._log.error)(message)
@@ -288,6 +328,7 @@ class StageNode(Node):
         if self._command_sub is not None:
             topics.append((self._command_sub.topic_name, self.interface.command.type_name,
                            itf.command_qos(values["command_reliability"])))
+        topics += self._display_topics
         loop = self.loop
         node = self.get_fully_qualified_name()
         metadata = run_metadata(values, self.mechanism, self.mechanism_path, self.interface, node,

@@ -74,6 +74,10 @@ class SteppingLoop:
         self.diagnostics: Optional[Diagnostics] = None
         #: The last published snapshot (the diagnostics' hinge stress ratio), None before.
         self.snapshot: Any = None
+        #: Display output (`display.DisplayOutput`) and publish ticks per display tick
+        #: (0: off); set before `start`.
+        self.display: Any = None
+        self.display_every = 0
         self.requests = RequestQueue(self.alive)
         self.run_wall0 = time.perf_counter()
         self.run_sim0 = sim.state.t
@@ -212,6 +216,8 @@ class SteppingLoop:
         t3 = perf()
         if self.diagnostics is not None:
             self.diagnostics.window.add(t1 - t0, t2 - t1, t3 - t2, t3 - t0)
+        if self.display_every and self.ticks % self.display_every == 0:
+            self.display.publish(snap, stamp)
         self._count_tick(stamp)
         return True
 
