@@ -97,8 +97,8 @@ def to_root(pose: Sequence[float], points: np.ndarray) -> np.ndarray:
     """Return body-frame points (k, 2) in the root frame for a body at pose (x, y, theta)."""
     x, y, th = pose
     c, s = math.cos(th), math.sin(th)
-    return np.column_stack([x + c * points[:, 0] - s * points[:, 1],
-                            y + s * points[:, 0] + c * points[:, 1]])
+    # rows (px, py) @ [[c, s], [-s, c]] = (c px - s py, s px + c py)
+    return points @ np.array([[c, s], [-s, c]]) + np.array([x, y])
 
 
 def load_colour(ratio: float) -> tuple[float, float, float, float]:
@@ -131,6 +131,19 @@ class MarkerScene:
         self.rest = np.array([b.pose for b in mech.bodies], dtype=float)
         self._body_index = {b.name: i for i, b in enumerate(mech.bodies)}
         self._peak_load = 0.0
+        # Every drawn point in its body's frame, with its body's index, so that one
+        # vectorised to_root places all of them: the outlines (closed: first vertex again
+        # when they are polygons), then each hinge's frame b.
+        local, owner, self._splits = [], [], []
+        for i, outline in enumerate(self.outlines):
+            closed = np.vstack([outline, outline[:1]]) if len(outline) >= 3 else outline
+            local.append(closed)
+            owner += [i] * len(closed)
+            self._splits.append(len(owner))
+        local.append(np.array([h.b.position for h in mech.hinges], dtype=float).reshape(-1, 2))
+        owner += [self._body_index[h.b.body] for h in mech.hinges]
+        self._local = np.vstack(local)
+        self._owner = np.array(owner, dtype=int)
 
     def hinge_loads(self, wrenches: np.ndarray) -> np.ndarray:
         """Return one load figure per hinge from its wrench (m, fx, fy): |m| / arm + |f|."""
@@ -148,12 +161,13 @@ class MarkerScene:
         """
         mech = self.mechanism
         shown = displayed_poses(self.rest, np.asarray(poses, dtype=float), self.display_scale)
-        outlines = []
-        for pose, outline in zip(shown, self.outlines):
-            pts = to_root(pose, outline)
-            outlines.append(np.vstack([pts, pts[:1]]) if len(pts) >= 3 else pts)
-        centres = np.array([to_root(shown[self._body_index[h.b.body]],
-                                    np.array([h.b.position]))[0] for h in mech.hinges])
+        # to_root of every point at once, each with the pose of its body
+        held = shown[self._owner]
+        c, s = np.cos(held[:, 2]), np.sin(held[:, 2])
+        lx, ly = self._local[:, 0], self._local[:, 1]
+        placed = np.column_stack([held[:, 0] + c * lx - s * ly, held[:, 1] + s * lx + c * ly])
+        parts = np.split(placed, self._splits)
+        outlines, centres = parts[:-1], parts[-1]
         if ratios is None:
             loads = self.hinge_loads(wrenches)
             self._peak_load = max(self._peak_load, float(loads.max(initial=0.0)))
@@ -177,13 +191,13 @@ class MarkerScene:
         for k, (body, pts) in enumerate(zip(self.mechanism.bodies, g["outlines"])):
             out.append(MarkerSpec("bodies", k, LINE_STRIP, body.name, _IDENTITY,
                                   (LINE_WIDTH_M, 0.0, 0.0), BODY_RGBA,
-                                  [(float(x), float(y), 0.0) for x, y in pts]))
-        for k, (hinge, centre, ratio) in enumerate(zip(self.mechanism.hinges, g["hinges"],
-                                                       g["ratios"])):
-            pose = (float(centre[0]), float(centre[1]), 0.0, 0.0, 0.0, 0.0, 1.0)
-            out.append(MarkerSpec("hinges", k, CYLINDER, hinge.name, pose,
+                                  [(x, y, 0.0) for x, y in pts.tolist()]))
+        for k, (hinge, (x, y), ratio) in enumerate(zip(
+                self.mechanism.hinges, g["hinges"].tolist(), g["ratios"].tolist())):
+            out.append(MarkerSpec("hinges", k, CYLINDER, hinge.name,
+                                  (x, y, 0.0, 0.0, 0.0, 0.0, 1.0),
                                   (HINGE_DISC_M[0], HINGE_DISC_M[0], HINGE_DISC_M[1]),
-                                  load_colour(float(ratio)), []))
+                                  load_colour(ratio), []))
         if g["arrow"] is not None:
             out.append(MarkerSpec("drive", 0, ARROW, "", _IDENTITY, ARROW_SCALE_M, DRIVE_RGBA,
                                   [(float(p[0]), float(p[1]), 0.0) for p in g["arrow"]]))
