@@ -24,7 +24,7 @@ def test_defaults_are_valid_and_give_ten_steps_per_tick():
     assert steps_per_tick(1000.0, 1e-4) == (10, None)
     read_only = {s.name for s in parameter_specs() if s.read_only}
     assert read_only == {"mechanism", "sim_step", "time_mode", "stepping_nice",
-                         "command_reliability"}
+                         "command_reliability", "frame_prefix"}
     assert values["command_reliability"] == "reliable"
 
 
@@ -45,6 +45,10 @@ def test_steps_per_tick(rate, step, n):
 
 
 @pytest.mark.parametrize("changes, word", [
+    (dict(frame_prefix="/stage1/"), "leading slash"),
+    (dict(frame_prefix="stage 1/"), "whitespace"),
+    (dict(display_rate=-1.0), "display_rate"),
+    (dict(display_scale=float("nan")), "display_scale"),
     (dict(sim_step=3e-4), "does not divide"),
     (dict(publish_rate=20000.0, sim_step=1e-5), "publish_rate"),
     (dict(publish_rate=0.5), "publish_rate"),

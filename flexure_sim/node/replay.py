@@ -43,7 +43,8 @@ ACK_TIMEOUT_S = 2.0
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
-        "run", metavar="RUN.mcap", help="MCAP file recorded by stage_node (or ros2 bag record)"
+        "run", metavar="RUN", help="recording of stage_node (or ros2 bag record): a bag "
+        "directory (its files in order) or one MCAP file"
     )
     p.add_argument(
         "-r",

@@ -80,6 +80,68 @@ def build_bag_metadata(
     }
 
 
+def combine_bag_metadata(files: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """The metadata of a bag made of several files (in order), from the one-file metadata of
+    each (`build_bag_metadata`, as stored in each file's ``rosbag2`` record): topics in order of
+    first appearance with their counts summed, the files' entries in order, starting time
+    and duration spanning the files that hold messages, custom_data summed for the
+    flexure_sim counters (``flexure_sim.*`` keys holding integers), else the last value.
+    This is what a bag directory's ``metadata.yaml`` holds (`metadata_yaml`)."""
+    if not files:
+        raise ValueError("files: a bag has at least one file")
+    topics: dict[str, dict[str, Any]] = {}
+    entries: list[dict[str, Any]] = []
+    custom: dict[str, str] = {}
+    spans = []
+    for meta in files:
+        for t in meta["topics_with_message_count"]:
+            name = t["topic_metadata"]["name"]
+            if name in topics:
+                topics[name]["message_count"] += t["message_count"]
+            else:
+                topics[name] = {"topic_metadata": dict(t["topic_metadata"]),
+                                "message_count": t["message_count"]}
+        entries.extend(dict(f) for f in meta["files"])
+        if meta["message_count"]:
+            start = meta["starting_time"]["nanoseconds_since_epoch"]
+            spans.append((start, start + meta["duration"]["nanoseconds"]))
+        for key, value in meta.get("custom_data", {}).items():
+            if key.startswith("flexure_sim.") and key in custom and value.isdigit() \
+                    and custom[key].isdigit():
+                custom[key] = str(int(custom[key]) + int(value))
+            else:
+                custom[key] = value
+    start = min((a for a, _ in spans), default=0)
+    end = max((b for _, b in spans), default=0)
+    first = files[0]
+    return {
+        "version": METADATA_VERSION,
+        "storage_identifier": first["storage_identifier"],
+        "duration": {"nanoseconds": end - start},
+        "starting_time": {"nanoseconds_since_epoch": start},
+        "message_count": sum(m["message_count"] for m in files),
+        "topics_with_message_count": list(topics.values()),
+        "compression_format": first.get("compression_format", ""),
+        "compression_mode": first.get("compression_mode", ""),
+        "relative_file_paths": [f["path"] for f in entries],
+        "files": entries,
+        "custom_data": custom,
+        "ros_distro": first.get("ros_distro", "jazzy"),
+    }
+
+
+def parse_metadata_yaml(text: str) -> dict[str, Any]:
+    """The metadata struct of a bag directory's ``metadata.yaml`` (checked as
+    `parse_serialized_metadata`); ValueError naming what is wrong."""
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ValueError(f"metadata.yaml is not YAML: {exc}") from exc
+    if not isinstance(data, dict) or not isinstance(data.get(FILE_KEY), dict):
+        raise ValueError(f"metadata.yaml: no {FILE_KEY} mapping")
+    return parse_serialized_metadata(yaml.safe_dump(data[FILE_KEY]))
+
+
 def dump_serialized_metadata(metadata: Mapping[str, Any]) -> str:
     """YAML for the ``serialized_metadata`` key of the ``rosbag2`` record."""
     return _dump(dict(metadata))

@@ -22,24 +22,30 @@ from .errors import (
     RunError,
     UndecodableMessageError,
 )
-from .reader import LogReader, undecodable_note
+from .bag import is_bag_directory
+from .reader import LogReader, open_reader, undecodable_note
 
 
 def check_path(path: str | os.PathLike[str]) -> Path:
-    """``path`` as a Path; `RunError` (usage) if it is missing or a directory."""
+    """
+    Return ``path`` as a Path.
+
+    `RunError` (usage) if it is missing or a directory that is not a bag (no metadata.yaml,
+    no MCAP file).
+    """
     p = Path(path)
     if not p.exists():
         raise RunError(f"{p}: no such file", 2)
-    if p.is_dir():
-        raise RunError(f"{p}: is a directory, not an MCAP file", 2)
+    if p.is_dir() and not is_bag_directory(p):
+        raise RunError(f"{p}: is a directory without metadata.yaml or MCAP files, not a bag", 2)
     return p
 
 
 def open_log(
     path: str | os.PathLike[str], recover: bool = False, strict: bool = False
 ) -> LogReader:
-    """Return a `LogReader` of a checked path, ready for its one pass."""
-    return LogReader(check_path(path), recover=recover, strict=strict)
+    """Return a `LogReader` of a checked path (a `bag_read.BagReader` of a bag directory)."""
+    return open_reader(check_path(path), recover=recover, strict=strict)
 
 
 def check_readable(reader: LogReader) -> None:

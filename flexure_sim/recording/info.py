@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Optional
 
-from .reader import LogReader, TopicInfo, TopicTable, undecodable_note
+from .reader import TopicInfo, TopicTable, open_reader, undecodable_note
 
 RECORD_NAME = "flexure_sim"
 #: Key of the rosbag2 ``custom_data`` entry in which the recorder counts dropped messages.
@@ -120,11 +120,11 @@ def log_info(
     not decode).
     """
     path = Path(path)
-    reader = LogReader(path, recover=recover, strict=strict)
+    reader = open_reader(path, recover=recover, strict=strict)  # a file or a bag directory
     reader.read_through(decode=decode)
     return LogInfo(
         path=path,
-        size_bytes=path.stat().st_size,
+        size_bytes=getattr(reader, "size_bytes", None) or path.stat().st_size,
         profile=reader.header.profile,
         library=reader.header.library,
         topics=reader.topics,

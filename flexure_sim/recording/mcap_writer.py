@@ -161,6 +161,7 @@ class Worker:
         self._topics: dict[int, AddTopic] = {}
         self._counts: dict[int, int] = defaultdict(int)
         self._start = self._end = -1
+        self.bag_metadata: dict | None = None
         self._deadline: float | None = None
         self.thread = threading.Thread(target=self._run, name="mcap-recorder", daemon=True)
         self.thread.start()
@@ -273,6 +274,8 @@ class Worker:
             custom_data={DROPPED_KEY: str(self._dropped())},
             ros_distro=self._ros_distro,
         )
+        #: The file's rosbag2 metadata (for a bag directory's metadata.yaml).
+        self.bag_metadata = metadata
         self._writer.flush()
         self._writer.add_metadata(
             METADATA_RECORD_NAME, {METADATA_RECORD_KEY: dump_serialized_metadata(metadata)}

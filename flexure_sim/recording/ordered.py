@@ -3,7 +3,8 @@ The messages of a log in log-time order, as a replay needs them.
 
 A properly closed, intact file is first read through once (every CRC checked, nothing
 decoded or kept), then played from its chunk index with the mcap library's indexed reader,
-which holds only the chunks that overlap in time: memory does not grow with the file. A
+which holds only the chunks that overlap in time: memory does not grow with the file (a bag
+directory: its files one after the other). A
 damaged or incomplete file read with ``recover`` has no usable index: its readable payloads
 are held in memory and sorted by log time (stable: file order on ties).
 """
@@ -15,7 +16,7 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
-from .reader import LogReader
+from .reader import open_reader
 
 
 class OrderedLog:
@@ -27,7 +28,10 @@ class OrderedLog:
     """
 
     def __init__(self, path: str | os.PathLike[str], recover: bool = False) -> None:
-        reader = LogReader(path, recover=recover)
+        reader = open_reader(path, recover=recover)
+        #: The files played in turn: a bag's, in order (split by time: their log times follow
+        #: one another), or the one file.
+        self._files: list[Path] = list(getattr(reader, "files", [reader.path]))
         self._held: list[tuple[int, str, bytes]] | None = None
         if reader.summary_ok and not recover:
             reader.read_through(decode=False)  # refuses a damaged file before anything plays
@@ -57,10 +61,11 @@ class OrderedLog:
             return
         if not wanted:
             return
-        with self.path.open("rb") as stream:
-            reader = make_reader(stream, validate_crcs=True)
-            for _, channel, message in reader.iter_messages(
-                topics=sorted(wanted), log_time_order=True
-            ):  # (no time bound: its keyword changed between mcap versions)
-                if message.log_time >= start_ns:
-                    yield message.log_time, channel.topic, message.data
+        for path in self._files:
+            with path.open("rb") as stream:
+                reader = make_reader(stream, validate_crcs=True)
+                for _, channel, message in reader.iter_messages(
+                    topics=sorted(wanted), log_time_order=True
+                ):  # (no time bound: its keyword changed between mcap versions)
+                    if message.log_time >= start_ns:
+                        yield message.log_time, channel.topic, message.data

@@ -255,17 +255,30 @@ class McapLog(TopicTable):
         return [m for m in self.messages if m.topic == topic]
 
 
+def open_reader(path: str | os.PathLike[str], recover: bool = False,
+                strict: bool = False) -> Any:
+    """
+    Return a `LogReader` of an MCAP file, or a `bag_read.BagReader` of a bag directory.
+
+    The BagReader has the same interface and reads the bag's files in order as one run.
+    """
+    if Path(path).is_dir():
+        from .bag_read import BagReader
+        return BagReader(path, recover=recover, strict=strict)
+    return LogReader(path, recover=recover, strict=strict)
+
+
 def read_log(
     path: str | os.PathLike[str], recover: bool = False, decode: bool = True,
     strict: bool = False,
 ) -> McapLog:
     """
-    Return every message of ``path`` in one list.
+    Return every message of ``path`` (a file or a bag directory) in one list.
 
-    For small logs and tests; tools stream with `LogReader`. Decoded unless ``decode`` is
+    For small logs and tests; tools stream with `open_reader`. Decoded unless ``decode`` is
     False.
     """
-    reader = LogReader(path, recover=recover, strict=strict)
+    reader = open_reader(path, recover=recover, strict=strict)
     messages = list(reader.messages(decode=decode))
     return McapLog(
         path=reader.path,

@@ -166,6 +166,11 @@ class McapRecorder:
     def dropped_count(self) -> int:
         return self.stats.dropped_count
 
+    @property
+    def bag_metadata(self) -> dict | None:
+        """The rosbag2 metadata written into the file by `close` (None before)."""
+        return self._worker.bag_metadata
+
     # -- recording --------------------------------------------------------------------------
     def add_topic(
         self,

@@ -5,9 +5,10 @@ from typing import Any
 
 
 def add_file_arguments(parser: Any, recover: bool = True, namespace: bool = True) -> None:
-    """RUN.mcap, --recover, --strict and --namespace."""
-    parser.add_argument("run", metavar="RUN.mcap",
-                        help="MCAP file recorded by stage_node (or ros2 bag record)")
+    """RUN, --recover, --strict and --namespace."""
+    parser.add_argument("run", metavar="RUN",
+                        help="recording of stage_node (or ros2 bag record): a bag directory "
+                        "(its files in order, as one run) or one MCAP file")
     if recover:
         parser.add_argument("--recover", action="store_true",
                             help="read what is readable of a truncated or damaged file "
