@@ -17,7 +17,7 @@ from rcl_interfaces.msg import (
 from rclpy.parameter import Parameter
 
 from .interface import TIME_MODES
-from .params import COMMAND_RELIABILITIES, ParamSpec, parameter_specs
+from .params import COMMAND_RELIABILITIES, RECORD_FORMATS, ParamSpec, parameter_specs
 
 _TYPE_CODES = {
     float: ParameterType.PARAMETER_DOUBLE,
@@ -28,6 +28,7 @@ _TYPE_CODES = {
 _CONSTRAINTS = {
     "time_mode": f"one of {', '.join(TIME_MODES)}",
     "command_reliability": f"one of {', '.join(COMMAND_RELIABILITIES)}",
+    "record_format": f"one of {', '.join(RECORD_FORMATS)}",
     "sim_step": "> 0 and divides 1/publish_rate",
     "slew_rate": "> 0",
     "stroke_min": "stroke_min <= stroke_max; the engine must find a static equilibrium there",

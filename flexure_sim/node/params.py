@@ -22,6 +22,8 @@ MAX_PUBLISH_RATE = 10000.0
 MAX_SIM_STEP = 1e-2
 #: Values of ``command_reliability``.
 COMMAND_RELIABILITIES = ("reliable", "best_effort")
+#: Values of ``record_format``.
+RECORD_FORMATS = ("bag", "mcap")
 #: Default of ``wake_spin``: see its description (measured in BENCHMARKS.md).
 WAKE_SPIN_S = 1e-3
 #: Default of ``stepping_nice``: see its description (measured in BENCHMARKS.md).
@@ -243,8 +245,9 @@ def parameter_specs(
             None,
             None,
             "Directory of the recordings (relative to the working directory), created if "
-            "missing; files are named <mechanism>_<namespace_node>_<UTC time>.mcap, with "
-            "_1, _2, ... when the name is taken (names are claimed atomically).",
+            "missing; recordings are named <mechanism>_<namespace_node>_<UTC time> (a bag "
+            "directory, or that .mcap file), with _1, _2, ... when the name is taken "
+            "(names are claimed atomically).",
         ),
         ParamSpec(
             "record_path",
@@ -254,9 +257,44 @@ def parameter_specs(
             False,
             None,
             None,
-            "Explicit file for the next recording (later ones get _1, _2, ... before the "
-            "suffix, or the next free one); empty: a new name in record_dir. Existing files "
-            "are never overwritten.",
+            "Explicit bag directory (or, ending in .mcap, file) for the next recording "
+            "(later ones get _1, _2, ... or the next free one); empty: a new name in "
+            "record_dir. Existing recordings are never overwritten.",
+        ),
+        ParamSpec(
+            "record_format",
+            "bag",
+            str,
+            "",
+            False,
+            None,
+            None,
+            "bag: a rosbag2 bag directory per recording (metadata.yaml + <name>_0.mcap, "
+            "split by record_max_bytes / record_max_duration), as ros2 bag record writes; "
+            "mcap: one MCAP file. A record_path ending in .mcap is one file either way. "
+            "Applies from the next recording.",
+        ),
+        ParamSpec(
+            "record_max_bytes",
+            0,
+            int,
+            "B",
+            False,
+            0,
+            None,
+            "Bag format: start a new file of the bag once the current one holds this many "
+            "bytes of messages (before MCAP framing and compression); 0: no limit.",
+        ),
+        ParamSpec(
+            "record_max_duration",
+            0.0,
+            float,
+            "s",
+            False,
+            0.0,
+            None,
+            "Bag format: start a new file once the current one spans this much simulated "
+            "time; 0: no limit.",
         ),
     ]
 
@@ -349,6 +387,15 @@ def validate(values: Mapping[str, Any]) -> Optional[str]:
         return "mechanism: expected a built-in name or a YAML path, got an empty string"
     if not isinstance(values["record_dir"], str) or not values["record_dir"].strip():
         return "record_dir: expected a directory path, got an empty string"
+    if values["record_format"] not in RECORD_FORMATS:
+        return (f"record_format: expected one of {', '.join(RECORD_FORMATS)}, "
+                f"got {values['record_format']!r}")
+    size = values["record_max_bytes"]
+    if not (isinstance(size, int) and not isinstance(size, bool) and size >= 0):
+        return f"record_max_bytes: must be an integer >= 0, got {size!r}"
+    span = values["record_max_duration"]
+    if not (isinstance(span, (int, float)) and math.isfinite(span) and span >= 0.0):
+        return f"record_max_duration: must be a finite number >= 0, got {span!r}"
     if not isinstance(values["record_path"], str):
         return f"record_path: expected a string, got {values['record_path']!r}"
     return None

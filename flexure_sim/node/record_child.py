@@ -1,8 +1,9 @@
 """
 The recorder process's side of `record_process`.
 
-Reads the frames the node sends on stdin and writes them with `McapRecorder` (protocol, loss policy
-and test hooks: `record_process`).
+Reads the frames the node sends on stdin and writes them with `McapRecorder` (one file) or
+`BagRecorder` (a bag directory: its metadata.yaml is written each time a file is finished,
+so also when the node died). Protocol, loss policy and test hooks: `record_process`.
 
 Run as ``python -m flexure_sim.node.record_child`` by `record_process.RecorderProcess`.
 """
@@ -19,6 +20,7 @@ from pathlib import Path
 from typing import Any, BinaryIO, Optional
 
 from ..recording import McapRecorder, QosDescription, RecordingError
+from ..recording.bag import BagRecorder
 from ..recording.mcap_writer import describe
 from .record_process import (
     CHILD_QUEUE,
@@ -64,9 +66,30 @@ def _output(path: Path, claimed: bool = False) -> Path | BinaryIO:
     return io.BufferedWriter(raw)
 
 
-def _open(spec: dict[str, Any]) -> McapRecorder:
+def _fill(new: Any, spec: dict[str, Any]) -> Any:
+    """Add the topics and metadata of an ``O`` frame to a new recorder (closed on failure)."""
+    try:
+        for name, type_name, qos in spec["topics"]:
+            new.add_topic(name, type_name, QosDescription.from_dict(qos))
+        for name, data in spec["metadata"].items():
+            new.add_metadata(name, data)
+    except BaseException:
+        with contextlib.suppress(RecordingError):
+            new.close()
+        raise
+    return new
+
+
+def _open(spec: dict[str, Any]) -> McapRecorder | BagRecorder:
     """Return a recorder for an ``O`` frame; the child never drops (it waits for its writer)."""
     path = Path(spec["path"])
+    limits = spec.get("bag")
+    if limits is not None:  # a bag directory (claimed: the node made it, empty, with mkdir)
+        return _fill(BagRecorder(
+            path, max_bytes=int(limits.get("max_bytes", 0)),
+            max_duration_ns=int(limits.get("max_duration_ns", 0)),
+            claimed=bool(spec.get("claimed")), open_file=_output, queue_size=CHILD_QUEUE,
+            max_block_s=None), spec)
     # claimed: the node created the empty file with O_EXCL (session), so it is ours to fill.
     claimed = bool(spec.get("claimed")) and path.is_file() and path.stat().st_size == 0
     if path.exists() and not claimed:
@@ -80,23 +103,14 @@ def _open(spec: dict[str, Any]) -> McapRecorder:
             if path.stat().st_size == 0:
                 path.unlink()
         raise
-    try:
-        for name, type_name, qos in spec["topics"]:
-            new.add_topic(name, type_name, QosDescription.from_dict(qos))
-        for name, data in spec["metadata"].items():
-            new.add_metadata(name, data)
-    except BaseException:
-        with contextlib.suppress(RecordingError):
-            new.close()
-        raise
-    return new
+    return _fill(new, spec)
 
 
 def _child(stdin: BinaryIO, stdout: BinaryIO) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, signal.SIG_IGN)
     _lower_priority()
-    recorder: Optional[McapRecorder] = None
+    recorder: Optional[McapRecorder | BagRecorder] = None
     path = ""
     names: list[str] = []
 

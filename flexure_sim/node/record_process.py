@@ -9,7 +9,8 @@ hands it each tick's payloads as one frame on a pipe: a few microseconds per tic
 
 Protocol on the child's stdin, frames of ``<opcode:1><length:u32 LE><body>``:
 
-- ``O`` open: JSON {path, topics: [[name, type, qos], ...], metadata: {name: {k: v}}}
+- ``O`` open: JSON {path, topics: [[name, type, qos], ...], metadata: {name: {k: v}},
+  claimed, bag: null (one MCAP file) or {max_bytes, max_duration_ns} (a bag directory)}
 - ``B`` batch: ``<stamp:u64>`` then per message ``<channel:u16><size:u32><cdr bytes>``
   (channel = index into the topics of the open file)
 - ``M`` metadata: JSON {name, data}
@@ -210,8 +211,10 @@ class ProcessRecording:
     the payloads of one tick as (channel index, bytes) pairs. ``lossless`` (default): wait for
     the recorder rather than drop (fast and lockstep modes); False: never wait, drop whole
     batches the pipe and backlog cannot take and count them (real-time mode). ``claimed``:
-    ``path`` is an empty file the caller created to claim the name
-    (`session.claim_recording_path`).
+    ``path`` is an empty file (or, for a bag, an empty directory) the caller created to
+    claim the name (`session.claim_recording_path`). ``bag``: None for one MCAP file at
+    ``path``; else ``path`` is a rosbag2 bag directory (`recording.bag.BagRecorder`) split at
+    ``bag["max_bytes"]`` bytes or ``bag["max_duration_ns"]`` (0: no limit).
     """
 
     def __init__(
@@ -224,6 +227,7 @@ class ProcessRecording:
         *,
         lossless: bool = True,
         claimed: bool = False,
+        bag: Mapping[str, int] | None = None,
     ) -> None:
         self.process = process
         self.path = Path(path)
@@ -234,6 +238,7 @@ class ProcessRecording:
                        for name, type_name, qos in topics],
             "metadata": {metadata_name: dict(metadata)},
             "claimed": claimed,
+            "bag": dict(bag) if bag is not None else None,
         }
         process.send(b"O", json.dumps(spec).encode())
         reply = process.answer()

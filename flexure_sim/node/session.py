@@ -3,6 +3,10 @@ Recordings of the stage node.
 
 File names, metadata, and the session of files one node writes (`RecordingSession`).
 
+Layout (`recording_layout`): a rosbag2 bag directory per recording (``record_format`` bag,
+the default: ``<name>/metadata.yaml`` + ``<name>/<name>_0.mcap``...), or one MCAP file
+(``record_format`` mcap, or a ``record_path`` ending in ``.mcap``).
+
 Each recording holds a channel per published topic plus the drive command topic, and a
 metadata record ``flexure_sim`` (mechanism, parameters, engine settings); the node records
 the same CDR bytes it publishes (written by `record_process`).
@@ -40,11 +44,19 @@ def node_token(fully_qualified_name: str) -> str:
     return "_".join(parts) or "stage_node"
 
 
+def recording_layout(record_format: str, record_path: str) -> str:
+    """``bag`` (a rosbag2 bag directory) or ``mcap`` (one file) for these parameters: a
+    ``record_path`` ending in ``.mcap`` is one file whatever ``record_format`` says."""
+    if record_path.endswith(".mcap"):
+        return "mcap"
+    return record_format
+
+
 def _candidates(record_dir: str, record_path: str, mechanism_name: str, node: str, index: int,
-                now: Optional[_dt.datetime]) -> Iterator[Path]:
+                now: Optional[_dt.datetime], layout: str = "mcap") -> Iterator[Path]:
     if record_path:
         base = Path(record_path)
-        suffix = base.suffix or ".mcap"
+        suffix = "" if layout == "bag" else (base.suffix or ".mcap")
         if index == 0:
             yield base
         for k in range(max(index, 1), MAX_SUFFIX):
@@ -53,9 +65,10 @@ def _candidates(record_dir: str, record_path: str, mechanism_name: str, node: st
     stamp = (now or _dt.datetime.now(_dt.timezone.utc)).strftime("%Y%m%dT%H%M%S")
     stem = f"{mechanism_name}_{node}_{stamp}" if node else f"{mechanism_name}_{stamp}"
     directory = Path(record_dir)
-    yield directory / f"{stem}.mcap"
+    suffix = "" if layout == "bag" else ".mcap"
+    yield directory / f"{stem}{suffix}"
     for k in range(1, MAX_SUFFIX):
-        yield directory / f"{stem}_{k}.mcap"
+        yield directory / f"{stem}_{k}{suffix}"
 
 
 def claim_recording_path(
@@ -65,6 +78,7 @@ def claim_recording_path(
     index: int,
     now: Optional[_dt.datetime] = None,
     node: str = "",
+    layout: str = "mcap",
 ) -> Path:
     """
     Claim the first free name for the ``index``-th recording of this node (0 first).
@@ -78,13 +92,20 @@ def claim_recording_path(
     YYYYmmddTHHMMSS>.mcap`` (``_1``, ``_2``... appended if the name is taken), ``node`` being
     `node_token` of the node's fully qualified name. Relative paths are relative to the
     working directory.
+
+    ``layout`` ``bag``: the same names without ``.mcap``, claimed as empty directories
+    (``mkdir``, atomic too) for a rosbag2 bag directory.
     """
     parent_made = False
-    for candidate in _candidates(record_dir, record_path, mechanism_name, node, index, now):
+    for candidate in _candidates(record_dir, record_path, mechanism_name, node, index, now,
+                                 layout):
         if not parent_made:
             candidate.parent.mkdir(parents=True, exist_ok=True)
             parent_made = True
         try:
+            if layout == "bag":
+                candidate.mkdir()
+                return candidate
             fd = os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         except FileExistsError:
             continue
@@ -95,9 +116,11 @@ def claim_recording_path(
 
 
 def release_claim(path: Path) -> None:
-    """Remove a claimed name that was never written (the file is still empty)."""
+    """Remove a claimed name that was never written (the file or directory is still empty)."""
     try:
-        if path.stat().st_size == 0:
+        if path.is_dir():
+            path.rmdir()  # only if empty
+        elif path.stat().st_size == 0:
             path.unlink()
     except OSError:
         pass
@@ -158,24 +181,30 @@ class RecordingSession:
         ``lossless``: wait for a slow recorder (fast, lockstep); False drops and counts (real
         time).
         """
+        layout = recording_layout(values["record_format"], values["record_path"])
         try:
             path = claim_recording_path(values["record_dir"], values["record_path"],
-                                        mechanism_name, self._index, node=node_token(node))
+                                        mechanism_name, self._index, node=node_token(node),
+                                        layout=layout)
         except OSError as exc:
             raise RecordingError(f"cannot create a recording: {exc}") from exc
         try:
             if self._process is None or not self._process.alive():
                 self._process = RecorderProcess()
             # Real time may drop (counted) rather than stall the paced loop; other modes wait.
+            bag = None
+            if layout == "bag":
+                bag = {"max_bytes": int(values["record_max_bytes"]),
+                       "max_duration_ns": round(float(values["record_max_duration"]) * 1e9)}
             self.current = ProcessRecording(self._process, path, topics, metadata, METADATA_NAME,
-                                            claimed=True, lossless=lossless)
+                                            claimed=True, lossless=lossless, bag=bag)
         except BaseException:
             release_claim(path)
             raise
         self._index += 1
         self.error = ""
         wanted = next(_candidates(values["record_dir"], values["record_path"], mechanism_name,
-                                  node_token(node), self._index - 1, None))
+                                  node_token(node), self._index - 1, None, layout))
         if values["record_path"] and path != wanted:
             self.log.warning(f"{wanted} exists (recordings are never overwritten): "
                              f"recording to {path} instead")
