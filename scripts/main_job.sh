@@ -12,7 +12,9 @@
 # node gets to them).
 #
 # Everything goes to runs/main_job/<UTC time>/ (override with MAIN_JOB_DIR):
-#   stage.mcap, plots/*.png, stage_node.log, live.json (what the driver saw live).
+#   stage/ (the recording: a rosbag2 bag directory, metadata.yaml + stage_0.mcap, which
+#   ros2 bag info and rosbags open too), plots/*.png, stage_node.log, live.json (what the
+#   driver saw live).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 t_start=$(date +%s%N)
@@ -29,7 +31,7 @@ out="${MAIN_JOB_DIR:-runs/main_job/$(date -u +%Y%m%dT%H%M%S)}"
 mkdir -p "$out"
 out="$(cd "$out" && pwd)"
 export ROS_LOG_DIR="$out/ros_log"
-run="$out/stage.mcap"
+run="$out/stage"
 
 echo "== stage_node: microstage, lockstep mode, 2 kHz ticks of 5 engine steps, ROS_DOMAIN_ID=$ROS_DOMAIN_ID"
 stage_node --ros-args -p mechanism:=microstage -p time_mode:=lockstep -p publish_rate:=2000.0 \

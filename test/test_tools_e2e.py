@@ -26,6 +26,7 @@ from std_msgs.msg import Float64
 from flexure_sim import cli
 from flexure_sim.engine.config import load_mechanism
 from flexure_sim.recording import log_info, read_log
+from flexure_sim.recording.bag import bag_files
 from flexure_sim.engine.solver import Simulation
 from flexure_sim.tools.export import csv_name
 from flexure_sim.tools.plot import figure_title
@@ -42,6 +43,8 @@ def recorded(tmp_path_factory):
     """Return a demo run through the real node: (recording, what the driver saw live, work dir)."""
     work = tmp_path_factory.mktemp("node_run")
     domain = next_domain_id()
+    # The recording is a rosbag2 bag directory split into several files (every 40 ms of
+    # simulated time): every tool reads it as one run.
     node = NodeProcess(
         work,
         domain,
@@ -49,7 +52,8 @@ def recorded(tmp_path_factory):
             "time_mode": "lockstep",
             "publish_rate": RATE,
             "record": False,
-            "record_path": str(work / "stage.mcap"),
+            "record_path": str(work / "stage"),
+            "record_max_duration": 0.04,
         },
     )
     try:
@@ -75,8 +79,9 @@ def recorded(tmp_path_factory):
     finally:
         rc = node.stop(signal.SIGINT)
     assert rc == 0, node.stderr
-    path = work / "stage.mcap"
+    path = work / "stage"
     assert live["recording"] == str(path)
+    assert len(bag_files(path)) >= 3
     return path, live, work
 
 
@@ -385,7 +390,7 @@ def test_ros2_run_replay_finds_the_installed_launcher(recorded, tmp_path):
                              [m.data for m in log.messages_on("/output/displacement")])
         # Bad input: a message and exit code 1, no traceback.
         bad = tmp_path / "bad.mcap"
-        bad.write_bytes(path.read_bytes()[:1000])
+        bad.write_bytes(bag_files(path)[0].read_bytes()[:1000])
         proc = subprocess.run(
             [str(exe), str(bad)], env=env, capture_output=True, text=True, timeout=60
         )
