@@ -51,19 +51,25 @@ def test_packed_markers_equal_serialize_message_outside_padding(loaded, prefix, 
         bytes(b for i, b in enumerate(expected) if i not in mask)
 
 
-def test_a_display_tick_costs_well_under_a_publish_period(loaded):
+def test_a_display_tick_costs_a_fraction_of_the_rclpy_route(loaded):
+    """Timed against building rclpy messages + serialize_message in the same run, so the
+    comparison holds however loaded the machine is."""
     mech, snap = loaded
     display = Display(mech, resolve_mechanism_path("microstage"), Frames(""), 1.0)
-    display.markers(snap, 0)
-    n = 200
-    t0 = time.perf_counter()
-    for k in range(n):
-        display.markers(snap, k)
-    per_tick_us = 1e6 * (time.perf_counter() - t0) / n
-    print(f"display tick (stress ratios + markers packed): {per_tick_us:.0f} us")
-    # The rclpy route (build + serialize_message) measured 1.5 ms here: a 1 kHz period and
-    # a half. The packed route must leave most of a 1 kHz period to the engine.
-    assert per_tick_us < 500
+    scene = MarkerScene(mech)
+
+    def per_call_us(f, n: int) -> float:
+        f()
+        t0 = time.perf_counter()
+        for k in range(n):
+            f()
+        return 1e6 * (time.perf_counter() - t0) / n
+
+    packed = per_call_us(lambda: display.markers(snap, 5), 200)
+    reference = per_call_us(lambda: serialize_message(
+        scene.message(snap.poses, snap.wrenches, snap.drive_force, 5)), 50)
+    print(f"display tick: packed {packed:.0f} us, rclpy messages + serialize {reference:.0f} us")
+    assert packed < reference / 2  # measured 4-5x under loads 4-5.5 on 2 cores
 
 
 def test_hinges_are_coloured_by_stress_ratio_when_the_file_gives_sigma_y(loaded):
