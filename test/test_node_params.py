@@ -6,7 +6,8 @@ import pytest
 
 from flexure_sim.node.pacing import Pacer, PacingStats
 from flexure_sim.node.params import parameter_specs, steps_per_tick, validate
-from flexure_sim.node.session import claim_recording_path, node_token, release_claim
+from flexure_sim.node.session import (
+    claim_recording_path, node_token, recording_layout, release_claim)
 
 
 def defaults() -> dict:
@@ -49,6 +50,9 @@ def test_steps_per_tick(rate, step, n):
     (dict(frame_prefix="stage 1/"), "whitespace"),
     (dict(display_rate=-1.0), "display_rate"),
     (dict(display_scale=float("nan")), "display_scale"),
+    (dict(record_format="rosbag"), "record_format"),
+    (dict(record_max_bytes=-1), "record_max_bytes"),
+    (dict(record_max_duration=float("inf")), "record_max_duration"),
     (dict(sim_step=3e-4), "does not divide"),
     (dict(publish_rate=20000.0, sim_step=1e-5), "publish_rate"),
     (dict(publish_rate=0.5), "publish_rate"),
@@ -188,6 +192,23 @@ def test_recording_names_hold_the_node_and_take_the_next_suffix_when_taken(tmp_p
     out.write_bytes(b"data")
     release_claim(out)  # never removes a file that holds anything
     assert out.read_bytes() == b"data"
+
+
+def test_bag_recordings_claim_directories_and_a_dot_mcap_path_keeps_one_file(tmp_path):
+    now = dt.datetime(2026, 1, 2, 3, 4, 5, tzinfo=dt.timezone.utc)
+    d = str(tmp_path / "runs")
+    first = claim_recording_path(d, "", "microstage", 0, now, node="stage_node", layout="bag")
+    assert first == tmp_path / "runs" / "microstage_stage_node_20260102T030405"
+    assert first.is_dir() and not any(first.iterdir())  # claimed, empty
+    second = claim_recording_path(d, "", "microstage", 0, now, node="stage_node", layout="bag")
+    assert second.name == "microstage_stage_node_20260102T030405_1" and second.is_dir()
+    out = tmp_path / "out" / "run"
+    assert claim_recording_path("runs", str(out), "microstage", 0, layout="bag") == out
+    assert claim_recording_path("runs", str(out), "microstage", 1, layout="bag").name == "run_1"
+    release_claim(out)
+    assert not out.exists()
+    assert recording_layout("bag", "") == "bag" and recording_layout("mcap", "") == "mcap"
+    assert recording_layout("bag", "x.mcap") == "mcap" and recording_layout("bag", "x") == "bag"
 
 
 def _claim_many(directory, barrier, results):

@@ -21,6 +21,7 @@ from rcl_interfaces.srv import GetParameters, SetParameters
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
+from visualization_msgs.msg import MarkerArray
 
 from flexure_sim.engine.config import ConfigError, load_mechanism, resolve_mechanism_path
 from flexure_sim.recording import CorruptLogError, read_log
@@ -42,6 +43,7 @@ TYPES = {
     "/drive/force": Float64,
     "/diagnostics": DiagnosticArray,
     "/clock": Clock,
+    "/markers": MarkerArray,
     **{f"/bodies/body{i}/pose": PoseStamped for i in range(1, 7)},
     **{f"/hinges/{h}/wrench": WrenchStamped for h in "abcdefg"},
     **{f"/hinges/{h}/deflection": TransformStamped for h in "abcdefg"},
@@ -307,7 +309,7 @@ def test_signal_leaves_a_complete_recording_matching_what_was_received(
     node = start(tmp_path, domain, peer, time_mode="lockstep", sim_step=1e-4, publish_rate=100.0,
                  record=True, record_path="run.mcap")
     try:
-        topics = ["/clock"] + STAGE_TOPICS + ["/diagnostics"]
+        topics = ["/clock"] + STAGE_TOPICS + ["/diagnostics", "/markers"]
         for topic in topics:
             peer.subscribe(topic, TYPES[topic])
         drive = peer.publisher("/drive/displacement", Float64)
@@ -322,7 +324,8 @@ def test_signal_leaves_a_complete_recording_matching_what_was_received(
             assert answer.success, answer.message
         peer.spin_until(
             lambda: all(len(peer.received[t]) >= ticks for t in ["/clock"] + STAGE_TOPICS)
-            and len(peer.received["/diagnostics"]) >= 2,
+            and len(peer.received["/diagnostics"]) >= 2
+            and len(peer.received["/markers"]) >= 9,
             20,
             "every tick's messages",
         )
@@ -331,6 +334,7 @@ def test_signal_leaves_a_complete_recording_matching_what_was_received(
         stop_cleanly(node, sig)
     received = {t: len(peer.received[t]) for t in topics}
     assert received["/bodies/poses"] == ticks and received["/diagnostics"] == ticks // 10  # 10 Hz
+    assert received["/markers"] == 9  # display_rate 30 Hz: every 3rd of the 100 Hz ticks
     received["/drive/displacement"] = 2
     path = node.cwd / "run.mcap"
     counts, total, metadata = read_with_mcap(path)
