@@ -97,6 +97,7 @@ def test_every_published_frame_id_carries_the_frame_prefix(tmp_path):
                     assert frame.startswith(PREFIX), f"{topic}: frame id {frame!r}"
                     seen.add(frame)
     # The stamped topics: poses, 7 wrenches and deflections, markers (and TF where present).
-    assert {"/markers", "/bodies/poses", "/bodies/body3/pose", "/hinges/g/deflection"} <= set(stamped)
+    assert {"/markers", "/bodies/poses", "/bodies/body3/pose",
+            "/hinges/g/deflection"} <= set(stamped)
     assert seen <= expected_frames(PREFIX)
     assert {PREFIX + "stage", PREFIX + "hinge_a", PREFIX + "hinge_a_a"} <= seen

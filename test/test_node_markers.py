@@ -10,7 +10,8 @@ import time
 
 import numpy as np
 import pytest
-from rclpy.serialization import serialize_message
+from geometry_msgs.msg import PoseArray
+from rclpy.serialization import deserialize_message, serialize_message
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -25,7 +26,7 @@ from flexure_sim.node.markers import MarkerScene, load_colour
 from flexure_sim.recording import read_log
 from flexure_sim.topics import Frames
 
-from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id
+from node_harness import NodeProcess, Peer, next_domain_id
 
 
 @pytest.fixture(scope="module")
@@ -78,8 +79,6 @@ def test_hinges_are_coloured_by_stress_ratio_when_the_file_gives_sigma_y(loaded)
     assert display.colouring == "stress ratio"
     geometry = Parameters(resolve_mechanism_path("microstage")).design().geometry
     table = stress_table(snap.wrenches, geometry, [h.name for h in mech.hinges])
-    msg = MarkerArray()
-    from rclpy.serialization import deserialize_message
     msg = deserialize_message(display.markers(snap, 0), MarkerArray)
     discs = [m for m in msg.markers if m.ns == "hinges"]
     assert [m.text for m in discs] == [h.name for h in mech.hinges]
@@ -166,7 +165,7 @@ def test_node_publishes_and_records_markers_at_the_display_rate(tmp_path):
     peer.watch = node
     try:
         peer.subscribe("/markers", MarkerArray)
-        peer.subscribe("/bodies/poses", __import__("geometry_msgs.msg").msg.PoseArray)
+        peer.subscribe("/bodies/poses", PoseArray)
         peer.wait_for_publishers(["/markers", "/bodies/poses"])
         # Matched once the first tick's pose array arrives; markers start at that tick.
         first = None
