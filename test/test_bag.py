@@ -143,3 +143,17 @@ def test_a_metadata_yaml_that_disagrees_with_the_files_is_named(tmp_path):
     empty = tmp_path / "empty"
     empty.mkdir()
     assert main(["info", str(empty)]) == 2
+
+
+def test_a_topic_is_selected_once_for_the_whole_bag(tmp_path):
+    """Readers keep per-topic state from the select call (tools build one series per topic):
+    a bag of three files must ask once per topic, as one file does."""
+    from flexure_sim.recording.reader import open_reader
+
+    bag = tmp_path / "sel"
+    record(bag, 25, max_duration_ns=10 * MS)
+    asked = []
+    reader = open_reader(bag)
+    got = [m.topic for m in reader.messages(lambda t: asked.append(t.name) or t.name == "/a")]
+    assert sorted(asked) == ["/a", "/b"]
+    assert got == ["/a"] * 25

@@ -101,12 +101,21 @@ class BagReader:
 
     def messages(self, select: Callable[[Any], bool] | None = None,
                  decode: bool = True) -> Iterator[Any]:
-        """The messages of every file in turn (`reader.LogReader.messages`)."""
+        """The messages of every file in turn (`reader.LogReader.messages`); ``select`` is
+        asked once per topic of the bag, as for one file (not once per file)."""
         if self._done:
             raise RuntimeError("BagReader.messages: a log is read in one pass only")
         self._done = True
+        once = None
+        if select is not None:
+            asked: dict[str, bool] = {}
+
+            def once(topic: Any) -> bool:
+                if topic.name not in asked:
+                    asked[topic.name] = bool(select(topic))
+                return asked[topic.name]
         for part in self.parts:
-            yield from part.messages(select, decode)
+            yield from part.messages(once, decode)
         if self._meta is not None:
             if not self.recover:
                 check_counts(self.path, self._meta, self.parts)
