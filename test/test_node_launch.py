@@ -109,10 +109,11 @@ def test_ros2_run_starts_the_installed_node_with_the_builtin_stage(tmp_path):
         peer.close()
         rc = node.stop(signal.SIGINT)
     assert rc == 0, node.stderr
-    # Default recording: runs/ under the working directory, complete after Ctrl-C.
-    files = sorted((cwd / "runs").glob("microstage_*.mcap"))
-    assert len(files) == 1, node.stderr
-    log = read_log(files[0])
+    # Default recording: a bag directory in runs/ under the working directory, complete
+    # after Ctrl-C (read_log checks its metadata.yaml against the files).
+    bags = sorted((cwd / "runs").glob("microstage_*"))
+    assert len(bags) == 1 and (bags[0] / "metadata.yaml").is_file(), node.stderr
+    log = read_log(bags[0])
     assert log.complete and log.counts["/drive/displacement"] == 1
 
 
