@@ -131,6 +131,7 @@ def test_rosbags_and_flexure_sim_read_the_directory_as_one_run(tmp_path, capsys)
     assert main(["info", str(bag)]) == 0
     out = capsys.readouterr().out
     assert re.search(r"/a\s+std_msgs/msg/Float64\s+25\b", out), out
+    assert "3 file(s): one_0.mcap, one_1.mcap, one_2.mcap" in out
 
 
 def test_a_metadata_yaml_that_disagrees_with_the_files_is_named(tmp_path):

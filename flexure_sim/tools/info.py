@@ -115,6 +115,9 @@ def summarize(info: LogInfo) -> dict:
         "complete": info.complete,
         "note": info.note,
         "chunk_count": info.chunk_count,
+        # A bag directory: its files, in order (relative to it); None for one MCAP file.
+        "bag_files": ([f["path"] for f in (info.bag_metadata or {}).get("files") or []]
+                      if info.path.is_dir() else None),
         "unchecked_chunks": info.unchecked_chunks,
         "message_count": info.message_count,
         "start": info.start_ns / 1e9 if info.message_count else None,
@@ -161,6 +164,9 @@ def format_summary(s: dict, show_yaml: bool = False) -> str:
         f"{s['library'] or 'unknown'}; "
         f"{s['chunk_count']} chunk(s)",
     ]
+    if s.get("bag_files") is not None:
+        lines.append(f"Bag:          rosbag2 bag directory (metadata.yaml), "
+                     f"{len(s['bag_files'])} file(s): {', '.join(s['bag_files'])}")
     if s["message_count"]:
         lines.append(f"Duration:     {s['duration']:.6f} s of log time (simulation time), "
                      f"{s['start']:.6f} s to {s['end']:.6f} s")
