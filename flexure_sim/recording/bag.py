@@ -48,16 +48,15 @@ class BagRecorder:
         if max_bytes < 0 or max_duration_ns < 0:
             raise ValueError("max_bytes, max_duration_ns: must be >= 0 (0: no limit)")
         self.directory = Path(directory)
-        if claimed and self.directory.is_dir() and not any(self.directory.iterdir()):
-            pass
-        else:
-            try:
+        ours = claimed and self.directory.is_dir() and not any(self.directory.iterdir())
+        try:
+            if not ours:
                 self.directory.mkdir(parents=True)
-            except FileExistsError:
-                raise RecordingError(
-                    f"{self.directory}: exists; recordings are never overwritten") from None
-            except OSError as exc:
-                raise RecordingError(f"cannot create {self.directory}: {exc}") from exc
+        except FileExistsError:
+            raise RecordingError(
+                f"{self.directory}: exists; recordings are never overwritten") from None
+        except OSError as exc:
+            raise RecordingError(f"cannot create {self.directory}: {exc}") from exc
         self._max_bytes = max_bytes
         self._max_duration = max_duration_ns
         self._open_file = open_file or (lambda path: path)
