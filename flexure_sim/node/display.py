@@ -6,9 +6,10 @@ publish ticks (at least every tick), so a recording holds the same markers in ev
 mode and a ``use_sim_time`` viewer sees display_rate in its own time. In real-time mode that
 is display_rate of wall time too; in fast mode it is display_rate times the real-time factor.
 
-Hinge colours: the stress ratio sigma / sigma_y of `engine.stress` (green 0, red 1 = yield)
-when the mechanism file gives a yield strength ``sigma_y`` to some hinge (hinges without
-one are drawn at 0); otherwise |wrench| relative to its peak so far (`markers.MarkerScene`).
+Hinge colours: the stress ratio sigma / sigma_y (`engine.stress.ratio_map`, the map the
+diagnostics use; green 0, red 1 = yield) when the mechanism file gives a yield strength
+``sigma_y`` to some hinge (hinges without one are drawn at 0); otherwise |wrench| relative
+to its peak so far (`markers.MarkerScene`).
 
 TF tree (REP-105 style, all frames with the node's frame prefix): ``stage`` -> each body
 frame (on ``/tf`` at the display rate for moving bodies; on ``/tf_static`` for bodies held
