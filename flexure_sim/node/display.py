@@ -25,12 +25,42 @@ from dataclasses import dataclass
 from typing import Any, Optional
 
 import numpy as np
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from .. import topics
 from ..engine.mechanism import Fixed, Mechanism
 from ..engine.stress import ratio_map
 from ..topics import Frames
 from .marker_cdr import MarkerArrayPacker
 from .markers import MarkerScene
+
+
+def tf_qos() -> QoSProfile:
+    """QoS of /tf as tf2's TransformBroadcaster offers it: reliable, keep last 100, volatile."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+def tf_static_qos() -> QoSProfile:
+    """QoS of /tf_static as tf2's StaticTransformBroadcaster offers it: reliable, keep last
+    1, transient local (late subscribers get the static transforms)."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class _Named:
+    """Name and ``pkg/msg/Type`` of a topic whose type may not be importable (TF)."""
+
+    def __init__(self, name: str, type_name: str) -> None:
+        self.name, self.type_name = name, type_name
+
+
+#: Display topics (display.py): markers at the display rate; TF where tf2_msgs exists.
+MARKERS = _Named(topics.MARKERS, "visualization_msgs/msg/MarkerArray")
+TF = _Named(topics.TF, "tf2_msgs/msg/TFMessage")
+TF_STATIC = _Named(topics.TF_STATIC, "tf2_msgs/msg/TFMessage")
 
 
 def display_every(publish_rate: float, display_rate: float) -> int:

@@ -123,32 +123,6 @@ def yaw_quaternion(yaw: float) -> tuple[float, float, float, float]:
     return 0.0, 0.0, math.sin(half), math.cos(half)
 
 
-def tf_qos() -> QoSProfile:
-    """QoS of /tf as tf2's TransformBroadcaster offers it: reliable, keep last 100, volatile."""
-    return _reliable_volatile(100)
-
-
-def tf_static_qos() -> QoSProfile:
-    """QoS of /tf_static as tf2's StaticTransformBroadcaster offers it: reliable, keep last
-    1, transient local (late subscribers get the static transforms)."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                      reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-class _Named:
-    """Name and ``pkg/msg/Type`` of a topic whose type may not be importable (TF)."""
-
-    def __init__(self, name: str, type_name: str) -> None:
-        self.name, self.type_name = name, type_name
-
-
-#: Display topics (display.py): markers at the display rate; TF where tf2_msgs exists.
-MARKERS = _Named(topics.MARKERS, "visualization_msgs/msg/MarkerArray")
-TF = _Named(topics.TF, "tf2_msgs/msg/TFMessage")
-TF_STATIC = _Named(topics.TF_STATIC, "tf2_msgs/msg/TFMessage")
-
-
 class StageInterface:
     """
     Topic table of one mechanism in one time mode, and snapshot -> messages.

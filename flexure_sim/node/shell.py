@@ -34,6 +34,7 @@ from . import interface as itf
 from .commands import CommandIntake
 from .declare import coerce_integer_overrides, declare
 from .diagnostics import Diagnostics
+from . import display as dsp
 from .display import Display, DisplayOutput, display_every, static_transforms, tf_message
 from .display import tf_message_class
 from .drive_input import CommandFilter, DriveLimits
@@ -159,7 +160,8 @@ class StageNode(Node):
                                         self.session.write, self._log, loop.throttle)
         loop.diagnostics = Diagnostics(loop, diag_pub, len(tick_pubs), self.get_name(),
                                        self.mechanism.name, watch.diagnostics)
-        self._build_display(values, qos, watch, len(tick_pubs) + 1 + (self._command_sub is not None))
+        first = len(tick_pubs) + 1 + (self._command_sub is not None)  # after the command
+        self._build_display(values, qos, watch, first)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/record", self._on_record)
         self.create_service(Trigger, "~/step", self._on_step)
@@ -192,23 +194,23 @@ class StageNode(Node):
 
         frames = self.interface.frames
         display = Display(self.mechanism, frames, float(values["display_scale"]))
-        pub = self.create_publisher(MarkerArray, itf.MARKERS.name, qos,
-                                    event_callbacks=watch.publisher_callbacks(itf.MARKERS.name))
+        pub = self.create_publisher(MarkerArray, dsp.MARKERS.name, qos,
+                                    event_callbacks=watch.publisher_callbacks(dsp.MARKERS.name))
         #: Extra recorded topics: (resolved name, type name, QoS), in channel order.
-        self._display_topics = [(pub.topic_name, itf.MARKERS.type_name, qos)]
+        self._display_topics = [(pub.topic_name, dsp.MARKERS.type_name, qos)]
         tf_class, why = tf_message_class()
         tf_pub = None
         if tf_class is None:
             self._log.info(f"TF off: {why}; poses are on bodies/poses and bodies/<body>/pose")
         else:
-            tf_pub = self.create_publisher(tf_class, itf.TF.name, itf.tf_qos())
-            static_pub = self.create_publisher(tf_class, itf.TF_STATIC.name, itf.tf_static_qos())
+            tf_pub = self.create_publisher(tf_class, dsp.TF.name, dsp.tf_qos())
+            static_pub = self.create_publisher(tf_class, dsp.TF_STATIC.name, dsp.tf_static_qos())
             static_pub.publish(tf_message(static_transforms(self.mechanism, frames),
                                           self.get_clock().now().nanoseconds, tf_class))
             self._tf_static_pub = static_pub
-            self._display_topics += [(tf_pub.topic_name, itf.TF.type_name, itf.tf_qos()),
-                                     (static_pub.topic_name, itf.TF_STATIC.type_name,
-                                      itf.tf_static_qos())]
+            self._display_topics += [(tf_pub.topic_name, dsp.TF.type_name, dsp.tf_qos()),
+                                     (static_pub.topic_name, dsp.TF_STATIC.type_name,
+                                      dsp.tf_static_qos())]
         channels = list(range(first_channel, first_channel + len(self._display_topics)))
         loop = self.loop
         loop.display = DisplayOutput(display, pub, self.session, channels, tf_pub, tf_class)
