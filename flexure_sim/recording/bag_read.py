@@ -52,6 +52,17 @@ def check_counts(directory: Path, meta: dict[str, Any], parts: list[Any]) -> Non
                                              f"messages on {name}, the files hold {held}")
 
 
+def _asked_once(select: Callable[[Any], bool]) -> Callable[[Any], bool]:
+    """``select``, asked once per topic name, its answer remembered."""
+    asked: dict[str, bool] = {}
+
+    def once(topic: Any) -> bool:
+        if topic.name not in asked:
+            asked[topic.name] = bool(select(topic))
+        return asked[topic.name]
+    return once
+
+
 class BagReader:
     """A bag directory opened for one streaming pass; the interface of `reader.LogReader`."""
 
@@ -106,14 +117,7 @@ class BagReader:
         if self._done:
             raise RuntimeError("BagReader.messages: a log is read in one pass only")
         self._done = True
-        once = None
-        if select is not None:
-            asked: dict[str, bool] = {}
-
-            def once(topic: Any) -> bool:
-                if topic.name not in asked:
-                    asked[topic.name] = bool(select(topic))
-                return asked[topic.name]
+        once = _asked_once(select) if select is not None else None
         for part in self.parts:
             yield from part.messages(once, decode)
         if self._meta is not None:
