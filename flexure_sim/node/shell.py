@@ -112,8 +112,8 @@ class StageNode(Node):
         time_mode = values["time_mode"]
         dt = float(values["sim_step"])
         try:
-            self.interface = itf.StageInterface(self.mechanism, time_mode,
-                                                 values["frame_prefix"])
+            self.interface = itf.StageInterface(
+                self.mechanism, time_mode, values["frame_prefix"])
         except ValueError as exc:
             raise StartupError(str(exc)) from exc
         sim = Simulation(self.mechanism, dt=dt, relinearize_tol=RELINEARIZE_TOL)
