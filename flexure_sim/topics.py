@@ -72,8 +72,11 @@ TF_STATIC = "/tf_static"
 
 
 def frame_prefix_problem(prefix: object) -> str | None:
-    """Why ``prefix`` cannot prefix frame ids (None if it can): tf2 frame ids have no
-    leading slash and no whitespace."""
+    """
+    Why ``prefix`` cannot prefix frame ids (None if it can).
+
+    tf2 frame ids have no leading slash and no whitespace.
+    """
     if not isinstance(prefix, str):
         return f"frame_prefix: expected a string, got {prefix!r}"
     if prefix.startswith("/"):
@@ -84,9 +87,13 @@ def frame_prefix_problem(prefix: object) -> str | None:
 
 
 class Frames:
-    """Every frame id the node publishes, with its ``frame_prefix`` (e.g. ``stage1/``)
-    prepended, so two stages can share one TF tree and one RViz view. The one place frame
-    ids are made: headers, child_frame_ids, markers and TF all take them from here."""
+    """
+    Every frame id the node publishes.
+
+    With its ``frame_prefix`` (e.g. ``stage1/``) prepended, so two stages can share one TF tree and
+    one RViz view. The one place frame ids are made: headers, child_frame_ids, markers and TF all
+    take them from here.
+    """
 
     def __init__(self, prefix: str = "") -> None:
         problem = frame_prefix_problem(prefix)
@@ -96,7 +103,7 @@ class Frames:
         self.root = prefix + ROOT_FRAME
 
     def body(self, body: str) -> str:
-        """Frame of one body (at its mass centre)."""
+        """Return the frame of one body, at its mass centre."""
         return self.prefix + body
 
     def hinge_b(self, hinge: str) -> str:

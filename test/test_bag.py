@@ -1,7 +1,9 @@
-"""Bag directories (issue 14, item 5) written by `BagRecorder`: metadata.yaml field by field
-against rosbag2 Jazzy's schema, splitting by size and by duration into complete MCAP files,
-and the directory read back as one run by rosbags (`rosbags.rosbag2.Reader`), mcap and
-flexure_sim's own readers and tools.
+"""
+Bag directories (issue 14, item 5) written by `BagRecorder`.
+
+metadata.yaml field by field against rosbag2 Jazzy's schema, splitting by size and by duration into
+complete MCAP files, and the directory read back as one run by rosbags (`rosbags.rosbag2.Reader`),
+mcap and flexure_sim's own readers and tools.
 
 rosbag2's schema, from ros2/rosbag2 (jazzy) rosbag2_storage/include/rosbag2_storage/yaml.hpp
 (``convert<BagMetadata>::encode`` and the converters it calls) and metadata_io.cpp (file
@@ -34,7 +36,7 @@ MS = 1_000_000
 
 
 def record(directory: Path, ticks: int, **limits) -> BagRecorder:
-    """A bag of ``ticks`` batches 1 ms apart, each a Float64 on /a and /b (8 + 4 bytes each)."""
+    """Return a bag of ``ticks`` batches 1 ms apart, a Float64 on /a and /b (8 + 4 bytes)."""
     bag = BagRecorder(directory, chunk_size=4096, **limits)
     bag.add_topic("/a", "std_msgs/msg/Float64")
     bag.add_topic("/b", "std_msgs/msg/Float64")
@@ -147,8 +149,11 @@ def test_a_metadata_yaml_that_disagrees_with_the_files_is_named(tmp_path):
 
 
 def test_a_topic_is_selected_once_for_the_whole_bag(tmp_path):
-    """Readers keep per-topic state from the select call (tools build one series per topic):
-    a bag of three files must ask once per topic, as one file does."""
+    """
+    Readers keep per-topic state from the select call (tools build one series per topic).
+
+    A bag of three files must ask once per topic, as one file does.
+    """
     from flexure_sim.recording.reader import open_reader
 
     bag = tmp_path / "sel"

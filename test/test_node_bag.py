@@ -1,6 +1,9 @@
-"""stage_node (a real subprocess) recording rosbag2 bag directories (issue 14, item 5): after
-~/reset, ~/record false, SIGINT, SIGTERM and kill -9 of the node, each directory has a
-metadata.yaml whose counts equal its MCAP files', and rosbags opens it as a rosbag2 bag."""
+"""
+stage_node (a real subprocess) recording rosbag2 bag directories (issue 14, item 5).
+
+After ~/reset, ~/record false, SIGINT, SIGTERM and kill -9 of the node, each directory has a
+metadata.yaml whose counts equal its MCAP files', and rosbags opens it as a rosbag2 bag.
+"""
 from __future__ import annotations
 
 import signal
@@ -16,8 +19,11 @@ from node_harness import NodeProcess, Peer, next_domain_id
 
 
 def check_bag(directory: Path) -> dict:
-    """Assert that metadata.yaml counts what the bag's MCAP files hold (read with mcap, an
-    independent reader) and that rosbags opens the directory; return the metadata."""
+    """
+    Assert that metadata.yaml counts what the bag's MCAP files hold; return the metadata.
+
+    The files are read with mcap, an independent reader, and rosbags must open the directory.
+    """
     meta = yaml.safe_load((directory / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert meta["version"] == 9 and meta["storage_identifier"] == "mcap"
     assert sorted(p.name for p in directory.glob("*.mcap")) == sorted(meta["relative_file_paths"])

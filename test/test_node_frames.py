@@ -1,5 +1,8 @@
-"""Frame ids of a real stage_node (subprocess) with a ``frame_prefix``: every frame id on every
-topic it publishes carries the prefix (issue 14, item 3)."""
+"""
+Frame ids of a real stage_node (subprocess) with a ``frame_prefix``.
+
+Every frame id on every topic it publishes carries the prefix (issue 14, item 3).
+"""
 from __future__ import annotations
 
 import signal
@@ -27,8 +30,11 @@ except ImportError:  # pragma: no cover - listed in requirements.txt
 
 
 def frame_ids(msg) -> list[str]:
-    """Every frame id a message carries: its header's, a TransformStamped's child, and those
-    of each element of a MarkerArray."""
+    """
+    Every frame id a message carries.
+
+    Its header's, a TransformStamped's child, and those of each element of a MarkerArray.
+    """
     found = []
     if hasattr(msg, "header"):
         found.append(msg.header.frame_id)

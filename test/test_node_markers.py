@@ -1,7 +1,10 @@
-"""Markers and TF of the stage node (issue 14, items 1 and 2): the packed MarkerArray against
-serialize_message, its cost per display tick, the TF transforms as data against the engine's
-poses and deflections, and a real node (subprocess) publishing and recording the markers at
-the display rate, with TF off on this machine (no tf2_msgs on PyPI)."""
+"""
+Markers and TF of the stage node (issue 14, items 1 and 2).
+
+The packed MarkerArray against serialize_message, its cost per display tick, the TF transforms as
+data against the engine's poses and deflections, and a real node (subprocess) publishing and
+recording the markers at the display rate, with TF off on this machine (no tf2_msgs on PyPI).
+"""
 from __future__ import annotations
 
 import math
@@ -52,8 +55,11 @@ def test_packed_markers_equal_serialize_message_outside_padding(loaded, prefix, 
 
 
 def test_a_display_tick_costs_a_fraction_of_the_rclpy_route(loaded):
-    """Timed against building rclpy messages + serialize_message in the same run, so the
-    comparison holds however loaded the machine is."""
+    """
+    Timed against building rclpy messages + serialize_message in the same run.
+
+    So the comparison holds however loaded the machine is.
+    """
     mech, snap = loaded
     display = Display(mech, Frames(""), 1.0)
     scene = MarkerScene(mech)
@@ -152,9 +158,12 @@ def test_tf_is_off_without_tf2_msgs_and_says_why():
 
 # ------------------------------------------------------------------------------ real node
 def test_node_publishes_and_records_markers_at_the_display_rate(tmp_path):
-    """Lockstep at 100 Hz, display_rate 20 Hz of simulated time: every 5th tick, so 50 steps
-    give exactly 10 MarkerArrays (ticks 0, 5, ..., 45), each with the stage's 6 outlines,
-    7 hinge discs and the drive arrow, in the prefixed root frame."""
+    """
+    Lockstep at 100 Hz, display_rate 20 Hz of simulated time.
+
+    Every 5th tick, so 50 steps give exactly 10 MarkerArrays (ticks 0, 5, ..., 45), each with the
+    stage's 6 outlines, 7 hinge discs and the drive arrow, in the prefixed root frame.
+    """
     domain = next_domain_id()
     peer = Peer(domain)
     node = NodeProcess(tmp_path / "node", domain, {

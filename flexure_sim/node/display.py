@@ -1,5 +1,7 @@
-"""What the stage node publishes for viewers (RViz, Foxglove) at its display rate: the
-markers (`markers`, packed by `marker_cdr`) and, where ``tf2_msgs`` is importable, TF.
+"""
+What the stage node publishes for viewers (RViz, Foxglove) at its display rate.
+
+The markers (`markers`, packed by `marker_cdr`) and, where ``tf2_msgs`` is importable, TF.
 
 Display ticks are counted in simulated time: every round(publish_rate / display_rate)
 publish ticks (at least every tick), so a recording holds the same markers in every time
@@ -36,15 +38,18 @@ from .markers import MarkerScene
 
 
 def tf_qos() -> QoSProfile:
-    """QoS of /tf as tf2's TransformBroadcaster offers it: reliable, keep last 100, volatile."""
+    """Return the QoS of /tf as tf2's TransformBroadcaster offers it: reliable, depth 100."""
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                       reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
 
 
 def tf_static_qos() -> QoSProfile:
-    """QoS of /tf_static as tf2's StaticTransformBroadcaster offers it: reliable, keep last
-    1, transient local (late subscribers get the static transforms)."""
+    """
+    Return the QoS of /tf_static as tf2's StaticTransformBroadcaster offers it.
+
+    Reliable, keep last 1, transient local (late subscribers get the static transforms).
+    """
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                       reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -72,8 +77,12 @@ def display_every(publish_rate: float, display_rate: float) -> int:
 
 @dataclass(frozen=True)
 class Transform:
-    """One TF transform as data: ``child`` in ``parent``, translation (x, y, z) in m and
-    rotation (x, y, z, w) (a yaw-only quaternion: the stage is planar)."""
+    """
+    One TF transform as data.
+
+    ``child`` in ``parent``, translation (x, y, z) in m and rotation (x, y, z, w) (a yaw-only
+    quaternion: the stage is planar).
+    """
 
     parent: str
     child: str
@@ -92,8 +101,12 @@ def fixed_bodies(mechanism: Mechanism) -> set[str]:
 
 
 def static_transforms(mechanism: Mechanism, frames: Frames) -> list[Transform]:
-    """The transforms that never change: root -> fixed bodies (at their initial pose), and
-    body -> each hinge frame on it (its position and angle in the body frame)."""
+    """
+    Return the transforms that never change.
+
+    Root -> fixed bodies (at their initial pose), and body -> each hinge frame on it (its position
+    and angle in the body frame).
+    """
     out = [_planar(frames.root, frames.body(b.name), *b.pose)
            for b in mechanism.bodies if b.name in fixed_bodies(mechanism)]
     for h in mechanism.hinges:
@@ -105,7 +118,7 @@ def static_transforms(mechanism: Mechanism, frames: Frames) -> list[Transform]:
 
 
 def moving_transforms(mechanism: Mechanism, frames: Frames, poses: np.ndarray) -> list[Transform]:
-    """root -> each body that is not fixed, at its pose (x, y, theta) of ``poses`` (n, 3)."""
+    """Return root -> each body that is not fixed, at its pose (x, y, theta) in ``poses``."""
     held = fixed_bodies(mechanism)
     return [_planar(frames.root, frames.body(b.name), float(x), float(y), float(th))
             for b, (x, y, th) in zip(mechanism.bodies, np.asarray(poses, dtype=float))
@@ -123,7 +136,7 @@ def tf_message_class() -> tuple[Optional[type], str]:
 
 
 def tf_message(transforms: list[Transform], stamp_ns: int, message_class: type) -> Any:
-    """A TFMessage of ``transforms`` stamped ``stamp_ns``."""
+    """Return a TFMessage of ``transforms`` stamped ``stamp_ns``."""
     from geometry_msgs.msg import TransformStamped
 
     sec, nsec = divmod(stamp_ns, 1_000_000_000)
@@ -140,8 +153,12 @@ def tf_message(transforms: list[Transform], stamp_ns: int, message_class: type) 
 
 
 def stress_ratios(wrenches: np.ndarray, stress: tuple) -> np.ndarray:
-    """sigma / sigma_y per hinge from ``stress`` = `engine.stress.ratio_map` of the mechanism
-    (the same map as the diagnostics' stress ratio); 0 for hinges without a yield strength."""
+    """
+    Return sigma / sigma_y per hinge; 0 for hinges without a yield strength.
+
+    ``stress`` is `engine.stress.ratio_map` of the mechanism (the same map as the diagnostics'
+    stress ratio).
+    """
     names, index, coefficients = stress
     w = np.asarray(wrenches, dtype=float)
     out = np.zeros(len(w))
@@ -172,10 +189,13 @@ class Display:
 
 
 class DisplayOutput:
-    """Publishes and records one display tick (stepping thread): the markers, and the moving
-    TF transforms when ``tf_publisher`` is given. ``channels`` = recording channel of the
-    markers and, with TF, of /tf and /tf_static (the static transforms are written once into
-    each recording, as rosbag2 records a latched /tf_static)."""
+    """
+    Publishes and records one display tick (stepping thread).
+
+    The markers, and the moving TF transforms when ``tf_publisher`` is given. ``channels`` =
+    recording channel of the markers and, with TF, of /tf and /tf_static (the static transforms are
+    written once into each recording, as rosbag2 records a latched /tf_static).
+    """
 
     def __init__(self, display: Display, publisher: Any, session: Any, channels: list[int],
                  tf_publisher: Any = None, tf_class: Optional[type] = None) -> None:

@@ -1,5 +1,7 @@
-"""The stage's ``visualization_msgs/MarkerArray`` packed straight to CDR (see `cdr` for the
-encoding), from the plain `markers.MarkerSpec` data of one display tick.
+"""
+The stage's ``visualization_msgs/MarkerArray`` packed straight to CDR.
+
+From the plain `markers.MarkerSpec` data of one display tick (see `cdr` for the encoding).
 
 Building the rclpy messages costs ~1 ms and serialize_message another ~0.5 ms for the
 microstage's 14 markers: one and a half publish periods at 1 kHz, on the stepping thread.
@@ -27,8 +29,11 @@ _ADD = 0
 
 
 class _Builder:
-    """A CDR layout as struct codes, with a slot (constant value or None = variable) per
-    value; offsets are relative to the end of the encapsulation header."""
+    """
+    A CDR layout as struct codes, with a slot (constant value or None = variable) per value.
+
+    Offsets are relative to the end of the encapsulation header.
+    """
 
     def __init__(self) -> None:
         self.fmt = ["<4s"]
@@ -64,7 +69,7 @@ class _Builder:
 
 
 def _shape(specs: Sequence[MarkerSpec]) -> tuple:
-    """What fixes the layout: every constant field of every marker."""
+    """Return what fixes the layout: every constant field of every marker."""
     return tuple((s.ns, s.id, s.type, s.text, len(s.points)) for s in specs)
 
 

@@ -184,8 +184,12 @@ class MarkerScene:
 
     def specs(self, poses: np.ndarray, wrenches: np.ndarray, drive_force: float,
               ratios: Optional[np.ndarray] = None) -> list["MarkerSpec"]:
-        """Return the markers of one tick as plain data (what `message` and
-        `marker_cdr.MarkerArrayPacker` both turn into a MarkerArray: one definition)."""
+        """
+        Return the markers of one tick as plain data.
+
+        `message` and `marker_cdr.MarkerArrayPacker` both turn it into a MarkerArray: one
+        definition.
+        """
         g = self.geometry(poses, wrenches, drive_force, ratios)
         out = []
         for k, (body, pts) in enumerate(zip(self.mechanism.bodies, g["outlines"])):
@@ -205,8 +209,11 @@ class MarkerScene:
 
     def message(self, poses: np.ndarray, wrenches: np.ndarray, drive_force: float,
                 stamp_ns: int, ratios: Optional[np.ndarray] = None):
-        """Return the ``visualization_msgs/MarkerArray`` of one tick (rclpy objects: the
-        reference the node's packed bytes are tested against)."""
+        """
+        Return the ``visualization_msgs/MarkerArray`` of one tick as rclpy objects.
+
+        It is the reference the node's packed bytes are tested against.
+        """
         from builtin_interfaces.msg import Time
         from geometry_msgs.msg import Point
         from visualization_msgs.msg import Marker, MarkerArray
@@ -231,8 +238,12 @@ class MarkerScene:
 
 @dataclass(frozen=True)
 class MarkerSpec:
-    """One marker as data: namespace, id, type (visualization_msgs/Marker constants), text,
-    pose (x, y, z, qx, qy, qz, qw), scale, colour (r, g, b, a) and points (x, y, z)."""
+    """
+    One marker as data.
+
+    namespace, id, type (visualization_msgs/Marker constants), text, pose (x, y, z, qx, qy, qz,
+    qw), scale, colour (r, g, b, a) and points (x, y, z).
+    """
 
     ns: str
     id: int

@@ -45,8 +45,11 @@ def node_token(fully_qualified_name: str) -> str:
 
 
 def recording_layout(record_format: str, record_path: str) -> str:
-    """``bag`` (a rosbag2 bag directory) or ``mcap`` (one file) for these parameters: a
-    ``record_path`` ending in ``.mcap`` is one file whatever ``record_format`` says."""
+    """
+    ``bag`` (a rosbag2 bag directory) or ``mcap`` (one file) for these parameters.
+
+    A ``record_path`` ending in ``.mcap`` is one file whatever ``record_format`` says.
+    """
     if record_path.endswith(".mcap"):
         return "mcap"
     return record_format

@@ -188,8 +188,12 @@ class StageNode(Node):
 
     def _build_display(self, values: dict[str, Any], qos: Any, watch: QosWatch,
                        first_channel: int) -> None:
-        """Markers publisher, TF publishers where tf2_msgs is importable, and the display
-        output of the stepping thread (recording channels from ``first_channel`` on)."""
+        """
+        Markers publisher.
+
+        TF publishers where tf2_msgs is importable, and the display output of the stepping thread
+        (recording channels from ``first_channel`` on).
+        """
         from visualization_msgs.msg import MarkerArray
 
         frames = self.interface.frames

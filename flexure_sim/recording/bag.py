@@ -1,4 +1,6 @@
-"""Bag directories as ``ros2 bag record`` (rosbag2 Jazzy, storage mcap) writes them:
+"""
+Bag directories as ``ros2 bag record`` (rosbag2 Jazzy, storage mcap) writes them.
+
 ``<dir>/metadata.yaml`` and ``<dir>/<dir>_0.mcap``, ``<dir>_1.mcap``... when split.
 
 `BagRecorder` writes one: each file is a complete `McapRecorder` MCAP (its own summary and
@@ -34,7 +36,8 @@ def bag_file_name(directory: Path, index: int) -> str:
 
 
 class BagRecorder:
-    """A rosbag2 bag directory written with `McapRecorder` files; the same recording API.
+    """
+    A rosbag2 bag directory written with `McapRecorder` files; the same recording API.
 
     ``directory`` must not exist, or (``claimed``) exist empty (a name the caller claimed).
     ``open_file(path)`` returns what each McapRecorder writes to (default: the path);
@@ -77,7 +80,7 @@ class BagRecorder:
 
     @property
     def files(self) -> list[Path]:
-        """The bag's files so far, in order (the last one still open unless closed)."""
+        """Return the bag's files so far, in order (the last one still open unless closed)."""
         return [self.directory / bag_file_name(self.directory, i)
                 for i in range(len(self._finished) + (0 if self._closed else 1))]
 
@@ -118,8 +121,11 @@ class BagRecorder:
         self._topics.append((name, type_name, qos))
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
-        """A metadata record in the current file; repeated in every later file, so that each
-        file describes its run on its own."""
+        """
+        Write a metadata record into the current file.
+
+        Repeated in every later file, so that each file describes its run on its own.
+        """
         self._current.add_metadata(name, data)
         self._metadata.append((name, dict(data)))
 
@@ -162,12 +168,12 @@ class BagRecorder:
 
 
 def is_bag_directory(path: Path) -> bool:
-    """True if ``path`` is a directory holding a metadata.yaml or MCAP files."""
+    """Return True if ``path`` is a directory holding a metadata.yaml or MCAP files."""
     return path.is_dir() and ((path / METADATA_FILE).is_file() or any(path.glob("*.mcap")))
 
 
 def read_bag_metadata(directory: Path) -> dict[str, Any] | None:
-    """The parsed metadata.yaml of a bag directory (None if absent); ValueError if invalid."""
+    """Return the parsed metadata.yaml of a bag directory (None if absent; ValueError if bad)."""
     try:
         text = (directory / METADATA_FILE).read_text()
     except FileNotFoundError:
@@ -178,9 +184,12 @@ def read_bag_metadata(directory: Path) -> dict[str, Any] | None:
 
 
 def bag_files(directory: Path) -> list[Path]:
-    """The files of a bag directory, in order: those metadata.yaml lists, then any later
-    ``*_N.mcap`` it does not (a file being written when both processes died); without a
-    metadata.yaml, every ``*.mcap`` by its index N (then by name)."""
+    """
+    Return the files of a bag directory, in order.
+
+    Those metadata.yaml lists, then any later ``*_N.mcap`` it does not (a file being written when
+    both processes died); without a metadata.yaml, every ``*.mcap`` by its index N (then by name).
+    """
     listed: list[Path] = []
     try:
         meta = read_bag_metadata(directory)

@@ -81,12 +81,15 @@ def build_bag_metadata(
 
 
 def combine_bag_metadata(files: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """The metadata of a bag made of several files (in order), from the one-file metadata of
-    each (`build_bag_metadata`, as stored in each file's ``rosbag2`` record): topics in order of
-    first appearance with their counts summed, the files' entries in order, starting time
-    and duration spanning the files that hold messages, custom_data summed for the
-    flexure_sim counters (``flexure_sim.*`` keys holding integers), else the last value.
-    This is what a bag directory's ``metadata.yaml`` holds (`metadata_yaml`)."""
+    """
+    Return the metadata of a bag made of several files (in order).
+
+    From the one-file metadata of each (`build_bag_metadata`, as stored in each file's ``rosbag2``
+    record): topics in order of first appearance with their counts summed, the files' entries in
+    order, starting time and duration spanning the files that hold messages, custom_data summed for
+    the flexure_sim counters (``flexure_sim.*`` keys holding integers), else the last value. This
+    is what a bag directory's ``metadata.yaml`` holds (`metadata_yaml`).
+    """
     if not files:
         raise ValueError("files: a bag has at least one file")
     topics: dict[str, dict[str, Any]] = {}
@@ -131,8 +134,11 @@ def combine_bag_metadata(files: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
 
 
 def parse_metadata_yaml(text: str) -> dict[str, Any]:
-    """The metadata struct of a bag directory's ``metadata.yaml`` (checked as
-    `parse_serialized_metadata`); ValueError naming what is wrong."""
+    """
+    Return the metadata struct of a bag directory's ``metadata.yaml``.
+
+    Checked as `parse_serialized_metadata`; ValueError naming what is wrong.
+    """
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:

@@ -1,8 +1,11 @@
-"""A bag directory (`bag`) read as one run: `BagReader`, a `reader.LogReader` per file (in
-order, `bag.bag_files`) behind the LogReader interface, so every tool streams a directory as
-it streams a file. Topics are merged by name (counts summed), messages and metadata records
-come in file order (the metadata of each name is the last one), and ``bag_metadata`` is the
-directory's metadata.yaml (else the files' own rosbag2 records combined).
+"""
+A bag directory (`bag`) read as one run.
+
+`BagReader`, a `reader.LogReader` per file (in order, `bag.bag_files`) behind the LogReader
+interface, so every tool streams a directory as it streams a file. Topics are merged by name
+(counts summed), messages and metadata records come in file order (the metadata of each name is the
+last one), and ``bag_metadata`` is the directory's metadata.yaml (else the files' own rosbag2
+records combined).
 
 Strict reading (``recover`` False) also checks metadata.yaml against the files at the end of
 the pass: its total, per-file and per-topic counts must equal what the files hold (a stale or
@@ -33,8 +36,12 @@ def _files(directory: Path) -> list[Path]:
 
 
 def check_counts(directory: Path, meta: dict[str, Any], parts: list[Any]) -> None:
-    """CorruptLogError unless metadata.yaml ``meta`` counts what the files ``parts`` (read
-    through, in order) hold: in all, per file and per topic."""
+    """
+    Check that metadata.yaml counts what the bag's files hold, else raise CorruptLogError.
+
+    ``meta`` must count what the files ``parts`` (read through, in order) hold: in all, per
+    file and per topic.
+    """
     total = sum(p.message_count for p in parts)
     if meta["message_count"] != total:
         raise CorruptLogError(directory, f"{METADATA_FILE} counts {meta['message_count']} "
@@ -112,8 +119,11 @@ class BagReader:
 
     def messages(self, select: Callable[[Any], bool] | None = None,
                  decode: bool = True) -> Iterator[Any]:
-        """The messages of every file in turn (`reader.LogReader.messages`); ``select`` is
-        asked once per topic of the bag, as for one file (not once per file)."""
+        """
+        Return the messages of every file in turn (`reader.LogReader.messages`).
+
+        ``select`` is asked once per topic of the bag, as for one file (not once per file).
+        """
         if self._done:
             raise RuntimeError("BagReader.messages: a log is read in one pass only")
         self._done = True

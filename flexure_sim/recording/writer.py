@@ -168,7 +168,7 @@ class McapRecorder:
 
     @property
     def bag_metadata(self) -> dict | None:
-        """The rosbag2 metadata written into the file by `close` (None before)."""
+        """Return the rosbag2 metadata written into the file by `close` (None before)."""
         return self._worker.bag_metadata
 
     # -- recording --------------------------------------------------------------------------
