@@ -39,7 +39,8 @@ from flexure_sim.engine.fitting import (
 )
 from flexure_sim.engine.hinge_laws import QuadraticLaw, evaluate, wrench_on_element
 from flexure_sim.engine.kinematics import rot
-from flexure_sim.engine.polynomial import PolynomialLaw, monomial_exponents
+from flexure_sim.engine.monomials import monomial_exponents
+from flexure_sim.engine.polynomial import PolynomialLaw
 from flexure_sim.engine.polynomial_files import load_law
 from flexure_sim.engine.solver import Simulation
 

@@ -6,7 +6,8 @@ No ROS here. Layers, each importing only the ones above it:
 - ``kinematics``: rotations, (R, p) <-> twist <-> twistor, adjoint maps;
 - ``stiffness``: hinge stiffness from geometry (notch, cantilever);
 - ``hinge_laws``, ``polynomial``: potentials, wrenches, damping, energy and power of the
-  hinge laws (``polynomial_files`` reads and writes the polynomial hinge files);
+  hinge laws (``monomials`` holds the polynomials' Appendix B algebra, ``polynomial_files``
+  reads and writes the polynomial hinge files);
 - ``mechanism``: bodies, hinges, constraints and drives as plain data; ``config`` loads and
   validates them from YAML (``yaml_files`` reads the files);
 - ``assembly`` (+ the compiled ``kernels``): hinge forces on the bodies with exact Jacobians;

@@ -31,7 +31,7 @@ from ..errors import as_array
 from .fitting import FitError, WrenchData, fit_polynomial, predict_wrench, write_wrench_csv
 from .hinge_laws import QuadraticLaw, twistor_coordinates
 from .kinematics import rot
-from .polynomial import monomial_exponents, monomial_gradients
+from .monomials import monomial_exponents, monomial_gradients
 from .stiffness import notch_stiffness, shear_modulus
 
 # ------------------------------------------------------------------- hinge laws

@@ -47,15 +47,8 @@ from ..errors import FlexureSimError, as_array
 from .hinge_laws import COORDINATES, wrench_on_element
 from .kinematics import rot
 from .yaml_files import read_text
-from .polynomial import (
-    MAX_ORDER,
-    REST,
-    VARIABLES,
-    PolynomialLaw,
-    describe_monomial,
-    monomial_exponents,
-    monomial_gradients,
-)
+from .monomials import describe_monomial, monomial_exponents, monomial_gradients
+from .polynomial import MAX_ORDER, REST, VARIABLES, PolynomialLaw
 
 #: Required CSV columns: displacement of b in a, then the wrench m_b on the element.
 COLUMNS = ("alpha", "px", "py", "m", "fx", "fy")
