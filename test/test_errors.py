@@ -42,7 +42,7 @@ def test_every_package_error_derives_from_the_root():
         "flexure_sim.engine.config_values.ConfigError",
         "flexure_sim.engine.model.SolverError",
         "flexure_sim.recording.errors.RecordingError",
-        "flexure_sim.engine.fitting.DataError",
+        "flexure_sim.engine.wrench_data.DataError",
         "flexure_sim.engine.fitting.FitError",
         "flexure_sim.engine.polynomial_files.PolynomialFileError",
         "flexure_sim.recording.errors.RunError",
@@ -60,7 +60,7 @@ def test_every_package_error_derives_from_the_root():
     [
         ("flexure_sim.engine.config_values.ConfigError", ValueError),
         ("flexure_sim.engine.polynomial_files.PolynomialFileError", ValueError),
-        ("flexure_sim.engine.fitting.DataError", ValueError),
+        ("flexure_sim.engine.wrench_data.DataError", ValueError),
         ("flexure_sim.engine.fitting.FitError", ValueError),
         ("flexure_sim.cli.UsageError", ValueError),
         ("flexure_sim.engine.model.SolverError", RuntimeError),

@@ -16,5 +16,6 @@ No ROS here. Layers, each importing only the ones above it:
   compression is measured); ``dynamics`` (+ the compiled ``stepping`` loop), ``statics``,
   ``snapshot``: stepping, equilibria and reports, reading the model and updating the data;
   ``solver``: the ``Simulation`` facade over them;
-- ``fitting``, ``datasets``: polynomial laws fitted to measured wrenches, and the data sets.
+- ``wrench_data``, ``fitting``, ``datasets``: measured wrenches and their CSV files, polynomial
+  laws fitted to them, and the data sets.
 """

@@ -28,11 +28,12 @@ from typing import Any, Callable, Optional, Sequence
 import numpy as np
 
 from ..errors import as_array
-from .fitting import FitError, WrenchData, fit_polynomial, predict_wrench, write_wrench_csv
+from .fitting import FitError, fit_polynomial, predict_wrench
 from .hinge_laws import QuadraticLaw, twistor_coordinates
 from .kinematics import rot
 from .monomials import monomial_exponents, monomial_gradients
 from .stiffness import notch_stiffness, shear_modulus
+from .wrench_data import WrenchData, write_wrench_csv
 
 # ------------------------------------------------------------------- hinge laws
 
