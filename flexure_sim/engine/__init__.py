@@ -17,5 +17,5 @@ No ROS here. Layers, each importing only the ones above it:
   ``snapshot``: stepping, equilibria and reports, reading the model and updating the data;
   ``solver``: the ``Simulation`` facade over them;
 - ``wrench_data``, ``fitting``, ``datasets``: measured wrenches and their CSV files, polynomial
-  laws fitted to them, and the data sets.
+  laws fitted to them, and the data sets (``randomtest``: Chapter 7.1).
 """
