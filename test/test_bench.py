@@ -2,14 +2,14 @@
 import numpy as np
 import pytest
 
-from flexure_sim.tools import bench
+from flexure_sim.tools import bench_engine
 from flexure_sim.engine.config import load_mechanism
 from flexure_sim.engine.solver import DEFAULT_STEP
 
 
 @pytest.fixture(scope="module")
 def stage_run():
-    return bench.bench_stage_step(DEFAULT_STEP, radau=True)
+    return bench_engine.bench_stage_step(DEFAULT_STEP, radau=True)
 
 
 def test_shipped_step_is_accurate_to_1e_6_against_the_reference(stage_run):
@@ -27,18 +27,18 @@ def test_reference_is_confirmed_by_an_independent_integrator(stage_run):
 
 def test_error_grows_with_the_step_as_second_order():
     mech = load_mechanism("microstage")
-    ref, _ = bench.reference_trajectory(mech, 4e-4, 0.01)
+    ref, _ = bench_engine.reference_trajectory(mech, 4e-4, 0.01)
     errors = []
     for dt in (4e-4, 2e-4):
         from flexure_sim.engine.solver import Simulation
         sim = Simulation(mech, dt=dt)
-        sim.set_command(bench.U_STEP)
-        traj = bench._output_trajectory(sim, int(round(4e-4 / dt)), len(ref))
+        sim.set_command(bench_engine.U_STEP)
+        traj = bench_engine._output_trajectory(sim, int(round(4e-4 / dt)), len(ref))
         errors.append(np.max(np.abs(traj - ref)) / np.max(np.abs(ref)))
     assert errors[1] < errors[0] / 3
 
 
 def test_static_sweep_figures():
-    res = bench.bench_static_sweep(levels=50)
+    res = bench_engine.bench_static_sweep(levels=50)
     assert res["gain_at_full_stroke"] == pytest.approx(27.63, rel=1e-3)
     assert res["newton_iterations"] < 6 * 50

@@ -14,7 +14,7 @@ import pytest
 
 import flexure_sim
 from flexure_sim.engine import kinematics as kin
-from flexure_sim.engine import datasets, polynomial, stiffness
+from flexure_sim.engine import datasets, monomials, stiffness
 from flexure_sim.errors import FlexureSimError
 
 
@@ -42,7 +42,7 @@ def test_every_package_error_derives_from_the_root():
         "flexure_sim.engine.config_values.ConfigError",
         "flexure_sim.engine.model.SolverError",
         "flexure_sim.recording.errors.RecordingError",
-        "flexure_sim.engine.fitting.DataError",
+        "flexure_sim.engine.wrench_data.DataError",
         "flexure_sim.engine.fitting.FitError",
         "flexure_sim.engine.polynomial_files.PolynomialFileError",
         "flexure_sim.recording.errors.RunError",
@@ -60,7 +60,7 @@ def test_every_package_error_derives_from_the_root():
     [
         ("flexure_sim.engine.config_values.ConfigError", ValueError),
         ("flexure_sim.engine.polynomial_files.PolynomialFileError", ValueError),
-        ("flexure_sim.engine.fitting.DataError", ValueError),
+        ("flexure_sim.engine.wrench_data.DataError", ValueError),
         ("flexure_sim.engine.fitting.FitError", ValueError),
         ("flexure_sim.cli.UsageError", ValueError),
         ("flexure_sim.engine.model.SolverError", RuntimeError),
@@ -132,23 +132,23 @@ def test_argument_checks_name_the_argument(call, fragment):
     "call,fragment",
     [
         (
-            lambda: polynomial.monomials(np.zeros((2, 3)), np.zeros((5, 4))),
+            lambda: monomials.monomials(np.zeros((2, 3)), np.zeros((5, 4))),
             "exponents: expected shape (n, 3)",
         ),
         (
-            lambda: polynomial.monomial_gradients(np.zeros(3), np.zeros((5, 3))),
+            lambda: monomials.monomial_gradients(np.zeros(3), np.zeros((5, 3))),
             "u: expected shape (n, n)",
         ),
         (
-            lambda: polynomial.compose_linear(np.zeros(15), 4, 2, np.eye(3)),
+            lambda: monomials.compose_linear(np.zeros(15), 4, 2, np.eye(3)),
             "M: expected shape (4, 4)",
         ),
         (
-            lambda: polynomial.compose_linear(np.zeros(14), 4, 2, np.eye(4)),
+            lambda: monomials.compose_linear(np.zeros(14), 4, 2, np.eye(4)),
             "coefficients: expected shape (15,)",
         ),
         (
-            lambda: polynomial.derivative_coefficients(np.zeros(3), 4, 2, 0),
+            lambda: monomials.derivative_coefficients(np.zeros(3), 4, 2, 0),
             "coefficients: expected shape (15,)",
         ),
         (

@@ -24,24 +24,17 @@ from flexure_sim.engine.datasets import (
     error_table,
     law_data,
     leaf_tip,
-    randomtest_report,
     sample_box,
 )
-from flexure_sim.engine.fitting import (
-    DataError,
-    FitError,
-    WrenchData,
-    fit_polynomial,
-    number_of_unknowns,
-    predict_wrench,
-    read_wrench_csv,
-    write_wrench_csv,
-)
+from flexure_sim.engine.fitting import FitError, fit_polynomial, number_of_unknowns, predict_wrench
 from flexure_sim.engine.hinge_laws import QuadraticLaw, evaluate, wrench_on_element
 from flexure_sim.engine.kinematics import rot
-from flexure_sim.engine.polynomial import PolynomialLaw, monomial_exponents
+from flexure_sim.engine.monomials import monomial_exponents
+from flexure_sim.engine.polynomial import PolynomialLaw
 from flexure_sim.engine.polynomial_files import load_law
+from flexure_sim.engine.randomtest import randomtest_report
 from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.wrench_data import DataError, WrenchData, read_wrench_csv, write_wrench_csv
 
 EXAMPLES = ROOT / "config" / "examples"
 K_LEAF = Leaf().small_displacement_stiffness()

@@ -12,12 +12,14 @@ import yaml
 
 from flexure_sim.engine import kinematics as kin
 from flexure_sim.engine.hinge_laws import QuadraticLaw, evaluate
-from flexure_sim.engine.polynomial import (
-    PolynomialLaw,
+from flexure_sim.engine.monomials import (
     derivative_coefficients,
     monomial_exponents,
     monomial_index,
     monomials,
+)
+from flexure_sim.engine.polynomial import (
+    PolynomialLaw,
     quadratic_as_polynomial,
     swap_bodies,
     transform_frames,

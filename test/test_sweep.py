@@ -21,7 +21,7 @@ import yaml
 from flexure_sim.engine.config import load_mechanism
 from flexure_sim.engine.solver import Simulation
 from flexure_sim.engine.study import load_study, study_from_dict
-from flexure_sim.tools import analysis, sweep_run as sweep, sweep_summary
+from flexure_sim.tools import response_metrics, sweep_run as sweep, sweep_summary
 from flexure_sim.tools.sweep_outputs import OUTPUTS, evaluate_batch
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -92,7 +92,7 @@ def test_step_outputs_agree_with_an_independent_integrator():
                     atol=1e-10 * scale, t_eval=t)
     i = sim.mechanism.body_index("body4")
     col = list(sim.part.free).index(3 * i)
-    ref = analysis.step_response(t, sol.y[col] - sim.z0[3 * i], 0.0, 0.0)
+    ref = response_metrics.step_response(t, sol.y[col] - sim.z0[3 * i], 0.0, 0.0)
     assert ref.settling_time is not None and ref.overshoot > 0
     assert cols["settling_time"][0] == pytest.approx(ref.settling_time, rel=1e-4)
     assert cols["overshoot"][0] == pytest.approx(ref.overshoot, rel=1e-3, abs=1e-7)

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from flexure_sim.tools import analysis
+from flexure_sim.tools import analysis, response_metrics
 from flexure_sim.tools.analysis import Step
 
 
@@ -27,7 +27,7 @@ def second_order(zeta: float, wn: float, t: np.ndarray) -> np.ndarray:
 def test_first_order_settles_in_tau_ln_50_and_rises_in_tau_ln_9(tau):
     t = np.linspace(0, 20 * tau, 20001)[1:]
     y = first_order(tau, t)
-    r = analysis.step_response(t, y, 0.0, 0.0)
+    r = response_metrics.step_response(t, y, 0.0, 0.0)
     assert r.settling_time == pytest.approx(tau * math.log(50), rel=1e-5)
     assert r.rise_time == pytest.approx(tau * math.log(9), rel=1e-5)
     assert r.overshoot == 0.0
@@ -38,7 +38,7 @@ def test_settling_time_is_interpolated_between_coarse_samples():
     tau = 1e-3
     t = np.arange(1, 21) * 1e-3  # one sample per tau
     y = first_order(tau, t)
-    ts = analysis.settling_time(t, y, 0.0, 0.0, 1.0)
+    ts = response_metrics.settling_time(t, y, 0.0, 0.0, 1.0)
     # Linear interpolation of |error| between 3 ms (5.0 %) and 4 ms (1.8 %).
     e3, e4 = math.exp(-3), math.exp(-4)
     assert ts == pytest.approx(3e-3 + (e3 - 0.02) / (e3 - e4) * 1e-3, rel=1e-12)
@@ -50,7 +50,7 @@ def test_second_order_overshoot_is_exp_of_minus_pi_zeta_over_sqrt(zeta):
     wn = 2 * math.pi * 50.0
     t = np.linspace(0, 30 / (zeta * wn), 200001)[1:]
     y = second_order(zeta, wn, t)
-    r = analysis.step_response(t, y, 0.0, 0.0)
+    r = response_metrics.step_response(t, y, 0.0, 0.0)
     assert r.overshoot == pytest.approx(
         math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2)), rel=1e-6
     )
@@ -65,22 +65,22 @@ def test_a_step_down_and_an_offset_baseline_are_handled_like_a_step_up():
     tau = 2e-3
     t = np.linspace(0.1, 0.15, 5001)
     y = first_order(tau, t, t0=0.1, y0=5.0, y1=3.0)[1:]
-    r = analysis.step_response(t[1:], y, 0.1, 5.0)
+    r = response_metrics.step_response(t[1:], y, 0.1, 5.0)
     assert r.change == pytest.approx(-2.0, abs=1e-8)
     assert r.settling_time == pytest.approx(tau * math.log(50), rel=1e-4)
     assert r.overshoot == 0.0
     # Ringing below the final value of a step down is overshoot.
     ringing = 3.0 - 0.5 * np.exp(-(t[1:] - 0.1) / tau) * np.sin(2e3 * (t[1:] - 0.1))
-    assert analysis.overshoot(ringing, 5.0, 3.0) > 0.0
+    assert response_metrics.overshoot(ringing, 5.0, 3.0) > 0.0
 
 
 def test_a_response_still_moving_at_the_end_of_its_window_is_not_settled():
     tau = 1e-3
     t = np.linspace(0, 4e-3, 401)[1:]  # only 4 tau: still 1.8 % away, and the band is moving
-    r = analysis.step_response(t, first_order(tau, t), 0.0, 0.0)
+    r = response_metrics.step_response(t, first_order(tau, t), 0.0, 0.0)
     assert not r.settled
     ramp = np.linspace(0, 1, 100)
-    r = analysis.step_response(np.arange(1, 101) * 1e-3, ramp, 0.0, 0.0)
+    r = response_metrics.step_response(np.arange(1, 101) * 1e-3, ramp, 0.0, 0.0)
     assert r.settling_time is None or not r.settled
 
 

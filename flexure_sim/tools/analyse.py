@@ -24,6 +24,7 @@ from ..recording.errors import EXIT_OK, EXIT_USAGE, RunError
 from ..topics import COMMAND, DRIVE_FORCE, DRIVE_INPUT, OUTPUT
 from . import analysis
 from .options import add_file_arguments
+from .response_metrics import DEFAULT_BAND
 from .runlog import Run, load_run, require_stage_run
 from .tables import columns, format_si
 
@@ -41,7 +42,7 @@ def register(subparsers: Any) -> None:
     add_file_arguments(p)
     p.add_argument("--json", action="store_true",
                    help="print a JSON list of steps (SI units; overshoot as a fraction)")
-    p.add_argument("--band", type=float, default=analysis.DEFAULT_BAND,
+    p.add_argument("--band", type=float, default=DEFAULT_BAND,
                    help="settling band as a fraction of the change (default 0.02)")
     p.add_argument("--no-static", action="store_true",
                    help="do not compare with the engine's static solve of the recorded mechanism")
@@ -136,7 +137,7 @@ def static_gains(run: Run, steps: list[analysis.StepMetrics]) -> tuple[dict[int,
     return gains, ""
 
 
-def analyse_run(run: Run, band: float = analysis.DEFAULT_BAND, static: bool = True) -> dict:
+def analyse_run(run: Run, band: float = DEFAULT_BAND, static: bool = True) -> dict:
     """Step and their metrics as dicts, with notes for the user."""
     require_stage_run(run, "analyse")
     notes: list[str] = []

@@ -20,10 +20,11 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
-from ..engine.fitting import FitError, fit_polynomial, read_wrench_csv, summarize_errors
+from ..engine.fitting import FitError, fit_polynomial, summarize_errors
 from ..errors import FlexureSimError
 from ..engine.polynomial import MAX_ORDER
 from ..engine.polynomial_files import save_law
+from ..engine.wrench_data import read_wrench_csv
 
 
 def register(subparsers) -> None:

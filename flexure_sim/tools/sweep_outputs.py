@@ -22,7 +22,7 @@ from ..engine.mechanism import Mechanism
 from ..engine.solver import Simulation, StaticResult
 from ..engine.stress import peak_ratio, stress_table
 from ..engine.study import Study
-from . import analysis
+from . import response_metrics
 
 
 class Design:
@@ -45,7 +45,7 @@ class Design:
         #: Drive input (m): the study's, else the drive's full stroke.
         self.input = study.input if study.input is not None else drive.stroke[1]
         self._static: Optional[StaticResult] = None
-        self._step: Optional[analysis.Response] = None
+        self._step: Optional[response_metrics.Response] = None
         self._modes: Optional[linear.Modes] = None
 
     def static(self) -> StaticResult:
@@ -65,7 +65,7 @@ class Design:
                                                         static=self.static()))
         return self._modes
 
-    def step_response(self) -> analysis.Response:
+    def step_response(self) -> response_metrics.Response:
         """
         Output response to a step of the command from 0 to the input.
 
@@ -82,7 +82,9 @@ class Design:
                 sim.step()
                 y[k] = output_displacement(sim)
             t = dt * np.arange(1, n + 1)
-            self._step = analysis.step_response(t, y, 0.0, 0.0, band=self.study.step["band"])
+            self._step = response_metrics.step_response(
+                t, y, 0.0, 0.0, band=self.study.step["band"]
+            )
         return self._step
 
 
