@@ -46,7 +46,7 @@ def hand_stiffness(mech) -> np.ndarray:
         rb = R(mech.bodies[ib].pose[2]) @ np.array(h.b.position)
         Ra = R(mech.bodies[ia].pose[2] + h.a.angle)
         A[0, 3 * ia + 2], A[0, 3 * ib + 2] = -1.0, 1.0                  # d alpha
-        A[1:, 3 * ib:3 * ib + 2] = Ra.T                                   # d p = Ra^T (d o_b - d o_a)
+        A[1:, 3 * ib:3 * ib + 2] = Ra.T                 # d p = Ra^T (d o_b - d o_a)
         A[1:, 3 * ib + 2] = Ra.T @ (J @ rb)
         A[1:, 3 * ia:3 * ia + 2] = -Ra.T
         A[1:, 3 * ia + 2] = -Ra.T @ (J @ ra)

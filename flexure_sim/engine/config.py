@@ -561,8 +561,8 @@ def _constraints(ctx, raw, by_name) -> list:
             )
             coords = (COORDINATE_NAMES.index(coord),)
         else:
-            raise ctx.fail(f"{key}.type",
-                           f"unknown constraint type {_shown(kind)} (fixed, drive, force, sine_rate)")
+            raise ctx.fail(f"{key}.type", f"unknown constraint type {_shown(kind)} "
+                           "(fixed, drive, force, sine_rate)")
         for k in coords:
             if (body, k) in held:
                 raise ctx.fail(
