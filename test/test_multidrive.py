@@ -1,8 +1,11 @@
-"""Several named drives, drives on a rotation, force-controlled drives, named outputs.
+"""
+Test several named drives, drives on a rotation, force drives, named outputs.
 
-Expected values come from closed forms (a hinge of known rotational stiffness Ko: moment
-Ko theta, angle torque / Ko) or from the exact tangent stiffness (``linear.tangent_at``)
-solved here by hand, never from the engine's static solver itself."""
+Several named drives, drives on a rotation, force-controlled drives, named outputs.  Expected
+values come from closed forms (a hinge of known rotational stiffness Ko: moment Ko theta, angle
+torque / Ko) or from the exact tangent stiffness (``linear.tangent_at``) solved here by hand, never
+from the engine's static solver itself.
+"""
 import copy
 
 import numpy as np
@@ -90,8 +93,12 @@ def test_force_drive_displacement_is_force_over_the_exact_tangent_stiffness():
 
 
 def two_drive_microstage():
-    """The microstage with a second, named drive: a torque-free tangential drive turning
-    the output body (body4) about its origin, body6's drive named ``piezo``."""
+    """
+    Return the microstage with a second, named drive.
+
+    The microstage with a second, named drive: a torque-free tangential drive turning the output
+    body (body4) about its origin, body6's drive named ``piezo``.
+    """
     doc, source = _microstage_doc()
     doc = copy.deepcopy(doc)
     doc["constraints"][1]["name"] = "piezo"

@@ -1,11 +1,13 @@
-"""The shipped XY stage (config/xy_stage.yaml): two named drives, three named outputs.
+"""
+Test the shipped XY stage (config/xy_stage.yaml).
 
-Acceptance: the engine's static solution against an independent linear computation: the
-stiffness matrix of the same model assembled here by hand for small displacements,
-K = sum over hinges A_h^T K_h A_h (A_h: the first-order map from the body coordinates to
-the hinge deflection (alpha, p) of frame b relative to frame a, in frame a; K_h: the
-hinge's stiffness from the stiffness formulas of the file), then the constrained solve
-with the prescribed coordinates eliminated."""
+The shipped XY stage (config/xy_stage.yaml): two named drives, three named outputs.  Acceptance:
+the engine's static solution against an independent linear computation: the stiffness matrix of the
+same model assembled here by hand for small displacements, K = sum over hinges A_h^T K_h A_h (A_h:
+the first-order map from the body coordinates to the hinge deflection (alpha, p) of frame b
+relative to frame a, in frame a; K_h: the hinge's stiffness from the stiffness formulas of the
+file), then the constrained solve with the prescribed coordinates eliminated.
+"""
 import json
 import subprocess
 

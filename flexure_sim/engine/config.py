@@ -269,7 +269,11 @@ def _sensor(ctx: _Ctx, raw: Any, output: Any) -> SensorSpec:
 
 
 def _outputs(ctx: _Ctx, raw: Any, by_name: dict[str, Body]) -> tuple[Output, ...]:
-    """``outputs: [{name, body, axis: [x, y]} | {name, body, coordinate: x|y|theta}]``."""
+    """
+    Read the ``outputs:`` list.
+
+    ``outputs: [{name, body, axis: [x, y]} | {name, body, coordinate: x|y|theta}]``.
+    """
     if not isinstance(raw, list) or not raw:
         raise ctx.fail("outputs", "expected a non-empty list of outputs")
     out, seen = [], set()
@@ -288,8 +292,9 @@ def _outputs(ctx: _Ctx, raw: Any, by_name: dict[str, Body]) -> tuple[Output, ...
         if coord is not None and coord not in COORDINATE_NAMES:
             raise ctx.fail(f"{key}.coordinate",
                            f"expected one of {COORDINATE_NAMES}, got {_shown(coord)}")
-        axis = (1.0, 0.0) if coord is not None else _axis(ctx, f"{key}.axis",
-                                                         _require(ctx, key, spec, "axis"))
+        axis = (1.0, 0.0)
+        if coord is None:
+            axis = _axis(ctx, f"{key}.axis", _require(ctx, key, spec, "axis"))
         out.append(Output(body, axis, name, coord))
     return tuple(out)
 

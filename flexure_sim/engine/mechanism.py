@@ -107,14 +107,22 @@ class Drive:
     kind: str = "displacement"
 
     def direction(self, mech: "Mechanism") -> np.ndarray:
-        """The drive's direction e in the 3 n_bodies coordinates: the input is e . (z - z0)
-        and a force drive's generalized force is e f (virtual work)."""
+        """
+        Return the drive's direction e in the 3 n_bodies coordinates.
+
+        The drive's direction e in the 3 n_bodies coordinates: the input is e . (z - z0) and a
+        force drive's generalized force is e f (virtual work).
+        """
         return direction(mech, self.body, self.axis, self.coordinate)
 
 
 def direction(mech: "Mechanism", body: str, axis, coordinate: Optional[str]) -> np.ndarray:
-    """e in the 3 n_bodies coordinates of a body's axis (unit vector in the root frame) or
-    of one of its coordinates (x, y, theta)."""
+    """
+    Return the direction of a body's axis or coordinate.
+
+    e in the 3 n_bodies coordinates of a body's axis (unit vector in the root frame) or of one of
+    its coordinates (x, y, theta).
+    """
     e = np.zeros(3 * len(mech.bodies))
     i = mech.body_index(body)
     if coordinate is not None:
@@ -154,8 +162,12 @@ Constraint = Union[Fixed, Drive, SineRate]
 
 @dataclass(frozen=True)
 class Output:
-    """The displacement reported as the mechanism's output: body origin along axis, or
-    one coordinate of the body (``coordinate``: x, y or theta) from rest."""
+    """
+    The displacement reported as an output.
+
+    The displacement reported as the mechanism's output: body origin along axis, or one coordinate
+    of the body (``coordinate``: x, y or theta) from rest.
+    """
 
     body: str
     axis: tuple[float, float]
@@ -163,7 +175,11 @@ class Output:
     coordinate: Optional[str] = None
 
     def direction(self, mech: "Mechanism") -> np.ndarray:
-        """c in the 3 n_bodies coordinates: the output is c . (z - z0)."""
+        """
+        Return the output's direction c in the 3 n_bodies coordinates.
+
+        c in the 3 n_bodies coordinates: the output is c . (z - z0).
+        """
         return direction(mech, self.body, self.axis, self.coordinate)
 
 
@@ -219,7 +235,11 @@ class Mechanism:
 
     @property
     def all_outputs(self) -> tuple[Output, ...]:
-        """The named outputs, or the single ``output`` (named ``output``), or none."""
+        """
+        Return the named outputs, or the single ``output``, or none.
+
+        The named outputs, or the single ``output`` (named ``output``), or none.
+        """
         if self.outputs:
             return self.outputs
         return (self.output,) if self.output is not None else ()

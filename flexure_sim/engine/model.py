@@ -280,9 +280,13 @@ class Model:
         return self.output_matrix @ (z - self.z0)
 
     def drive_inputs(self, value) -> np.ndarray:
-        """One input per drive (``drive_names`` order) from a number (a single drive), a
-        sequence of one value per drive, or a {name: value} mapping naming every drive;
-        ValueError naming the problem otherwise (also for non-finite values)."""
+        """
+        Return one input per drive (``drive_names`` order).
+
+        One input per drive (``drive_names`` order) from a number (a single drive), a sequence of
+        one value per drive, or a {name: value} mapping naming every drive; ValueError naming the
+        problem otherwise (also for non-finite values).
+        """
         names = self.drive_names
         if isinstance(value, dict):
             unknown = sorted(set(value) - set(names))
@@ -322,10 +326,14 @@ class Model:
 
     def drive_forces(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
                      Q: Optional[np.ndarray] = None, inputs=None) -> np.ndarray:
-        """Per drive (``drive_names`` order), the force (N; N m on theta) its actuator
-        applies along its direction: a displacement drive's share D_d^T lambda_P of the
-        constraint forces lambda_P = M_P a_P - Q_P (eq. 6.4); a force drive's commanded
-        force (its entry of ``inputs``, 0 without)."""
+        """
+        Return the force each drive's actuator applies.
+
+        Per drive (``drive_names`` order), the force (N; N m on theta) its actuator applies along
+        its direction: a displacement drive's share D_d^T lambda_P of the constraint forces
+        lambda_P = M_P a_P - Q_P (eq. 6.4); a force drive's commanded force (its entry of
+        ``inputs``, 0 without).
+        """
         out = np.zeros(len(self.drives))
         if len(self.displacement_index):
             if Q is None:
@@ -337,8 +345,12 @@ class Model:
         return out
 
     def drive_positions(self, z: np.ndarray) -> np.ndarray:
-        """Per drive, the driven body's displacement from rest along the drive's direction
-        (a displacement drive's input; where a force drive's body has moved)."""
+        """
+        Return each driven body's displacement along its drive's direction.
+
+        Per drive, the driven body's displacement from rest along the drive's direction (a
+        displacement drive's input; where a force drive's body has moved).
+        """
         return self.drive_directions @ (z - self.z0)
 
     def hinge_compression(self, z: np.ndarray) -> Optional[float]:

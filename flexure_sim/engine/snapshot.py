@@ -55,8 +55,12 @@ class Snapshot:
 
 
 def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
-    """Everything the simulation reports at state ``s``; ``inputs``: one per drive (a
-    static state of several drives or force drives), default the state's u per drive."""
+    """
+    Return everything the simulation reports at state ``s``.
+
+    Everything the simulation reports at state ``s``; ``inputs``: one per drive (a static state of
+    several drives or force drives), default the state's u per drive.
+    """
     Q, deflections, wrenches, energy, _ = model.assembly.report(s.z, s.v)
     _, _, aP = model.prescribed(s.t, s.u, s.command)
     if inputs is None:

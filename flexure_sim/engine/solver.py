@@ -112,8 +112,12 @@ class Simulation:
         dynamics.step(self.model, self.data, n)
 
     def set_command(self, command) -> None:
-        """Set the actuator target (m along the drive axis): a number, or one value per
-        drive (a sequence or a {name: value} mapping); must be finite."""
+        """
+        Set the actuator target (m along the drive axis).
+
+        Set the actuator target (m along the drive axis): a number, or one value per drive (a
+        sequence or a {name: value} mapping); must be finite.
+        """
         if np.ndim(command) == 0 and not isinstance(command, dict) and not np.isfinite(command):
             raise ValueError(f"drive command must be finite, got {command!r}")
         if not self.model.drives:
@@ -132,8 +136,12 @@ class Simulation:
         return statics.static(self.model, u, t, tol, max_iter)
 
     def static_gain(self, t: float = 0.0) -> np.ndarray:
-        """Exact static gain at rest, outputs (rows) against drives (columns)
-        (``statics.static_gain``; names: ``model.output_names``, ``model.drive_names``)."""
+        """
+        Return the exact static gain at rest, outputs against drives.
+
+        Exact static gain at rest, outputs (rows) against drives (columns)
+        (``statics.static_gain``; names: ``model.output_names``, ``model.drive_names``).
+        """
         return statics.static_gain(self.model, t)
 
     def static_sweep(self, inputs, t: float = 0.0, tol: float = 1e-13) -> StaticSweep:

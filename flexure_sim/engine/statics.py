@@ -103,8 +103,12 @@ def static_sweep(model: Model, inputs, t: float = 0.0, tol: float = 1e-13) -> St
 
 
 def _z_static(model: Model, zF: np.ndarray, t: float, inputs: np.ndarray) -> np.ndarray:
-    """All coordinates: z_F, and z_P = the held and timed values at t plus D u (the
-    displacement drives' inputs)."""
+    """
+    Return all coordinates of a static state.
+
+    All coordinates: z_F, and z_P = the held and timed values at t plus D u (the displacement
+    drives' inputs).
+    """
     z = model.full(zF, np.zeros(len(zF)), t, 0.0, 0.0)[0]
     if len(model.displacement_index):
         z[model.part.prescribed] += model.part.D @ inputs[model.displacement_index]
@@ -119,11 +123,15 @@ def _applied(model: Model, inputs: np.ndarray) -> np.ndarray:
 
 
 def static_gain(model: Model, t: float = 0.0) -> np.ndarray:
-    """Exact static gain at rest: d(output k)/d(input d) for every output (rows,
-    ``output_names``) and drive (columns, ``drive_names``), from the tangent stiffness
-    K = dQ/dz at the unstressed pose: a displacement drive moves z_P by D_d and the free
-    coordinates by dz_F = -K_FF^-1 K_FP D_d; a force drive applies e_d: dz_F = -K_FF^-1 e_dF
-    (the linearised equilibrium Q_F + E_F f = 0). Output k moves by c_k . dz."""
+    """
+    Return the exact static gain at rest.
+
+    Exact static gain at rest: d(output k)/d(input d) for every output (rows, ``output_names``) and
+    drive (columns, ``drive_names``), from the tangent stiffness K = dQ/dz at the unstressed pose:
+    a displacement drive moves z_P by D_d and the free coordinates by dz_F = -K_FF^-1 K_FP D_d; a
+    force drive applies e_d: dz_F = -K_FF^-1 e_dF (the linearised equilibrium Q_F + E_F f = 0).
+    Output k moves by c_k . dz.
+    """
     z = _z_static(model, model.z0[model.part.free].copy(), t, np.zeros(len(model.drives)))
     K = model.assembly.forces(z, np.zeros_like(z), jacobian=True).dQ_dz
     F, P = model.part.free, model.part.prescribed
