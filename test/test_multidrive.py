@@ -173,3 +173,16 @@ def test_config_rejects_duplicate_drive_names_and_forces_on_held_coordinates():
     bad["constraints"][1]["axis"] = "phi"
     with pytest.raises(ConfigError, match="one of"):
         mechanism_from_dict(bad, source)
+
+
+def test_a_stepped_single_drive_reports_the_same_per_drive_as_in_its_scalar_fields():
+    sim = Simulation(load_mechanism("microstage"))
+    sim.set_command({"drive": 1e-6})
+    sim.step(20)
+    snap = sim.snapshot()
+    assert snap.drive_names == ("drive",)
+    np.testing.assert_allclose(snap.drive_inputs, [snap.drive_input], rtol=0, atol=0)
+    np.testing.assert_allclose(snap.drive_forces, [snap.drive_force], rtol=1e-12)
+    np.testing.assert_allclose(snap.drive_positions, [snap.drive_input], rtol=1e-12)
+    assert snap.outputs == {"output": snap.output}
+    assert 0 < snap.drive_input < 1e-6 and snap.drive_force > 0
