@@ -6,6 +6,7 @@ Offline simulation without ROS (and, from the tools package, analysis of recorde
     flexure-sim simulate microstage --drive step:1.35e-6 --duration 0.05 [--json]
     flexure-sim simulate microstage --drive step:1.35e-6 --static [--json]
     flexure-sim simulate config/fourbar_mixed.yaml --duration 0.2
+    flexure-sim simulate xy_stage --static [--json]     # several drives: the gain matrix
 """
 from __future__ import annotations
 
@@ -51,7 +52,7 @@ def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
     gain = None
     if snap.output is not None and amplitude != 0.0:
         gain = snap.output / amplitude
-    return {
+    out = {
         "mechanism": mech.name,
         "t": snap.t,
         "input": amplitude if sim.drive else None,
@@ -77,6 +78,13 @@ def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
             "drive_work": snap.drive_work,
         },
     }
+    if len(sim.model.drives) > 1 or len(sim.model.outputs) > 1:
+        out["drives"] = {name: {"input": float(snap.drive_inputs[k]),
+                                "force": float(snap.drive_forces[k]),
+                                "position": float(snap.drive_positions[k])}
+                         for k, name in enumerate(snap.drive_names)}
+        out["outputs"] = dict(snap.outputs)
+    return out
 
 
 def run_simulate(args: argparse.Namespace) -> dict:
@@ -88,15 +96,23 @@ def run_simulate(args: argparse.Namespace) -> dict:
     if args.dt <= 0 or not np.isfinite(args.dt):
         raise UsageError(f"--dt {args.dt!r}: must be a positive number of seconds")
     sim = Simulation(mech, dt=args.dt, relinearize_tol=args.relinearize_tol)
-    if amplitude and sim.drive is None:
+    several = len(sim.model.drives) > 1 or len(sim.model.outputs) > 1
+    if amplitude and several and len(sim.model.drives) > 1:
+        raise UsageError(f"--drive: mechanism {mech.name!r} has {len(sim.model.drives)} drives "
+                         f"({', '.join(sim.model.drive_names)}); --static without --drive "
+                         "reports the gain of every output against every drive")
+    if amplitude and sim.drive is None and not sim.model.drives:
         raise UsageError(f"--drive: mechanism {mech.name!r} has no drive")
     start = time.perf_counter()
     if args.stroke_limit:
         return _stroke_limit(args, sim)
     if args.static:
-        result = sim.static(amplitude)
-        wall = time.perf_counter() - start
+        result = sim.static(amplitude if len(sim.model.drives) <= 1 else
+                            np.zeros(len(sim.model.drives)))
         out = summarize(sim, result.snapshot, amplitude)
+        if several:
+            out["gain_matrix"] = gain_matrix(sim)
+        wall = time.perf_counter() - start
         out.update(mechanism_file=str(path), mode="static", newton_iterations=result.iterations,
                    residual=result.residual, wall_s=wall)
         out["hinge_stress"] = _stress(sim, result.snapshot)
@@ -124,6 +140,17 @@ def run_simulate(args: argparse.Namespace) -> dict:
         linearizations=sim.stats.linearizations,
     )
     return out
+
+
+def gain_matrix(sim: Simulation) -> dict:
+    """
+    Return the exact static gain at rest, each output (rows) against each drive (columns).
+
+    ``Simulation.static_gain``, as JSON (m/m, rad/m, m/N, ... per the pair's units).
+    """
+    G = sim.static_gain()
+    return {"outputs": list(sim.model.output_names), "drives": list(sim.model.drive_names),
+            "matrix": [[float(g) for g in row] for row in G]}
 
 
 def _stress(sim: Simulation, snap: Snapshot) -> dict:
@@ -166,6 +193,12 @@ def print_table(out: dict) -> None:
         print(f"gain:                {_fmt(out['gain'], '')}")
         print(f"joint-a compression: {_fmt(out['joint_a_compression'], 'nm', 1e9)}")
         print(f"drive force:         {_fmt(out['drive_force'], 'N')}")
+    if out.get("gain_matrix"):
+        g = out["gain_matrix"]
+        print("static gain (output per unit input of each drive, exact linearisation at rest):")
+        print("output   " + "".join(f"{d:>14s}" for d in g["drives"]))
+        for name, row in zip(g["outputs"], g["matrix"]):
+            print(f"{name:8s} " + "".join(f"{v:14.6g}" for v in row))
     for t, v in out.get("output_at", {}).items():
         print(f"output at {float(t) * 1e3:g} ms:      {_fmt(v, 'um', 1e6)}")
     print("hinge deflection, frame b in frame a:  rotation [urad]  x [nm]  y [nm]")

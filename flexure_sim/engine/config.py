@@ -22,6 +22,16 @@ Format (SI units; see config/microstage.yaml for a complete example)::
          stroke: [0.0, 2.0e-6], slew_rate: 0.01}
       - {type: sine_rate, body: link2, coordinate: theta, amplitude: 4.9348, frequency: 5.0}
     output: {body: body4, axis: [1, 0]}
+
+Several drives: give each a ``name`` (a single unnamed drive is named ``drive``). ``axis``
+may name one coordinate instead (``axis: theta``: a tangential piezo turning the body; input
+in rad; the body's other coordinates stay free). ``type: force``: a force-controlled drive,
+the commanded force (N; N m on theta; ``stroke`` is the force range) acts on the body along
+its axis, whose coordinates stay free. Several outputs::
+
+    outputs:
+      - {name: x, body: platform, axis: [1, 0]}
+      - {name: theta, body: platform, coordinate: theta}
     compression_hinge: a
     sensor: {noise_rms: 2.0e-9, resolution: 1.0e-9, bandwidth: 5000.0, latency: 1, seed: 0}
                                               # optional, needs output; see engine/sensor.py
@@ -186,7 +196,7 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
         raise ConfigError(f"{source}: the document must be a mapping, got {type(data).__name__}")
     _no_unknown(ctx, "", data, {
         "name", "description", "source", "defaults", "stiffness_models", "bodies", "hinges",
-        "constraints", "output", "compression_hinge", "metadata", "sensor",
+        "constraints", "output", "outputs", "compression_hinge", "metadata", "sensor",
     })
     name = _name(ctx, "name", _require(ctx, "", data, "name"))
     defaults = _mapping(ctx, "defaults", data.get("defaults", {}))
@@ -211,6 +221,9 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
             _body_ref(ctx, "output.body", spec, by_name),
             _axis(ctx, "output.axis", spec.get("axis", [1, 0])),
         )
+    outputs = _outputs(ctx, data["outputs"], by_name) if "outputs" in data else ()
+    if outputs and output is not None:
+        raise ctx.fail("outputs", "give either output or outputs, not both")
     compression = data.get("compression_hinge")
     if compression is not None and not isinstance(compression, str):
         raise ctx.fail("compression_hinge", f"expected a hinge name, got {_shown(compression)}")
@@ -234,6 +247,7 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
         source=str(data.get("source", source)),
         metadata=dict(metadata),
         sensor=sensor,
+        outputs=outputs,
     )
 
 
@@ -252,6 +266,37 @@ def _sensor(ctx: _Ctx, raw: Any, output: Any) -> SensorSpec:
                 raise ctx.fail(f"sensor.{k}", f"expected an integer >= 0, got {_shown(v)}")
             values[k] = v
     return SensorSpec(**values)
+
+
+def _outputs(ctx: _Ctx, raw: Any, by_name: dict[str, Body]) -> tuple[Output, ...]:
+    """
+    Read the ``outputs:`` list.
+
+    ``outputs: [{name, body, axis: [x, y]} | {name, body, coordinate: x|y|theta}]``.
+    """
+    if not isinstance(raw, list) or not raw:
+        raise ctx.fail("outputs", "expected a non-empty list of outputs")
+    out, seen = [], set()
+    for i, spec in enumerate(raw):
+        key = f"outputs[{i}]"
+        spec = _mapping(ctx, key, spec)
+        _no_unknown(ctx, key, spec, {"name", "body", "axis", "coordinate"})
+        name = _name(ctx, f"{key}.name", _require(ctx, key, spec, "name"))
+        if name in seen:
+            raise ctx.fail(f"{key}.name", f"duplicate output name {name!r}")
+        seen.add(name)
+        body = _body_ref(ctx, f"{key}.body", spec, by_name)
+        if "coordinate" in spec and "axis" in spec:
+            raise ctx.fail(key, "give either axis or coordinate, not both")
+        coord = spec.get("coordinate")
+        if coord is not None and coord not in COORDINATE_NAMES:
+            raise ctx.fail(f"{key}.coordinate",
+                           f"expected one of {COORDINATE_NAMES}, got {_shown(coord)}")
+        axis = (1.0, 0.0)
+        if coord is None:
+            axis = _axis(ctx, f"{key}.axis", _require(ctx, key, spec, "axis"))
+        out.append(Output(body, axis, name, coord))
+    return tuple(out)
 
 
 def _bodies(ctx: _Ctx, raw: Any) -> list[Body]:
@@ -460,6 +505,7 @@ def _constraints(ctx, raw, by_name) -> list:
         raise ctx.fail("constraints", "expected a list of constraints")
     out: list = []
     held: dict[tuple[str, int], str] = {}
+    forced: list = []
     for i, spec in enumerate(raw):
         key = f"constraints[{i}]"
         spec = _mapping(ctx, key, spec)
@@ -469,32 +515,38 @@ def _constraints(ctx, raw, by_name) -> list:
             _no_unknown(ctx, key, spec, {"type", "body"})
             c: Any = Fixed(body)
             coords = (0, 1, 2)
-        elif kind == "drive":
-            _no_unknown(
-                ctx, key, spec, {"type", "body", "axis", "response_time", "stroke", "slew_rate"}
-            )
+        elif kind in ("drive", "force"):
+            _no_unknown(ctx, key, spec, {"type", "name", "body", "axis", "response_time",
+                                         "stroke", "slew_rate"})
             stroke = _vector(ctx, f"{key}.stroke", _require(ctx, key, spec, "stroke"), (2,))
             if stroke[0] >= stroke[1]:
-                raise ctx.fail(
-                    f"{key}.stroke", f"expected [min, max] with min < max, got {stroke}"
-                )
+                raise ctx.fail(f"{key}.stroke",
+                               f"expected [min, max] with min < max, got {stroke}")
+            axis_spec = _require(ctx, key, spec, "axis")
+            coord = axis_spec if isinstance(axis_spec, str) else None
+            if coord is not None and coord not in COORDINATE_NAMES:
+                raise ctx.fail(f"{key}.axis", f"expected a vector [x, y] or one of "
+                               f"{COORDINATE_NAMES}, got {_shown(coord)}")
+            drives = [o for o in out if isinstance(o, Drive)]
+            dname = _name(ctx, f"{key}.name", spec["name"]) if "name" in spec else "drive"
+            if any(d.name == dname for d in drives):
+                raise ctx.fail(f"{key}.name", f"duplicate drive name {dname!r}"
+                               + ("" if "name" in spec else ": name every drive"))
             c = Drive(
                 body,
-                _axis(ctx, f"{key}.axis", _require(ctx, key, spec, "axis")),
-                _number(
-                    ctx,
-                    f"{key}.response_time",
-                    _require(ctx, key, spec, "response_time"),
-                    positive=True,
-                ),
+                (1.0, 0.0) if coord is not None else _axis(ctx, f"{key}.axis", axis_spec),
+                _number(ctx, f"{key}.response_time", _require(ctx, key, spec, "response_time"),
+                        positive=True),
                 (stroke[0], stroke[1]),
-                _number(
-                    ctx, f"{key}.slew_rate", _require(ctx, key, spec, "slew_rate"), positive=True
-                ),
+                _number(ctx, f"{key}.slew_rate", _require(ctx, key, spec, "slew_rate"),
+                        positive=True),
+                dname, coord, "force" if kind == "force" else "displacement",
             )
-            coords = (0, 1, 2)
-            if any(isinstance(o, Drive) for o in out):
-                raise ctx.fail(key, "only one drive constraint is supported")
+            if kind == "force":
+                coords = ()  # the body stays free: checked against the held ones below
+                forced.append((key, body, c))
+            else:
+                coords = (0, 1, 2) if coord is None else (COORDINATE_NAMES.index(coord),)
         elif kind == "sine_rate":
             _no_unknown(
                 ctx, key, spec, {"type", "body", "coordinate", "amplitude", "frequency", "phase"}
@@ -514,8 +566,8 @@ def _constraints(ctx, raw, by_name) -> list:
             )
             coords = (COORDINATE_NAMES.index(coord),)
         else:
-            raise ctx.fail(f"{key}.type",
-                           f"unknown constraint type {_shown(kind)} (fixed, drive, sine_rate)")
+            raise ctx.fail(f"{key}.type", f"unknown constraint type {_shown(kind)} "
+                           "(fixed, drive, force, sine_rate)")
         for k in coords:
             if (body, k) in held:
                 raise ctx.fail(
@@ -525,6 +577,12 @@ def _constraints(ctx, raw, by_name) -> list:
                 )
             held[(body, k)] = key
         out.append(c)
+    for key, body, c in forced:
+        acts = (0, 1) if c.coordinate is None else (COORDINATE_NAMES.index(c.coordinate),)
+        for k in acts:
+            if (body, k) in held:
+                raise ctx.fail(key, f"a force drive needs coordinate {COORDINATE_NAMES[k]} of "
+                               f"body {body!r} free, but {held[(body, k)]} constrains it")
     if not any(isinstance(c, Fixed) for c in out):
         raise ctx.fail(
             "constraints", "the mechanism has no fixed body (add {type: fixed, body: ...})"

@@ -87,6 +87,14 @@ class Drive:
     input constraint (eqs. 6.21-6.23), which with B = t_char K is overdamped with a slow
     time constant t_char. ``stroke`` is the actuator's range [min, max] (m) and
     ``slew_rate`` its speed limit (m/s); the node enforces both on commands.
+
+    ``name`` tells drives apart (``drive`` for a mechanism's single unnamed drive).
+    ``coordinate`` (x, y or theta): the drive acts on that one coordinate of the body (a
+    tangential piezo turning it: theta, input in rad) and the others stay free; None: along
+    ``axis`` with the body's other coordinates held. ``kind``: ``displacement`` (the input
+    is prescribed) or ``force`` (the input is a force (N, or N m on theta) applied to the
+    body along ``axis``/``coordinate``, whose coordinates stay free; ``stroke`` is then
+    the force range).
     """
 
     body: str
@@ -94,6 +102,34 @@ class Drive:
     response_time: float
     stroke: tuple[float, float]
     slew_rate: float
+    name: str = "drive"
+    coordinate: Optional[str] = None
+    kind: str = "displacement"
+
+    def direction(self, mech: "Mechanism") -> np.ndarray:
+        """
+        Return the drive's direction e in the 3 n_bodies coordinates.
+
+        The drive's direction e in the 3 n_bodies coordinates: the input is e . (z - z0) and a
+        force drive's generalized force is e f (virtual work).
+        """
+        return direction(mech, self.body, self.axis, self.coordinate)
+
+
+def direction(mech: "Mechanism", body: str, axis, coordinate: Optional[str]) -> np.ndarray:
+    """
+    Return the direction of a body's axis or coordinate.
+
+    e in the 3 n_bodies coordinates of a body's axis (unit vector in the root frame) or of one of
+    its coordinates (x, y, theta).
+    """
+    e = np.zeros(3 * len(mech.bodies))
+    i = mech.body_index(body)
+    if coordinate is not None:
+        e[3 * i + COORDINATE_NAMES.index(coordinate)] = 1.0
+    else:
+        e[3 * i:3 * i + 2] = axis
+    return e
 
 
 @dataclass(frozen=True)
@@ -126,10 +162,25 @@ Constraint = Union[Fixed, Drive, SineRate]
 
 @dataclass(frozen=True)
 class Output:
-    """The displacement reported as the mechanism's output: body origin along axis."""
+    """
+    The displacement reported as an output.
+
+    The displacement reported as the mechanism's output: body origin along axis, or one coordinate
+    of the body (``coordinate``: x, y or theta) from rest.
+    """
 
     body: str
     axis: tuple[float, float]
+    name: str = "output"
+    coordinate: Optional[str] = None
+
+    def direction(self, mech: "Mechanism") -> np.ndarray:
+        """
+        Return the output's direction c in the 3 n_bodies coordinates.
+
+        c in the 3 n_bodies coordinates: the output is c . (z - z0).
+        """
+        return direction(mech, self.body, self.axis, self.coordinate)
 
 
 @dataclass(frozen=True)
@@ -154,6 +205,8 @@ class Mechanism:
     metadata: dict = field(default_factory=dict)
     #: The sensor reading the output (published as ``output/measured``); None: no sensor.
     sensor: Optional[SensorSpec] = None
+    #: Named outputs (``outputs:`` in YAML); empty: the single ``output``, if any.
+    outputs: tuple[Output, ...] = ()
 
     def body_index(self, name: str) -> int:
         """Index of a body by name (ValueError naming it if unknown)."""
@@ -172,5 +225,21 @@ class Mechanism:
     @property
     def drive(self) -> Optional[Drive]:
         """Return the drive constraint, if the mechanism has one."""
-        drives = [c for c in self.constraints if isinstance(c, Drive)]
+        drives = self.drives
         return drives[0] if drives else None
+
+    @property
+    def drives(self) -> tuple[Drive, ...]:
+        """Every drive constraint, in the order of the constraints."""
+        return tuple(c for c in self.constraints if isinstance(c, Drive))
+
+    @property
+    def all_outputs(self) -> tuple[Output, ...]:
+        """
+        Return the named outputs, or the single ``output``, or none.
+
+        The named outputs, or the single ``output`` (named ``output``), or none.
+        """
+        if self.outputs:
+            return self.outputs
+        return (self.output,) if self.output is not None else ()

@@ -46,37 +46,44 @@ class Partition:
     """
     Free and prescribed coordinate indices.
 
-    Per prescribed coordinate dz_P/du (the drive axis component); the sine-rate constraints as
-    (index into prescribed, constraint).
+    Per prescribed coordinate dz_P/du (the drive axis component) of the single displacement
+    drive (zeros with none or several); the sine-rate constraints as (index into prescribed,
+    constraint); ``D``: dz_P/du per displacement drive (columns, ``Model.displacement_index``
+    order).
     """
 
     free: np.ndarray
     prescribed: np.ndarray
     du: np.ndarray
     timed: list = field(default_factory=list)
+    D: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 def partition(mech: Mechanism) -> Partition:
     """Split the 3 n_bodies coordinates of ``mech`` by its constraints."""
-    prescribed: dict[int, float] = {}
+    prescribed: set[int] = set()
     timed = []
+    columns = []
     for c in mech.constraints:
         i = mech.body_index(c.body)
         if isinstance(c, Fixed):
-            for k in range(3):
-                prescribed[3 * i + k] = 0.0
-        elif isinstance(c, Drive):
-            prescribed[3 * i] = c.axis[0]
-            prescribed[3 * i + 1] = c.axis[1]
-            prescribed[3 * i + 2] = 0.0
+            prescribed.update(3 * i + k for k in range(3))
+        elif isinstance(c, Drive) and c.kind == "displacement":
+            if c.coordinate is None:
+                prescribed.update(3 * i + k for k in range(3))  # along the axis, rest held
+            else:
+                prescribed.add(3 * i + COORDINATE_NAMES.index(c.coordinate))
+            columns.append(c.direction(mech))
         elif isinstance(c, SineRate):
-            prescribed[3 * i + COORDINATE_NAMES.index(c.coordinate)] = 0.0
+            prescribed.add(3 * i + COORDINATE_NAMES.index(c.coordinate))
             timed.append((3 * i + COORDINATE_NAMES.index(c.coordinate), c))
     P = np.array(sorted(prescribed), dtype=int)
     F = np.array([k for k in range(3 * len(mech.bodies)) if k not in prescribed], dtype=int)
     pos = {k: j for j, k in enumerate(P)}
-    du = np.array([prescribed[k] for k in P], dtype=float)
-    return Partition(F, P, du, [(pos[k], c) for k, c in timed])
+    D = np.array(columns, dtype=float).reshape(len(columns), -1)[:, P].T if columns else (
+        np.zeros((len(P), 0)))
+    du = D[:, 0].copy() if D.shape[1] == 1 else np.zeros(len(P))
+    return Partition(F, P, du, [(pos[k], c) for k, c in timed], D)
 
 
 class Model:
@@ -108,7 +115,20 @@ class Model:
         self.assembly = Assembly(mechanism)
         self.dt = float(dt)
         self.relinearize_tol = relinearize_tol
-        self.drive: Optional[Drive] = mechanism.drive
+        #: Every drive (constraint order), their names and directions e (rows; the input
+        #: of drive d is e_d . (z - z0)), the displacement and force drives' indices.
+        self.drives: tuple[Drive, ...] = mechanism.drives
+        self.drive_names = tuple(d.name for d in self.drives)
+        self.drive_directions = np.array([d.direction(mechanism) for d in self.drives]
+                                         ).reshape(len(self.drives), 3 * len(mechanism.bodies))
+        self.displacement_index = np.array(
+            [k for k, d in enumerate(self.drives) if d.kind == "displacement"], dtype=int)
+        self.force_index = np.array(
+            [k for k, d in enumerate(self.drives) if d.kind == "force"], dtype=int)
+        #: Stepping (dynamics) handles at most one drive, a displacement drive; statics any.
+        self.steppable = len(self.force_index) == 0 and len(self.displacement_index) <= 1
+        self.drive: Optional[Drive] = (
+            self.drives[0] if self.steppable and self.drives else None)
         nb = len(mechanism.bodies)
         self.mass = np.array([[b.mass, b.mass, b.inertia]
                              for b in mechanism.bodies], dtype=float).ravel()
@@ -121,9 +141,12 @@ class Model:
             1e-3, float(np.ptp(self.z0.reshape(nb, 3)[:, :2]))) if nb > 1 else 1.0
         self.atol = self._iteration_atol()
         self.kernel_args = self._kernel_args() if self.assembly.compiled else None
-        out = mechanism.output
-        self._output_index = None if out is None else mechanism.body_index(out.body)
-        self.output_axis = None if out is None else np.array(out.axis, dtype=float)
+        #: The outputs (named; the single ``output:`` is named ``output``) and their
+        #: directions c (rows; output k is c_k . (z - z0)).
+        self.outputs = mechanism.all_outputs
+        self.output_names = tuple(o.name for o in self.outputs)
+        self.output_matrix = np.array([o.direction(mechanism) for o in self.outputs]
+                                      ).reshape(len(self.outputs), 3 * nb)
 
     @property
     def compiled(self) -> bool:
@@ -247,12 +270,44 @@ class Model:
 
     # --------------------------------------------------------------- measures
     def output_displacement(self, z: np.ndarray) -> Optional[float]:
-        """Return the output body's displacement from rest along the output axis (m), or None."""
-        axis = self.output_axis
-        if axis is None:
+        """Return the (first) output's displacement from rest (m, or rad on theta), or None."""
+        if not self.outputs:
             return None
-        i = self._output_index
-        return float((z[3 * i:3 * i + 2] - self.z0[3 * i:3 * i + 2]) @ axis)
+        return float(self.output_matrix[0] @ (z - self.z0))
+
+    def output_values(self, z: np.ndarray) -> np.ndarray:
+        """Every output's displacement from rest, c_k . (z - z0) (``output_names`` order)."""
+        return self.output_matrix @ (z - self.z0)
+
+    def drive_inputs(self, value) -> np.ndarray:
+        """
+        Return one input per drive (``drive_names`` order).
+
+        One input per drive (``drive_names`` order) from a number (a single drive), a sequence of
+        one value per drive, or a {name: value} mapping naming every drive; ValueError naming the
+        problem otherwise (also for non-finite values).
+        """
+        names = self.drive_names
+        if isinstance(value, dict):
+            unknown = sorted(set(value) - set(names))
+            missing = [n for n in names if n not in value]
+            if unknown or missing:
+                raise ValueError(f"drive inputs: unknown {unknown}, missing {missing} "
+                                 f"(drives: {', '.join(names) or 'none'})")
+            out = np.array([value[n] for n in names], dtype=float)
+        elif np.ndim(value) == 0:
+            if len(names) > 1:
+                raise ValueError(f"one number given for {len(names)} drives "
+                                 f"({', '.join(names)}): give one value per drive")
+            out = np.full(len(names), float(value))
+        else:
+            out = np.asarray(value, dtype=float).ravel()
+            if len(out) != len(names):
+                raise ValueError(f"{len(out)} drive inputs given for {len(names)} drives "
+                                 f"({', '.join(names) or 'none'})")
+        if not np.all(np.isfinite(out)):
+            raise ValueError(f"drive inputs must be finite, got {value!r}")
+        return out
 
     def drive_force(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
                     Q: Optional[np.ndarray] = None) -> float:
@@ -268,6 +323,35 @@ class Model:
             Q = self.assembly.generalized_forces(z, v)[0]
         P = self.part.prescribed
         return float((self.mass[P] * aP - Q[P]) @ self.part.du)
+
+    def drive_forces(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
+                     Q: Optional[np.ndarray] = None, inputs=None) -> np.ndarray:
+        """
+        Return the force each drive's actuator applies.
+
+        Per drive (``drive_names`` order), the force (N; N m on theta) its actuator applies along
+        its direction: a displacement drive's share D_d^T lambda_P of the constraint forces
+        lambda_P = M_P a_P - Q_P (eq. 6.4); a force drive's commanded force (its entry of
+        ``inputs``, 0 without).
+        """
+        out = np.zeros(len(self.drives))
+        if len(self.displacement_index):
+            if Q is None:
+                Q = self.assembly.generalized_forces(z, v)[0]
+            P = self.part.prescribed
+            out[self.displacement_index] = self.part.D.T @ (self.mass[P] * aP - Q[P])
+        if inputs is not None and len(self.force_index):
+            out[self.force_index] = np.asarray(inputs, dtype=float)[self.force_index]
+        return out
+
+    def drive_positions(self, z: np.ndarray) -> np.ndarray:
+        """
+        Return each driven body's displacement along its drive's direction.
+
+        Per drive, the driven body's displacement from rest along the drive's direction (a
+        displacement drive's input; where a force drive's body has moved).
+        """
+        return self.drive_directions @ (z - self.z0)
 
     def hinge_compression(self, z: np.ndarray) -> Optional[float]:
         """

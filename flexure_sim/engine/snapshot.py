@@ -1,7 +1,7 @@
 """What a simulation reports at one instant, read from a ``Model`` and a ``State``."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
@@ -25,6 +25,12 @@ class Snapshot:
     compression: of the compression hinge (``Model.hinge_compression``): along the drive
     axis, at its centre of stiffness, its drive side's displacement minus its far side's (m),
     or None.
+    drive_names, drive_inputs, drive_forces: per drive (``Model.drive_names`` order) its
+    input (a displacement drive's prescribed displacement; a force drive's commanded
+    force) and the force its actuator applies (``Model.drive_forces``); drive_positions:
+    each driven body's displacement along its drive's direction. The scalar drive_input,
+    drive_command and drive_force are the first drive's (the single drive's, as before).
+    outputs: {name: displacement from rest} of every output (``Model.output_values``).
     """
 
     t: float
@@ -41,12 +47,28 @@ class Snapshot:
     potential_energy: float
     dissipated: float
     drive_work: float
+    drive_names: tuple = ()
+    drive_inputs: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    drive_forces: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    drive_positions: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    outputs: dict = field(default_factory=dict)
 
 
-def snapshot(model: Model, s: State) -> Snapshot:
-    """Everything the simulation reports at state ``s``."""
+def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
+    """
+    Return everything the simulation reports at state ``s``.
+
+    Everything the simulation reports at state ``s``; ``inputs``: one per drive (a static state of
+    several drives or force drives), default the state's u per drive.
+    """
     Q, deflections, wrenches, energy, _ = model.assembly.report(s.z, s.v)
     _, _, aP = model.prescribed(s.t, s.u, s.command)
+    if inputs is None:
+        inputs = np.full(len(model.drives), s.u)
+    else:
+        aP = np.zeros_like(aP)  # a static state: at rest
+    forces = model.drive_forces(s.z, s.v, aP, Q, inputs)
+    positions = model.drive_positions(s.z)
     nb = len(model.mechanism.bodies)
     return Snapshot(
         t=s.t,
@@ -56,11 +78,16 @@ def snapshot(model: Model, s: State) -> Snapshot:
         wrenches=wrenches,
         drive_input=s.u,
         drive_command=s.command,
-        drive_force=model.drive_force(s.z, s.v, aP, Q),
+        drive_force=float(forces[0]) if len(forces) else 0.0,
         output=model.output_displacement(s.z),
         compression=model.hinge_compression(s.z),
         kinetic_energy=float(0.5 * np.sum(model.mass * s.v**2)),
         potential_energy=energy,
         dissipated=s.dissipated,
         drive_work=s.drive_work,
+        drive_names=model.drive_names,
+        drive_inputs=np.asarray(inputs, dtype=float).copy(),
+        drive_forces=forces,
+        drive_positions=positions,
+        outputs=dict(zip(model.output_names, model.output_values(s.z).tolist())),
     )

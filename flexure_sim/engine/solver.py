@@ -36,6 +36,14 @@ __all__ = [
 ]
 
 
+def _check_steppable(model: Model) -> None:
+    if not model.steppable:
+        kinds = ", ".join(f"{d.name} ({d.kind})" for d in model.drives)
+        raise SolverError(f"mechanism {model.mechanism.name!r}: stepping supports one "
+                          f"displacement drive, this one has {kinds}; its statics "
+                          f"(static, static_gain) handle every drive")
+
+
 class Simulation:
     """
     A model, one run's data, and the stepping / static solvers.
@@ -100,20 +108,41 @@ class Simulation:
 
         T stays on the step grid.
         """
+        _check_steppable(self.model)
         dynamics.step(self.model, self.data, n)
 
-    def set_command(self, command: float) -> None:
-        """Set the actuator target (m along the drive axis); must be finite."""
-        if not np.isfinite(command):
-            raise ValueError(f"drive command must be finite, got {command!r}")
-        if self.model.drive is None:
-            raise ValueError(f"mechanism {self.model.mechanism.name!r} has no drive")
-        self.data.state.command = float(command)
+    def set_command(self, command) -> None:
+        """
+        Set the actuator target (m along the drive axis).
 
-    def static(self, u: float, t: float = 0.0, tol: float = 1e-13,
+        Set the actuator target (m along the drive axis): a number, or one value per drive (a
+        sequence or a {name: value} mapping); must be finite.
+        """
+        if np.ndim(command) == 0 and not isinstance(command, dict) and not np.isfinite(command):
+            raise ValueError(f"drive command must be finite, got {command!r}")
+        if not self.model.drives:
+            raise ValueError(f"mechanism {self.model.mechanism.name!r} has no drive")
+        values = self.model.drive_inputs(command)
+        _check_steppable(self.model)
+        self.data.state.command = float(values[0])
+
+    def static(self, u, t: float = 0.0, tol: float = 1e-13,
                max_iter: int = 50) -> StaticResult:
-        """Return static equilibrium with the actuator output held at u (``statics.static``)."""
+        """
+        Return static equilibrium with the actuator outputs held at u (``statics.static``).
+
+        u: a number (single drive), one value per drive or a {name: value} mapping.
+        """
         return statics.static(self.model, u, t, tol, max_iter)
+
+    def static_gain(self, t: float = 0.0) -> np.ndarray:
+        """
+        Return the exact static gain at rest, outputs against drives.
+
+        Exact static gain at rest, outputs (rows) against drives (columns)
+        (``statics.static_gain``; names: ``model.output_names``, ``model.drive_names``).
+        """
+        return statics.static_gain(self.model, t)
 
     def static_sweep(self, inputs, t: float = 0.0, tol: float = 1e-13) -> StaticSweep:
         """Return static equilibria for many drive inputs (``statics.static_sweep``)."""

@@ -66,12 +66,20 @@ def load(mechanism_arg: Any) -> tuple[Any, Path]:
         raise StartupError("parameter mechanism: expected a built-in name or a YAML path, got "
                            f"{mechanism_arg!r}")
     try:
-        return load_mechanism(mechanism_arg), resolve_mechanism_path(mechanism_arg).resolve()
+        mech = load_mechanism(mechanism_arg)
+        path = resolve_mechanism_path(mechanism_arg).resolve()
     except ConfigError as exc:
         raise StartupError(str(exc)) from exc
     except Exception as exc:  # noqa: BLE001 - whatever the loader lets through: one line
         raise StartupError(f"{mechanism_arg}: cannot load the mechanism "
                            f"({type(exc).__name__}: {exc})") from exc
+    drives = mech.drives
+    if len(drives) > 1 or any(d.kind != "displacement" for d in drives):
+        kinds = ", ".join(f"{d.name} ({d.kind})" for d in drives)
+        raise StartupError(f"{path}: mechanism {mech.name} has drives {kinds}: stage_node "
+                           "steps one displacement drive (its statics: flexure-sim simulate "
+                           "--static)")
+    return mech, path
 
 
 class StageNode(Node):
