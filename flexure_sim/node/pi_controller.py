@@ -37,6 +37,7 @@ from typing import Any, Optional
 
 from ..control.pi_notch import PIConfig, PIController
 from .. import topics
+from ..errors import FlexureSimError
 
 #: (name, default, description) of every parameter; all can be changed live except the
 #: topics, ``handshake`` and ``trace_path`` (read-only). The default gains suit the built-in
@@ -67,7 +68,7 @@ READ_ONLY = {"measurement_topic", "setpoint_topic", "command_topic", "handshake"
 ACK_TIMEOUT = 10.0
 
 
-class StartupError(Exception):
+class StartupError(FlexureSimError, RuntimeError):
     """The controller cannot start (one line on stderr, exit code 1)."""
 
 
