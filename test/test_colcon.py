@@ -103,7 +103,9 @@ def test_built_stage_node_runs_the_builtin_stage_and_stops_on_sigint(workspace, 
     assert rc == 0, node.stderr
     used = workspace.install / MICROSTAGE
     assert f"mechanism microstage ({used})" in node.stderr
-    files = sorted((tmp_path / "runs").glob("microstage_*.mcap"))
+    bags = sorted((tmp_path / "runs").glob("microstage_*"))  # a rosbag2 bag directory
+    assert len(bags) == 1 and (bags[0] / "metadata.yaml").is_file(), node.stderr
+    files = sorted(bags[0].glob("*.mcap"))
     assert len(files) == 1, node.stderr
     complete, meta, _ = recording_facts(files[0])
     assert complete and meta["mechanism_path"] == str(used)
@@ -225,12 +227,14 @@ def test_ros2_run_topic_pub_and_param_set_against_the_built_node(workspace, tmp_
         assert float(echo.stdout.split("data:")[1].split()[0]) > MIN_GAIN * 1e-6, echo
         # ros2param reads values as YAML 1.1, where 1e-6 (no dot) is a string and 2 an integer:
         # the node takes either for its double parameters (other text: test_node_params).
+        # (2 m is no stroke the stage can follow, which the node refuses: the integer goes to
+        # slew_rate, 2 m/s.)
         answers = {}
-        for text in ("1e-6", "2"):
+        for name, text in (("stroke_max", "1e-6"), ("slew_rate", "2")):
             set_ = ros2.until(("param", "set", "--no-daemon", "--spin-time", "1", "/stage_node",
-                               "stroke_max", text), lambda r: "Set" in r.stdout + r.stderr)
+                               name, text), lambda r: "Set" in r.stdout + r.stderr)
             value = peer.call(GetParameters, "/stage_node/get_parameters",
-                              GetParameters.Request(names=["stroke_max"])).values[0]
+                              GetParameters.Request(names=[name])).values[0]
             answers[text] = ((set_.stdout + set_.stderr).split(":")[0].strip(), value.type,
                              value.double_value)
         assert answers == {
@@ -247,7 +251,9 @@ def test_ros2_run_topic_pub_and_param_set_against_the_built_node(workspace, tmp_
             log.close()
     text = (tmp_path / "ros2_run.log").read_text()
     assert rc == 0, text
-    files = sorted((tmp_path / "runs").glob("microstage_*.mcap"))
+    bags = sorted((tmp_path / "runs").glob("microstage_*"))  # a rosbag2 bag directory
+    assert len(bags) == 1 and (bags[0] / "metadata.yaml").is_file(), text
+    files = sorted(bags[0].glob("*.mcap"))
     assert len(files) == 1, text
     complete, meta, commands = recording_facts(files[0])
     assert complete and commands == [1.0e-6], text
