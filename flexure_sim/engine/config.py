@@ -56,7 +56,10 @@ import numpy as np
 
 from . import stiffness as stiffness_models
 from .builtins import builtin_names, find_builtin
+from .config_constraints import _constraints, _outputs, _sensor
 from .config_values import ConfigError  # noqa: F401  (raised by the loader; re-exported)
+from .config_values import axis as _axis
+from .config_values import body_ref as _body_ref
 from .config_values import Ctx as _Ctx
 from .config_values import key_text as _key_text
 from .config_values import mapping as _mapping
@@ -69,19 +72,8 @@ from .config_values import vector as _vector
 from .builtins import searched as builtin_search_places
 from .yaml_files import read_yaml
 from .hinge_laws import COORDINATES, QuadraticLaw
-from .mechanism import (
-    COORDINATE_NAMES,
-    Body,
-    Drive,
-    Fixed,
-    Frame,
-    Hinge,
-    Mechanism,
-    Output,
-    SineRate,
-)
+from .mechanism import Body, Drive, Frame, Hinge, Mechanism, Output
 from .polynomial import PolynomialLaw
-from .sensor import SensorSpec
 from .polynomial_files import PolynomialFileError
 from .polynomial_files import load_law as load_polynomial_law
 from .stress import StressGeometry
@@ -251,54 +243,6 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
     )
 
 
-def _sensor(ctx: _Ctx, raw: Any, output: Any) -> SensorSpec:
-    """Read the ``sensor:`` block (engine/sensor.py): every key optional, none negative."""
-    spec = _mapping(ctx, "sensor", raw)
-    _no_unknown(ctx, "sensor", spec, {"noise_rms", "resolution", "bandwidth", "latency", "seed"})
-    if output is None:
-        raise ctx.fail("sensor", "needs an output (the sensor reads output/displacement)")
-    values = {k: _number(ctx, f"sensor.{k}", spec[k], nonnegative=True)
-              for k in ("noise_rms", "resolution", "bandwidth") if k in spec}
-    for k in ("latency", "seed"):
-        if k in spec:
-            v = spec[k]
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise ctx.fail(f"sensor.{k}", f"expected an integer >= 0, got {_shown(v)}")
-            values[k] = v
-    return SensorSpec(**values)
-
-
-def _outputs(ctx: _Ctx, raw: Any, by_name: dict[str, Body]) -> tuple[Output, ...]:
-    """
-    Read the ``outputs:`` list.
-
-    ``outputs: [{name, body, axis: [x, y]} | {name, body, coordinate: x|y|theta}]``.
-    """
-    if not isinstance(raw, list) or not raw:
-        raise ctx.fail("outputs", "expected a non-empty list of outputs")
-    out, seen = [], set()
-    for i, spec in enumerate(raw):
-        key = f"outputs[{i}]"
-        spec = _mapping(ctx, key, spec)
-        _no_unknown(ctx, key, spec, {"name", "body", "axis", "coordinate"})
-        name = _name(ctx, f"{key}.name", _require(ctx, key, spec, "name"))
-        if name in seen:
-            raise ctx.fail(f"{key}.name", f"duplicate output name {name!r}")
-        seen.add(name)
-        body = _body_ref(ctx, f"{key}.body", spec, by_name)
-        if "coordinate" in spec and "axis" in spec:
-            raise ctx.fail(key, "give either axis or coordinate, not both")
-        coord = spec.get("coordinate")
-        if coord is not None and coord not in COORDINATE_NAMES:
-            raise ctx.fail(f"{key}.coordinate",
-                           f"expected one of {COORDINATE_NAMES}, got {_shown(coord)}")
-        axis = (1.0, 0.0)
-        if coord is None:
-            axis = _axis(ctx, f"{key}.axis", _require(ctx, key, spec, "axis"))
-        out.append(Output(body, axis, name, coord))
-    return tuple(out)
-
-
 def _bodies(ctx: _Ctx, raw: Any) -> list[Body]:
     if not isinstance(raw, list) or not raw:
         raise ctx.fail("bodies", "expected a non-empty list of bodies")
@@ -342,27 +286,6 @@ def _shape(ctx: _Ctx, key: str, spec: Any) -> tuple[tuple[float, float], ...]:
         raise ctx.fail(f"{key}.polygon", "expected a list of at least 3 points [x, y]")
     points = tuple(tuple(_vector(ctx, f"{key}.polygon[{i}]", v, (2,))) for i, v in enumerate(raw))
     return points
-
-
-def _body_ref(ctx: _Ctx, key: str, spec: dict, by_name: dict[str, Body]) -> str:
-    name = spec.get("body")
-    if name is None:
-        raise ctx.fail(key, "missing required key")
-    if not isinstance(name, str):
-        raise ctx.fail(key, f"expected a body name, got {_shown(name)}")
-    if name not in by_name:
-        raise ctx.fail(key, f"unknown body {_shown(name)} (bodies: {', '.join(by_name)})")
-    return name
-
-
-def _axis(ctx: _Ctx, key: str, value: Any) -> tuple[float, float]:
-    v = np.array(_vector(ctx, key, value, (2,)))
-    largest = np.max(np.abs(v))
-    if largest == 0:
-        raise ctx.fail(key, "axis must not be zero")
-    v = v / largest  # first, so that the norm of components near the double range is finite
-    v = v / np.linalg.norm(v)
-    return float(v[0]), float(v[1])
 
 
 def _frame(ctx: _Ctx, key: str, spec: Any, by_name: dict[str, Body]) -> Frame:
@@ -498,93 +421,3 @@ def _damping(ctx: _Ctx, key: str, spec: Any, K: np.ndarray) -> np.ndarray:
             raise ctx.fail(f"{key}.B", "damping matrix must be symmetric positive semi-definite")
         return B
     raise ctx.fail(key, "give t_char or B")
-
-
-def _constraints(ctx, raw, by_name) -> list:
-    if not isinstance(raw, list):
-        raise ctx.fail("constraints", "expected a list of constraints")
-    out: list = []
-    held: dict[tuple[str, int], str] = {}
-    forced: list = []
-    for i, spec in enumerate(raw):
-        key = f"constraints[{i}]"
-        spec = _mapping(ctx, key, spec)
-        kind = _require(ctx, key, spec, "type")
-        body = _body_ref(ctx, f"{key}.body", spec, by_name)
-        if kind == "fixed":
-            _no_unknown(ctx, key, spec, {"type", "body"})
-            c: Any = Fixed(body)
-            coords = (0, 1, 2)
-        elif kind in ("drive", "force"):
-            _no_unknown(ctx, key, spec, {"type", "name", "body", "axis", "response_time",
-                                         "stroke", "slew_rate"})
-            stroke = _vector(ctx, f"{key}.stroke", _require(ctx, key, spec, "stroke"), (2,))
-            if stroke[0] >= stroke[1]:
-                raise ctx.fail(f"{key}.stroke",
-                               f"expected [min, max] with min < max, got {stroke}")
-            axis_spec = _require(ctx, key, spec, "axis")
-            coord = axis_spec if isinstance(axis_spec, str) else None
-            if coord is not None and coord not in COORDINATE_NAMES:
-                raise ctx.fail(f"{key}.axis", f"expected a vector [x, y] or one of "
-                               f"{COORDINATE_NAMES}, got {_shown(coord)}")
-            drives = [o for o in out if isinstance(o, Drive)]
-            dname = _name(ctx, f"{key}.name", spec["name"]) if "name" in spec else "drive"
-            if any(d.name == dname for d in drives):
-                raise ctx.fail(f"{key}.name", f"duplicate drive name {dname!r}"
-                               + ("" if "name" in spec else ": name every drive"))
-            c = Drive(
-                body,
-                (1.0, 0.0) if coord is not None else _axis(ctx, f"{key}.axis", axis_spec),
-                _number(ctx, f"{key}.response_time", _require(ctx, key, spec, "response_time"),
-                        positive=True),
-                (stroke[0], stroke[1]),
-                _number(ctx, f"{key}.slew_rate", _require(ctx, key, spec, "slew_rate"),
-                        positive=True),
-                dname, coord, "force" if kind == "force" else "displacement",
-            )
-            if kind == "force":
-                coords = ()  # the body stays free: checked against the held ones below
-                forced.append((key, body, c))
-            else:
-                coords = (0, 1, 2) if coord is None else (COORDINATE_NAMES.index(coord),)
-        elif kind == "sine_rate":
-            _no_unknown(
-                ctx, key, spec, {"type", "body", "coordinate", "amplitude", "frequency", "phase"}
-            )
-            coord = _require(ctx, key, spec, "coordinate")
-            if coord not in COORDINATE_NAMES:
-                raise ctx.fail(f"{key}.coordinate",
-                               f"expected one of {COORDINATE_NAMES}, got {_shown(coord)}")
-            c = SineRate(
-                body,
-                coord,
-                _number(ctx, f"{key}.amplitude", _require(ctx, key, spec, "amplitude")),
-                _number(
-                    ctx, f"{key}.frequency", _require(ctx, key, spec, "frequency"), positive=True
-                ),
-                _number(ctx, f"{key}.phase", spec.get("phase", 0.0)),
-            )
-            coords = (COORDINATE_NAMES.index(coord),)
-        else:
-            raise ctx.fail(f"{key}.type", f"unknown constraint type {_shown(kind)} "
-                           "(fixed, drive, force, sine_rate)")
-        for k in coords:
-            if (body, k) in held:
-                raise ctx.fail(
-                    key,
-                    f"coordinate {COORDINATE_NAMES[k]} of body {body!r} is already "
-                    f"constrained by {held[(body, k)]}",
-                )
-            held[(body, k)] = key
-        out.append(c)
-    for key, body, c in forced:
-        acts = (0, 1) if c.coordinate is None else (COORDINATE_NAMES.index(c.coordinate),)
-        for k in acts:
-            if (body, k) in held:
-                raise ctx.fail(key, f"a force drive needs coordinate {COORDINATE_NAMES[k]} of "
-                               f"body {body!r} free, but {held[(body, k)]} constrains it")
-    if not any(isinstance(c, Fixed) for c in out):
-        raise ctx.fail(
-            "constraints", "the mechanism has no fixed body (add {type: fixed, body: ...})"
-        )
-    return out

@@ -8,7 +8,9 @@ the mechanism loader (`config`) and other readers of YAML documents.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Mapping
+
+import numpy as np
 
 from ..errors import FlexureSimError
 
@@ -101,3 +103,26 @@ def name(ctx: Ctx, key: str, value: Any) -> str:
             " names become ROS topic and frame names)"
         )
     return value
+
+
+def body_ref(ctx: Ctx, key: str, spec: dict, by_name: Mapping[str, Any]) -> str:
+    """Return the body named by ``spec["body"]``, which must be one of ``by_name``."""
+    name = spec.get("body")
+    if name is None:
+        raise ctx.fail(key, "missing required key")
+    if not isinstance(name, str):
+        raise ctx.fail(key, f"expected a body name, got {shown(name)}")
+    if name not in by_name:
+        raise ctx.fail(key, f"unknown body {shown(name)} (bodies: {', '.join(by_name)})")
+    return name
+
+
+def axis(ctx: Ctx, key: str, value: Any) -> tuple[float, float]:
+    """Return the unit vector along a non-zero 2-vector ``value``."""
+    v = np.array(vector(ctx, key, value, (2,)))
+    largest = np.max(np.abs(v))
+    if largest == 0:
+        raise ctx.fail(key, "axis must not be zero")
+    v = v / largest  # first, so that the norm of components near the double range is finite
+    v = v / np.linalg.norm(v)
+    return float(v[0]), float(v[1])
