@@ -155,10 +155,12 @@ def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True,
         i = mech.body_index(mech.output.body)
         e[3 * i:3 * i + 2] = mech.output.axis
         names.append("output"), Cs.append(e @ Zx), Ds.append(0.0), y0.append(snap.output)
-    if drive and mech.compression_hinge is not None:
-        h = mech.hinges[mech.hinge_index(mech.compression_hinge)]
-        G = _frame_jacobian(mech, h.b, z) - _frame_jacobian(mech, h.a, z)
-        row = np.array(sim.drive.axis) @ G
+    if drive and sim.model.compression is not None:
+        # The engine's one definition (engine/compression.py): the drive side's centre of
+        # stiffness minus the far side's, along the drive axis.
+        (i_drive, c_drive), (i_far, c_far), axis = sim.model.compression
+        G = _point_jacobian(i_drive, c_drive, z) - _point_jacobian(i_far, c_far, z)
+        row = axis @ G
         names.append("compression"), Cs.append(row @ Zx), Ds.append(0.0), y0.append(
             snap.compression
         )
@@ -210,16 +212,15 @@ def _coord(mech, k: int, rate: bool = False) -> str:
 
 
 def _frame_jacobian(mech, frame, z: np.ndarray) -> np.ndarray:
-    """d(P + R(theta) c)/dz (2 x N) of a frame's origin in the root frame."""
-    i = mech.body_index(frame.body)
+    """Return d(P + R(theta) c)/dz (2 x N) of a frame's origin in the root frame."""
+    return _point_jacobian(mech.body_index(frame.body), frame.position, z)
+
+
+def _point_jacobian(i: int, c, z: np.ndarray) -> np.ndarray:
+    """Return d(P + R(theta) c)/dz (2 x N) of the point c (body coordinates) on body i."""
     th = z[3 * i + 2]
-    c, s = np.cos(th), np.sin(th)
-    w = np.array(
-        [
-            c * frame.position[0] - s * frame.position[1],
-            s * frame.position[0] + c * frame.position[1],
-        ]
-    )
+    cs, sn = np.cos(th), np.sin(th)
+    w = np.array([cs * c[0] - sn * c[1], sn * c[0] + cs * c[1]])
     G = np.zeros((2, len(z)))
     G[:, 3 * i:3 * i + 2] = np.eye(2)
     G[:, 3 * i + 2] = J @ w
