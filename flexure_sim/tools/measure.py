@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
+from .. import topics
 from ..engine.solver import DEFAULT_STEP
 from .tick_profile import profile
 
@@ -230,9 +231,11 @@ def run_node(
         result.update(recording_complete=log.complete, recorded_messages=log.message_count,
                       recording_bytes=path.stat().st_size,
                       recording_dropped=int(log.dropped_messages or 0))
-        result["topics_per_tick"] = sum(
-            1 for t in log.topics if t not in ("/diagnostics", "/drive/displacement")
-        )
+        # Per tick: every recorded topic but the command, diagnostics (~10 Hz) and the display
+        # topics (markers and TF at display_rate).
+        not_per_tick = {"/diagnostics", "/drive/displacement", "/" + topics.MARKERS,
+                        topics.TF, topics.TF_STATIC}
+        result["topics_per_tick"] = sum(1 for t in log.topics if t not in not_per_tick)
     if keep_dir:
         result["workdir"] = str(workdir)
     else:
