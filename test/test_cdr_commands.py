@@ -20,7 +20,7 @@ from std_msgs.msg import Float64
 
 from flexure_sim.engine.config import load_mechanism
 from flexure_sim.engine.solver import Simulation
-from flexure_sim.node import cdr
+from flexure_sim.node import cdr, diagnostics_msg
 from flexure_sim.node import interface as itf
 from flexure_sim.node.cdr import packing_applies, parse_float64
 from flexure_sim.node.interface import StageInterface, diagnostics_message, encode_diagnostics
@@ -87,6 +87,7 @@ def test_packed_cdr_only_under_fast_dds_and_for_known_layouts(monkeypatch):
         return real(msg)
 
     monkeypatch.setattr(itf, "serialize_message", serialize)
+    monkeypatch.setattr(diagnostics_msg, "serialize_message", serialize)
     iface = StageInterface(mech, "fast")
     assert not iface.packed
     stamp = 1_234_567_891

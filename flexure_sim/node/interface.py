@@ -21,10 +21,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Optional, Sequence
+from typing import Any, Optional
 
-from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Pose, PoseArray, PoseStamped, TransformStamped, WrenchStamped
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
@@ -34,8 +33,10 @@ from std_msgs.msg import Float64
 from ..engine.mechanism import Mechanism
 from .. import topics
 from ..topics import ROOT_FRAME, Frames, hinge_frame, hinge_frame_a
+from .diagnostics_msg import (  # noqa: F401  (re-exported: one import for the node)
+    ERROR, OK, WARN, diagnostics_message, encode_diagnostics, stamp_msg, value_text)
 from .cdr import (
-    ClockPacker, Float64Packer, StampedPacker, pack_diagnostics, packing_applies, split_stamp)
+    ClockPacker, Float64Packer, StampedPacker, packing_applies, split_stamp)
 
 TIME_MODES = ("realtime", "fast", "lockstep")
 #: Modes in which the node publishes /clock (simulated time is not wall time).
@@ -385,74 +386,3 @@ class StageInterface:
             out.append(Float64(data=float(snap.drive_input)))
             out.append(Float64(data=float(snap.drive_force)))
         return out
-
-
-def stamp_msg(stamp_ns: int) -> Time:
-    sec, nsec = split_stamp(stamp_ns)
-    return Time(sec=sec, nanosec=nsec)
-
-
-def encode_diagnostics(
-    stamp_ns: int,
-    name: str,
-    hardware_id: str,
-    level: int,
-    message: str,
-    values: Sequence[tuple[str, Any]],
-) -> bytes:
-    """
-    CDR of `diagnostics_message` with the same arguments.
-
-    Packed by `cdr.pack_diagnostics` (serialized by serialize_message where packing does not
-    apply).
-    """
-    if not packing_applies("diagnostic_msgs/msg/DiagnosticArray"):
-        return serialize_message(
-            diagnostics_message(stamp_ns, name, hardware_id, level, message, values))
-    sec, nsec = split_stamp(stamp_ns)
-    return pack_diagnostics(sec, nsec, level, name, message, hardware_id,
-                            [(k, value_text(v)) for k, v in values])
-
-
-def diagnostics_message(
-    stamp_ns: int,
-    name: str,
-    hardware_id: str,
-    level: int,
-    message: str,
-    values: Sequence[tuple[str, Any]],
-) -> DiagnosticArray:
-    """
-    One DiagnosticStatus in a DiagnosticArray.
-
-    Values are formatted with str() (floats with repr precision). The reference for
-    `encode_diagnostics`.
-    """
-    status = DiagnosticStatus()
-    status.level = bytes([level])
-    status.name = name
-    status.message = message
-    status.hardware_id = hardware_id
-    status.values = [KeyValue(key=k, value=value_text(v)) for k, v in values]
-    array = DiagnosticArray()
-    array.header.stamp = stamp_msg(stamp_ns)
-    array.status = [status]
-    return array
-
-
-def value_text(value: Any) -> str:
-    """
-    Return a parameter or diagnostics value as text, as ROS writes it on the command line.
-
-    true/false, floats with repr precision, everything else with str().
-    """
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return repr(value)
-    return str(value)
-
-
-OK = 0
-WARN = 1
-ERROR = 2
