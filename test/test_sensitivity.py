@@ -203,3 +203,29 @@ def test_first_mode_sensitivity_of_a_mechanism_without_drive(capsys):
     assert out["gradient"]["first_mode"]["stiffness_models.notch.h"] > 0  # thicker: stiffer
     assert main(["sensitivity", "fourbar_mixed", "--wrt", "stiffness_models.notch.h"]) == 2
     assert "names no output body" in capsys.readouterr().err
+
+
+def test_compression_sensitivity_does_not_depend_on_hinge_labels(params, tmp_path):
+    """
+    Relabel the compression hinge (A and B swapped): the derivative stays the engine's.
+
+    The engine measures compression drive side minus far side (engine/compression.py); the
+    sensitivity must differentiate that same definition, not B minus A.
+    """
+    import yaml
+
+    data = copy.deepcopy(params.data)
+    hinge = [h for h in data["hinges"] if h["name"] == "a"][0]
+    hinge["a"], hinge["b"] = hinge["b"], hinge["a"]
+    path = tmp_path / "swapped.yaml"
+    path.write_text(yaml.safe_dump(data))
+    swapped = Parameters(str(path))
+    got = sensitivities(swapped, [H_C], ["compression"], U)["gradient"]["compression"][H_C]
+    x0 = swapped.value(H_C)
+    fd = _richardson_first(lambda x: _resolve(swapped, {H_C: x})[1], x0, 2e-3 * x0)
+    assert got == pytest.approx(fd, rel=1e-6)
+    assert got == pytest.approx(result_of(params)[H_C], rel=1e-9)  # same physics, same number
+
+
+def result_of(params):
+    return sensitivities(params, [H_C], ["compression"], U)["gradient"]["compression"]

@@ -103,14 +103,23 @@ class Sensitivity:
                 + (z[3 * i + 1] - self.sim.z0[3 * i + 1]) * axis[1]
             ) / self.u
         if "compression" in which:
+            # The engine's one definition (engine/compression.py): the drive side's centre of
+            # stiffness minus the far side's, along the drive axis. The frames' positions
+            # carry the design parameters; the centre's offset from the frame origin is the
+            # model's (zero for the diagonal notch and leaf stiffness).
             k = mech.hinge_index(mech.compression_hinge)
             h = mech.hinges[k]
-            (bx, by), (ax_, ay) = (
-                self._frame_move(h.b.body, design.cb[k], z),
-                self._frame_move(h.a.body, design.ca[k], z),
-            )
-            axis = mech.drive.axis
-            out["compression"] = (bx - ax_) * axis[0] + (by - ay) * axis[1]
+            frames = {mech.body_index(h.b.body): (h.b, design.cb[k]),
+                      mech.body_index(h.a.body): (h.a, design.ca[k])}
+            (i_drive, c_drive), (i_far, c_far), axis = self.sim.model.compression
+
+            def moved(i, c):
+                frame, at = frames[i]
+                off = (c[0] - frame.position[0], c[1] - frame.position[1])
+                return self._frame_move(mech.bodies[i].name, (at[0] + off[0], at[1] + off[1]), z)
+
+            (dx, dy), (fx, fy) = moved(i_drive, c_drive), moved(i_far, c_far)
+            out["compression"] = (dx - fx) * axis[0] + (dy - fy) * axis[1]
         if "peak_stress" in which:
             wrench = forces(design, self.twistor, self.ia, self.ib, z).wrench
             best = None
