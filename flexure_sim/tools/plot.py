@@ -184,7 +184,7 @@ def plot_run(run: Run, out_dir: Path, dpi: int = 120) -> list[tuple[Path, str]]:
                     tx(comp.t),
                     comp.values * 1e9,
                     color="C3",
-                    label=f"compression ({body_b} - {body_a})",
+                    label="compression (as recorded: drive side - far side)",
                 )
             else:
                 ax2.plot(
