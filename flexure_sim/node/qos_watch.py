@@ -20,7 +20,7 @@ from __future__ import annotations
 from typing import Any
 
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.qos import qos_policy_name_from_kind
 
 from . import interface as itf
@@ -40,22 +40,9 @@ class QosWatch:
         self.publishers = 0
         self.subscribers = 0
         self._reported = (0, 0)
+        self._best_effort_seen = 0
 
     # ------------------------------------------------------------- callbacks
-    def subscription_callbacks(self, topic: str) -> SubscriptionEventCallbacks:
-        def incompatible(event: Any) -> None:
-            change = max(int(getattr(event, "total_count_change", 1)), 1)
-            self.publishers += change
-            policy = qos_policy_name_from_kind(event.last_policy_kind)
-            remedy = (" (it publishes best effort? set command_reliability:=best_effort, or "
-                      "publish reliable)" if policy == "RELIABILITY"
-                      and self.command_reliability == "reliable" else "")
-            self._log.warning(
-                f"a publisher on {topic} offers QoS incompatible with the command subscription "
-                f"({policy}): none of its commands reach the node{remedy}; "
-                f"{self.publishers} such publishers so far")
-        return SubscriptionEventCallbacks(incompatible_qos=incompatible)
-
     def publisher_callbacks(self, topic: str) -> PublisherEventCallbacks:
         def incompatible(event: Any) -> None:
             self.subscribers += max(int(getattr(event, "total_count_change", 1)), 1)
@@ -66,11 +53,28 @@ class QosWatch:
                 f"{self.subscribers} such subscribers so far")
         return PublisherEventCallbacks(incompatible_qos=incompatible)
 
-    def adopt(self, entity: Any) -> None:
-        """Serve the event handlers of a polled ``entity`` in this watch's callback group."""
-        for handler in entity.event_handlers:
-            handler.callback_group = self.group
-            self.group.add_entity(handler)
+    def check_command_publishers(self, node: Any, topic: str) -> None:
+        """
+        Count best-effort publishers on the command topic that a reliable subscription ignores.
+
+        A graph check on an executor timer: the subscription's own QoS events would put the
+        polled reader in the executor's wait set, which then holds the reader while it waits
+        and made the stepping thread lose commands in a flood.
+        """
+        if self.command_reliability != "reliable":
+            return
+        from rclpy.qos import ReliabilityPolicy
+
+        best_effort = sum(1 for info in node.get_publishers_info_by_topic(topic)
+                          if info.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT)
+        if best_effort > self._best_effort_seen:
+            self.publishers += best_effort - self._best_effort_seen
+            self._log.warning(
+                f"a publisher on {topic} offers QoS incompatible with the command subscription "
+                "(RELIABILITY): none of its commands reach the node (it publishes best effort? "
+                "set command_reliability:=best_effort, or publish reliable); "
+                f"{self.publishers} such publishers so far")
+        self._best_effort_seen = best_effort
 
     # ------------------------------------------------------------ diagnostics
     def diagnostics(self) -> tuple[list[tuple[str, Any]], list[str], int]:

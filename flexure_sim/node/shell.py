@@ -162,8 +162,10 @@ class StageNode(Node):
             self._command_sub = self.create_subscription(
                 self.interface.command.msg_type, self.interface.command.name, never_called,
                 itf.command_qos(reliability), raw=True, callback_group=PolledGroup(),
-                event_callbacks=watch.subscription_callbacks(self.interface.command.name))
-            watch.adopt(self._command_sub)
+            )
+            command_topic = self._command_sub.topic_name
+            self.create_timer(0.5, lambda: watch.check_command_publishers(self, command_topic),
+                              callback_group=watch.group)
             loop.intake = CommandIntake(self._command_sub, drive_filter, len(tick_pubs) + 1,
                                         self.session.write, self._log, loop.throttle)
         loop.diagnostics = Diagnostics(loop, diag_pub, len(tick_pubs), self.get_name(),
