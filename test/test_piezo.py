@@ -1,0 +1,234 @@
+"""
+The piezo actuator model (engine/piezo.py, piezo_run.py, config_actuator.py); no ROS.
+
+Expected values come from closed forms written here (series springs, sums of exponentials,
+the gamma = 0 Bouc-Wen loop), a second method (time integration against the loop's dh/dV
+solution, Newton statics against the linearisation) or finite differences.
+"""
+import copy
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from conftest import ROOT
+from flexure_sim.engine import piezo, piezo_run
+from flexure_sim.engine.config import ConfigError, load_mechanism, mechanism_from_dict
+from flexure_sim.engine.mechanism import Drive
+from flexure_sim.engine.piezo import CreepElement, PiezoSpec
+from flexure_sim.engine.solver import Simulation
+
+EXAMPLE = ROOT / "config" / "examples" / "piezo_stage.yaml"
+GAIN = 1.5e-5 / 100.0  # the example's stroke over its voltage range, m/V
+
+
+def example_doc() -> dict:
+    return yaml.safe_load(EXAMPLE.read_text())
+
+
+def with_actuator(block) -> dict:
+    doc = example_doc()
+    doc["constraints"][1]["actuator"] = block
+    return doc
+
+
+def drive_of(doc) -> Drive:
+    return [c for c in mechanism_from_dict(doc).constraints if isinstance(c, Drive)][0]
+
+
+# ---------------------------------------------------------------- (a) the ideal actuator
+
+def test_ideal_actuator_applies_the_nominal_command_exactly():
+    spec = drive_of(with_actuator({"v_max": 150.0})).actuator
+    assert (spec.alpha, spec.creep, spec.bandwidth, spec.stiffness) == (0.0, (), 0.0, math.inf)
+    rng = np.random.default_rng(3)
+    times = np.cumsum(rng.uniform(1e-4, 1e-2, 40))
+    commands = rng.uniform(0.0, 1.5e-5, 40)  # nominal displacements, m
+    for k_load in (0.0, 4.1e5, 2.3e7):
+        run = piezo_run.simulate(spec, times, commands, k_load)
+        np.testing.assert_allclose(run.output, commands, rtol=1e-14, atol=1e-21)
+    assert drive_of(example_doc() | {"constraints": [
+        {"type": "fixed", "body": "ground"},
+        {k: v for k, v in example_doc()["constraints"][1].items() if k != "actuator"},
+    ]}).actuator is None  # no block: today's ideal drive
+
+
+def test_voltage_command_maps_through_the_nominal_gain():
+    spec = drive_of(with_actuator({"v_min": -20.0, "v_max": 130.0,
+                                   "command": "voltage"})).actuator
+    assert spec.gain == pytest.approx(1.5e-5 / 150.0, rel=1e-15)
+    run = piezo_run.simulate(spec, [0.0, 1.0, 2.0], [-20.0, 130.0, 55.0])
+    np.testing.assert_allclose(run.output, [0.0, 1.5e-5, 0.5 * 1.5e-5], rtol=1e-14, atol=1e-21)
+
+
+# ------------------------------------------------------------ (b) the Bouc-Wen loop
+
+def sech_half_width(alpha, d, beta, A):
+    """gamma = 0: dh/dV = a - beta sgn(dV) h is linear, H = (a/beta) tanh(beta A), and the
+    branch from -H reaches (a/beta)(1 - sech(beta A)) after A (derived independently)."""
+    return alpha * d / beta * (1.0 - 1.0 / math.cosh(beta * A))
+
+
+def bouc_wen(alpha=0.3, beta=0.02, gamma=0.0, **kw) -> PiezoSpec:
+    return PiezoSpec(gain=GAIN, v_max=100.0, command="voltage", alpha=alpha, beta=beta,
+                     gamma=gamma, **kw)
+
+
+@pytest.mark.parametrize("A", [5.0, 50.0, 200.0])
+def test_closed_form_loop_reduces_to_the_sech_formula_without_gamma(A):
+    spec = bouc_wen(beta=0.03)
+    assert piezo.steady_loop_half_width(spec, A) == pytest.approx(
+        sech_half_width(0.3, GAIN, 0.03, A), rel=1e-12)
+
+
+@pytest.mark.parametrize("gamma", [0.0, 0.006, -0.006, 0.03])
+def test_triangle_loop_width_matches_the_analytic_steady_loop(gamma):
+    spec = bouc_wen(beta=0.03, gamma=gamma)
+    times, commands = piezo_run.triangle(spec, 2.0, 3)
+    run = piezo_run.simulate(spec, times, commands, 0.0, np.linspace(0, times[-1], 6001))
+    width = piezo_run.loop_width(run.voltage, run.output, 50.0)
+    expected = 2 * piezo.steady_loop_half_width(spec, 50.0)
+    if gamma == 0.0:
+        expected = 2 * sech_half_width(0.3, GAIN, 0.03, 50.0)
+    assert width == pytest.approx(expected, rel=0.02)
+    assert width == pytest.approx(expected, rel=1e-3)  # what the integration really achieves
+    assert 0.05 < width / 1.5e-5 < 0.2  # a piezo-like loop of 5-20 % of the stroke
+
+
+def test_jump_equals_the_time_integration_of_a_ramp():
+    """jump (the exact dh/dV sweep) and solve_ivp of dh/dt along a ramp agree: rate-free."""
+    spec = bouc_wen(beta=0.025, gamma=0.01)
+    s = piezo.initial_state(spec)
+    for v in (80.0, 10.0, 60.0, 35.0):
+        s = piezo.jump(spec, s, v)
+    run = piezo_run.simulate(spec, [0.0, 1.0, 2.0, 2.5, 3.0], [0.0, 80.0, 10.0, 60.0, 35.0])
+    assert run.states[1, -1] == pytest.approx(s[1], rel=1e-6)
+    halves = piezo.initial_state(spec)
+    for v in np.linspace(0.0, 80.0, 17)[1:]:
+        halves = piezo.jump(spec, halves, v)
+    assert halves[1] == pytest.approx(piezo.jump(spec, piezo.initial_state(spec), 80.0)[1],
+                                      rel=1e-12)
+
+
+# ----------------------------------------------------------- (c) the stack in series
+
+def test_output_loss_under_load_is_the_series_spring_formula():
+    k_s, k_L = 5.0e7, 2.0e7  # x_out / x_a = 5/7
+    spec = bouc_wen(stiffness=k_s, creep=(CreepElement(0.01, 0.05),))
+    times, commands = piezo_run.triangle(spec, 5.0, 2)
+    t = np.linspace(0, times[-1], 401)
+    free = piezo_run.simulate(spec, times, commands, 0.0, t)
+    loaded = piezo_run.simulate(spec, times, commands, k_L, t)
+    np.testing.assert_allclose(loaded.free_stroke, free.output, rtol=1e-12, atol=1e-20)
+    np.testing.assert_allclose(loaded.output, free.output * 5.0 / 7.0, rtol=1e-12, atol=1e-20)
+    # force balance at the contact: the stack's k_s (x_a - x_out) equals the load's k_L x_out
+    np.testing.assert_allclose(k_s * (loaded.free_stroke - loaded.output), loaded.force,
+                               rtol=1e-9, atol=1e-9)
+    blocked = piezo_run.simulate(spec, times, commands, math.inf, t)
+    np.testing.assert_allclose(blocked.force, k_s * free.output, rtol=1e-12)  # F_b = k_s x_a
+    assert np.all(blocked.output == 0.0)
+
+
+def test_load_stiffness_is_the_stage_tangent_at_rest():
+    """Linearisation's tangent against the guide's beam formula and Newton statics."""
+    sim = Simulation(load_mechanism(EXAMPLE))
+    k = piezo_run.load_stiffness(sim)
+    E, w, t, L = 69.0e9, 0.010, 0.001, 0.015
+    assert k == pytest.approx(2 * 12 * E * (w * t**3 / 12) / L**3, rel=1e-9)
+    u = 1e-9
+    assert k == pytest.approx(sim.static(u).snapshot.drive_force / u, rel=1e-6)
+
+
+# ------------------------------------------------------------------ (d) creep and lag
+
+def test_creep_step_follows_the_chain_sum_of_exponentials():
+    chain = (CreepElement(0.01, 0.1), CreepElement(0.015, 1.0), CreepElement(0.02, 10.0))
+    spec = bouc_wen(beta=0.03, gamma=0.01, creep=chain)
+    t = np.linspace(0.0, 30.0, 301)
+    run = piezo_run.simulate(spec, [0.0, 30.0], [70.0, 70.0], 0.0, t, rtol=1e-10)
+    a, p = 0.3 * GAIN, 0.04
+    x_h = GAIN * 70.0 - a / p * (1 - math.exp(-p * 70.0))  # the instantaneous step, h from 0
+    expected = x_h * (1 + sum(el.ratio * (1 - np.exp(-t / el.tau)) for el in chain))
+    np.testing.assert_allclose(run.output, expected, rtol=1e-7)
+
+
+def test_amplifier_lag_and_one_creep_element_step():
+    tau_a, r, tau = 1.0 / (2 * math.pi * 50.0), 0.02, 0.05
+    spec = bouc_wen(alpha=0.0, bandwidth=50.0, creep=(CreepElement(r, tau),))
+    t = np.linspace(0.0, 0.3, 301)
+    run = piezo_run.simulate(spec, [0.0, 0.3], [40.0, 40.0], 0.0, t, rtol=1e-10)
+    D = GAIN * 40.0
+    lag = D * (1 - np.exp(-t / tau_a))
+    creep = r * D * (1 - (tau * np.exp(-t / tau) - tau_a * np.exp(-t / tau_a)) / (tau - tau_a))
+    np.testing.assert_allclose(run.output, lag + creep, rtol=1e-6, atol=1e-9 * D)
+
+
+# --------------------------------------------------------------------- (e) Jacobian
+
+@pytest.mark.parametrize("bandwidth", [0.0, 800.0])
+def test_jacobian_matches_finite_differences(bandwidth):
+    spec = bouc_wen(beta=0.025, gamma=0.01, bandwidth=bandwidth,
+                    creep=(CreepElement(0.01, 0.2), CreepElement(0.02, 3.0)))
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        s = np.array([rng.uniform(0, 100), rng.uniform(-1, 1) * 2e-6,
+                      *(rng.uniform(-1, 1, 2) * 1e-7)])
+        v_cmd, v_rate = rng.uniform(0, 100), rng.uniform(-500, 500)
+        A, B = piezo.jacobian(spec, s, v_cmd, v_rate)
+        scale = np.array([1.0, 1e-6, 1e-7, 1e-7])
+        for j in range(spec.size):
+            e = np.zeros(spec.size)
+            e[j] = 1e-6 * scale[j]
+            fd = (piezo.rhs(spec, s + e, v_cmd, v_rate)
+                  - piezo.rhs(spec, s - e, v_cmd, v_rate)) / (2 * e[j])
+            np.testing.assert_allclose(A[:, j], fd, rtol=1e-6, atol=1e-9 * np.abs(fd).max())
+        for j, (dc, dr) in enumerate(((1e-4, 0.0), (0.0, 1e-3))):
+            fd = (piezo.rhs(spec, s, v_cmd + dc, v_rate + dr)
+                  - piezo.rhs(spec, s, v_cmd - dc, v_rate - dr)) / (2 * (dc + dr))
+            np.testing.assert_allclose(B[:, j], fd, rtol=1e-6, atol=1e-12)
+    g = piezo.free_stroke_gradient(spec)
+    s = np.array([30.0, 1e-7, 2e-8, -1e-8])
+    fd = [(piezo.free_stroke(spec, s + 1e-3 * e) - piezo.free_stroke(spec, s - 1e-3 * e))
+          / 2e-3 for e in np.eye(4)]
+    np.testing.assert_allclose(g, fd, rtol=1e-9)
+
+
+# ---------------------------------------------------------------- (f) the YAML block
+
+BAD = [
+    ({"v_max": 150.0, "bogus": 1}, "constraints[1].actuator.bogus: unknown key"),
+    ({"bandwidth": 10.0}, "constraints[1].actuator.v_max: missing required key"),
+    ({"v_max": -5.0}, "constraints[1].actuator.v_max: must be above v_min"),
+    ({"v_max": 150.0, "command": "current"}, "constraints[1].actuator.command: expected one"),
+    ({"v_max": 150.0, "bandwidth": -1.0}, "constraints[1].actuator.bandwidth: must not be neg"),
+    ({"v_max": 150.0, "stiffness": 0.0}, "constraints[1].actuator.stiffness: must be positive"),
+    ({"v_max": 150.0, "stiffness": "stiff"}, "constraints[1].actuator.stiffness: expected a nu"),
+    ({"v_max": 150.0, "hysteresis": {"alpha": 0.3, "beta": 0.01, "gamma": 0.02}},
+     "constraints[1].actuator.hysteresis.gamma: must lie within [-beta, beta]"),
+    ({"v_max": 150.0, "hysteresis": {"alpha": 0.3}},
+     "constraints[1].actuator.hysteresis.beta: missing required key"),
+    ({"v_max": 150.0, "hysteresis": {"alpha": -0.1, "beta": 0.01}},
+     "constraints[1].actuator.hysteresis.alpha: must not be negative"),
+    ({"v_max": 150.0, "creep": [{"ratio": 0.01, "tau": 0.0}]},
+     "constraints[1].actuator.creep[0].tau: must be positive"),
+    ({"v_max": 150.0, "creep": {"ratio": 0.01}}, "constraints[1].actuator.creep: expected a lis"),
+    ({"v_max": float("nan")}, "constraints[1].actuator.v_max: must be finite"),
+    ([150.0], "constraints[1].actuator: expected a mapping"),
+]
+
+
+@pytest.mark.parametrize("block, message", BAD)
+def test_bad_actuator_blocks_name_the_key(block, message):
+    with pytest.raises(ConfigError) as err:
+        mechanism_from_dict(with_actuator(block), source="stage.yaml")
+    text = str(err.value)
+    assert text.startswith("stage.yaml: ") and message in text and "\n" not in text
+
+
+def test_actuator_on_a_force_drive_is_refused():
+    doc = with_actuator({"v_max": 150.0})
+    doc["constraints"][1]["type"] = "force"
+    with pytest.raises(ConfigError, match=r"constraints\[1\]\.actuator: a piezo actuator "
+                       r"belongs on a displacement drive"):
+        mechanism_from_dict(copy.deepcopy(doc))
