@@ -11,6 +11,8 @@ import math
 import numpy as np
 import pytest
 import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from conftest import ROOT
 from flexure_sim.engine import piezo, piezo_run
@@ -232,3 +234,42 @@ def test_actuator_on_a_force_drive_is_refused():
     with pytest.raises(ConfigError, match=r"constraints\[1\]\.actuator: a piezo actuator "
                        r"belongs on a displacement drive"):
         mechanism_from_dict(copy.deepcopy(doc))
+
+
+# ------------------------------------------------- (f) the block, fuzzed (as test_config_fuzz)
+
+BLOCK = example_doc()["constraints"][1]["actuator"]
+BLOCK_PATHS = ([(k,) for k in BLOCK] + [("hysteresis", k) for k in BLOCK["hysteresis"]]
+               + [("creep", i, k) for i in range(len(BLOCK["creep"])) for k in ("ratio", "tau")])
+FUZZ_VALUES = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=True, allow_infinity=True)
+    | st.text(max_size=8) | st.sampled_from(["voltage", "displacement", "1e-3", 1e308, -1e308,
+                                             10**400, 5e-324, 0, -1]),
+    lambda children: st.lists(children, max_size=3) | st.dictionaries(
+        st.text(max_size=6), children, max_size=3),
+    max_leaves=8)
+
+
+@settings(max_examples=150, derandomize=True, deadline=None, database=None)
+@given(path=st.sampled_from(BLOCK_PATHS), value=FUZZ_VALUES, remove=st.booleans())
+def test_fuzzed_blocks_load_meaningfully_or_fail_in_one_line(path, value, remove):
+    block = copy.deepcopy(BLOCK)
+    node = block
+    for key in path[:-1]:
+        node = node[key]
+    if remove:
+        del node[path[-1]]
+    else:
+        node[path[-1]] = value
+    try:
+        spec = drive_of(with_actuator(block)).actuator
+    except ConfigError as exc:
+        assert str(exc).startswith("<dict>: constraints[1].actuator") and "\n" not in str(exc)
+        return
+    assert 0 < spec.gain < math.inf and spec.v_min < spec.v_max
+    assert math.isfinite(spec.v_min) and math.isfinite(spec.v_max)
+    assert 0 <= spec.bandwidth < math.inf and spec.stiffness > 0 and spec.command in (
+        "voltage", "displacement")
+    assert spec.alpha >= 0 and (spec.alpha == 0 or spec.beta > 0)
+    assert abs(spec.gamma) <= spec.beta
+    assert all(0 <= el.ratio < math.inf and 0 < el.tau < math.inf for el in spec.creep)
