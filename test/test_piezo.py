@@ -166,6 +166,37 @@ def test_amplifier_lag_and_one_creep_element_step():
     np.testing.assert_allclose(run.output, lag + creep, rtol=1e-6, atol=1e-9 * D)
 
 
+# ------------------------------------------ the fixed-step advance stepping will use
+
+def test_advance_under_a_held_command_matches_the_time_integration():
+    chain = (CreepElement(0.01, 2e-3), CreepElement(0.02, 2e-2))
+    spec = bouc_wen(beta=0.025, gamma=0.01, bandwidth=300.0, creep=chain)
+    T = 0.05
+    run = piezo_run.simulate(spec, [0.0, T], [80.0, 80.0], 0.0, [T], rtol=1e-11)
+    one = piezo.advance(spec, piezo.initial_state(spec), 80.0, T)  # V and h exact in one step
+    np.testing.assert_allclose(one[:2], run.states[:2, -1], rtol=1e-8)
+    errors = []
+    for n in (500, 1000):  # the engine's 1e-4 s step, and half of it
+        s = piezo.initial_state(spec)
+        for _ in range(n):
+            s = piezo.advance(spec, s, 80.0, T / n)
+        np.testing.assert_allclose(s[:2], run.states[:2, -1], rtol=1e-8)
+        errors.append(np.max(np.abs(s / run.states[:, -1] - 1)))
+    assert errors[0] < 1e-5 and 3.5 < errors[0] / errors[1] < 4.5  # second order in dt
+
+
+def test_advance_without_a_lag_traces_the_analytic_loop():
+    """Held commands sampled on a triangle (the node's ticks): the loop is the steady one."""
+    spec = bouc_wen(beta=0.03, gamma=0.006)
+    volts = np.concatenate([np.linspace(0, 100, 201), np.linspace(100, 0, 201)[1:]] * 3)
+    s, x = piezo.initial_state(spec), []
+    for v in volts:
+        s = piezo.advance(spec, s, v, 1e-4)
+        x.append(piezo.free_stroke(spec, s))
+    width = piezo_run.loop_width(volts, np.array(x), 50.0)
+    assert width == pytest.approx(2 * piezo.steady_loop_half_width(spec, 50.0), rel=1e-9)
+
+
 # --------------------------------------------------------------------- (e) Jacobian
 
 @pytest.mark.parametrize("bandwidth", [0.0, 800.0])

@@ -41,7 +41,9 @@ free stroke, and the load only compresses the stack (P7).
 
 State per actuator (`STATE_NAMES`): s = [V_a (V), h (m), c_1 .. c_N (m)]. `rhs` is f in
 ds/dt = f(s, V_c, dV_c/dt) (the rate is used only without an amplifier lag), `jacobian` its
-exact derivative. Steady hysteresis loop in closed form: `steady_loop_half_width`. No ROS.
+exact derivative; `advance` steps it under a held command (exact but for the creep's
+input, linear over the step). Steady hysteresis loop in closed form: `steady_loop_half_width`.
+No ROS.
 """
 from __future__ import annotations
 
@@ -245,6 +247,33 @@ def jump(spec: PiezoSpec, s: np.ndarray, v_new: float) -> np.ndarray:
     out = np.array(s, dtype=float)
     out[1] = _sweep(out[1], v_new - out[0], spec.alpha * spec.gain, spec.beta, spec.gamma)
     out[0] = v_new
+    return out
+
+
+def advance(spec: PiezoSpec, s: np.ndarray, v_cmd: float, dt: float) -> np.ndarray:
+    """
+    Return the state after ``dt`` (s) with the command held at ``v_cmd`` (V; zero-order hold).
+
+    The amplifier (P2) exactly: V_1 = V_c + (V_0 - V_c) exp(-dt / tau_a) (without a lag:
+    `jump` to V_c at the step's start). V_a moves monotonically over the step, so h is
+    exact too (`_sweep`: the rate-independent dh/dV). Creep (P5) by its exact solution for
+    x_h linear over the step between its values x_0, x_1 at the ends (the error is second
+    order in dt / tau_i):
+    c_1 = E c_0 + r [x_0 (1 - E) + (x_1 - x_0) (1 - tau (1 - E) / dt)], E = exp(-dt / tau).
+    """
+    if not dt > 0:
+        raise ValueError(f"dt: must be positive, got {dt!r}")
+    s0 = np.array(s, dtype=float) if spec.lagged else jump(spec, s, v_cmd)
+    out = s0.copy()
+    if spec.lagged:
+        out[0] = v_cmd + (s0[0] - v_cmd) * math.exp(-dt / spec.tau_amplifier)
+        out[1] = _sweep(s0[1], out[0] - s0[0], spec.alpha * spec.gain, spec.beta, spec.gamma)
+    x0 = spec.gain * (s0[0] - spec.v_min) - s0[1]
+    x1 = spec.gain * (out[0] - spec.v_min) - out[1]
+    for i, el in enumerate(spec.creep):
+        one_minus_e = -math.expm1(-dt / el.tau)
+        out[2 + i] = ((1.0 - one_minus_e) * s0[2 + i] + el.ratio * (
+            x0 * one_minus_e + (x1 - x0) * (1.0 - el.tau * one_minus_e / dt)))
     return out
 
 
