@@ -67,8 +67,12 @@ def test_voltage_command_maps_through_the_nominal_gain():
 # ------------------------------------------------------------ (b) the Bouc-Wen loop
 
 def sech_half_width(alpha, d, beta, A):
-    """gamma = 0: dh/dV = a - beta sgn(dV) h is linear, H = (a/beta) tanh(beta A), and the
-    branch from -H reaches (a/beta)(1 - sech(beta A)) after A (derived independently)."""
+    """
+    Half-width of the gamma = 0 loop, derived independently.
+
+    dh/dV = a - beta sgn(dV) h is linear, H = (a/beta) tanh(beta A), and the branch from -H
+    reaches (a/beta)(1 - sech(beta A)) after A.
+    """
     return alpha * d / beta * (1.0 - 1.0 / math.cosh(beta * A))
 
 
@@ -99,7 +103,7 @@ def test_triangle_loop_width_matches_the_analytic_steady_loop(gamma):
 
 
 def test_jump_equals_the_time_integration_of_a_ramp():
-    """jump (the exact dh/dV sweep) and solve_ivp of dh/dt along a ramp agree: rate-free."""
+    """The exact dh/dV sweep (jump) and solve_ivp of dh/dt along a ramp agree: rate-free."""
     spec = bouc_wen(beta=0.025, gamma=0.01)
     s = piezo.initial_state(spec)
     for v in (80.0, 10.0, 60.0, 35.0):

@@ -40,7 +40,7 @@ def _sensor(ctx: _Ctx, raw: Any, output: Any) -> SensorSpec:
 
 
 def _actuator(ctx: _Ctx, key: str, spec: dict, kind: str, stroke: list) -> Any:
-    """The drive's optional ``actuator:`` block (engine/config_actuator.py), or None."""
+    """Read the drive's optional ``actuator:`` block (engine/config_actuator.py), or None."""
     if "actuator" not in spec:
         return None
     if kind != "drive":

@@ -100,7 +100,7 @@ class PiezoSpec:
 
     @property
     def lagged(self) -> bool:
-        """True if the amplifier has a finite bandwidth (V_a is a lagging state)."""
+        """Tell whether the amplifier has a finite bandwidth (V_a is a lagging state)."""
         return self.bandwidth > 0.0
 
     @property
