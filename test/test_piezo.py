@@ -159,6 +159,16 @@ def test_creep_step_follows_the_chain_sum_of_exponentials():
     np.testing.assert_allclose(run.output, expected, rtol=1e-7)
 
 
+def test_a_chain_a_decade_apart_creeps_the_logarithmic_law():
+    """Ratio g per element, tau 1 ms .. 1000 s: g per time decade (PI's creep factor)."""
+    g = 0.015
+    spec = bouc_wen(alpha=0.0, creep=tuple(CreepElement(g, 10.0**k) for k in range(-3, 4)))
+    t = np.array([0.0, 0.01, 0.1, 1.0, 10.0])
+    run = piezo_run.simulate(spec, [0.0, 10.0], [50.0, 50.0], 0.0, t, rtol=1e-10)
+    x = run.output / (GAIN * 50.0)
+    np.testing.assert_allclose(np.diff(x)[1:], g, rtol=2e-3)  # from 10 ms to 10 s
+
+
 def test_amplifier_lag_and_one_creep_element_step():
     tau_a, r, tau = 1.0 / (2 * math.pi * 50.0), 0.02, 0.05
     spec = bouc_wen(alpha=0.0, bandwidth=50.0, creep=(CreepElement(r, tau),))

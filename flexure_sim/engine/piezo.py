@@ -11,7 +11,8 @@ The chain from the command to the force on the stage (every quantity SI; V in vo
    ``bandwidth`` 0 means unlimited: V_a = V_c, and a change of a held command is applied by
    `jump` (the hysteresis below is rate-independent, so a jump is integrated exactly in V).
 3. hysteresis, the Bouc-Wen model with n = 1 as used for piezo actuators (Low and Guo,
-   J. Microelectromech. Syst. 4(4) 1995, eqs. 5-6; Rakotondrabe, IEEE T-ASE 8(2) 2011, eq. 1):
+   J. Microelectromech. Syst. 4(4) 230-237, 1995; Rakotondrabe, IEEE T-ASE 8(2) 428-431,
+   2011):
    x_h = d (V_a - v_min) - h,                                              (P3)
    dh/dt = alpha d dV_a/dt - beta |dV_a/dt| h - gamma dV_a/dt |h|,          (P4)
    alpha (dimensionless) sets the loop's size, beta and gamma (1/V) its shape; h is in m.
@@ -26,7 +27,9 @@ The chain from the command to the force on the stage (every quantity SI; V in vo
    so a step of x_h by D gives D (1 + sum_i r_i (1 - exp(-t / tau_i))). Elements a time
    decade apart with ratio g each approximate the logarithmic law
    D(t) = D_0.1 (1 + g log10(t / 0.1 s)) with creep factor g ~ 0.01-0.02 (Physik Instrumente,
-   piezo tutorial, "Creep / Drift").
+   piezo tutorial, "Creep / Drift"): over a decade t..10t the increments
+   g (exp(-t/tau_k) - exp(-10 t/tau_k)), tau_k = 10^k s, telescope to exactly g for an
+   endless chain, so a finite chain creeps g per decade between its first and last tau.
 5. free stroke (the displacement of the unloaded actuator) and the stack's stiffness k_s in
    series with the stage:
    x_a = s_min + x_h + sum_i c_i,                                          (P6)
@@ -39,7 +42,7 @@ The chain from the command to the force on the stage (every quantity SI; V in vo
 The stage does not act back on the actuator's states: hysteresis and creep are those of the
 free stroke, and the load only compresses the stack (P7).
 
-State per actuator (`STATE_NAMES`): s = [V_a (V), h (m), c_1 .. c_N (m)]. `rhs` is f in
+State per actuator (`PiezoSpec.state_names`): s = [V_a (V), h (m), c_1 .. c_N (m)]. `rhs` is f in
 ds/dt = f(s, V_c, dV_c/dt) (the rate is used only without an amplifier lag), `jacobian` its
 exact derivative; `advance` steps it under a held command (exact but for the creep's
 input, linear over the step). Steady hysteresis loop in closed form: `steady_loop_half_width`.
