@@ -23,6 +23,10 @@ Format (SI units; see config/microstage.yaml for a complete example)::
       - {type: sine_rate, body: link2, coordinate: theta, amplitude: 4.9348, frequency: 5.0}
     output: {body: body4, axis: [1, 0]}
 
+A ``drive`` may carry a piezo actuator block ``actuator: {command, v_min, v_max, bandwidth,
+stiffness, hysteresis: {alpha, beta, gamma}, creep: [{ratio, tau}, ...]}``: see
+engine/config_actuator.py and engine/piezo.py.
+
 Several drives: give each a ``name`` (a single unnamed drive is named ``drive``). ``axis``
 may name one coordinate instead (``axis: theta``: a tangential piezo turning the body; input
 in rad; the body's other coordinates stay free). ``type: force``: a force-controlled drive,

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from .config_actuator import actuator_spec
 from .config_values import axis as _axis
 from .config_values import body_ref as _body_ref
 from .config_values import Ctx as _Ctx
@@ -36,6 +37,16 @@ def _sensor(ctx: _Ctx, raw: Any, output: Any) -> SensorSpec:
                 raise ctx.fail(f"sensor.{k}", f"expected an integer >= 0, got {_shown(v)}")
             values[k] = v
     return SensorSpec(**values)
+
+
+def _actuator(ctx: _Ctx, key: str, spec: dict, kind: str, stroke: list) -> Any:
+    """Read the drive's optional ``actuator:`` block (engine/config_actuator.py), or None."""
+    if "actuator" not in spec:
+        return None
+    if kind != "drive":
+        raise ctx.fail(f"{key}.actuator", "a piezo actuator belongs on a displacement drive "
+                       "(type: drive); its stack stiffness makes the force on the stage")
+    return actuator_spec(ctx, f"{key}.actuator", spec["actuator"], (stroke[0], stroke[1]))
 
 
 def _outputs(ctx: _Ctx, raw: Any, by_name: dict[str, Body]) -> tuple[Output, ...]:
@@ -86,7 +97,7 @@ def _constraints(ctx, raw, by_name) -> list:
             coords = (0, 1, 2)
         elif kind in ("drive", "force"):
             _no_unknown(ctx, key, spec, {"type", "name", "body", "axis", "response_time",
-                                         "stroke", "slew_rate"})
+                                         "stroke", "slew_rate", "actuator"})
             stroke = _vector(ctx, f"{key}.stroke", _require(ctx, key, spec, "stroke"), (2,))
             if stroke[0] >= stroke[1]:
                 raise ctx.fail(f"{key}.stroke",
@@ -110,6 +121,7 @@ def _constraints(ctx, raw, by_name) -> list:
                 _number(ctx, f"{key}.slew_rate", _require(ctx, key, spec, "slew_rate"),
                         positive=True),
                 dname, coord, "force" if kind == "force" else "displacement",
+                _actuator(ctx, key, spec, kind, stroke),
             )
             if kind == "force":
                 coords = ()  # the body stays free: checked against the held ones below

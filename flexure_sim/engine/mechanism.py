@@ -15,6 +15,7 @@ from typing import Optional, Union
 import numpy as np
 
 from .hinge_laws import HingeLaw
+from .piezo import PiezoSpec
 from .sensor import SensorSpec
 from .stress import StressGeometry
 
@@ -95,6 +96,9 @@ class Drive:
     is prescribed) or ``force`` (the input is a force (N, or N m on theta) applied to the
     body along ``axis``/``coordinate``, whose coordinates stay free; ``stroke`` is then
     the force range).
+
+    ``actuator``: the piezo stack model of the ``actuator:`` block (engine/piezo.py), None
+    without one. Parsed and validated; not yet used by stepping (see README "Piezo actuator").
     """
 
     body: str
@@ -105,6 +109,7 @@ class Drive:
     name: str = "drive"
     coordinate: Optional[str] = None
     kind: str = "displacement"
+    actuator: Optional[PiezoSpec] = None
 
     def direction(self, mech: "Mechanism") -> np.ndarray:
         """

@@ -22,6 +22,7 @@ TOOL_MODULES: tuple[str, ...] = (
     "tools.sensitivity",
     "tools.bench",
     "tools.sweep",
+    "tools.piezo_loop",
 )
 
 
