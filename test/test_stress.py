@@ -217,7 +217,9 @@ def test_design_geometry_is_the_mechanisms_stress_geometry():
 # 6 M / (t d^2) on the net width d = H - 2r -- the same definition as Roark's Table 17.1.
 # Coefficients as quoted in the public R function stress.concentration.factor (Reuel Smith,
 # 2022-2024; geometry "rect_2semicirc_edge", load type 2, "Chart 2.3, 2.24 in Peterson's
-# Stress Concentration Factors").
+# Stress Concentration Factors"); that function's tension row for the same notches (Chart 2.3,
+# 3.065 - 3.472 x + 1.009 x^2 + 0.405 x^3) is also what eng-calculations.com prints for
+# Peterson's "tension strip with opposite semicircular edge notches".
 def _peterson_chart_2_24(x):
     return 3.065 - 6.637 * x + 8.229 * x**2 - 3.636 * x**3
 
