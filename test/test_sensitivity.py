@@ -17,6 +17,7 @@ from flexure_sim.engine.config import mechanism_from_dict
 from flexure_sim.engine.design import ParameterError, Parameters
 from flexure_sim.engine.sensitivity import sensitivities
 from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.stress import stress_table
 
 U = 1.35e-6
 H_C, X_C = "hinges.c.stiffness.h", "hinges.e.stiffness.D"
@@ -31,7 +32,8 @@ def _resolve(params, changes):
     """
     gain.
 
-    compression, first mode of the stage with the YAML numbers changed, re-solved by the engine.
+    compression, first mode and peak hinge stress of the stage with the YAML numbers changed,
+    re-solved by the engine.
     """
     data = copy.deepcopy(params.data)
     for path, value in changes.items():
@@ -43,10 +45,12 @@ def _resolve(params, changes):
             entry["stiffness"][keys[3]] = value
         else:
             data["stiffness_models"]["notch"][keys[2]] = value
-    sim = Simulation(mechanism_from_dict(data))
+    mech = mechanism_from_dict(data)
+    sim = Simulation(mech)
     snap = sim.static(U).snapshot
     first = linear.modes(linear.linearize(sim, U, wrenches=False)).frequencies[0]
-    return np.array([snap.output / U, snap.compression, first])
+    peak = max(v["stress"] for v in stress_table(snap.wrenches, mech).values())
+    return np.array([snap.output / U, snap.compression, first, peak])
 
 
 def _richardson_first(f, x, dx):
@@ -145,6 +149,25 @@ def test_first_mode_second_derivatives_through_the_mass_matrix(params):
     assert res[f"{mass}|{mass}"] == pytest.approx(fd_mm, rel=1e-4)
     assert res[f"{H_C}|{mass}"] == pytest.approx(fd_hm, rel=1e-4)
     assert res[f"{H_C}|{H_C}"] == pytest.approx(fd_hh, rel=1e-4)
+
+
+def test_peak_stress_derivatives_agree_with_central_differences(params):
+    """
+    First (1e-6) and second (1e-4) derivatives of the peak stress in hinge c's h and D.
+
+    Hinge c carries the peak; D flows through both its stiffness and its concentration factor.
+    """
+    d_c = "hinges.c.stiffness.D"
+    res = sensitivities(params, [H_C, d_c], ["peak_stress"], U)
+    h0, d0 = params.value(H_C), params.value(d_c)
+    for path, x0 in ((H_C, h0), (d_c, d0)):
+        fd = _richardson_first(lambda x: _resolve(params, {path: x})[3], x0, 2e-3 * x0)
+        assert res["gradient"]["peak_stress"][path] == pytest.approx(fd, rel=1e-6), path
+    fd = _second_differences(lambda h, d: _resolve(params, {H_C: h, d_c: d})[3],
+                             h0, d0, 1e-2 * h0, 1e-2 * d0)
+    got = res["second"]["peak_stress"]
+    exact = [got[f"{H_C}|{H_C}"], got[f"{d_c}|{d_c}"], got[f"{H_C}|{d_c}"]]
+    np.testing.assert_allclose(exact, fd, rtol=1e-4)
 
 
 def test_taylor_remainder_falls_as_the_square_of_the_step(params, result):
