@@ -67,7 +67,7 @@ def result(params):
 def test_first_derivatives_agree_with_central_differences(params, result):
     for path in (H_C, X_C):
         x0 = params.value(path)
-        fd = _richardson_first(lambda x: _resolve(params, {path: x}), x0, 2e-3 * x0)
+        fd = _richardson_first(lambda x: _resolve(params, {path: x})[:3], x0, 2e-3 * x0)
         exact = [result["gradient"][o][path] for o in ("gain", "compression", "first_mode")]
         np.testing.assert_allclose(exact, fd, rtol=1e-6)
 

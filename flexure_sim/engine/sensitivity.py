@@ -205,9 +205,6 @@ class Sensitivity:
         )
         return dx, dy
 
-    def first_mode(self) -> float:
-        return float(np.sqrt(self.lam) / (2.0 * np.pi))
-
 
 def sensitivities(
     params: Parameters, wrt: Sequence[str], of: Sequence[str] = OUTPUTS, u: Optional[float] = None
