@@ -42,3 +42,16 @@ def test_static_sweep_figures():
     res = bench_engine.bench_static_sweep(levels=50)
     assert res["gain_at_full_stroke"] == pytest.approx(27.63, rel=1e-3)
     assert res["newton_iterations"] < 6 * 50
+
+
+def test_analyses_benchmark_runs_modes_frf_at_1000_frequencies_and_4_outputs_to_20_parameters():
+    """The issue's analysis benchmark: what it times (its wall times are printed, not tested)."""
+    from flexure_sim.engine.sensitivity import OUTPUTS
+    from flexure_sim.tools.bench_studies import SENSITIVITY_PARAMETERS, bench_analyses
+
+    res = bench_analyses()
+    assert res["frequencies"] == 1000
+    assert res["first_mode_hz"] == pytest.approx(300.6, rel=1e-3)
+    assert res["sensitivity_parameters"] == len(set(SENSITIVITY_PARAMETERS)) == 20
+    assert res["sensitivity_outputs"] == len(OUTPUTS) == 4
+    assert res["modes_frf_wall_s"] > 0 and res["sensitivity_wall_s"] > 0

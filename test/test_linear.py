@@ -65,6 +65,23 @@ def test_hyperdual_composites_with_known_derivatives():
     np.testing.assert_allclose((1.0 / x).d, 2.0 / x.a**3, rtol=4 * EPS)
 
 
+def test_a_complex_step_on_the_hyperdual_parts_gives_the_third_derivative():
+    """
+    Im(f(x + ih)) / h of the e1e2 part is the third derivative, to machine precision.
+
+    The construction engine/sensitivity.py uses for the first mode's second derivative.
+    f = sin(x) sqrt(x): f''' = -cos x sqrt x - (3/2) sin x / sqrt x - (3/4) cos x / x^1.5
+    + (3/8) sin x / x^2.5.
+    """
+    x0, h = 0.9, 1e-30
+    x = hd.HyperDual(x0 + 1j * h, 1.0, 1.0, 0.0)
+    f = np.sin(x) * np.sqrt(x)
+    s, c, r = np.sin(x0), np.cos(x0), np.sqrt(x0)
+    third = -c * r - 1.5 * s / r - 0.75 * c / x0**1.5 + 0.375 * s / x0**2.5
+    assert np.imag(f.d) / h == pytest.approx(third, rel=16 * EPS)
+    assert np.real(f.d) == pytest.approx(-s * r + c / r - 0.25 * s / x0**1.5, rel=16 * EPS)
+
+
 def test_hyperdual_flows_through_the_notch_stiffness_formula():
     from flexure_sim.engine.stiffness import notch_stiffness
 

@@ -17,6 +17,7 @@ from flexure_sim.engine.config import mechanism_from_dict
 from flexure_sim.engine.design import ParameterError, Parameters
 from flexure_sim.engine.sensitivity import sensitivities
 from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.stress import stress_table
 
 U = 1.35e-6
 H_C, X_C = "hinges.c.stiffness.h", "hinges.e.stiffness.D"
@@ -31,7 +32,8 @@ def _resolve(params, changes):
     """
     gain.
 
-    compression, first mode of the stage with the YAML numbers changed, re-solved by the engine.
+    compression, first mode and peak hinge stress of the stage with the YAML numbers changed,
+    re-solved by the engine.
     """
     data = copy.deepcopy(params.data)
     for path, value in changes.items():
@@ -43,10 +45,12 @@ def _resolve(params, changes):
             entry["stiffness"][keys[3]] = value
         else:
             data["stiffness_models"]["notch"][keys[2]] = value
-    sim = Simulation(mechanism_from_dict(data))
+    mech = mechanism_from_dict(data)
+    sim = Simulation(mech)
     snap = sim.static(U).snapshot
     first = linear.modes(linear.linearize(sim, U, wrenches=False)).frequencies[0]
-    return np.array([snap.output / U, snap.compression, first])
+    peak = max(v["stress"] for v in stress_table(snap.wrenches, mech).values())
+    return np.array([snap.output / U, snap.compression, first, peak])
 
 
 def _richardson_first(f, x, dx):
@@ -63,7 +67,7 @@ def result(params):
 def test_first_derivatives_agree_with_central_differences(params, result):
     for path in (H_C, X_C):
         x0 = params.value(path)
-        fd = _richardson_first(lambda x: _resolve(params, {path: x}), x0, 2e-3 * x0)
+        fd = _richardson_first(lambda x: _resolve(params, {path: x})[:3], x0, 2e-3 * x0)
         exact = [result["gradient"][o][path] for o in ("gain", "compression", "first_mode")]
         np.testing.assert_allclose(exact, fd, rtol=1e-6)
 
@@ -88,6 +92,82 @@ def test_second_derivatives_agree_with_central_differences(params, result):
     for k, o in enumerate(("gain", "compression")):
         assert result["second"][o][f"{H_C}|{H_C}"] == pytest.approx(fd_hh[k], rel=1e-4)
         assert result["second"][o][f"{H_C}|{X_C}"] == pytest.approx(fd_ht[k], rel=1e-4)
+
+
+def _second_differences(f, x0, y0, dx, dy):
+    """
+    d2f/dx2, d2f/dy2 and d2f/dx dy by central differences, Richardson-extrapolated.
+
+    Steps dx, dy and their halves.
+    """
+    def xx(d):
+        return (f(x0 + d, y0) - 2 * f(x0, y0) + f(x0 - d, y0)) / d**2
+
+    def yy(d):
+        return (f(x0, y0 + d) - 2 * f(x0, y0) + f(x0, y0 - d)) / d**2
+
+    def xy(a, b):
+        return (f(x0 + a, y0 + b) - f(x0 + a, y0 - b) - f(x0 - a, y0 + b)
+                + f(x0 - a, y0 - b)) / (4 * a * b)
+
+    return ((4 * xx(dx / 2) - xx(dx)) / 3, (4 * yy(dy / 2) - yy(dy)) / 3,
+            (4 * xy(dx / 2, dy / 2) - xy(dx, dy)) / 3)
+
+
+def test_first_mode_second_derivatives_agree_with_central_differences(params, result):
+    """
+    d2 f1 / dh2, dD2 and dh dD (two hinges) against re-solved eigen-analyses.
+
+    Exact by Nelson's eigenvector derivative and a complex step on the hyper-dual parts
+    (engine/sensitivity.py).
+    """
+    h0, d0 = params.value(H_C), params.value(X_C)
+    fd = _second_differences(lambda h, d: _resolve(params, {H_C: h, X_C: d})[2],
+                             h0, d0, 1e-2 * h0, 1e-2 * d0)
+    got = result["second"]["first_mode"]
+    exact = [got[f"{H_C}|{H_C}"], got[f"{X_C}|{X_C}"], got[f"{H_C}|{X_C}"]]
+    np.testing.assert_allclose(exact, fd, rtol=1e-4)
+
+
+def test_first_mode_second_derivatives_through_the_mass_matrix(params):
+    """d2 f1 / dm2 and d2 f1 / dh dm: the M_p, M_pq terms of the eigenvalue's second derivative."""
+    mech, mass = params.mechanism, "bodies.body4.mass"
+    res = sensitivities(params, [H_C, mass], ["first_mode"], U)["second"]["first_mode"]
+    h0, m0 = params.value(H_C), params.value(mass)
+
+    def first(h, m):
+        data = copy.deepcopy(params.data)
+        entry = [e for e in data["hinges"] if e["name"] == "c"][0]
+        if isinstance(entry["stiffness"], str):
+            entry["stiffness"] = dict(data["stiffness_models"][entry["stiffness"]])
+        entry["stiffness"]["h"] = h
+        sim = Simulation(_replaced(mechanism_from_dict(data), body="body4", mass=m))
+        return linear.modes(linear.linearize(sim, U, wrenches=False)).frequencies[0]
+
+    assert mech.bodies[mech.body_index("body4")].mass == m0
+    fd_hh, fd_mm, fd_hm = _second_differences(first, h0, m0, 1e-2 * h0, 1e-2 * m0)
+    assert res[f"{mass}|{mass}"] == pytest.approx(fd_mm, rel=1e-4)
+    assert res[f"{H_C}|{mass}"] == pytest.approx(fd_hm, rel=1e-4)
+    assert res[f"{H_C}|{H_C}"] == pytest.approx(fd_hh, rel=1e-4)
+
+
+def test_peak_stress_derivatives_agree_with_central_differences(params):
+    """
+    First (1e-6) and second (1e-4) derivatives of the peak stress in hinge c's h and D.
+
+    Hinge c carries the peak; D flows through both its stiffness and its concentration factor.
+    """
+    d_c = "hinges.c.stiffness.D"
+    res = sensitivities(params, [H_C, d_c], ["peak_stress"], U)
+    h0, d0 = params.value(H_C), params.value(d_c)
+    for path, x0 in ((H_C, h0), (d_c, d0)):
+        fd = _richardson_first(lambda x: _resolve(params, {path: x})[3], x0, 2e-3 * x0)
+        assert res["gradient"]["peak_stress"][path] == pytest.approx(fd, rel=1e-6), path
+    fd = _second_differences(lambda h, d: _resolve(params, {H_C: h, d_c: d})[3],
+                             h0, d0, 1e-2 * h0, 1e-2 * d0)
+    got = res["second"]["peak_stress"]
+    exact = [got[f"{H_C}|{H_C}"], got[f"{d_c}|{d_c}"], got[f"{H_C}|{d_c}"]]
+    np.testing.assert_allclose(exact, fd, rtol=1e-4)
 
 
 def test_taylor_remainder_falls_as_the_square_of_the_step(params, result):
@@ -130,6 +210,22 @@ def test_sensitivity_command_json(capsys):
     assert "stiffness_models.notch.h|bodies.body4.mass" in out["second"]["peak_stress"]
     assert main(["sensitivity", "microstage", "--wrt", "nonsense.key"]) == 2
     assert "nonsense: no such key" in capsys.readouterr().err
+
+
+def test_sensitivity_command_reports_the_first_modes_mixed_second_derivative(result, capsys):
+    """--wrt A,B --of first_mode: d2 f1 / dA dB in the JSON and in the text."""
+    argv = ["sensitivity", "microstage", "--wrt", f"{H_C},{X_C}", "--of", "first_mode",
+            "--input", str(U)]
+    assert main(argv + ["--json"]) == 0
+    second = json.loads(capsys.readouterr().out)["second"]["first_mode"]
+    expected = result["second"]["first_mode"]
+    for key in (f"{H_C}|{H_C}", f"{X_C}|{X_C}", f"{H_C}|{X_C}"):
+        assert second[key] == pytest.approx(expected[key], rel=1e-9)
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    line = [t for t in text.splitlines() if t.strip().startswith(f"d2/d {H_C} d {X_C}:")]
+    assert len(line) == 1, text
+    assert float(line[0].split(":")[1]) == pytest.approx(expected[f"{H_C}|{X_C}"], rel=1e-9)
 
 
 def _replaced(mech, hinge=None, frame=None, index=None, value=None, body=None, mass=None):

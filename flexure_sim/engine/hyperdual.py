@@ -17,6 +17,8 @@ twist carried together with its derivative. Every elementary function obeys
 
 ``HyperDual`` is vectorised: the four parts are NumPy arrays that broadcast like the real
 part (an extra leading axis in the derivative parts carries several seed directions at once).
+Parts are real, or complex where a caller adds a complex step on top of the hyper-dual parts
+for one third derivative (engine/sensitivity.py, the first mode's second derivative).
 NumPy ufuncs dispatch to it through ``__array_ufunc__``, so ``np.sin(x)``, ``x * array`` and
 ``array * x`` all work; so does ``np.sqrt`` in the stiffness formulas of ``stiffness.py``.
 """
@@ -36,6 +38,13 @@ def _parts(x):
     return x, 0.0, 0.0, 0.0
 
 
+def _part(x) -> np.ndarray:
+    """One part as a float array, or as a complex array if it is complex (module docstring)."""
+    if isinstance(x, complex) or getattr(getattr(x, "dtype", None), "kind", "") == "c":
+        return np.asarray(x)
+    return np.asarray(x, dtype=float)
+
+
 def _chain(x: "HyperDual", f, f1, f2) -> "HyperDual":
     """f(x) from f(a), f'(a), f''(a) (the module docstring's rule)."""
     return HyperDual(f, f1 * x.b, f1 * x.c, f1 * x.d + f2 * x.b * x.c)
@@ -48,10 +57,10 @@ class HyperDual:
     __slots__ = ("a", "b", "c", "d")
 
     def __init__(self, a, b=0.0, c=0.0, d=0.0):
-        self.a = np.asarray(a, dtype=float)
-        self.b = np.asarray(b, dtype=float)
-        self.c = np.asarray(c, dtype=float)
-        self.d = np.asarray(d, dtype=float)
+        self.a = _part(a)
+        self.b = _part(b)
+        self.c = _part(c)
+        self.d = _part(d)
 
     # ------------------------------------------------------------------ basics
     @property

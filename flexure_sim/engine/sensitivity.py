@@ -21,10 +21,25 @@ independent infinitesimals e1, e2 and their product for the second derivative.
 
 Outputs: ``gain`` (output displacement / u), ``compression`` (m), ``peak_stress`` (Pa, the
 largest hinge stress, engine/stress.py) and ``first_mode`` (Hz). The first natural frequency
-uses eigenvalue sensitivity, d lambda/dp = phi^T (dK/dp - lambda dM/dp) phi with phi
-M-normalised, where dK/dp phi (total: z moves with p) is the e1e2 part of one hyper-dual
-force evaluation at z + e1 phi + e2 dz/dp with p + e2; its second derivative would need
-third derivatives of the forces and is not computed (None).
+f = sqrt(lambda) / 2 pi comes from eigenvalue sensitivity of (K - lambda M) phi = 0,
+phi^T M phi = 1 (K, M on the free coordinates; K = -dQ_F/dz_F total in p, since z moves with
+p), with r_p = (K_p - lambda_p M - lambda M_p) phi:
+
+    lambda_p  = phi^T (K_p - lambda M_p) phi,
+    lambda_pq = phi^T (K_pq - lambda_p M_q - lambda_q M_p - lambda M_pq) phi
+                + phi_p^T r_q + phi_q^T r_p,
+
+the second form by differentiating the first once more and multiplying by phi^T. The
+eigenvector derivative phi_p solves (K - lambda M) phi_p = -r_p; only its part M-orthogonal
+to phi matters (phi^T r_q = 0), so it comes from the bordered system with phi^T M phi_p = 0
+instead of Nelson's normalisation (R. B. Nelson, "Simplified calculation of eigenvector
+derivatives", AIAA J. 14 (1976) 1201). K_pq phi is a third derivative of the forces
+(Q_zpq[phi] with the chain through z(p, q)): one force evaluation at the hyper-dual z(p, q)
+with a complex step i h phi added to its real part gives all of K phi, K_p phi, K_q phi and
+K_pq phi as the imaginary parts / h of the four hyper-dual parts of Q (complex step, Lyness
+and Moler 1967; Martins, Sturdza and Alonso, ACM TOMS 29 (2003) 245: there is no
+subtraction, so with h = 1e-30 the step error h^2 is far below rounding -- exact in double
+precision, like the hyper-dual parts).
 """
 
 from __future__ import annotations
@@ -42,6 +57,9 @@ from .solver import Simulation
 from .stress import hinge_stress
 
 OUTPUTS = ("gain", "compression", "first_mode", "peak_stress")
+
+#: Complex step h (relative to z in m and rad, phi M-normalised): h^2 is below rounding.
+COMPLEX_STEP = 1e-30
 
 
 class Sensitivity:
@@ -70,8 +88,14 @@ class Sensitivity:
         dQz, _ = linear.tangent_at(self.sim, self.z)
         K = -dQz[np.ix_(lay.free, lay.free)]
         self.lu = scipy.linalg.lu_factor(K)
-        w2, shapes = scipy.linalg.eigh(0.5 * (K + K.T), np.diag(lay.mass[lay.free]))
+        mass = lay.mass[lay.free]
+        w2, shapes = scipy.linalg.eigh(0.5 * (K + K.T), np.diag(mass))
         self.lam, self.phi = w2[0], shapes[:, 0]
+        n = len(self.free)  # Nelson's bordered matrix [[K - lambda M, M phi], [phi^T M, 0]]
+        bordered = np.zeros((n + 1, n + 1))
+        bordered[:n, :n] = 0.5 * (K + K.T) - self.lam * np.diag(mass)
+        bordered[:n, n] = bordered[n, :n] = mass * self.phi
+        self.bordered = scipy.linalg.lu_factor(bordered)
         self.ia, self.ib = hinge_indices(mech)
         self.twistor = params.twistor
 
@@ -130,7 +154,37 @@ class Sensitivity:
             if best is None:
                 raise ParameterError("peak_stress: no hinge has a notch or leaf geometry")
             out["peak_stress"] = best
+        if "first_mode" in which:
+            out["first_mode"] = self._first_mode(design, z)
         return out
+
+    def _first_mode(self, design, z):
+        """
+        First natural frequency (Hz) as a HyperDual: its parts d/dp, d/dq, d2/dp dq.
+
+        From the hyper-dual design and equilibrium z(p, q) (module docstring).
+        """
+        F, n = self.free, len(self.free)
+        phi = np.zeros(len(self.z))
+        phi[F] = self.phi
+        za, zb, zc, zd = hd.parts_of(z)
+        Q = forces(design, self.twistor, self.ia, self.ib,
+                   hd.HyperDual(za + 1j * COMPLEX_STEP * phi, zb, zc, zd)).Q
+        # -Im(Q parts) / h = (K phi, K_p phi, K_q phi, K_pq phi) on the free coordinates.
+        _, kp, kq, kpq = (-np.imag(np.asarray(x))[..., F] / COMPLEX_STEP for x in hd.parts_of(Q))
+        m, mp, mq, mpq = (np.broadcast_to(np.asarray(x)[..., F], (n,))
+                          for x in hd.parts_of(design.mass))
+        lam, ph = self.lam, self.phi
+        lam_p = ph @ kp - lam * ph @ (mp * ph)
+        lam_q = ph @ kq - lam * ph @ (mq * ph)
+        r_p = kp - (lam_p * m + lam * mp) * ph
+        r_q = kq - (lam_q * m + lam * mq) * ph
+        rhs = np.zeros((n + 1, 2))
+        rhs[:n, 0], rhs[:n, 1] = -r_p, -r_q
+        phi_pq = scipy.linalg.lu_solve(self.bordered, rhs)[:n]
+        lam_pq = (ph @ kpq - ph @ ((lam_p * mq + lam_q * mp + lam * mpq) * ph)
+                  + phi_pq[:, 0] @ r_q + phi_pq[:, 1] @ r_p)
+        return np.sqrt(hd.HyperDual(lam, lam_p, lam_q, lam_pq)) / (2.0 * np.pi)
 
     def _frame_move(self, body: str, c, z):
         i = self.params.mechanism.body_index(body)
@@ -150,30 +204,6 @@ class Sensitivity:
             - (np.sin(th0) * c[0] + np.cos(th0) * c[1])
         )
         return dx, dy
-
-    def first_mode_derivative(self, path: str, z_p: Optional[np.ndarray] = None) -> float:
-        """Return d f_1 / dp (Hz per unit of p) by eigenvalue sensitivity; z_p = dz/dp if known."""
-        v = self.params.check(path)
-        design = self.params.design({path: hd.HyperDual(v, 0.0, 1.0, 0.0)})
-        if z_p is None:
-            z_p = self.equilibrium(design).c
-        F = self.free
-        phi = np.zeros_like(self.z)
-        phi[F] = self.phi
-        zz = hd.HyperDual(self.z, phi, z_p, 0.0)
-        Q = forces(design, self.twistor, self.ia, self.ib, zz).Q
-        dK_phi = -np.asarray(hd.parts_of(Q)[3])[F]
-        mass = design.mass
-        dM = (
-            np.asarray(hd.parts_of(mass)[2])[F]
-            if isinstance(mass, hd.HyperDual)
-            else np.zeros(len(F))
-        )
-        dlam = self.phi @ dK_phi - self.lam * self.phi @ (dM * self.phi)
-        return float(dlam / (2.0 * np.sqrt(self.lam)) / (2.0 * np.pi))
-
-    def first_mode(self) -> float:
-        return float(np.sqrt(self.lam) / (2.0 * np.pi))
 
 
 def sensitivities(
@@ -201,20 +231,16 @@ def sensitivities(
         raise ParameterError(f"gain: mechanism {mech.name!r} names no output body")
     if "compression" in of and mech.compression_hinge is None:
         raise ParameterError(f"compression: mechanism {mech.name!r} names no compression hinge")
-    static = [o for o in of if o != "first_mode"]
-    sens = Sensitivity(params, u, bool(static))
+    sens = Sensitivity(params, u, any(o != "first_mode" for o in of))
     base = params.design()
     values = {
-        k: float(hd.real(v)) for k, v in sens.outputs(base, hd.HyperDual(sens.z), static).items()
+        k: float(hd.real(v)) for k, v in sens.outputs(base, hd.HyperDual(sens.z), of).items()
     }
     gradient = {o: {} for o in of}
     second = {o: {} for o in of}
-    z_p = {}
     for p in wrt:
         design = params.design({p: hd.HyperDual(params.value(p), 1.0, 1.0, 0.0)})
-        z = sens.equilibrium(design)
-        z_p[p] = np.asarray(z.b)
-        res = sens.outputs(design, z, static)
+        res = sens.outputs(design, sens.equilibrium(design), of)
         for o, v in res.items():
             gradient[o][p] = float(v.b)
             second[o][f"{p}|{p}"] = float(v.d)
@@ -226,11 +252,6 @@ def sensitivities(
                 q: hd.HyperDual(params.value(q), 0.0, 1.0, 0.0),
             }
         )
-        for o, v in sens.outputs(design, sens.equilibrium(design), static).items():
+        for o, v in sens.outputs(design, sens.equilibrium(design), of).items():
             second[o][f"{p}|{q}"] = float(v.d)
-    if "first_mode" in of:
-        values["first_mode"] = sens.first_mode()
-        for p in wrt:
-            gradient["first_mode"][p] = sens.first_mode_derivative(p, z_p[p])
-            second["first_mode"] = None
     return {"input": u, "values": values, "gradient": gradient, "second": second}

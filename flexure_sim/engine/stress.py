@@ -20,7 +20,11 @@ Formulas for Stress and Strain", 7th ed. (McGraw-Hill, 2002), Table 17.1:
 
 for notch depth a, notch radius r and gross width W. A circular notch hinge is the case of
 semicircular notches, a = r = D/2, W = h + D (a/r = 1, 2a/W = D/(h + D)); the factor tends to
-1 for a thin neck between large holes (2a/W -> 1), as flexure hinges are designed. Applying
+1 for a thin neck between large holes (2a/W -> 1), as flexure hinges are designed. Checked
+against Peterson's Chart 2.24 (opposite semicircular notches in bending; W. D. and D. F.
+Pilkey, "Peterson's Stress Concentration Factors", 3rd ed., 2008) within 2 % for 2a/W <= 0.5,
+and for thin necks against a plane-stress finite-element model: at the stage's h/D = 1/12
+it is 1.2 % above (conservative), where Peterson's polynomial is 5.7 % high. Applying
 the bending factor to the axial part too is conservative (the tension factor of the same
 notch is smaller).
 

@@ -44,9 +44,6 @@ def run(args) -> int:
         print(f"{o} = {res['values'][o]:.10g}")
         for p, d in res["gradient"][o].items():
             print(f"  d/d {p}: {d:.10g}")
-        if res["second"][o] is None:
-            print("  second derivatives: not available (needs third derivatives of the forces)")
-            continue
         for pq, d in res["second"][o].items():
             print(f"  d2/d {pq.replace('|', ' d ')}: {d:.10g}")
     return 0
