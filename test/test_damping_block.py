@@ -1,5 +1,5 @@
 """
-The mechanism file's ``damping:`` block (Rayleigh or modal) wired into the engine (issue 12 item 1).
+The mechanism file's ``damping:`` block (Rayleigh or modal) in the engine (issue 12 item 1).
 
 Expected values come from independent sources: the definition of a damping ratio (the poles of
 the exact Jacobian, -Re/|lambda|), the logarithmic decrement of a free decay simulated by the
@@ -33,7 +33,7 @@ def stage_dict(name: str = "microstage") -> dict:
 
 
 def undamped_hinges(damping: dict) -> dict:
-    """The stage with no hinge damping and the given damping block."""
+    """Return the stage with no hinge damping and the given damping block."""
     data = stage_dict()
     data["defaults"]["damping"] = {"t_char": 0.0}
     data["damping"] = damping

@@ -69,7 +69,7 @@ class DampingSpec:
     ratio: Optional[float] = None
 
     def mode_ratios(self, n_modes: int) -> np.ndarray:
-        """The modal damping ratio of each of ``n_modes`` modes (ValueError if not given)."""
+        """Return the damping ratio of each of ``n_modes`` modes (ValueError if not given)."""
         given = np.asarray(self.ratios, dtype=float)
         if given.size > n_modes or (given.size < n_modes and self.ratio is None):
             raise ValueError(f"ratios: {given.size} given for {n_modes} modes")

@@ -275,8 +275,8 @@ class Model:
 
         Rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v), du/dt = (command - u)/tau, with z_P, v_P
         depending on u through the drive axis; dQ/dv includes -C (``velocity_jacobian``),
-        also through v_P = d_u (command - u)/tau. With ``load_gradient`` also g = dq/dy of the drive
-        load q = du^T Q_P: (A, g).
+        also through v_P = d_u (command - u)/tau. With ``load_gradient`` also g = dq/dy of the
+        drive load q = du^T Q_P: (A, g).
         """
         part = self.part
         nF = len(part.free)
