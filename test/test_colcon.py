@@ -68,6 +68,7 @@ def test_colcon_build_installs_the_package_for_ros2_run_without_a_pip_copy(works
     index = install / "share" / "ament_index" / "resource_index"
     assert (index / "packages" / "flexure_sim").is_file()
     assert (install / "share" / "flexure_sim" / "config" / "microstage.yaml").is_file()
+    assert (install / "share" / "flexure_sim" / "config" / "microstage_realistic.yaml").is_file()
     # The environment that built it cannot import a flexure_sim of its own.
     bare = subprocess.run([str(workspace.python), "-c", "import flexure_sim"], capture_output=True,
                           text=True, env=fresh_shell_env(workspace.python), timeout=60,

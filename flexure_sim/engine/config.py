@@ -39,6 +39,8 @@ its axis, whose coordinates stay free. Several outputs::
     compression_hinge: a
     sensor: {noise_rms: 2.0e-9, resolution: 1.0e-9, bandwidth: 5000.0, latency: 1, seed: 0}
                                               # optional, needs output; see engine/sensor.py
+    damping: {model: modal, ratio: 0.01}     # optional, besides the hinges' own: a damping
+                                              # matrix C at rest; see engine/config_damping.py
 
 Stiffness models: ``notch`` (D, h, t, E, nu), ``cantilever`` (length, thickness, width, E,
 nu), ``matrix`` (K: 3x3, or Ko, Kt: [kx, ky] and optional Kc: [cx, cy]). A notch or
@@ -52,6 +54,7 @@ and ``damping: {t_char}`` means B = t_char K as for the other laws.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any, Callable
@@ -61,6 +64,7 @@ import numpy as np
 from . import stiffness as stiffness_models
 from .builtins import builtin_names, find_builtin
 from .config_constraints import _constraints, _outputs, _sensor
+from .config_damping import hinge_damping, mechanism_damping
 from .config_values import ConfigError  # noqa: F401  (raised by the loader; re-exported)
 from .config_values import axis as _axis
 from .config_values import body_ref as _body_ref
@@ -193,6 +197,7 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
     _no_unknown(ctx, "", data, {
         "name", "description", "source", "defaults", "stiffness_models", "bodies", "hinges",
         "constraints", "output", "outputs", "compression_hinge", "metadata", "sensor",
+        "damping",
     })
     name = _name(ctx, "name", _require(ctx, "", data, "name"))
     defaults = _mapping(ctx, "defaults", data.get("defaults", {}))
@@ -232,7 +237,7 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
         )
     metadata = _mapping(ctx, "metadata", data.get("metadata", {}))
     sensor = _sensor(ctx, data["sensor"], output) if "sensor" in data else None
-    return Mechanism(
+    mech = Mechanism(
         name=name,
         bodies=tuple(bodies),
         hinges=tuple(hinges),
@@ -245,6 +250,11 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
         sensor=sensor,
         outputs=outputs,
     )
+    if "damping" not in data:
+        return mech
+    from .model import partition  # the modes are those of the free coordinates
+    n_modes = len(partition(mech).free)
+    return dataclasses.replace(mech, damping=mechanism_damping(ctx, data["damping"], n_modes))
 
 
 def _bodies(ctx: _Ctx, raw: Any) -> list[Body]:
@@ -372,7 +382,8 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
                 raise ctx.fail(law_key,
                                f"unknown law {_shown(law_name)} ({', '.join(COORDINATES)}, "
                                "or {polynomial: FILE})")
-        B = _damping(ctx, f"{key}.damping", spec.get("damping", defaults.get("damping")), K)
+        B = hinge_damping(ctx, f"{key}.damping", spec.get("damping", defaults.get("damping")),
+                          K)
         law = poly.with_damping(B) if poly is not None else QuadraticLaw(law_name, K, B)
         hinges.append(Hinge(name, fa, fb, law, source, stress=geometry))
     return hinges
@@ -398,30 +409,3 @@ def _polynomial_law(ctx: _Ctx, key: str, spec: dict, cache: dict) -> PolynomialL
         except PolynomialFileError as exc:
             raise ctx.fail(f"{key}.polynomial", str(exc)) from None
     return cache[path]
-
-
-def _damping(ctx: _Ctx, key: str, spec: Any, K: np.ndarray) -> np.ndarray:
-    if spec is None:
-        raise ctx.fail(
-            key, "missing damping (give {t_char: seconds} or {B: 3x3}, here or in defaults)"
-        )
-    spec = _mapping(ctx, key, spec)
-    _no_unknown(ctx, key, spec, {"t_char", "B"})
-    if "t_char" in spec:
-        with np.errstate(all="ignore"):
-            B = _number(ctx, f"{key}.t_char", spec["t_char"], nonnegative=True) * K
-        if not np.all(np.isfinite(B)):
-            raise ctx.fail(f"{key}.t_char",
-                           "t_char times the stiffness is not finite: check the units")
-        return B
-    if "B" in spec:
-        rows = spec["B"]
-        if not isinstance(rows, list) or len(rows) != 3:
-            raise ctx.fail(f"{key}.B", "expected a 3x3 matrix")
-        B = np.array([_vector(ctx, f"{key}.B[{i}]", r, (3,)) for i, r in enumerate(rows)])
-        with np.errstate(all="ignore"):
-            psd = np.allclose(B, B.T) and np.all(np.linalg.eigvalsh(B) >= 0)
-        if not psd:
-            raise ctx.fail(f"{key}.B", "damping matrix must be symmetric positive semi-definite")
-        return B
-    raise ctx.fail(key, "give t_char or B")

@@ -19,9 +19,11 @@ v are the derivative parts of one hyper-dual evaluation of ``parametric.forces``
 
 Undamped modes solve K phi = omega^2 M phi on the free coordinates with the exact tangent
 stiffness K = -dQ_F/dz_F (symmetric at an equilibrium: the Hessian of the potential) and the
-diagonal mass matrix (``scipy.linalg.eigh``: phi^T M phi = I). The damped poles are the
-eigenvalues of A (including the actuator pole -1/tau); with damping scaled to zero they
-tend to +-i omega. The frequency response is G(i w) = C (i w I - A)^-1 B + D.
+diagonal mass matrix (``damping_models.natural_modes``: phi^T M phi = I). The damped poles are
+the eigenvalues of A (including the actuator pole -1/tau); with damping scaled to zero they
+tend to +-i omega. Damping: the hinges' and the mechanism file's damping matrix C (a
+``damping:`` block, ``Model.damping``), both in dQ/dv (``tangent_at``) and so in A, B, the
+drive force row and the modal ratios. The frequency response is G(i w) = C (i w I - A)^-1 B + D.
 """
 
 from __future__ import annotations
@@ -30,10 +32,10 @@ from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
 import numpy as np
-import scipy.linalg
 
 from . import hyperdual as hd
 from .kinematics import J
+from .damping_models import natural_modes
 from .design import design_of, hinge_indices, twistor_flags
 from .parametric import forces
 from .solver import Simulation, StaticResult
@@ -80,9 +82,13 @@ def layout(sim: Simulation) -> Layout:
 
 
 def tangent_at(sim: Simulation, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Exact dQ/dz and dQ/dv (all coordinates) at rest at z."""
+    """
+    Exact dQ/dz and dQ/dv (all coordinates) at rest at z.
+
+    dQ/dv holds the hinges' damping and the mechanism's damping matrix (-C, ``Model``).
+    """
     hf = sim.assembly.forces(z, np.zeros_like(z), jacobian=True)
-    return hf.dQ_dz, hf.dQ_dv
+    return hf.dQ_dz, sim.model.velocity_jacobian(hf.dQ_dv)
 
 
 # --------------------------------------------------------------------- the model
@@ -278,12 +284,7 @@ def modes(model: LinearModel) -> Modes:
 
     Undamped modes: the generalised eigenproblem K phi = w^2 M phi; damped poles: eig A.
     """
-    w2, shapes = scipy.linalg.eigh(model.stiffness, np.diag(model.mass))
-    if np.any(w2 <= 0):
-        raise ValueError(
-            "the tangent stiffness is not positive definite at this equilibrium "
-            f"(smallest eigenvalue {w2.min():.3g})"
-        )
+    w2, shapes = natural_modes(model.stiffness, model.mass)
     poles = np.linalg.eigvals(model.A)
     poles = poles[np.lexsort((poles.imag, np.abs(poles)))]
     mag = np.abs(poles)

@@ -14,6 +14,7 @@ from typing import Optional, Union
 
 import numpy as np
 
+from .damping_models import DampingSpec
 from .hinge_laws import HingeLaw
 from .piezo import PiezoSpec
 from .sensor import SensorSpec
@@ -212,6 +213,9 @@ class Mechanism:
     sensor: Optional[SensorSpec] = None
     #: Named outputs (``outputs:`` in YAML); empty: the single ``output``, if any.
     outputs: tuple[Output, ...] = ()
+    #: The mechanism's damping matrix (``damping:`` in YAML: Rayleigh or modal, built at rest
+    #: by ``damping_models.damping_matrix``), besides the hinges' own; None: hinges only.
+    damping: Optional[DampingSpec] = None
 
     def body_index(self, name: str) -> int:
         """Index of a body by name (ValueError naming it if unknown)."""

@@ -16,8 +16,10 @@ dissertation's Baumgarte-stabilised multipliers (6.21-6.23), nothing drifts.
 
 The driven coordinate follows the actuator output u, a first-order lag of the command
 (``Drive``); u is part of the integrated state y = (z_F, v_F, u). A ``Model`` holds the
-partition, masses, the hinge assembly and the compiled kernel's arguments, and evaluates
-F(y, t), its exact Jacobian and the reported measures (output, drive force, compression).
+partition, masses, the hinge assembly, the mechanism's damping matrix C (a ``damping:`` block:
+Rayleigh or modal, built once at rest by ``damping_models.damping_matrix``; Q -= C v on all
+coordinates, dissipating v^T C v) and the compiled kernel's arguments, and evaluates F(y, t),
+its exact Jacobian and the reported measures (output, drive force, compression).
 It never changes after construction, so any number of ``Data`` may share it.
 """
 from __future__ import annotations
@@ -31,6 +33,7 @@ from ..errors import FlexureSimError
 from . import stepping
 from .assembly import Assembly
 from .compression import compression_points, point_displacement
+from .damping_models import damping_matrix
 from .mechanism import COORDINATE_NAMES, Drive, Fixed, Mechanism, SineRate
 
 #: Default fixed step (s): 10 steps per millisecond.
@@ -135,6 +138,13 @@ class Model:
         self.z0 = np.array([b.pose for b in mechanism.bodies], dtype=float).ravel()
         self.part = partition(mechanism)
         self.mass_free = self.mass[self.part.free]
+        #: The damping matrix C of the mechanism's ``damping:`` block on all coordinates
+        #: (None without the block): generalised force -C v, dissipated power v^T C v.
+        self.damping: Optional[np.ndarray] = None
+        if mechanism.damping is not None:
+            rest = self.assembly.forces(self.z0, np.zeros_like(self.z0), jacobian=True)
+            self.damping = damping_matrix(mechanism.damping, self.mass, -rest.dQ_dz,
+                                          self.part.free)
         self.motion = self._motion_arrays()
         self.compression = compression_points(mechanism)
         self.length_scale = max(
@@ -180,9 +190,10 @@ class Model:
         a = self.assembly
         part = self.part
         tau, has_drive, zP0, du, sine_index, sine_amp, sine_w, sine_phase = self.motion
+        damping = self.damping if self.damping is not None else np.zeros((0, 0))
         return (part.free.astype(np.int64), part.prescribed.astype(np.int64), self.mass, zP0, du,
                 tau, has_drive, sine_index, sine_amp, sine_w, sine_phase, a._ia, a._ib, a._ca,
-                a._cb, a.phia, a.phib, a._kind, a._W, a._C)
+                a._cb, a.phia, a.phib, a._kind, a._W, a._C, np.ascontiguousarray(damping))
 
     # ------------------------------------------------------------- coordinates
     def prescribed(self, t: float, u: float, command: float):
@@ -215,6 +226,28 @@ class Model:
         return z, v, u
 
     # --------------------------------------------------------------- dynamics
+    def generalized_forces(self, z: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, float, float]:
+        """
+        Q, potential energy and dissipated power: the hinges' and the damping matrix's.
+
+        Q = Q_hinges - C v and dissipation + v^T C v (``Assembly.generalized_forces``; C:
+        ``damping``, nothing added without it).
+        """
+        Q, potential, dissipation = self.assembly.generalized_forces(z, v)
+        Q, extra = self.add_damping(Q, v)
+        return Q, potential, dissipation + extra
+
+    def add_damping(self, Q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, float]:
+        """Return (Q - C v, v^T C v) for the hinges' Q (Q itself and 0 without C)."""
+        if self.damping is None:
+            return Q, 0.0
+        cv = self.damping @ v
+        return Q - cv, float(v @ cv)
+
+    def velocity_jacobian(self, dQ_dv: np.ndarray) -> np.ndarray:
+        """Return dQ/dv of all forces from the hinges' dQ/dv: minus C (``damping``) if given."""
+        return dQ_dv if self.damping is None else dQ_dv - self.damping
+
     def rhs(self, y: np.ndarray, t: float, command: float):
         """F(y, t) and the energy rates (``stepping.energy_rates``)."""
         if self.compiled:
@@ -227,7 +260,7 @@ class Model:
         nF = len(part.free)
         u = y[2 * nF] if self.drive else 0.0
         z, v, aP = self.full(y[:nF], y[nF:2 * nF], t, u, command)
-        Q, potential, dissipation = self.assembly.generalized_forces(z, v)
+        Q, potential, dissipation = self.generalized_forces(z, v)
         F = np.empty_like(y)
         F[:nF] = y[nF:2 * nF]
         F[nF:2 * nF] = Q[part.free] / self.mass_free
@@ -241,8 +274,9 @@ class Model:
         Exact A = dF/dy for y = (z_F, v_F, u).
 
         Rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v), du/dt = (command - u)/tau, with z_P, v_P
-        depending on u through the drive axis. With ``load_gradient`` also g = dq/dy of the drive
-        load q = du^T Q_P: (A, g).
+        depending on u through the drive axis; dQ/dv includes -C (``velocity_jacobian``),
+        also through v_P = d_u (command - u)/tau. With ``load_gradient`` also g = dq/dy of the
+        drive load q = du^T Q_P: (A, g).
         """
         part = self.part
         nF = len(part.free)
@@ -252,7 +286,7 @@ class Model:
         m = len(y)
         A = np.zeros((m, m))
         A[:nF, nF:2 * nF] = np.eye(nF)
-        Kzz, Kvv = hf.dQ_dz, hf.dQ_dv
+        Kzz, Kvv = hf.dQ_dz, self.velocity_jacobian(hf.dQ_dv)
         FF = np.ix_(part.free, part.free)
         A[nF:2 * nF, :nF] = Kzz[FF] / mF[:, None]
         A[nF:2 * nF, nF:2 * nF] = Kvv[FF] / mF[:, None]
@@ -320,7 +354,7 @@ class Model:
         if self.drive is None:
             return 0.0
         if Q is None:
-            Q = self.assembly.generalized_forces(z, v)[0]
+            Q = self.generalized_forces(z, v)[0]
         P = self.part.prescribed
         return float((self.mass[P] * aP - Q[P]) @ self.part.du)
 
@@ -337,7 +371,7 @@ class Model:
         out = np.zeros(len(self.drives))
         if len(self.displacement_index):
             if Q is None:
-                Q = self.assembly.generalized_forces(z, v)[0]
+                Q = self.generalized_forces(z, v)[0]
             P = self.part.prescribed
             out[self.displacement_index] = self.part.D.T @ (self.mass[P] * aP - Q[P])
         if inputs is not None and len(self.force_index):

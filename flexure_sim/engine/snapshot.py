@@ -62,6 +62,7 @@ def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
     several drives or force drives), default the state's u per drive.
     """
     Q, deflections, wrenches, energy, _ = model.assembly.report(s.z, s.v)
+    Q = model.add_damping(Q, s.v)[0]  # the drive forces see the damping matrix too
     _, _, aP = model.prescribed(s.t, s.u, s.command)
     if inputs is None:
         inputs = np.full(len(model.drives), s.u)

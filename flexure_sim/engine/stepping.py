@@ -61,10 +61,12 @@ def kernel_rhs(y, t, command, args):
     F(y, t) and the energy rates (``AUX_*``) with the compiled quadratic-law forces.
 
     args = (free, prescribed, mass, zP0, du, tau, has_drive, sine_index, sine_amp, sine_w,
-    sine_phase, ia, ib, ca, cb, phia, phib, kind, W, C) -- see Model._kernel_args.
+    sine_phase, ia, ib, ca, cb, phia, phib, kind, W, C, damping) -- see Model._kernel_args;
+    ``damping``: the mechanism's damping matrix (0 x 0 without one), Q -= damping v and
+    dissipation += v^T damping v (``Model.add_damping``).
     """
     (free, prescribed, mass, zP0, du, tau, has_drive, sine_index, sine_amp, sine_w, sine_phase,
-     ia, ib, ca, cb, phia, phib, kind, W, C) = args
+     ia, ib, ca, cb, phia, phib, kind, W, C, damping) = args
     nF = free.shape[0]
     u = y[2 * nF] if has_drive else 0.0
     zP, vP, aP = prescribed_motion(
@@ -84,6 +86,10 @@ def kernel_rhs(y, t, command, args):
     potential, dissipation = quadratic_forces(
         z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q, np.empty((n, 3)), np.empty((n, 3))
     )
+    if damping.shape[0]:
+        cv = damping @ v
+        Q -= cv
+        dissipation += v @ cv
     F = np.empty_like(y)
     for i in range(nF):
         F[i] = y[nF + i]
