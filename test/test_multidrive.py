@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 
 from flexure_sim.engine.config import ConfigError, load_mechanism, mechanism_from_dict
-from flexure_sim.engine.linear import tangent_at
-from flexure_sim.engine.model import SolverError
+from flexure_sim.engine.linear import linearize, tangent_at
 from flexure_sim.engine.solver import Simulation
 
 KO = 2.5  # N m / rad
@@ -150,10 +149,9 @@ def test_bad_drive_inputs_are_named(value, message):
     assert message in str(err.value)
 
 
-def test_stepping_several_drives_says_it_is_not_supported():
-    sim = Simulation(two_drive_microstage())
-    with pytest.raises(SolverError, match="stepping supports one displacement drive"):
-        sim.step()
+def test_the_linear_model_refuses_several_drives_by_name():
+    with pytest.raises(ValueError, match=r"drives piezo \(displacement\), tilt"):
+        linearize(Simulation(two_drive_microstage()))
 
 
 def test_config_rejects_duplicate_drive_names_and_forces_on_held_coordinates():

@@ -8,7 +8,7 @@ read the model and update the data.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Optional
+from typing import Optional, Union
 
 import numpy as np
 
@@ -19,21 +19,27 @@ class State:
     Simulation state.
 
     z, v: (x, y, theta) and (vx, vy, omega) per body in the root frame (3 n_bodies, body order). u:
-    actuator output (m) along the drive axis; command: the actuator's current target (m). Energy
-    bookkeeping since the last reset: dissipated (J) by hinge damping and drive_work (J) done by
-    the prescribed coordinates.
+    actuator output along the drive's direction (m, rad on theta); command: the actuators'
+    current targets (m or rad; a force drive's force, N or N m). With a single drive both are
+    numbers (u is 0 for a force drive); with several, u holds one value per displacement drive
+    and command one per drive (``Model.drive_names`` order). Energy bookkeeping since the last
+    reset: dissipated (J) by hinge damping and drive_work (J) done by the drives and the
+    prescribed coordinates.
     """
 
     t: float
     z: np.ndarray
     v: np.ndarray
-    u: float = 0.0
-    command: float = 0.0
+    u: Union[float, np.ndarray] = 0.0
+    command: Union[float, np.ndarray] = 0.0
     dissipated: float = 0.0
     drive_work: float = 0.0
 
     def copy(self) -> "State":
-        return replace(self, z=self.z.copy(), v=self.v.copy())
+        return replace(self, z=self.z.copy(), v=self.v.copy(), u=np.copy(self.u)
+                       if isinstance(self.u, np.ndarray) else self.u,
+                       command=np.copy(self.command)
+                       if isinstance(self.command, np.ndarray) else self.command)
 
 
 @dataclass
@@ -50,8 +56,8 @@ class Linearization:
     """
     Where and what.
 
-    Configuration z, Jacobian A, h phi_1(hA), h phi_2(hA), and the drive work's rows (g, g^T Psi_1,
-    g^T Psi_2) and scalars (``stepping.step_energy``).
+    Configuration z, Jacobian A, h phi_1(hA), h phi_2(hA), and per displacement drive the
+    rows (g, g^T Psi_1, g^T Psi_2) and scalars of its work (``stepping.step_energy``).
     """
 
     z: np.ndarray

@@ -26,14 +26,14 @@ from .data import Data, Linearization, State
 from .model import Model, SolverError
 
 
-def linearize(model: Model, data: Data, y: np.ndarray, t: float, command: float) -> None:
+def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> None:
     """
     Exact Jacobian A at y and the matrices h phi_1(hA), h phi_2(hA) of the step, into ``data.lin``.
 
     Both come from one exponential of the block matrix [[hA, I, 0], [0, 0, I], [0, 0, 0]]
     (its first block row is [e^{hA}, h phi_1(hA), h^2 phi_2(hA)] up to the powers of h).
-    With a drive, also the rows of its exact work (``stepping.step_energy``): g = dq/dy
-    of the drive load q = du^T Q_P and h phi_1(h (A - I/tau)) = (A - I/tau)^-1
+    Per displacement drive, also the rows of its exact work (``stepping.step_energy``): g = dq/dy
+    of its load q = D_d^T Q_P and h phi_1(h (A - I/tau)) = (A - I/tau)^-1
     (e^{-h/tau} e^{hA} - I), one linear solve with the e^{hA} already at hand (A - I/tau
     is regular: A's eigenvalues have no positive real part for a damped mechanism; an
     exponential is the fallback).
@@ -46,20 +46,19 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command: float)
     aug[m:2 * m, 2 * m:] = np.eye(m)
     E = scipy.linalg.expm(aug)
     phi1, phi2 = h * E[:m, m:2 * m], h * E[:m, 2 * m:]
-    erows = np.zeros((3, m))
-    escal = np.zeros(6)
-    escal[stepping.E_BALANCE] = float(not model.part.timed)
-    if model.drive:
-        tau = model.drive.response_time
+    rows = max(model.n_actuators, 1)
+    erows = np.zeros((rows, 3, m))
+    escal = np.zeros((rows, 6))
+    escal[:, stepping.E_BALANCE] = float(not model.part.timed)
+    for k, (du, tau) in enumerate(zip(model.D_rows, model.tau)):
         shifted_phi1 = _shifted_phi1(A, E[:m, :m], h, tau)
         psi1, psi2 = stepping.weighted_phi(A, phi1, phi2, h, tau, shifted_phi1)
-        erows[0], erows[1], erows[2] = g, g @ psi1, g @ psi2
-        du = model.part.du
-        escal[stepping.E_PSI0] = tau * -np.expm1(-h / tau)
-        escal[stepping.E_DECAY] = np.exp(-h / tau)
-        escal[stepping.E_DRIVE_MASS] = float(du @ (model.mass[model.part.prescribed] * du))
-        escal[stepping.E_TAU] = tau
-        escal[stepping.E_HAS_DRIVE] = 1.0
+        erows[k, 0], erows[k, 1], erows[k, 2] = g[k], g[k] @ psi1, g[k] @ psi2
+        escal[k, stepping.E_PSI0] = tau * -np.expm1(-h / tau)
+        escal[k, stepping.E_DECAY] = np.exp(-h / tau)
+        escal[k, stepping.E_DRIVE_MASS] = float(du @ (model.mass[model.part.prescribed] * du))
+        escal[k, stepping.E_TAU] = tau
+        escal[k, stepping.E_HAS_DRIVE] = 1.0
     data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, erows, escal)
     data.stats.linearizations += 1
 
@@ -100,9 +99,9 @@ def _advance(model: Model, data: Data, n, y, t, command, F0, aux0):
     return stepping.advance_interpreted(*common, model)
 
 
-def jump_work(model: Model, s: State, command: float) -> float:
+def jump_work(model: Model, s: State, command) -> float:
     """
-    Work of the drive's velocity jump when the command changes.
+    Work of the drives' velocity jumps when the commands change (``command``: actuator order).
 
     The prescribed velocities jump from those of ``s`` to those of the new command, which takes the
     kinetic energy 1/2 M_P (v_P+^2 - v_P-^2) from the actuator (an impulse M_P dv_P acting at the
@@ -115,14 +114,15 @@ def jump_work(model: Model, s: State, command: float) -> float:
 
 def step(model: Model, data: Data, n: int = 1) -> None:
     """
-    Advance ``data`` n fixed steps with the actuator command held at state.command.
+    Advance ``data`` n fixed steps with the drives' commands held at state.command.
 
     Time is origin + k dt, k the steps taken since the origin (the t of a state this data
     did not step itself), not a running sum: t stays on the step grid however long the
     run, so stamps derived from it stay on the tick grid.
     """
     s = data.state
-    command = s.command
+    command = model.actuator_command(s.command)
+    key = command.tobytes()
     clock = data.clock
     if clock is None or clock[0] is not s:
         clock = (s, s.t, 0)
@@ -130,7 +130,7 @@ def step(model: Model, data: Data, n: int = 1) -> None:
     dt = model.dt
     y, t = model.pack(s), s.t
     cache = data.cache
-    if cache is not None and cache[0] is s and cache[1] == command:
+    if cache is not None and cache[0] is s and cache[1] == key:
         F0, aux0 = cache[2:4]
     else:
         F0, aux0 = model.rhs(y, t, command)
@@ -165,7 +165,7 @@ def step(model: Model, data: Data, n: int = 1) -> None:
     if not np.all(np.isfinite(y)):
         raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
     z, v, u = model.unpack(y, t, command)
-    data.state = State(t, z, v, u, command, dissipated, work)
+    data.state = State(t, z, v, model.state_u(u), s.command, dissipated, work)
     data.clock = (data.state, origin, k)
     # F at the new state seeds the next call while the command is unchanged.
-    data.cache = (data.state, command, F0, aux0)
+    data.cache = (data.state, key, F0, aux0)

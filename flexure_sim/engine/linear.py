@@ -132,6 +132,11 @@ def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True,
     ``static``: that equilibrium if already solved (``sim.static(u)``).
     """
     mech = sim.mechanism
+    if sim.model.drives and sim.drive is None:
+        kinds = ", ".join(f"{d.name} ({d.kind})" for d in sim.model.drives)
+        raise ValueError(f"mechanism {mech.name!r} has drives {kinds}: the linear model "
+                         f"handles a single displacement drive (its static gain matrix: "
+                         f"simulate --static)")
     st = static if static is not None else sim.static(u)
     z = st.z
     lay = layout(sim)

@@ -14,12 +14,14 @@ where lambda_P are the constraint forces (the Lagrange multipliers of eq. 6.4, s
 force the drive must supply is the drive-axis component of lambda). Unlike the
 dissertation's Baumgarte-stabilised multipliers (6.21-6.23), nothing drifts.
 
-The driven coordinate follows the actuator output u, a first-order lag of the command
-(``Drive``); u is part of the integrated state y = (z_F, v_F, u). A ``Model`` holds the
-partition, masses, the hinge assembly, the mechanism's damping matrix C (a ``damping:`` block:
-Rayleigh or modal, built once at rest by ``damping_models.damping_matrix``; Q -= C v on all
-coordinates, dissipating v^T C v) and the compiled kernel's arguments, and evaluates F(y, t),
-its exact Jacobian and the reported measures (output, drive force, compression).
+The driven coordinates follow the actuator outputs u, one per displacement drive, each a
+first-order lag of its command (``Drive``); u is part of the integrated state
+y = (z_F, v_F, u). A force drive's held force enters Q on its free coordinates (``drives``).
+A ``Model`` holds the partition, masses, the hinge assembly, the mechanism's damping matrix C
+(a ``damping:`` block: Rayleigh or modal, built once at rest by
+``damping_models.damping_matrix``; Q -= C v on all coordinates, dissipating v^T C v) and the
+compiled kernel's arguments, and evaluates F(y, t), its exact Jacobian and the reported
+measures (output, drive force, compression).
 It never changes after construction, so any number of ``Data`` may share it.
 """
 from __future__ import annotations
@@ -34,6 +36,7 @@ from . import stepping
 from .assembly import Assembly
 from .compression import compression_points, point_displacement
 from .damping_models import damping_matrix
+from .drives import DriveMixin
 from .mechanism import COORDINATE_NAMES, Drive, Fixed, Mechanism, SineRate
 
 #: Default fixed step (s): 10 steps per millisecond.
@@ -89,7 +92,7 @@ def partition(mech: Mechanism) -> Partition:
     return Partition(F, P, du, [(pos[k], c) for k, c in timed], D)
 
 
-class Model:
+class Model(DriveMixin):
     """
     The constants of a mechanism prepared for stepping with fixed step ``dt`` (s).
 
@@ -128,10 +131,11 @@ class Model:
             [k for k, d in enumerate(self.drives) if d.kind == "displacement"], dtype=int)
         self.force_index = np.array(
             [k for k, d in enumerate(self.drives) if d.kind == "force"], dtype=int)
-        #: Stepping (dynamics) handles at most one drive, a displacement drive; statics any.
-        self.steppable = len(self.force_index) == 0 and len(self.displacement_index) <= 1
+        #: The single drive of a mechanism with one displacement drive and no other (the
+        #: scalar interfaces: linear model, stroke limit), else None.
         self.drive: Optional[Drive] = (
-            self.drives[0] if self.steppable and self.drives else None)
+            self.drives[0] if len(self.drives) == 1 and len(self.displacement_index) == 1
+            else None)
         nb = len(mechanism.bodies)
         self.mass = np.array([[b.mass, b.mass, b.inertia]
                              for b in mechanism.bodies], dtype=float).ravel()
@@ -145,6 +149,7 @@ class Model:
             rest = self.assembly.forces(self.z0, np.zeros_like(self.z0), jacobian=True)
             self.damping = damping_matrix(mechanism.damping, self.mass, -rest.dQ_dz,
                                           self.part.free)
+        self._drive_constants()
         self.motion = self._motion_arrays()
         self.compression = compression_points(mechanism)
         self.length_scale = max(
@@ -168,10 +173,10 @@ class Model:
         part = self.part
         sines = [c for _, c in part.timed]
         return (
-            self.drive.response_time if self.drive else 1.0,
-            self.drive is not None,
+            self.tau,
             self.z0[part.prescribed].copy(),
-            part.du.astype(float),
+            np.ascontiguousarray(part.D, dtype=float).reshape(len(part.prescribed),
+                                                              self.n_actuators),
             np.array([j for j, _ in part.timed], dtype=np.int64),
             np.array([c.amplitude for c in sines], dtype=float),
             np.array([2.0 * np.pi * c.frequency for c in sines], dtype=float),
@@ -181,24 +186,28 @@ class Model:
     def _iteration_atol(self) -> np.ndarray:
         free = self.part.free
         per_coord = np.where(free % 3 == 2, 1e-12, 1e-12 * self.length_scale)
-        parts = [per_coord, per_coord / self.dt]
-        if self.drive:
-            parts.append([1e-12 * (self.drive.stroke[1] - self.drive.stroke[0])])
-        return np.concatenate(parts)
+        return np.concatenate([per_coord, per_coord / self.dt, 1e-12 * self.stroke_span])
 
     def _kernel_args(self) -> tuple:
         a = self.assembly
         part = self.part
-        tau, has_drive, zP0, du, sine_index, sine_amp, sine_w, sine_phase = self.motion
+        tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase = self.motion
         damping = self.damping if self.damping is not None else np.zeros((0, 0))
-        return (part.free.astype(np.int64), part.prescribed.astype(np.int64), self.mass, zP0, du,
-                tau, has_drive, sine_index, sine_amp, sine_w, sine_phase, a._ia, a._ib, a._ca,
-                a._cb, a.phia, a.phib, a._kind, a._W, a._C, np.ascontiguousarray(damping))
+        return (part.free.astype(np.int64), part.prescribed.astype(np.int64), self.mass, zP0, D,
+                tau, sine_index, sine_amp, sine_w, sine_phase, self.force_dir, self.force_z0,
+                a._ia, a._ib, a._ca, a._cb, a.phia, a.phib, a._kind, a._W, a._C,
+                np.ascontiguousarray(damping))
 
     # ------------------------------------------------------------- coordinates
-    def prescribed(self, t: float, u: float, command: float):
-        """z_P, v_P, a_P: prescribed coordinates, their rates and accelerations."""
-        return stepping.prescribed_motion(t, u, command, *self.motion)
+    def prescribed(self, t: float, u, command):
+        """
+        Return z_P, v_P, a_P: prescribed coordinates, their rates and accelerations.
+
+        ``u``: a state's u (``actuator_u``); ``command``: a number or the actuator-order vector
+        (``kernel_command``).
+        """
+        return stepping.prescribed_motion(t, self.actuator_u(u), self.kernel_command(command),
+                                          *self.motion)
 
     def full(self, zF, vF, t, u, command):
         """All coordinates z, velocities v (root frame) and a_P from the free ones."""
@@ -211,17 +220,15 @@ class Model:
         return z, v, aP
 
     def pack(self, state) -> np.ndarray:
-        """Return y = (z_F, v_F, u) of a state."""
+        """Return y = (z_F, v_F, u) of a state (one u per displacement drive)."""
         part = self.part
-        parts = [state.z[part.free], state.v[part.free]]
-        if self.drive:
-            parts.append([state.u])
-        return np.concatenate(parts)
+        return np.concatenate([state.z[part.free], state.v[part.free],
+                               self.actuator_u(state.u)])
 
-    def unpack(self, y: np.ndarray, t: float, command: float):
-        """(z, v, u) of y at time t under ``command``."""
+    def unpack(self, y: np.ndarray, t: float, command):
+        """(z, v, u) of y at time t under ``command`` (u: the actuator outputs, a vector)."""
         nF = len(self.part.free)
-        u = float(y[2 * nF]) if self.drive else 0.0
+        u = y[2 * nF:2 * nF + self.n_actuators].copy()
         z, v, _ = self.full(y[:nF], y[nF:2 * nF], t, u, command)
         return z, v, u
 
@@ -248,35 +255,43 @@ class Model:
         """Return dQ/dv of all forces from the hinges' dQ/dv: minus C (``damping``) if given."""
         return dQ_dv if self.damping is None else dQ_dv - self.damping
 
-    def rhs(self, y: np.ndarray, t: float, command: float):
-        """F(y, t) and the energy rates (``stepping.energy_rates``)."""
+    def rhs(self, y: np.ndarray, t: float, command):
+        """
+        Return F(y, t) and the energy rates (``stepping.energy_rates``).
+
+        ``command``: a number or the actuator-order vector (``kernel_command``).
+        """
+        command = self.kernel_command(command)
         if self.compiled:
             return stepping.kernel_rhs(y, t, command, self.kernel_args)
         return self.rhs_python(y, t, command)
 
-    def rhs_python(self, y: np.ndarray, t: float, command: float, _args=None):
+    def rhs_python(self, y: np.ndarray, t: float, command, _args=None):
         """F(y, t) and the energy rates through Assembly (any hinge law)."""
         part = self.part
-        nF = len(part.free)
-        u = y[2 * nF] if self.drive else 0.0
+        command = self.kernel_command(command)
+        nF, nd = len(part.free), self.n_actuators
+        u = y[2 * nF:2 * nF + nd]
         z, v, aP = self.full(y[:nF], y[nF:2 * nF], t, u, command)
         Q, potential, dissipation = self.generalized_forces(z, v)
+        applied = stepping.applied_forces(Q, z, command, nd, self.force_dir, self.force_z0)
         F = np.empty_like(y)
         F[:nF] = y[nF:2 * nF]
         F[nF:2 * nF] = Q[part.free] / self.mass_free
-        if self.drive:
-            F[2 * nF] = (command - u) / self.drive.response_time
-        return F, stepping.energy_rates(Q, v, potential, dissipation, part.prescribed, self.mass,
-                                        part.du, self.motion[4], aP)
+        F[2 * nF:] = (command[:nd] - u) / self.tau
+        aux = np.empty(stepping.AUX_LOAD + nd)
+        return F, stepping.energy_rates(aux, Q, v, potential, dissipation, applied,
+                                        part.prescribed, self.mass, self.motion[2],
+                                        self.motion[3], aP)
 
-    def jacobian(self, y: np.ndarray, t: float, command: float, load_gradient: bool = False):
+    def jacobian(self, y: np.ndarray, t: float, command, load_gradient: bool = False):
         """
         Exact A = dF/dy for y = (z_F, v_F, u).
 
-        Rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v), du/dt = (command - u)/tau, with z_P, v_P
-        depending on u through the drive axis; dQ/dv includes -C (``velocity_jacobian``),
-        also through v_P = d_u (command - u)/tau. With ``load_gradient`` also g = dq/dy of the
-        drive load q = du^T Q_P: (A, g).
+        Rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v), du_d/dt = (command_d - u_d)/tau_d, with z_P,
+        v_P depending on each u_d through D_d (the force drives' held forces do not depend on y);
+        dQ/dv includes -C (``velocity_jacobian``), also through v_P. With ``load_gradient`` also
+        G (rows g_d = dq_d/dy) of the drive loads q_d = D_d^T Q_P: (A, G).
         """
         part = self.part
         nF = len(part.free)
@@ -290,17 +305,17 @@ class Model:
         FF = np.ix_(part.free, part.free)
         A[nF:2 * nF, :nF] = Kzz[FF] / mF[:, None]
         A[nF:2 * nF, nF:2 * nF] = Kvv[FF] / mF[:, None]
-        g = np.zeros(m)
-        if self.drive:
-            tau = self.drive.response_time
-            FP = np.ix_(part.free, part.prescribed)
-            A[nF:2 * nF, 2 * nF] = (Kzz[FP] @ part.du - Kvv[FP] @ part.du / tau) / mF
-            A[2 * nF, 2 * nF] = -1.0 / tau
-            PF, PP = np.ix_(part.prescribed, part.free), np.ix_(part.prescribed, part.prescribed)
-            g[:nF] = part.du @ Kzz[PF]
-            g[nF:2 * nF] = part.du @ Kvv[PF]
-            g[2 * nF] = part.du @ (Kzz[PP] @ part.du - Kvv[PP] @ part.du / tau)
-        return (A, g) if load_gradient else A
+        G = np.zeros((self.n_actuators, m))
+        FP = np.ix_(part.free, part.prescribed)
+        PF, PP = np.ix_(part.prescribed, part.free), np.ix_(part.prescribed, part.prescribed)
+        for k, (dk, tau) in enumerate(zip(self.D_rows, self.tau)):
+            A[nF:2 * nF, 2 * nF + k] = (Kzz[FP] @ dk - Kvv[FP] @ dk / tau) / mF
+            A[2 * nF + k, 2 * nF + k] = -1.0 / tau
+            G[k, :nF] = dk @ Kzz[PF]
+            G[k, nF:2 * nF] = dk @ Kvv[PF]
+            for j, (dj, tau_j) in enumerate(zip(self.D_rows, self.tau)):
+                G[k, 2 * nF + j] = dk @ (Kzz[PP] @ dj - Kvv[PP] @ dj / tau_j)
+        return (A, G) if load_gradient else A
 
     # --------------------------------------------------------------- measures
     def output_displacement(self, z: np.ndarray) -> Optional[float]:
@@ -312,80 +327,6 @@ class Model:
     def output_values(self, z: np.ndarray) -> np.ndarray:
         """Every output's displacement from rest, c_k . (z - z0) (``output_names`` order)."""
         return self.output_matrix @ (z - self.z0)
-
-    def drive_inputs(self, value) -> np.ndarray:
-        """
-        Return one input per drive (``drive_names`` order).
-
-        One input per drive (``drive_names`` order) from a number (a single drive), a sequence of
-        one value per drive, or a {name: value} mapping naming every drive; ValueError naming the
-        problem otherwise (also for non-finite values).
-        """
-        names = self.drive_names
-        if isinstance(value, dict):
-            unknown = sorted(set(value) - set(names))
-            missing = [n for n in names if n not in value]
-            if unknown or missing:
-                raise ValueError(f"drive inputs: unknown {unknown}, missing {missing} "
-                                 f"(drives: {', '.join(names) or 'none'})")
-            out = np.array([value[n] for n in names], dtype=float)
-        elif np.ndim(value) == 0:
-            if len(names) > 1:
-                raise ValueError(f"one number given for {len(names)} drives "
-                                 f"({', '.join(names)}): give one value per drive")
-            out = np.full(len(names), float(value))
-        else:
-            out = np.asarray(value, dtype=float).ravel()
-            if len(out) != len(names):
-                raise ValueError(f"{len(out)} drive inputs given for {len(names)} drives "
-                                 f"({', '.join(names) or 'none'})")
-        if not np.all(np.isfinite(out)):
-            raise ValueError(f"drive inputs must be finite, got {value!r}")
-        return out
-
-    def drive_force(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
-                    Q: Optional[np.ndarray] = None) -> float:
-        """
-        Force the actuator applies to the driven body along the drive axis (N).
-
-        The drive-axis component of the constraint forces lambda_P = M_P a_P - Q_P (eq. 6.4); 0
-        without a drive. ``Q``: the generalized forces at (z, v), if already known.
-        """
-        if self.drive is None:
-            return 0.0
-        if Q is None:
-            Q = self.generalized_forces(z, v)[0]
-        P = self.part.prescribed
-        return float((self.mass[P] * aP - Q[P]) @ self.part.du)
-
-    def drive_forces(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
-                     Q: Optional[np.ndarray] = None, inputs=None) -> np.ndarray:
-        """
-        Return the force each drive's actuator applies.
-
-        Per drive (``drive_names`` order), the force (N; N m on theta) its actuator applies along
-        its direction: a displacement drive's share D_d^T lambda_P of the constraint forces
-        lambda_P = M_P a_P - Q_P (eq. 6.4); a force drive's commanded force (its entry of
-        ``inputs``, 0 without).
-        """
-        out = np.zeros(len(self.drives))
-        if len(self.displacement_index):
-            if Q is None:
-                Q = self.generalized_forces(z, v)[0]
-            P = self.part.prescribed
-            out[self.displacement_index] = self.part.D.T @ (self.mass[P] * aP - Q[P])
-        if inputs is not None and len(self.force_index):
-            out[self.force_index] = np.asarray(inputs, dtype=float)[self.force_index]
-        return out
-
-    def drive_positions(self, z: np.ndarray) -> np.ndarray:
-        """
-        Return each driven body's displacement along its drive's direction.
-
-        Per drive, the driven body's displacement from rest along the drive's direction (a
-        displacement drive's input; where a force drive's body has moved).
-        """
-        return self.drive_directions @ (z - self.z0)
 
     def hinge_compression(self, z: np.ndarray) -> Optional[float]:
         """

@@ -25,11 +25,12 @@ class Snapshot:
     compression: of the compression hinge (``Model.hinge_compression``): along the drive
     axis, at its centre of stiffness, its drive side's displacement minus its far side's (m),
     or None.
-    drive_names, drive_inputs, drive_forces: per drive (``Model.drive_names`` order) its
-    input (a displacement drive's prescribed displacement; a force drive's commanded
-    force) and the force its actuator applies (``Model.drive_forces``); drive_positions:
-    each driven body's displacement along its drive's direction. The scalar drive_input,
-    drive_command and drive_force are the first drive's (the single drive's, as before).
+    drive_names, drive_inputs, drive_commands, drive_forces: per drive (``Model.drive_names``
+    order) its input (a displacement drive's actuator output, the prescribed displacement; a
+    force drive's commanded force), its command and the force its actuator applies
+    (``Model.drive_forces``); drive_positions: each driven body's displacement along its drive's
+    direction. The scalar drive_input, drive_command and drive_force are the first drive's (the
+    single drive's, as before).
     outputs: {name: displacement from rest} of every output (``Model.output_values``).
     """
 
@@ -52,6 +53,7 @@ class Snapshot:
     drive_forces: np.ndarray = field(default_factory=lambda: np.zeros(0))
     drive_positions: np.ndarray = field(default_factory=lambda: np.zeros(0))
     outputs: dict = field(default_factory=dict)
+    drive_commands: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
@@ -59,15 +61,16 @@ def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
     Return everything the simulation reports at state ``s``.
 
     Everything the simulation reports at state ``s``; ``inputs``: one per drive (a static state of
-    several drives or force drives), default the state's u per drive.
+    several drives or force drives), default the state's (``Model.state_inputs``).
     """
     Q, deflections, wrenches, energy, _ = model.assembly.report(s.z, s.v)
     Q = model.add_damping(Q, s.v)[0]  # the drive forces see the damping matrix too
-    _, _, aP = model.prescribed(s.t, s.u, s.command)
+    _, _, aP = model.prescribed(s.t, s.u, model.actuator_command(s.command))
     if inputs is None:
-        inputs = np.full(len(model.drives), s.u)
+        inputs = model.state_inputs(s.u, s.command)
     else:
         aP = np.zeros_like(aP)  # a static state: at rest
+    commands = np.broadcast_to(np.asarray(s.command, dtype=float), (len(model.drives),))
     forces = model.drive_forces(s.z, s.v, aP, Q, inputs)
     positions = model.drive_positions(s.z)
     nb = len(model.mechanism.bodies)
@@ -77,8 +80,8 @@ def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
         velocities=s.v.reshape(nb, 3).copy(),
         deflections=deflections,
         wrenches=wrenches,
-        drive_input=s.u,
-        drive_command=s.command,
+        drive_input=float(inputs[0]) if len(inputs) else 0.0,
+        drive_command=float(commands[0]) if len(commands) else 0.0,
         drive_force=float(forces[0]) if len(forces) else 0.0,
         output=model.output_displacement(s.z),
         compression=model.hinge_compression(s.z),
@@ -91,4 +94,5 @@ def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
         drive_forces=forces,
         drive_positions=positions,
         outputs=dict(zip(model.output_names, model.output_values(s.z).tolist())),
+        drive_commands=commands.copy(),
     )

@@ -36,14 +36,6 @@ __all__ = [
 ]
 
 
-def _check_steppable(model: Model) -> None:
-    if not model.steppable:
-        kinds = ", ".join(f"{d.name} ({d.kind})" for d in model.drives)
-        raise SolverError(f"mechanism {model.mechanism.name!r}: stepping supports one "
-                          f"displacement drive, this one has {kinds}; its statics "
-                          f"(static, static_gain) handle every drive")
-
-
 class Simulation:
     """
     A model, one run's data, and the stepping / static solvers.
@@ -104,27 +96,27 @@ class Simulation:
 
     def step(self, n: int = 1) -> None:
         """
-        Advance n fixed steps with the actuator command held at state.command (``dynamics.step``).
+        Advance n fixed steps with the drives' commands held at state.command (``dynamics.step``).
 
         T stays on the step grid.
         """
-        _check_steppable(self.model)
         dynamics.step(self.model, self.data, n)
 
     def set_command(self, command) -> None:
         """
-        Set the actuator target (m along the drive axis).
+        Set the drives' targets.
 
-        Set the actuator target (m along the drive axis): a number, or one value per drive (a
-        sequence or a {name: value} mapping); must be finite.
+        A displacement drive's target is its actuator output's (m along its axis, rad on theta),
+        a force drive's its force (N, N m on theta). A number (a single drive), or one value per
+        drive (a sequence in ``model.drive_names`` order or a {name: value} mapping); each must
+        be finite (ValueError naming the drive). Held until the next call.
         """
         if np.ndim(command) == 0 and not isinstance(command, dict) and not np.isfinite(command):
             raise ValueError(f"drive command must be finite, got {command!r}")
         if not self.model.drives:
             raise ValueError(f"mechanism {self.model.mechanism.name!r} has no drive")
         values = self.model.drive_inputs(command)
-        _check_steppable(self.model)
-        self.data.state.command = float(values[0])
+        self.data.state.command = float(values[0]) if len(values) == 1 else values
 
     def static(self, u, t: float = 0.0, tol: float = 1e-13,
                max_iter: int = 50) -> StaticResult:

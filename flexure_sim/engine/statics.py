@@ -63,7 +63,8 @@ def static(model: Model, u, t: float = 0.0, tol: float = 1e-13,
     Q = model.assembly.generalized_forces(z, np.zeros_like(z))[0] + _applied(model, inputs)
     residual = float(np.max(np.abs(Q[model.part.free]), initial=0.0))
     u0 = float(inputs[0]) if len(inputs) else float(u) if np.ndim(u) == 0 else 0.0
-    state = State(t, z, np.zeros_like(z), u0, u0)
+    state = State(t, z, np.zeros_like(z), model.state_u(inputs[model.displacement_index]),
+                  u0 if len(inputs) <= 1 else inputs.copy())
     return StaticResult(snapshot(model, state, inputs), iterations, residual, z)
 
 

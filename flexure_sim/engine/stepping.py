@@ -26,26 +26,38 @@ import numpy as np
 from .kernels import njit, quadratic_forces
 
 CONVERGED, NOT_CONTRACTING, SLOW = 0, 1, 2
-#: Entries of the energy vector ``rhs`` returns next to F (see ``energy_rates``).
-AUX_LOAD, AUX_TIMED_POWER, AUX_DISSIPATION, AUX_ENERGY = 0, 1, 2, 3
-#: Entries of the per-linearization energy scalars (see ``dynamics.linearize``).
+#: Entries of the energy vector ``rhs`` returns next to F (see ``energy_rates``); the load of
+#: displacement drive k is entry AUX_LOAD + k.
+AUX_TIMED_POWER, AUX_DISSIPATION, AUX_ENERGY, AUX_APPLIED, AUX_LOAD = 0, 1, 2, 3, 4
+#: Columns of the per-linearization energy scalars, one row per displacement drive (see
+#: ``dynamics.linearize``).
 E_PSI0, E_DECAY, E_DRIVE_MASS, E_TAU, E_HAS_DRIVE, E_BALANCE = 0, 1, 2, 3, 4, 5
 
 
 @njit(cache=True)
-def prescribed_motion(
-    t, u, command, tau, has_drive, zP0, du, sine_index, sine_amp, sine_w, sine_phase
-):
+def prescribed_motion(t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase):
     """
     z_P, v_P, a_P.
 
-    Held coordinates, the drive (first-order lag of the command along its axis) and prescribed sine
-    rates (omega = a sin(w t + phase)).
+    Held coordinates, the displacement drives (column k of D: dz_P/du_k; u_k a first-order lag
+    of command[k] with time constant tau[k], so v_P = sum_k D_k (command_k - u_k)/tau_k) and
+    prescribed sine rates (omega = a sin(w t + phase)).
     """
-    udot = (command - u) / tau if has_drive else 0.0
-    zP = zP0 + du * u
-    vP = du * udot
-    aP = du * (-udot / tau if has_drive else 0.0)
+    nP = zP0.shape[0]
+    zP = zP0.copy()
+    vP = np.zeros(nP)
+    aP = np.zeros(nP)
+    for k in range(tau.shape[0]):
+        udot = (command[k] - u[k]) / tau[k]
+        udd = -udot / tau[k]
+        for i in range(nP):
+            zP[i] += D[i, k] * u[k]
+            if k == 0:  # assigned, not added to 0: keeps the sign of a zero rate
+                vP[i] = D[i, k] * udot
+                aP[i] = D[i, k] * udd
+            else:
+                vP[i] += D[i, k] * udot
+                aP[i] += D[i, k] * udd
     for i in range(sine_index.shape[0]):
         j = sine_index[i]
         a, w, ph = sine_amp[i], sine_w[i], sine_phase[i]
@@ -55,22 +67,44 @@ def prescribed_motion(
     return zP, vP, aP
 
 
+@njit(cache=True, inline="always")
+def applied_forces(Q, z, command, n_actuators, force_dir, force_z0):
+    """
+    Add the force drives' generalized forces sum_j e_j f_j to Q; return sum_j f_j e_j . (z - z0).
+
+    f_j = command[n_actuators + j] (held over a step), e_j = row j of force_dir (virtual
+    work); the returned potential of the held forces changes by exactly their work.
+    """
+    applied = 0.0
+    for j in range(force_dir.shape[0]):
+        f = command[n_actuators + j]
+        travel = -force_z0[j]
+        for i in range(Q.shape[0]):
+            Q[i] += force_dir[j, i] * f
+            travel += force_dir[j, i] * z[i]
+        applied += f * travel
+    return applied
+
+
 @njit(cache=True)
 def kernel_rhs(y, t, command, args):
     """
     F(y, t) and the energy rates (``AUX_*``) with the compiled quadratic-law forces.
 
-    args = (free, prescribed, mass, zP0, du, tau, has_drive, sine_index, sine_amp, sine_w,
-    sine_phase, ia, ib, ca, cb, phia, phib, kind, W, C, damping) -- see Model._kernel_args;
-    ``damping``: the mechanism's damping matrix (0 x 0 without one), Q -= damping v and
-    dissipation += v^T damping v (``Model.add_damping``).
+    y = (z_F, v_F, u) with one u per displacement drive; command: the displacement drives'
+    commands, then the force drives' forces (``Model.actuator_command``).
+    args = (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase,
+    force_dir, force_z0, ia, ib, ca, cb, phia, phib, kind, W, C, damping) -- see
+    Model._kernel_args; ``damping``: the mechanism's damping matrix (0 x 0 without one),
+    Q -= damping v and dissipation += v^T damping v (``Model.add_damping``).
     """
-    (free, prescribed, mass, zP0, du, tau, has_drive, sine_index, sine_amp, sine_w, sine_phase,
-     ia, ib, ca, cb, phia, phib, kind, W, C, damping) = args
+    (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, force_dir,
+     force_z0, ia, ib, ca, cb, phia, phib, kind, W, C, damping) = args
     nF = free.shape[0]
-    u = y[2 * nF] if has_drive else 0.0
+    nd = tau.shape[0]
+    u = y[2 * nF:2 * nF + nd]
     zP, vP, aP = prescribed_motion(
-        t, u, command, tau, has_drive, zP0, du, sine_index, sine_amp, sine_w, sine_phase
+        t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase
     )
     N = mass.shape[0]
     z = np.empty(N)
@@ -90,26 +124,34 @@ def kernel_rhs(y, t, command, args):
         cv = damping @ v
         Q -= cv
         dissipation += v @ cv
-    F = np.empty_like(y)
+    applied = applied_forces(Q, z, command, nd, force_dir, force_z0)
+    m = y.shape[0]
+    out = np.empty(m + AUX_LOAD + nd)  # F and the energy rates: one allocation
+    F = out[:m]
     for i in range(nF):
         F[i] = y[nF + i]
         F[nF + i] = Q[free[i]] / mass[free[i]]
-    if has_drive:
-        F[2 * nF] = (command - u) / tau
-    return F, energy_rates(Q, v, potential, dissipation, prescribed, mass, du, sine_index, aP)
+    for k in range(nd):
+        F[2 * nF + k] = (command[k] - u[k]) / tau[k]
+    return F, energy_rates(out[m:], Q, v, potential, dissipation, applied, prescribed, mass, D,
+                           sine_index, aP)
 
 
 @njit(cache=True, inline="always")
-def energy_rates(Q, v, potential, dissipation, prescribed, mass, du, sine_index, aP):
+def energy_rates(aux, Q, v, potential, dissipation, applied, prescribed, mass, D, sine_index,
+                 aP):
     """
-    Return the per-state energy figures the stepping loop integrates (indices ``AUX_*``).
+    Fill and return ``aux``: the per-state energy figures the stepping loop integrates (``AUX_*``).
 
-    Drive load du . Q_P, power of the timed (sine-rate) constraints sum v_P (M a_P - Q_P),
-    dissipated power, and mechanical energy T + U (a tuple: no allocation per step).
+    Power of the timed (sine-rate) constraints sum v_P (M a_P - Q_P), dissipated power,
+    mechanical energy T + U, the held forces' potential (``applied_forces``) and per
+    displacement drive k its load D_k . Q_P.
     """
-    load = 0.0
-    for i in range(prescribed.shape[0]):
-        load += du[i] * Q[prescribed[i]]
+    for k in range(D.shape[1]):
+        load = 0.0
+        for i in range(prescribed.shape[0]):
+            load += D[i, k] * Q[prescribed[i]]
+        aux[AUX_LOAD + k] = load
     timed = 0.0
     for i in range(sine_index.shape[0]):
         j = prescribed[sine_index[i]]
@@ -117,7 +159,11 @@ def energy_rates(Q, v, potential, dissipation, prescribed, mass, du, sine_index,
     kinetic = 0.0
     for j in range(mass.shape[0]):
         kinetic += 0.5 * mass[j] * v[j] * v[j]
-    return load, timed, dissipation, kinetic + potential
+    aux[AUX_TIMED_POWER] = timed
+    aux[AUX_DISSIPATION] = dissipation
+    aux[AUX_ENERGY] = kinetic + potential
+    aux[AUX_APPLIED] = applied
+    return aux
 
 
 def _advance(
@@ -201,37 +247,46 @@ def step_energy(y0, y1, F0, N1, aux0, aux1, command, h, erows, escal):
     """
     Dissipated energy and drive work over one step of the exponential trapezoidal rule.
 
-    The drive's power is ud (du^T M_P a_P - q) with ud = (command - u)/tau its rate, which
-    decays exactly as e^{-s/tau} over the step, and q = du^T Q_P(y) the drive load, which
-    the step's linear model follows as q_0 + g^T w(s), w(s) = s phi_1(sA) F_0 + s^2/h
-    phi_2(sA) N_1 (g = dq/dy at the linearization). So
+    Summed over the displacement drives k (row k of ``erows``, ``escal``; their coordinates
+    are disjoint, so each drive's work is its own). A drive's power is ud (m_d a - q) with
+    ud = (command - u)/tau its rate, which decays exactly as e^{-s/tau} over the step, and
+    q = D_k^T Q_P(y) its load, which the step's linear model follows as q_0 + g^T w(s),
+    w(s) = s phi_1(sA) F_0 + s^2/h phi_2(sA) N_1 (g = dq/dy at the linearization). So
 
         W = 1/2 m_d ud_0^2 (e^{-2h/tau} - 1)
             - ud_0 (q_0 tau (1 - e^{-h/tau}) + g^T Psi_1 F_0 + g^T Psi_2 N_1 + rest),
 
-    Psi_k = int_0^h e^{-s/tau} (phi_k-term of w) ds (rows ``erows`` = (g, g^T Psi_1,
-    g^T Psi_2), see ``weighted_phi``), m_d = du^T M_P du; ``rest`` is the trapezoidal rule on
-    what the linear model leaves of q (zero at the start of the step, tiny at its end).
-    The stiff, sub-microsecond transients after a command step are thereby integrated as
-    exactly as the motion. Timed (sine-rate) constraints' power: trapezoidal rule.
+    Psi_k = int_0^h e^{-s/tau} (phi_k-term of w) ds (rows (g, g^T Psi_1, g^T Psi_2), see
+    ``weighted_phi``), m_d = D_k^T M_P D_k; ``rest`` is the trapezoidal rule on what the
+    linear model leaves of q (zero at the start of the step, tiny at its end). The stiff,
+    sub-microsecond transients after a command step are thereby integrated as exactly as the
+    motion. Force drives (held forces): the change of their potential ``AUX_APPLIED``,
+    f . e (z_1 - z_0), exact. Timed (sine-rate) constraints' power: trapezoidal rule.
     Dissipated energy: with only drive and fixed constraints, the energy theorem
     W - Delta(T + U) (exact to the motion's accuracy), else the trapezoidal rule on the
     dissipated power.
     """
     work = 0.5 * h * (aux0[AUX_TIMED_POWER] + aux1[AUX_TIMED_POWER])
-    if escal[E_HAS_DRIVE] > 0.5:
-        nF = (y0.shape[0] - 1) // 2
-        ud0 = (command - y0[2 * nF]) / escal[E_TAU]
-        decay = escal[E_DECAY]
+    nd = 0
+    for k in range(escal.shape[0]):
+        if escal[k, E_HAS_DRIVE] > 0.5:
+            nd += 1
+    nF = (y0.shape[0] - nd) // 2
+    for k in range(nd):
+        ud0 = (command[k] - y0[2 * nF + k]) / escal[k, E_TAU]
+        decay = escal[k, E_DECAY]
         gw = 0.0
         psi = 0.0
         for j in range(y0.shape[0]):
-            gw += erows[0, j] * (y1[j] - y0[j])
-            psi += erows[1, j] * F0[j] + erows[2, j] * N1[j]
-        rest = aux1[AUX_LOAD] - aux0[AUX_LOAD] - gw
-        linear = aux0[AUX_LOAD] * escal[E_PSI0] + psi + 0.5 * h * decay * rest
-        work += 0.5 * escal[E_DRIVE_MASS] * ud0 * ud0 * (decay * decay - 1.0) - ud0 * linear
-    if escal[E_BALANCE] > 0.5:
+            gw += erows[k, 0, j] * (y1[j] - y0[j])
+            psi += erows[k, 1, j] * F0[j] + erows[k, 2, j] * N1[j]
+        rest = aux1[AUX_LOAD + k] - aux0[AUX_LOAD + k] - gw
+        linear = aux0[AUX_LOAD + k] * escal[k, E_PSI0] + psi + 0.5 * h * decay * rest
+        work += 0.5 * escal[k, E_DRIVE_MASS] * ud0 * ud0 * (decay * decay - 1.0) - ud0 * linear
+    applied = aux1[AUX_APPLIED] - aux0[AUX_APPLIED]
+    if applied != 0.0:
+        work += applied
+    if escal[0, E_BALANCE] > 0.5:
         dissipated = work - (aux1[AUX_ENERGY] - aux0[AUX_ENERGY])
     else:
         dissipated = 0.5 * h * (aux0[AUX_DISSIPATION] + aux1[AUX_DISSIPATION])

@@ -1,0 +1,182 @@
+"""
+The drives of a ``Model``: their constants, inputs and commands, and what each one does.
+
+A mechanism has any number of named drives (``mechanism.Drive``), in constraint order:
+
+- a **displacement drive** d prescribes its body's coordinates, z_P = z_P0 + D_d u_d, where
+  u_d, the actuator output, follows the drive's command c_d as a first-order lag of its own,
+  du_d/dt = (c_d - u_d) / tau_d; the u_d are integrated states (y = (z_F, v_F, u));
+- a **force drive** j applies the generalized force e_j f_j (virtual work; e_j its direction)
+  on coordinates that stay free; the commanded force f_j is held as it is (no lag).
+
+The stepping kernel takes the commands in *actuator order*: the displacement drives' commands,
+then the force drives' forces (``actuator_command``). A state keeps u and the commands in the
+simplest form: a number for a single actuator (single drive), a vector otherwise
+(``state_u``; ``Simulation.set_command``).
+"""
+from __future__ import annotations
+
+from typing import Optional, Union
+
+import numpy as np
+
+
+class DriveMixin:
+    """
+    The per-drive part of ``model.Model``: inputs, commands and forces of every drive.
+
+    Needs the model's ``drives``, ``drive_names``, ``drive_directions``, ``displacement_index``,
+    ``force_index``, ``part``, ``mass``, ``z0`` and ``assembly``.
+    """
+
+    def _drive_constants(self) -> None:
+        """Set the actuator time constants and the force drives' directions (kernel arrays)."""
+        actuators = [self.drives[k] for k in self.displacement_index]
+        #: Time constant (s) and stroke span (m) per displacement drive (actuator order).
+        self.tau = np.array([d.response_time for d in actuators], dtype=float)
+        self.stroke_span = np.array([d.stroke[1] - d.stroke[0] for d in actuators], dtype=float)
+        #: D^T, rows contiguous: dz_P/du_d per displacement drive.
+        self.D_rows = np.ascontiguousarray(self.part.D.T, dtype=float)
+        #: Direction e_j (rows) of each force drive, and e_j . z0.
+        self.force_dir = np.ascontiguousarray(
+            self.drive_directions[self.force_index], dtype=float).reshape(
+                len(self.force_index), len(self.z0))
+        self.force_z0 = self.force_dir @ self.z0
+        self._order = np.concatenate([self.displacement_index, self.force_index]).astype(int)
+
+    @property
+    def n_actuators(self) -> int:
+        """Return the number of displacement drives (actuator states u)."""
+        return len(self.displacement_index)
+
+    def actuator_command(self, command) -> np.ndarray:
+        """
+        Return the kernel's command vector: displacement drives' commands, then the forces.
+
+        ``command``: a state's command (a number: every drive's; or one value per drive, in
+        ``drive_names`` order).
+        """
+        values = np.broadcast_to(np.asarray(command, dtype=float), (len(self.drives),))
+        return np.ascontiguousarray(values[self._order], dtype=float)
+
+    def kernel_command(self, command) -> np.ndarray:
+        """
+        Return ``command`` as the kernel takes it.
+
+        An array is taken as already in actuator order (``actuator_command``); a number is
+        every drive's.
+        """
+        if isinstance(command, np.ndarray):
+            return command
+        return np.full(len(self.drives), float(command))
+
+    def actuator_u(self, u) -> np.ndarray:
+        """One actuator output per displacement drive from a state's u (number or vector)."""
+        return np.broadcast_to(np.asarray(u, dtype=float), (self.n_actuators,)).astype(float)
+
+    def state_u(self, u: np.ndarray) -> Union[float, np.ndarray]:
+        """Return a state's u from the actuator outputs: a number (none or one), else a vector."""
+        if self.n_actuators <= 1:
+            return float(u[0]) if self.n_actuators else 0.0
+        return np.array(u, dtype=float)
+
+    def state_inputs(self, u, command) -> np.ndarray:
+        """
+        Return each drive's input in a stepped state.
+
+        Per drive (``drive_names`` order): a displacement drive's actuator output u, a force
+        drive's commanded force.
+        """
+        out = np.zeros(len(self.drives))
+        out[self.displacement_index] = self.actuator_u(u)
+        if len(self.force_index):
+            commands = np.broadcast_to(np.asarray(command, dtype=float), (len(self.drives),))
+            out[self.force_index] = commands[self.force_index]
+        return out
+
+    def drive_inputs(self, value) -> np.ndarray:
+        """
+        Return one input per drive (``drive_names`` order).
+
+        One input per drive (``drive_names`` order) from a number (a single drive), a sequence of
+        one value per drive, or a {name: value} mapping naming every drive; ValueError naming the
+        problem (and the drive) otherwise, also for non-finite values.
+        """
+        names = self.drive_names
+        if isinstance(value, dict):
+            unknown = sorted(set(value) - set(names))
+            missing = [n for n in names if n not in value]
+            if unknown or missing:
+                raise ValueError(f"drive inputs: unknown {unknown}, missing {missing} "
+                                 f"(drives: {', '.join(names) or 'none'})")
+            out = np.array([_number(value[n], n) for n in names], dtype=float)
+        elif np.ndim(value) == 0:
+            if len(names) > 1:
+                raise ValueError(f"one number given for {len(names)} drives "
+                                 f"({', '.join(names)}): give one value per drive")
+            out = np.full(len(names), _number(value, names[0] if names else "drive"))
+        else:
+            try:
+                out = np.asarray(value, dtype=float).ravel()
+            except (TypeError, ValueError):
+                raise ValueError(f"drive inputs must be numbers, got {value!r}") from None
+            if len(out) != len(names):
+                raise ValueError(f"{len(out)} drive inputs given for {len(names)} drives "
+                                 f"({', '.join(names) or 'none'})")
+        bad = [n for n, x in zip(names, out) if not np.isfinite(x)]
+        if bad:
+            raise ValueError(f"drive inputs must be finite, got {value!r} "
+                             f"(drive {', '.join(bad)})")
+        return out
+
+    def drive_force(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
+                    Q: Optional[np.ndarray] = None) -> float:
+        """
+        Force the actuator applies to the driven body along the drive axis (N).
+
+        The drive-axis component of the constraint forces lambda_P = M_P a_P - Q_P (eq. 6.4) for
+        the single displacement drive; 0 without one.
+        """
+        if self.drive is None:
+            return 0.0
+        if Q is None:
+            Q = self.generalized_forces(z, v)[0]
+        P = self.part.prescribed
+        return float((self.mass[P] * aP - Q[P]) @ self.part.du)
+
+    def drive_forces(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
+                     Q: Optional[np.ndarray] = None, inputs=None) -> np.ndarray:
+        """
+        Return the force each drive's actuator applies.
+
+        Per drive (``drive_names`` order), the force (N; N m on theta) its actuator applies along
+        its direction: a displacement drive's share D_d^T lambda_P of the constraint forces
+        lambda_P = M_P a_P - Q_P (eq. 6.4; Q the hinges' forces); a force drive's commanded force
+        (its entry of ``inputs``, 0 without).
+        """
+        out = np.zeros(len(self.drives))
+        if len(self.displacement_index):
+            if Q is None:
+                Q = self.generalized_forces(z, v)[0]
+            P = self.part.prescribed
+            out[self.displacement_index] = self.part.D.T @ (self.mass[P] * aP - Q[P])
+        if inputs is not None and len(self.force_index):
+            out[self.force_index] = np.asarray(inputs, dtype=float)[self.force_index]
+        return out
+
+    def drive_positions(self, z: np.ndarray) -> np.ndarray:
+        """
+        Return each driven body's displacement along its drive's direction.
+
+        Per drive, the driven body's displacement from rest along the drive's direction (a
+        displacement drive's input; where a force drive's body has moved).
+        """
+        return self.drive_directions @ (z - self.z0)
+
+
+def _number(value, name: str) -> float:
+    """Return a drive input as a float; ValueError naming the drive for anything else."""
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"drive {name!r}: input must be a number, got {value!r}") from None
