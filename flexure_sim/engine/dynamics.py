@@ -39,7 +39,7 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
     linear solve with the e^{hA} already at hand (A - I/tau is regular: A's eigenvalues have
     no positive real part for a damped mechanism; an exponential is the fallback).
     """
-    A, g, damping = model.jacobian(y, t, command, damping=True)
+    A, g, damping, load_rows = model.jacobian(y, t, command, damping=True)
     m, h = A.shape[0], model.dt
     aug = np.zeros((3 * m, 3 * m))
     aug[:m, :m] = h * A
@@ -53,8 +53,9 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
     drive_mass = [float(dk @ (model.mass[part.prescribed] * dk)) for dk in model.D_rows]
     sines = np.array([[j, c.amplitude, 2.0 * np.pi * c.frequency, c.phase]
                       for j, c in part.timed], dtype=float).reshape(-1, 4).T
-    emats = step_energy.energy_matrices(A, phi1, phi2, h, g, damping, part.free,
-                                        part.prescribed, D, drive_mass, tau, shifted, sines)
+    emats = step_energy.energy_matrices(
+        A, phi1, phi2, h, g, damping, part.free, part.prescribed, D, drive_mass, tau, shifted,
+        sines, load_rows[[j for j, _ in part.timed]])
     data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, emats)
     data.stats.linearizations += 1
 

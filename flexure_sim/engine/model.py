@@ -294,7 +294,7 @@ class Model(DriveMixin):
         dQ/dv includes -C (``velocity_jacobian``), also through v_P. With ``load_gradient`` also
         G (rows g_d = dq_d/dy) of the drive loads q_d = D_d^T Q_P: (A, G); with ``damping`` also
         the damping matrix -dQ/dv over all coordinates (1/2 the Hessian of the dissipated power
-        in the velocities): (A, G, C).
+        in the velocities) and dQ_P/dy: (A, G, C, dQ_P/dy).
         """
         part = self.part
         nF = len(part.free)
@@ -319,7 +319,11 @@ class Model(DriveMixin):
             for j, (dj, tau_j) in enumerate(zip(self.D_rows, self.tau)):
                 G[k, 2 * nF + j] = dk @ (Kzz[PP] @ dj - Kvv[PP] @ dj / tau_j)
         if damping:
-            return A, G, -Kvv
+            rows = np.zeros((len(part.prescribed), m))  # dQ_P/dy
+            rows[:, :nF], rows[:, nF:2 * nF] = Kzz[PF], Kvv[PF]
+            for k, (dk, tau) in enumerate(zip(self.D_rows, self.tau)):
+                rows[:, 2 * nF + k] = Kzz[PP] @ dk - Kvv[PP] @ dk / tau
+            return A, G, -Kvv, rows
         return (A, G) if load_gradient else A
 
     # --------------------------------------------------------------- measures

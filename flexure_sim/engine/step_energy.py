@@ -37,7 +37,9 @@ the linear model follows as q_0 + g^T w(s) (g = dq/dy at the linearization). So
 
 Psi_k = int_0^h e^{-s/tau} (phi_k-term of w) ds (``weighted_phi``), m_d = D_k^T M_P D_k, and
 ``rest`` the trapezoidal rule on what the linear model leaves of q. Timed (sine-rate)
-constraints' power: the trapezoidal rule.
+constraints: their power sum_j v_j (M_j a_j - Q_j) with v_j held at the step's start and
+Q_j = Q_j0 + dQ_j/dy w(s), so its integral takes int_0^h w ds as the dissipation does; the
+rest (the rates' change over the step, the nonlinear part) by the trapezoidal rule.
 
 The remainder iteration accepts y_{n+1} one correction beyond the point where F and the
 rates were last evaluated; the rests are taken at the points where the rates were evaluated
@@ -75,12 +77,12 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
     are disjoint, so each drive's work is its own) and adds the force drives' held forces'
     work, the change of their potential ``AUX_APPLIED`` (exact).
     """
-    erows, escal, G, V, Cx, R, SP, B, sines = emats
+    erows, escal, G, V, Cx, R, SP, B, sines, Trows, T = emats
     m = y0.shape[0]
     nx = Cx.shape[0]
     nF = m - nx
     nd = B.shape[1]
-    work = 0.5 * h * (aux0[AUX_TIMED_POWER] + aux1[AUX_TIMED_POWER])
+    work = 0.0
     for k in range(nd):
         ud0 = (command[k] - y0[2 * nF + k]) / escal[k, E_TAU]
         decay = escal[k, E_DECAY]
@@ -103,8 +105,19 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
     for k in range(nd):
         for i in range(B.shape[0]):
             b[i] += B[i, k] * command[k]
+    # Timed constraints: power sum_j v_j lambda_j, lambda_j = M_j a_j - Q_j(y) following the
+    # linear model lambda_j0 - dQ_j/dy w(s), v_j held at v_j(t0); the rest trapezoidal.
+    timed0 = aux0[AUX_TIMED_POWER]
+    linear = 0.0
+    moved = 0.0
     for i in range(sines.shape[1]):
-        b[int(sines[0, i])] = sines[1, i] * math.sin(sines[2, i] * t0 + sines[3, i])
+        vj = sines[1, i] * math.sin(sines[2, i] * t0 + sines[3, i])
+        b[int(sines[0, i])] = vj
+        for j in range(m):
+            linear += vj * (T[i, j] * F0[j] + T[i, m + j] * N1[j])
+            moved += vj * Trows[i, j] * (ye1[j] - y0[j])
+    rest = aux1[AUX_TIMED_POWER] - (timed0 - moved)
+    work += h * timed0 - linear + 0.5 * h * rest
     c = R @ b
     c0 = b @ (SP @ b)
     x0 = y0[nF:]
@@ -171,7 +184,7 @@ def quadratic_integrals(M: np.ndarray, Q: np.ndarray, h: float, terms: int = 18)
 
 
 def energy_matrices(A, phi1, phi2, h, G_load, damping, free, prescribed, D, drive_mass, tau,
-                    shifted_phi1, sines):
+                    shifted_phi1, sines, timed_rows):
     """
     The per-linearization matrices of ``step_energy`` (module docstring).
 
@@ -179,7 +192,8 @@ def energy_matrices(A, phi1, phi2, h, G_load, damping, free, prescribed, D, driv
     displacement drives' loads; damping: C = -dQ/dv over all coordinates; free, prescribed:
     coordinate indices; D: dz_P/du (a column per displacement drive), drive_mass: D_k^T M_P D_k,
     tau: response times, shifted_phi1: h phi_1(h(A - I/tau_k)) (all per drive); sines: (4, n)
-    rows (index into prescribed, amplitude, omega, phase) of the timed constraints.
+    rows (index into prescribed, amplitude, omega, phase) of the timed constraints, timed_rows
+    (n, m) their dQ_j/dy.
     """
     m = A.shape[0]
     nF, nd = len(free), D.shape[1]
@@ -214,6 +228,8 @@ def energy_matrices(A, phi1, phi2, h, G_load, damping, free, prescribed, D, driv
         escal[k, E_DRIVE_MASS] = drive_mass[k]
         escal[k, E_TAU] = tau[k]
         escal[k, E_HAS_DRIVE] = 1.0
+    timed_rows = np.asarray(timed_rows, dtype=float).reshape(-1, m)
     out = (erows, escal, Gfull[m:, m:], integral[nF:m, m:], Cx, R, SP, B,
-           np.asarray(sines, dtype=float).reshape(4, -1))
+           np.asarray(sines, dtype=float).reshape(4, -1), timed_rows,
+           timed_rows @ integral[:m, m:])
     return tuple(np.ascontiguousarray(a) for a in out)
