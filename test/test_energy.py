@@ -116,7 +116,7 @@ def test_parallelogram_energies_at_the_shipped_step_agree_with_radau():
 
 
 def _rocked_parallelogram():
-    """The parallelogram stage with a rocker on its platform, turned at a prescribed sine rate."""
+    """Build the parallelogram stage with a rocker on its platform, turned at a sine rate."""
     data = yaml.safe_load(PARALLELOGRAM.read_text())
     data["bodies"].append({"name": "rocker", "mass": 0.001, "inertia": 1e-8,
                            "pose": [0.0, 0.04, 0.0]})

@@ -15,7 +15,8 @@ integration instead of holding by construction). The dissipated power of viscous
 P(v) = v^T C(z) v, C = -dQ/dv = 1/2 d^2P/dv^2 (every hinge law, and any constant damping
 matrix added to the forces). At the linearization the velocities are affine in the state,
 v = L x + b with x = (v_F, u) the last ``nx`` entries of y (v_P = sum_k D_k (command_k -
-u_k)/tau_k + the timed constraints' rates, taken at the step's start in b), so with x(s) = x_n + S w(s) (S selects x from y)
+u_k)/tau_k + the timed constraints' rates, taken at the step's start in b), so with
+x(s) = x_n + S w(s) (S selects x from y)
 
     int_0^h P ds = h P^(x_n) + 2 (C_x x_n + c)^T S int_0^h w ds + xi^T G xi + h/2 (rho_0 + rho_1),
 
@@ -186,7 +187,7 @@ def quadratic_integrals(M: np.ndarray, Q: np.ndarray, h: float, terms: int = 18)
 def energy_matrices(A, phi1, phi2, h, G_load, damping, free, prescribed, D, drive_mass, tau,
                     shifted_phi1, sines, timed_rows):
     """
-    The per-linearization matrices of ``step_energy`` (module docstring).
+    Build the per-linearization matrices of ``step_energy`` (module docstring).
 
     A, phi1 = h phi_1(hA), phi2 = h phi_2(hA): the step's; G_load: rows g_k = dq_k/dy of the
     displacement drives' loads; damping: C = -dQ/dv over all coordinates; free, prescribed:

@@ -140,7 +140,9 @@ def kernel_rhs(y, t, command, args):
 def energy_rates(aux, Q, v, potential, dissipation, applied, prescribed, mass, D, sine_index,
                  aP):
     """
-    Fill and return ``aux``: the energy figures the stepping loop integrates (``step_energy.AUX_*``).
+    Fill and return ``aux``: the energy figures the stepping loop integrates.
+
+    The figures are indexed by ``step_energy.AUX_*``.
 
     Power of the timed (sine-rate) constraints sum v_P (M a_P - Q_P), dissipated power,
     mechanical energy T + U, the held forces' potential (``applied_forces``) and per
