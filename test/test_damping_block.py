@@ -324,9 +324,10 @@ def test_without_the_block_the_step_response_is_bit_identical_to_before(name):
     for _ in range(4):
         sim.step(10)
         s = sim.snapshot()
-        got.append((s.output, s.drive_force, s.compression, s.dissipated, s.drive_work,
-                    float(s.poses[3, 2])))
-    assert got == BEFORE[name]
+        got.append((s.output, s.drive_force, s.compression, float(s.poses[3, 2])))
+    # The energies (fields 3 and 4 of BEFORE) are left out: the step's exact dissipation
+    # integral (issue 16 item 8) changed them on purpose; test_energy.py checks them.
+    assert got == [row[:3] + row[5:] for row in BEFORE[name]]
 
 
 def test_without_the_block_modes_and_frf_are_bit_identical_to_before():

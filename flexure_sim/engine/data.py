@@ -56,16 +56,15 @@ class Linearization:
     """
     Where and what.
 
-    Configuration z, Jacobian A, h phi_1(hA), h phi_2(hA), and per displacement drive the
-    rows (g, g^T Psi_1, g^T Psi_2) and scalars of its work (``stepping.step_energy``).
+    Configuration z, Jacobian A, h phi_1(hA), h phi_2(hA), and the matrices of the step's
+    dissipated energy and drive work (``step_energy.energy_matrices``).
     """
 
     z: np.ndarray
     A: np.ndarray
     phi1: np.ndarray
     phi2: np.ndarray
-    erows: np.ndarray
-    escal: np.ndarray
+    emats: tuple
 
 
 class Data:

@@ -14,14 +14,15 @@ sweeps for the stage), so A can be reused for many steps: it is re-computed only
 iteration stops contracting (or, optionally, when the configuration moved by more than
 ``relinearize_tol``). The converged step does not depend on where A was taken; the method
 is second order. phi_1 and phi_2 come from one matrix exponential per linearization. The
-drive work is integrated as exactly as the motion (``stepping.step_energy``).
+dissipated energy and the drive work are integrated as exactly as the motion, each on its
+own (``step_energy``).
 """
 from __future__ import annotations
 
 import numpy as np
 import scipy.linalg
 
-from . import stepping
+from . import step_energy, stepping
 from .data import Data, Linearization, State
 from .model import Model, SolverError
 
@@ -32,13 +33,13 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
 
     Both come from one exponential of the block matrix [[hA, I, 0], [0, 0, I], [0, 0, 0]]
     (its first block row is [e^{hA}, h phi_1(hA), h^2 phi_2(hA)] up to the powers of h).
-    Per displacement drive, also the rows of its exact work (``stepping.step_energy``): g = dq/dy
-    of its load q = D_d^T Q_P and h phi_1(h (A - I/tau)) = (A - I/tau)^-1
-    (e^{-h/tau} e^{hA} - I), one linear solve with the e^{hA} already at hand (A - I/tau
-    is regular: A's eigenvalues have no positive real part for a damped mechanism; an
-    exponential is the fallback).
+    Also the matrices of the step's energy integrals (``step_energy.energy_matrices``): the
+    damping matrix C = -dQ/dv, and per displacement drive g = dq/dy of its load
+    q = D_d^T Q_P and h phi_1(h (A - I/tau)) = (A - I/tau)^-1 (e^{-h/tau} e^{hA} - I), one
+    linear solve with the e^{hA} already at hand (A - I/tau is regular: A's eigenvalues have
+    no positive real part for a damped mechanism; an exponential is the fallback).
     """
-    A, g = model.jacobian(y, t, command, load_gradient=True)
+    A, g, damping, load_rows = model.jacobian(y, t, command, damping=True)
     m, h = A.shape[0], model.dt
     aug = np.zeros((3 * m, 3 * m))
     aug[:m, :m] = h * A
@@ -46,20 +47,16 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
     aug[m:2 * m, 2 * m:] = np.eye(m)
     E = scipy.linalg.expm(aug)
     phi1, phi2 = h * E[:m, m:2 * m], h * E[:m, 2 * m:]
-    rows = max(model.n_actuators, 1)
-    erows = np.zeros((rows, 3, m))
-    escal = np.zeros((rows, 6))
-    escal[:, stepping.E_BALANCE] = float(not model.part.timed)
-    for k, (du, tau) in enumerate(zip(model.D_rows, model.tau)):
-        shifted_phi1 = _shifted_phi1(A, E[:m, :m], h, tau)
-        psi1, psi2 = stepping.weighted_phi(A, phi1, phi2, h, tau, shifted_phi1)
-        erows[k, 0], erows[k, 1], erows[k, 2] = g[k], g[k] @ psi1, g[k] @ psi2
-        escal[k, stepping.E_PSI0] = tau * -np.expm1(-h / tau)
-        escal[k, stepping.E_DECAY] = np.exp(-h / tau)
-        escal[k, stepping.E_DRIVE_MASS] = float(du @ (model.mass[model.part.prescribed] * du))
-        escal[k, stepping.E_TAU] = tau
-        escal[k, stepping.E_HAS_DRIVE] = 1.0
-    data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, erows, escal)
+    part = model.part
+    tau, D = model.motion[0], model.motion[2]
+    shifted = [_shifted_phi1(A, E[:m, :m], h, tk) for tk in tau]
+    drive_mass = [float(dk @ (model.mass[part.prescribed] * dk)) for dk in model.D_rows]
+    sines = np.array([[j, c.amplitude, 2.0 * np.pi * c.frequency, c.phase]
+                      for j, c in part.timed], dtype=float).reshape(-1, 4).T
+    emats = step_energy.energy_matrices(
+        A, phi1, phi2, h, g, damping, part.free, part.prescribed, D, drive_mass, tau, shifted,
+        sines, load_rows[[j for j, _ in part.timed]])
+    data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, emats)
     data.stats.linearizations += 1
 
 
@@ -89,11 +86,11 @@ def moved_too_far(model: Model, data: Data, z: np.ndarray) -> bool:
     return bool(np.max(moved) > tol)
 
 
-def _advance(model: Model, data: Data, n, y, t, command, F0, aux0):
+def _advance(model: Model, data: Data, n, y, t, command, F0, aux0, ye):
     lin = data.lin
     common = (n, y, t, model.dt, command, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,
-              model.atol,
-              model.max_iterations, model.relinearize_after, F0, aux0, lin.erows, lin.escal)
+              model.atol, model.max_iterations, model.relinearize_after, F0, aux0, ye,
+              lin.emats)
     if model.compiled:
         return stepping.advance(*common, model.kernel_args)
     return stepping.advance_interpreted(*common, model)
@@ -131,9 +128,10 @@ def step(model: Model, data: Data, n: int = 1) -> None:
     y, t = model.pack(s), s.t
     cache = data.cache
     if cache is not None and cache[0] is s and cache[1] == key:
-        F0, aux0 = cache[2:4]
+        F0, aux0, ye = cache[2:5]
     else:
         F0, aux0 = model.rhs(y, t, command)
+        ye = y
     dissipated, work = s.dissipated, s.drive_work + jump_work(model, s, command)
     remaining = int(n)
     fresh = False
@@ -143,8 +141,8 @@ def step(model: Model, data: Data, n: int = 1) -> None:
             linearize(model, data, y, t, command)
             fresh = True
         chunk = 1 if model.relinearize_tol is not None else remaining
-        y, F0, aux0, dd, dw, steps, iterations, status = _advance(
-            model, data, chunk, y, t, command, F0, aux0)
+        y, F0, aux0, ye, dd, dw, steps, iterations, status = _advance(
+            model, data, chunk, y, t, command, F0, aux0, ye)
         dissipated += dd
         work += dw
         remaining -= steps
@@ -168,4 +166,4 @@ def step(model: Model, data: Data, n: int = 1) -> None:
     data.state = State(t, z, v, model.state_u(u), s.command, dissipated, work)
     data.clock = (data.state, origin, k)
     # F at the new state seeds the next call while the command is unchanged.
-    data.cache = (data.state, key, F0, aux0)
+    data.cache = (data.state, key, F0, aux0, ye)

@@ -284,14 +284,17 @@ class Model(DriveMixin):
                                         part.prescribed, self.mass, self.motion[2],
                                         self.motion[3], aP)
 
-    def jacobian(self, y: np.ndarray, t: float, command, load_gradient: bool = False):
+    def jacobian(self, y: np.ndarray, t: float, command, load_gradient: bool = False,
+                 damping: bool = False):
         """
         Exact A = dF/dy for y = (z_F, v_F, u).
 
         Rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v), du_d/dt = (command_d - u_d)/tau_d, with z_P,
         v_P depending on each u_d through D_d (the force drives' held forces do not depend on y);
         dQ/dv includes -C (``velocity_jacobian``), also through v_P. With ``load_gradient`` also
-        G (rows g_d = dq_d/dy) of the drive loads q_d = D_d^T Q_P: (A, G).
+        G (rows g_d = dq_d/dy) of the drive loads q_d = D_d^T Q_P: (A, G); with ``damping`` also
+        the damping matrix -dQ/dv over all coordinates (1/2 the Hessian of the dissipated power
+        in the velocities) and dQ_P/dy: (A, G, C, dQ_P/dy).
         """
         part = self.part
         nF = len(part.free)
@@ -315,6 +318,12 @@ class Model(DriveMixin):
             G[k, nF:2 * nF] = dk @ Kvv[PF]
             for j, (dj, tau_j) in enumerate(zip(self.D_rows, self.tau)):
                 G[k, 2 * nF + j] = dk @ (Kzz[PP] @ dj - Kvv[PP] @ dj / tau_j)
+        if damping:
+            rows = np.zeros((len(part.prescribed), m))  # dQ_P/dy
+            rows[:, :nF], rows[:, nF:2 * nF] = Kzz[PF], Kvv[PF]
+            for k, (dk, tau) in enumerate(zip(self.D_rows, self.tau)):
+                rows[:, 2 * nF + k] = Kzz[PP] @ dk - Kvv[PP] @ dk / tau
+            return A, G, -Kvv, rows
         return (A, G) if load_gradient else A
 
     # --------------------------------------------------------------- measures

@@ -10,6 +10,9 @@ F0 = F(y_n, t_n) and the remainder N(y, t) = F(y, t) - F0 - A (y - y_n), a step 
 fixed-point iteration from y_{n+1} = U. The iteration contracts by about |J - A| / |J| per
 sweep; it has converged when its last change is below rtol |U| + atol in every component.
 
+The dissipated energy and drive work are integrated within each step from the same linear
+model (``step_energy``).
+
 ``advance`` runs up to n steps and stops early with a status when the iteration does not
 contract (1) or contracts slowly (2), so the caller can re-linearize. The loop calls
 ``rhs(y, t, command, args)`` -> (F, energy rates ``energy_rates``): compiled with the force
@@ -24,14 +27,10 @@ import types
 import numpy as np
 
 from .kernels import njit, quadratic_forces
+from .step_energy import AUX_APPLIED, AUX_DISSIPATION, AUX_ENERGY, AUX_LOAD, AUX_TIMED_POWER
+from .step_energy import step_energy
 
 CONVERGED, NOT_CONTRACTING, SLOW = 0, 1, 2
-#: Entries of the energy vector ``rhs`` returns next to F (see ``energy_rates``); the load of
-#: displacement drive k is entry AUX_LOAD + k.
-AUX_TIMED_POWER, AUX_DISSIPATION, AUX_ENERGY, AUX_APPLIED, AUX_LOAD = 0, 1, 2, 3, 4
-#: Columns of the per-linearization energy scalars, one row per displacement drive (see
-#: ``dynamics.linearize``).
-E_PSI0, E_DECAY, E_DRIVE_MASS, E_TAU, E_HAS_DRIVE, E_BALANCE = 0, 1, 2, 3, 4, 5
 
 
 @njit(cache=True)
@@ -89,7 +88,7 @@ def applied_forces(Q, z, command, n_actuators, force_dir, force_z0):
 @njit(cache=True)
 def kernel_rhs(y, t, command, args):
     """
-    F(y, t) and the energy rates (``AUX_*``) with the compiled quadratic-law forces.
+    F(y, t) and the energy rates (``step_energy.AUX_*``) with the compiled quadratic-law forces.
 
     y = (z_F, v_F, u) with one u per displacement drive; command: the displacement drives'
     commands, then the force drives' forces (``Model.actuator_command``).
@@ -141,7 +140,9 @@ def kernel_rhs(y, t, command, args):
 def energy_rates(aux, Q, v, potential, dissipation, applied, prescribed, mass, D, sine_index,
                  aP):
     """
-    Fill and return ``aux``: the per-state energy figures the stepping loop integrates (``AUX_*``).
+    Fill and return ``aux``: the energy figures the stepping loop integrates.
+
+    The figures are indexed by ``step_energy.AUX_*``.
 
     Power of the timed (sine-rate) constraints sum v_P (M a_P - Q_P), dissipated power,
     mechanical energy T + U, the held forces' potential (``applied_forces``) and per
@@ -181,16 +182,18 @@ def _advance(
     slow_after,
     F0,
     aux0,
-    erows,
-    escal,
+    ye,
+    emats,
     args,
 ):
     """
-    Up to n steps from (y, t) with F0 = F(y, t) and aux0 its energy rates.
+    Up to n steps from (y, t) with F0 = F(y, t) and aux0 its energy rates, taken at ye.
 
-    Returns (y, F, aux, dissipated, work, steps, iterations, status): the state, its F and
-    energy rates after the steps taken (at t + steps dt; the caller keeps time), the
-    dissipated energy and drive work over them (``step_energy``), and why it stopped.
+    Returns (y, F, aux, ye, dissipated, work, steps, iterations, status): the state, its F
+    and energy rates after the steps taken (at t + steps dt; the caller keeps time), the
+    point where those rates were evaluated (the accepted y is one correction further), the
+    dissipated energy and drive work over the steps (``step_energy.step_energy``, with the
+    matrices ``emats``), and why it stopped.
     ``rhs`` is a global of the function (see the end of this module), not an argument:
     Numba cannot cache functions that take compiled functions as arguments.
     """
@@ -209,6 +212,7 @@ def _advance(
         k = 0
         F1, aux1 = F0, aux0
         N1 = F0  # replaced in the first iteration
+        ye1 = y1
         for k in range(1, max_iter + 1):
             F1, aux1 = rhs(y1, t1, command, args)
             N1 = F1 - F0 - A @ (y1 - y)
@@ -217,8 +221,10 @@ def _advance(
             if not math.isfinite(change):
                 break
             if change <= 1.0:
-                # F at the accepted point, to first order in a change below tolerance.
+                # F at the accepted point, to first order in a change below tolerance;
+                # the energy rates stay where they were evaluated (ye1).
                 F1 = F1 + A @ (y_next - y1)
+                ye1 = y1
                 y1 = y_next
                 converged = True
                 break
@@ -229,86 +235,17 @@ def _advance(
         if not converged:
             status = NOT_CONTRACTING
             break
-        dd, dw = step_energy(y, y1, F0, N1, aux0, aux1, command, dt, erows, escal)
+        dd, dw = step_energy(y, ye, y1, ye1, F0, N1, aux0, aux1, command, t1 - dt, dt, emats)
         dissipated += dd
         work += dw
         y = y1
-        F0, aux0 = F1, aux1
+        F0, aux0, ye = F1, aux1, ye1
         steps += 1
         iterations += k
         if k > slow_after:
             status = SLOW
             break
-    return y, F0, aux0, dissipated, work, steps, iterations, status
-
-
-@njit(cache=True, inline="always")
-def step_energy(y0, y1, F0, N1, aux0, aux1, command, h, erows, escal):
-    """
-    Dissipated energy and drive work over one step of the exponential trapezoidal rule.
-
-    Summed over the displacement drives k (row k of ``erows``, ``escal``; their coordinates
-    are disjoint, so each drive's work is its own). A drive's power is ud (m_d a - q) with
-    ud = (command - u)/tau its rate, which decays exactly as e^{-s/tau} over the step, and
-    q = D_k^T Q_P(y) its load, which the step's linear model follows as q_0 + g^T w(s),
-    w(s) = s phi_1(sA) F_0 + s^2/h phi_2(sA) N_1 (g = dq/dy at the linearization). So
-
-        W = 1/2 m_d ud_0^2 (e^{-2h/tau} - 1)
-            - ud_0 (q_0 tau (1 - e^{-h/tau}) + g^T Psi_1 F_0 + g^T Psi_2 N_1 + rest),
-
-    Psi_k = int_0^h e^{-s/tau} (phi_k-term of w) ds (rows (g, g^T Psi_1, g^T Psi_2), see
-    ``weighted_phi``), m_d = D_k^T M_P D_k; ``rest`` is the trapezoidal rule on what the
-    linear model leaves of q (zero at the start of the step, tiny at its end). The stiff,
-    sub-microsecond transients after a command step are thereby integrated as exactly as the
-    motion. Force drives (held forces): the change of their potential ``AUX_APPLIED``,
-    f . e (z_1 - z_0), exact. Timed (sine-rate) constraints' power: trapezoidal rule.
-    Dissipated energy: with only drive and fixed constraints, the energy theorem
-    W - Delta(T + U) (exact to the motion's accuracy), else the trapezoidal rule on the
-    dissipated power.
-    """
-    work = 0.5 * h * (aux0[AUX_TIMED_POWER] + aux1[AUX_TIMED_POWER])
-    nd = 0
-    for k in range(escal.shape[0]):
-        if escal[k, E_HAS_DRIVE] > 0.5:
-            nd += 1
-    nF = (y0.shape[0] - nd) // 2
-    for k in range(nd):
-        ud0 = (command[k] - y0[2 * nF + k]) / escal[k, E_TAU]
-        decay = escal[k, E_DECAY]
-        gw = 0.0
-        psi = 0.0
-        for j in range(y0.shape[0]):
-            gw += erows[k, 0, j] * (y1[j] - y0[j])
-            psi += erows[k, 1, j] * F0[j] + erows[k, 2, j] * N1[j]
-        rest = aux1[AUX_LOAD + k] - aux0[AUX_LOAD + k] - gw
-        linear = aux0[AUX_LOAD + k] * escal[k, E_PSI0] + psi + 0.5 * h * decay * rest
-        work += 0.5 * escal[k, E_DRIVE_MASS] * ud0 * ud0 * (decay * decay - 1.0) - ud0 * linear
-    applied = aux1[AUX_APPLIED] - aux0[AUX_APPLIED]
-    if applied != 0.0:
-        work += applied
-    if escal[0, E_BALANCE] > 0.5:
-        dissipated = work - (aux1[AUX_ENERGY] - aux0[AUX_ENERGY])
-    else:
-        dissipated = 0.5 * h * (aux0[AUX_DISSIPATION] + aux1[AUX_DISSIPATION])
-    return dissipated, work
-
-
-def weighted_phi(A, phi1, phi2, h, tau, shifted_phi1):
-    """
-    Psi_1.
-
-    Psi_2 = int_0^h e^{-s/tau} (s phi_1(sA), s^2/h phi_2(sA)) ds, from phi1 = h phi_1(hA), phi2 = h
-    phi_2(hA) and shifted_phi1 = h phi_1(h (A - I/tau)): swapping the order of integration in the
-    variation-of-constants integrals gives.
-
-        Psi_1 = tau (h phi_1(h(A - I/tau)) - e^{-h/tau} h phi_1(hA)),
-        Psi_2 = (tau^2 h phi_1(h(A - I/tau))
-                 - tau e^{-h/tau} ((h + tau) h phi_1(hA) - h^2 (phi_1(hA) - phi_2(hA)))) / h.
-    """
-    decay = math.exp(-h / tau)
-    psi1 = tau * (shifted_phi1 - decay * phi1)
-    psi2 = (tau * tau * shifted_phi1 - tau * decay * ((h + tau) * phi1 - h * (phi1 - phi2))) / h
-    return psi1, psi2
+    return y, F0, aux0, ye, dissipated, work, steps, iterations, status
 
 
 #: The right-hand side the compiled loop calls (resolved when Numba compiles ``advance``).
