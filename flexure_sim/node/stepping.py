@@ -167,10 +167,20 @@ class SteppingLoop:
                 sim.set_command(filt.applied)
             sim.step(self.n_steps)
         else:
+            # Step by step only while the ramp lasts: once the applied target reaches the
+            # command, the rest of the tick is one compiled call (the same states as one step
+            # at a time). A controller's new command every tick is usually within one step's
+            # slew, so a tick is then one set_command and one step(n), not n of each (which
+            # cost ~0.25 ms of Python per tick and made real-time ticks late).
             dt = self.dt
-            for _ in range(self.n_steps):
+            remaining = self.n_steps
+            while remaining:
                 sim.set_command(filt.advance(dt))
+                if filt.settled:
+                    sim.step(remaining)
+                    break
                 sim.step(1)
+                remaining -= 1
 
     def tick(self) -> bool:
         """
