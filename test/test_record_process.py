@@ -9,8 +9,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 from flexure_sim.node.record_process import (
     MAX_BACKLOG_ENV,
     RECORDER_NICE,
@@ -125,24 +123,3 @@ def test_a_slow_recorder_in_real_time_counts_every_message_it_drops(tmp_path, mo
                           capture_output=True, text=True, timeout=120)
     assert info.returncode == 0, info.stderr
     assert f"Dropped:      {missing} message(s) could not be recorded" in info.stdout
-
-
-AUTOGROUP = Path("/proc/self/autogroup")
-
-
-@pytest.mark.skipif(not AUTOGROUP.exists(), reason="the kernel does not group tasks by session")
-def test_the_recorder_session_group_yields_to_the_node_too(tmp_path: Path) -> None:
-    """
-    The recorder runs in a session of its own, which an autogroup kernel schedules as a group.
-
-    Its own niceness then ranks it only among its threads: against the node it weighed as much
-    as the node's whole session. Its group's niceness must be lowered too.
-    """
-    process = RecorderProcess()
-    try:
-        ProcessRecording(process, tmp_path / "group.mcap", [], {}, "meta").close()  # started
-        child = Path(f"/proc/{process.proc.pid}/autogroup").read_text()
-    finally:
-        process.quit()
-    assert child.split()[0] != AUTOGROUP.read_text().split()[0]  # a group of its own
-    assert int(child.split("nice")[1]) == RECORDER_NICE

@@ -32,10 +32,6 @@ from .record_process import (
 )
 
 
-#: Linux's scheduler autogroup of this process (kernels with CONFIG_SCHED_AUTOGROUP).
-AUTOGROUP = "/proc/self/autogroup"
-
-
 def _lower_priority() -> None:
     """
     Let the node's paced thread take a shared core from the recorder as soon as it wakes.
@@ -43,20 +39,10 @@ def _lower_priority() -> None:
     The recorder works in bursts (a compressed chunk every few hundred ms) that, at equal priority,
     the scheduler may let finish first: a late tick. The pipe and the backlog absorb the recorder's
     delay instead.
-
-    The child runs in a session of its own (signals), and where the kernel groups tasks by
-    session (autogroup, the default of desktop and VM kernels) its niceness only ranks it among
-    its own threads: the group competes with the node's as an equal. So the group's niceness is
-    raised too (lowering priority needs no privilege).
     """
     try:
         os.nice(RECORDER_NICE)
     except OSError:
-        pass
-    try:
-        with open(AUTOGROUP, "w") as group:
-            group.write(str(RECORDER_NICE))
-    except OSError:  # no autogroup here (or not allowed): the niceness above still applies
         pass
 
 
