@@ -30,7 +30,7 @@ class Log:
 
 
 def make_loop(mechanism):
-    """A real-time stepping loop of the stage at 1 kHz, not started (ticks driven by the test)."""
+    """Build a real-time stepping loop of the stage at 1 kHz, not started (the test ticks)."""
     sim = Simulation(mechanism, dt=DT, relinearize_tol=RELINEARIZE_TOL)
     drive = mechanism.drive
     filt = CommandFilter(DriveLimits(drive.stroke[0], drive.stroke[1], drive.slew_rate))
@@ -43,7 +43,7 @@ def make_loop(mechanism):
 
 def reference_ramp(mechanism, commands):
     """
-    The drive's definition (README: Drive commands), independently of the loop's shortcuts.
+    Step the drive's definition (README: Drive commands), independently of the loop's shortcuts.
 
     The applied target moves towards each tick's command by at most slew_rate * dt per
     engine step, and the engine takes one step per applied value.

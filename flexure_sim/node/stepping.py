@@ -8,10 +8,10 @@ publishing and recording the same bytes.
 
 Real-time mode paces ticks with absolute deadlines of a steady clock (`pacing.Pacer`; with
 ``merge_late_ticks`` a loop that many ticks late merges them into one that steps the engine
-through all their periods and publishes once); fast mode runs flat out; lockstep mode runs one tick per ``~/step`` request. Between ticks the
-thread runs the work services and parameter changes queued for it (`requests`). A tick whose
-engine step fails holds the last good state (`engine_guard.EngineHold`): input never stops
-the thread.
+through all their periods and publishes once); fast mode runs flat out; lockstep mode runs
+one tick per ``~/step`` request. Between ticks the thread runs the work services and
+parameter changes queued for it (`requests`). A tick whose engine step fails holds the last
+good state (`engine_guard.EngineHold`): input never stops the thread.
 """
 from __future__ import annotations
 
