@@ -71,6 +71,8 @@ def test_steps_per_tick(rate, step, n):
     (dict(wake_spin=float("nan")), "wake_spin"),
     (dict(stepping_nice=-21), "stepping_nice"),
     (dict(stepping_nice=2.5), "stepping_nice"),
+    (dict(merge_late_ticks=-1), "merge_late_ticks"),
+    (dict(merge_late_ticks=2.0), "merge_late_ticks"),
     (dict(command_reliability="sometimes"), "command_reliability"),
 ])
 def test_invalid_values_are_refused_with_the_reason(changes, word):
@@ -151,6 +153,34 @@ def test_pacer_counts_overruns_catches_up_and_slips_when_far_behind():
     assert pacer.stats.slips == 1 and pacer.stats.skipped >= 45
     clock.t += 1e-4
     assert pacer.done() is False  # re-anchored
+
+
+def test_pacer_merges_the_ticks_it_is_late_for_into_one_that_covers_their_periods():
+    clock = FakeClock()
+    pacer = Pacer(1e-3, merge_after=2, max_lag_s=1.0, clock=clock, sleep=clock.sleep)
+    pacer.start()
+    pacer.wait()
+    assert pacer.span == 1
+    clock.t += 1e-4
+    assert pacer.done() is False
+    clock.t += 5.5e-3  # a stall: tick 2 (due at 100.002) could only start at ~100.00662
+    deadline = pacer.wait()
+    # 4.62 periods late: ticks 2..5 are merged into tick 6, whose slot (100.006) is due now.
+    assert pacer.span == 5
+    assert deadline == pytest.approx(100.006)
+    clock.t += 1e-4
+    assert pacer.done() is False  # the merged tick itself is on time
+    stats = pacer.stats
+    assert (stats.merged, stats.missed, stats.ticks, stats.slips) == (4, 4, 6, 0)
+    assert stats.max_late_s == pytest.approx(4.62e-3)  # how late the loop was
+    # Back on the grid: one period per tick, simulated periods equal to wall time.
+    assert pacer.wait() == pytest.approx(100.007) and pacer.span == 1
+    clock.t += 1.5e-3  # this tick overran by half a period: less than merge_after late
+    assert pacer.done() is True
+    assert pacer.wait() == pytest.approx(100.008) and pacer.span == 1  # caught up tick by tick
+    clock.t += 1e-4
+    assert pacer.done() is False
+    assert (stats.merged, stats.missed, stats.ticks) == (4, 5, 8)
 
 
 def test_pacer_period_change_and_reanchor():

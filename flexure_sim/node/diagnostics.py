@@ -191,6 +191,7 @@ class Diagnostics:
                 ("paced_ticks", pacer.stats.ticks),
                 ("slips", pacer.stats.slips),
                 ("skipped_ticks", pacer.stats.skipped),
+                ("merged_ticks", pacer.stats.merged),
                 ("max_late_us", 1e6 * pacer.stats.max_late_s),
                 ("wake_spin_us", 1e6 * pacer.spin_s),
                 ("jitter_p50_us", 1e6 * p50),

@@ -7,8 +7,14 @@ Tick k is due at the absolute deadline ``D_k = t0 + k * period`` of a monotonic 
 absolute, so sleep jitter does not accumulate.
 
 A tick is **missed** when its work finishes after ``D_{k+1}`` (the next tick is then late).
-A late loop catches up by running ticks back to back; if it falls more than ``max_lag_s``
-behind, it **slips**: the schedule is re-anchored at the current time and the ticks skipped
+A loop less than ``merge_after`` periods late catches up by running ticks back to back. One
+further behind **merges** the ticks it is late for into the next one: that tick covers all of
+their periods (`Pacer.span`: the engine steps through every one, only the last is published)
+and starts on the grid slot that is due now, so simulated time stays with wall time; each
+merged tick counts as missed. Running late ticks back to back instead would cost every one of
+them a full tick's work (publishing and recording), and a loop whose tick takes most of a
+period would then stay behind for good. If it falls more than ``max_lag_s`` behind (a stopped
+process), it **slips**: the schedule is re-anchored at the current time and the ticks skipped
 are counted (simulated time then runs behind wall time by that much).
 """
 from __future__ import annotations
@@ -34,13 +40,15 @@ class PacingStats:
     Counters since `Pacer.start`.
 
     Ticks run, ticks missed (finished after the next deadline), slips (re-anchorings) and ticks
-    skipped by them, worst start lateness (s).
+    skipped by them, worst start lateness (s). ``merged``: ticks merged into a later one
+    (simulated, not published); they count among ``ticks`` and ``missed`` too.
     """
 
     ticks: int = 0
     missed: int = 0
     slips: int = 0
     skipped: int = 0
+    merged: int = 0
     max_late_s: float = 0.0
     late_histogram: np.ndarray = field(default_factory=lambda: np.zeros(_BINS + 1, dtype=np.int64))
     observed: int = 0
@@ -77,7 +85,9 @@ class Pacer:
     Absolute-deadline scheduler.
 
     ``spin_s``: the last part of each wait is busy-waited instead of slept (sleep overshoots by
-    ~0.1 ms and lets the core idle). ``clock`` and ``sleep`` are injectable for tests.
+    ~0.1 ms and lets the core idle). ``merge_after``: periods of lateness from which the late
+    ticks are merged into one (0: never, catch up tick by tick). ``clock`` and ``sleep`` are
+    injectable for tests.
     """
 
     def __init__(
@@ -86,6 +96,7 @@ class Pacer:
         *,
         max_lag_s: float = 0.1,
         spin_s: float = 0.0,
+        merge_after: int = 0,
         clock: Callable[[], float] = time.perf_counter,
         sleep: Callable[[float], None] = time.sleep,
     ) -> None:
@@ -97,6 +108,9 @@ class Pacer:
         self._sleep = sleep
         self.stats = PacingStats()
         self.spin_s = float(spin_s)
+        self.merge_after = int(merge_after)
+        #: Periods the current tick covers (1, or more when late ticks were merged into it).
+        self.span = 1
         self._t0 = clock()
         self._k = 0
 
@@ -123,8 +137,14 @@ class Pacer:
         self._t0 = self._clock() - self._k * self.period
 
     def wait(self) -> float:
-        """Sleep until the next tick's deadline (or slip if far behind); return the deadline."""
+        """
+        Sleep until the next tick's deadline; return the deadline.
+
+        Late by ``merge_after`` periods or more: merge the ticks it is late for into this one
+        (`span`), whose deadline is then the last grid slot due; far behind: slip.
+        """
         self._k += 1
+        self.span = 1
         deadline = self._t0 + self._k * self.period
         now = self._clock()
         if now < deadline:
@@ -145,6 +165,16 @@ class Pacer:
             self._t0 = now - self._k * self.period
             self.stats.observe(late)
             return now
+        behind = int(late // self.period)
+        if self.merge_after and behind >= self.merge_after:
+            stats = self.stats
+            self._k += behind
+            self.span += behind
+            stats.merged += behind
+            stats.ticks += behind
+            stats.missed += behind
+            stats.observe(late)  # how late the loop was, not the merged tick's own slot
+            return deadline + behind * self.period
         self.stats.observe(late)
         return deadline
 

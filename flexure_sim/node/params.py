@@ -163,6 +163,20 @@ def parameter_specs(
             "machines, and the tick then starts late; spinning costs CPU time.",
         ),
         ParamSpec(
+            "merge_late_ticks",
+            0,
+            int,
+            "ticks",
+            False,
+            0,
+            1000,
+            "Real-time mode: a loop late by this many tick periods or more merges the ticks "
+            "it is late for into the next one, which steps the engine through all their "
+            "periods and publishes once (simulated time stays with wall time; the merged "
+            "ticks are not published, and are counted). 0: never, every tick is published "
+            "and late ones run back to back.",
+        ),
+        ParamSpec(
             "stepping_nice",
             STEPPING_NICE,
             int,
@@ -370,6 +384,9 @@ def validate(values: Mapping[str, Any]) -> Optional[str]:
     spin = values["wake_spin"]
     if not (isinstance(spin, (int, float)) and math.isfinite(spin) and 0.0 <= spin <= 1.0):
         return f"wake_spin: must be in [0, 1] s, got {spin!r}"
+    merge = values["merge_late_ticks"]
+    if not (isinstance(merge, int) and not isinstance(merge, bool) and 0 <= merge <= 1000):
+        return f"merge_late_ticks: must be an integer in [0, 1000], got {merge!r}"
     nice = values["stepping_nice"]
     if not (isinstance(nice, int) and not isinstance(nice, bool) and -20 <= nice <= 19):
         return f"stepping_nice: must be an integer in [-20, 19], got {nice!r}"

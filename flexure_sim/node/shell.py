@@ -155,6 +155,7 @@ class StageNode(Node):
             sim, drive_filter, self.interface, tick_pubs, self.session, self._log,
             time_mode=time_mode, rate=float(values["publish_rate"]), dt=dt,
             wake_spin=float(values["wake_spin"]), nice=int(values["stepping_nice"]),
+            merge_after=int(values["merge_late_ticks"]),
             monitor_rate=float(values["monitor_rate"]))
         # Recording channels: the tick topics in publishing order, diagnostics, commands.
         self._command_sub = None
@@ -280,10 +281,10 @@ class StageNode(Node):
         if names & {"stroke_min", "stroke_max", "slew_rate"} and loop.filter is not None:
             limits = self._limits(values)
             loop.requests.call(lambda: loop.filter.set_limits(limits))
-        if names & {"publish_rate", "wake_spin", "monitor_rate"}:
+        if names & {"publish_rate", "wake_spin", "monitor_rate", "merge_late_ticks"}:
             rate, spin = float(values["publish_rate"]), float(values["wake_spin"])
-            monitor = float(values["monitor_rate"])
-            loop.requests.call(lambda: loop.set_pacing(rate, spin, monitor))
+            monitor, merge = float(values["monitor_rate"]), int(values["merge_late_ticks"])
+            loop.requests.call(lambda: loop.set_pacing(rate, spin, monitor, merge))
         if names & {"publish_rate", "display_rate"}:
             every = display_every(float(values["publish_rate"]), float(values["display_rate"]))
             loop.requests.call(lambda: setattr(loop, "display_every", every))

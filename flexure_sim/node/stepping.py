@@ -6,11 +6,12 @@ received since the last tick (`commands`), advances the engine by round(1 / (pub
 sim_step)) steps and publishes the state (`interface`), packing each message to CDR once and
 publishing and recording the same bytes.
 
-Real-time mode paces ticks with absolute deadlines of a steady clock (`pacing.Pacer`); fast
-mode runs flat out; lockstep mode runs one tick per ``~/step`` request. Between ticks the
-thread runs the work services and parameter changes queued for it (`requests`). A tick whose
-engine step fails holds the last good state (`engine_guard.EngineHold`): input never stops
-the thread.
+Real-time mode paces ticks with absolute deadlines of a steady clock (`pacing.Pacer`; with
+``merge_late_ticks`` a loop that many ticks late merges them into one that steps the engine
+through all their periods and publishes once); fast mode runs flat out; lockstep mode runs
+one tick per ``~/step`` request. Between ticks the thread runs the work services and
+parameter changes queued for it (`requests`). A tick whose engine step fails holds the last
+good state (`engine_guard.EngineHold`): input never stops the thread.
 """
 from __future__ import annotations
 
@@ -34,6 +35,15 @@ from .session import RecordingSession
 RELINEARIZE_TOL = None
 #: Diagnostics rate (Hz of simulated time), or every tick if the publish rate is lower.
 DIAGNOSTICS_RATE = 10.0
+#: Real time: lateness (s) beyond which the schedule slips (re-anchors), catching up tick by
+#: tick, and merging late ticks (``merge_late_ticks``; then only a stopped process slips).
+SLIP_LAG_S = 0.1
+MERGE_MAX_LAG_S = 1.0
+
+
+def crossed(first: int, count: int, every: int) -> bool:
+    """Whether one of the ticks ``first .. first + count - 1`` is a multiple of ``every``."""
+    return (first + count - 1) // every != (first - 1) // every
 
 
 class SteppingLoop:
@@ -42,7 +52,7 @@ class SteppingLoop:
     def __init__(self, sim: Simulation, drive_filter: Optional[CommandFilter], interface: Any,
                  publishers: Sequence[Any], session: RecordingSession, log: Any, *,
                  time_mode: str, rate: float, dt: float, wake_spin: float, nice: int,
-                 monitor_rate: float = 0.0) -> None:
+                 monitor_rate: float = 0.0, merge_after: int = 0) -> None:
         self.sim = sim
         self.filter = drive_filter
         self.interface = interface
@@ -64,6 +74,7 @@ class SteppingLoop:
         self.pacer: Optional[Pacer] = (
             Pacer(1.0 / rate, spin_s=min(wake_spin, 1.0 / rate)) if time_mode == "realtime"
             else None)
+        self._set_merge(merge_after)
         self._nice_request = nice
         self.nice = 0
         self.ticks = 0
@@ -167,24 +178,51 @@ class SteppingLoop:
                 sim.set_command(filt.applied)
             sim.step(self.n_steps)
         else:
+            # Step by step only while the ramp lasts: once the applied target reaches the
+            # command, the rest of the tick is one compiled call (the same states as one step
+            # at a time). A controller's new command every tick is usually within one step's
+            # slew, so a tick is then one set_command and one step(n), not n of each (which
+            # cost ~0.25 ms of Python per tick and made real-time ticks late).
             dt = self.dt
-            for _ in range(self.n_steps):
+            remaining = self.n_steps
+            while remaining:
                 sim.set_command(filt.advance(dt))
+                if filt.settled:
+                    sim.step(remaining)
+                    break
                 sim.step(1)
+                remaining -= 1
+
+    def _merged_periods(self, count: int) -> None:
+        """
+        Step through ``count`` tick periods that are not published (merged ticks, real time).
+
+        The sensor still samples each (its noise sequence and latency count ticks).
+        """
+        sim, sensor = self.sim, self.sensor
+        for _ in range(count):
+            self._advance_engine()
+            if sensor is not None:
+                sensor.sample(float(sim.model.output_displacement(sim.state.z)))
 
     def tick(self) -> bool:
         """
         One publish tick: commands, engine steps, publish + record every topic.
 
-        Returns False when the engine failed: the state is then held and only diagnostics go out.
+        In real time it may cover several periods (`Pacer.span`): the engine steps through
+        all of them, the state at the end is published. Returns False when the engine failed:
+        the state is then held and only diagnostics go out.
         """
         perf = time.perf_counter
         t0 = perf()
         sim = self.sim
+        span = self.pacer.span if self.pacer is not None else 1
         if self.intake is not None:
             self.intake.apply(round(sim.state.t * 1e9))
         self.hold.save(sim, self.filter)
         try:
+            if span > 1:
+                self._merged_periods(span - 1)
             self._advance_engine()
             t1 = perf()
             snap = sim.snapshot()
@@ -194,13 +232,13 @@ class SteppingLoop:
             message = self.hold.restore(sim, self.filter, exc)
             if self.throttle.event("engine") is not None:
                 self._log.error(message + f" ({self.hold.failures} engine failures in all)")
-            self._count_tick(round(sim.state.t * 1e9))
+            self._count_tick(round(sim.state.t * 1e9), span)
             return False
         t2 = perf()
         self.snapshot = snap
         stamp = round(snap.t * 1e9)
         measured = self.sensor.sample(float(snap.output)) if self.sensor is not None else 0.0
-        monitor = self.ticks % self.monitor_every == 0
+        monitor = crossed(self.ticks, span, self.monitor_every)
         payloads = self.interface.encode(snap, stamp, measured, monitor)
         if monitor:
             channels: Sequence[int] = range(len(payloads))
@@ -216,24 +254,35 @@ class SteppingLoop:
         t3 = perf()
         if self.diagnostics is not None:
             self.diagnostics.window.add(t1 - t0, t2 - t1, t3 - t2, t3 - t0)
-        if self.display_every and self.ticks % self.display_every == 0:
+        if self.display_every and crossed(self.ticks, span, self.display_every):
             self.display.publish(snap, stamp)
-        self._count_tick(stamp)
+        self._count_tick(stamp, span)
         return True
 
-    def _count_tick(self, stamp: int) -> None:
-        self.ticks += 1
-        if self.ticks % self.diag_every == 0 and self.diagnostics is not None:
+    def _count_tick(self, stamp: int, span: int = 1) -> None:
+        first = self.ticks + 1
+        self.ticks += span
+        if crossed(first, span, self.diag_every) and self.diagnostics is not None:
             self.diagnostics.publish(stamp)
 
     # ------------------------------------------------------------- live changes
-    def set_pacing(self, rate: float, wake_spin: float, monitor_rate: float = 0.0) -> None:
-        """Apply a new publish rate, busy-wait and monitoring rate (stepping thread)."""
+    def _set_merge(self, merge_after: int) -> None:
+        """Merge late ticks from ``merge_after`` ticks of lateness on (0: never)."""
+        pacer = self.pacer
+        if pacer is not None:
+            pacer.merge_after = merge_after
+            pacer.max_lag_s = max(MERGE_MAX_LAG_S if merge_after else SLIP_LAG_S,
+                                  2.0 * pacer.period)
+
+    def set_pacing(self, rate: float, wake_spin: float, monitor_rate: float = 0.0,
+                   merge_after: int = 0) -> None:
+        """Apply a new publish rate, busy-wait, monitoring rate and merging (stepping thread)."""
         self.monitor_rate = monitor_rate
         self.monitor_every = monitor_every(rate, monitor_rate)
         if self.pacer is not None:
             self.pacer.spin_s = min(wake_spin, 1.0 / rate)
         if rate == self.rate:
+            self._set_merge(merge_after)
             return
         self.rate = rate
         self.n_steps, _ = steps_per_tick(rate, self.dt)
@@ -242,6 +291,7 @@ class SteppingLoop:
             self.sensor.set_period(1.0 / rate)
         if self.pacer is not None:
             self.pacer.set_period(1.0 / rate)
+        self._set_merge(merge_after)
         self._log.info(f"publish_rate {rate:g} Hz: {self.n_steps} engine steps per tick")
 
     def reset(self) -> None:

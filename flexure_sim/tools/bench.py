@@ -48,6 +48,8 @@ LOW_WAKE_SPIN_S = 2e-4
 FLOOD_HZ = 10000.0
 #: monitor_rate of the second closed-loop run (Hz).
 MONITOR_RATE = 100.0
+#: merge_late_ticks of the flood and closed-loop runs that merge late ticks.
+MERGE_LATE_TICKS = 2
 #: Topics a controller would subscribe to, for the real-time runs next to a subscriber.
 CONTROLLER_TOPICS = (topics.OUTPUT, topics.DRIVE_FORCE, topics.hinge_compression("a"))
 
@@ -58,7 +60,8 @@ def bench_node(duration: float = 30.0) -> dict:
 
     Fast mode; real-time mode with the defaults; with a short wake_spin; and next to a controller
     process (an rclpy node subscribed to three topics at 1 kHz each), with the default
-    stepping-thread niceness and with none.
+    stepping-thread niceness and with none; next to a command flood and in closed loop, each
+    also with late ticks merged (``merge_late_ticks``).
     """
     from . import closed_loop, measure  # needs ROS 2
 
@@ -75,11 +78,15 @@ def bench_node(duration: float = 30.0) -> dict:
         "realtime_controller": realtime(list(CONTROLLER_TOPICS)),
         "realtime_controller_nice0": realtime(list(CONTROLLER_TOPICS), stepping_nice=0),
         "realtime_flood": realtime(flood_hz=FLOOD_HZ),
+        "realtime_flood_merge": realtime(flood_hz=FLOOD_HZ, merge_late_ticks=MERGE_LATE_TICKS),
         # pi_controller in a second process closing the loop on output/measured (issue 12).
         "realtime_closed_loop": closed_loop.run(duration),
         # The same with the monitoring topics at 100 Hz (control topics still every tick).
         "realtime_closed_loop_monitor100": closed_loop.run(
             duration, params={"monitor_rate": repr(MONITOR_RATE)}),
+        # Every tick, late ticks merged: simulated time stays with wall time.
+        "realtime_closed_loop_merge": closed_loop.run(
+            duration, params={"merge_late_ticks": repr(MERGE_LATE_TICKS)}),
     }
     return {
         "fast_rtf": fast["real_time_factor"],
@@ -176,6 +183,7 @@ def print_table(res: dict) -> None:
             "realtime_controller",
             "realtime_controller_nice0",
             "realtime_flood",
+            "realtime_flood_merge",
         ):
             r = nd.get(key)
             if r:
@@ -189,8 +197,10 @@ def print_table(res: dict) -> None:
                         if r.get("flood_hz")
                         else ""
                     )
+                    + (f", merge_late_ticks {r['params']['merge_late_ticks']}"
+                       if "merge_late_ticks" in r["params"] else "")
                     + f": missed {r['missed_ticks']} of {r['paced_ticks']} ticks "
-                    f"({r['missed_fraction']:.3%}), "
+                    f"({r['missed_fraction']:.3%}; merged {r.get('merged_ticks', 0)}), "
                     f"node CPU {r['node_cpu_cores'] or float('nan'):.2f} cores, "
                     f"worst lateness {r['max_late_us'] / 1e3:.1f} ms"
                 )
@@ -198,7 +208,9 @@ def print_table(res: dict) -> None:
 
         for key, label in (("realtime_closed_loop", ""),
                            ("realtime_closed_loop_monitor100",
-                            f" [monitor_rate {MONITOR_RATE:g} Hz]")):
+                            f" [monitor_rate {MONITOR_RATE:g} Hz]"),
+                           ("realtime_closed_loop_merge",
+                            f" [merge_late_ticks {MERGE_LATE_TICKS}]")):
             if nd.get(key):
                 print("  " + summary(nd[key]) + label)
 

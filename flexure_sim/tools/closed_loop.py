@@ -4,7 +4,8 @@ The closed loop at 1 kHz, measured.
 stage_node in real-time mode (recording on) with ``pi_controller`` in a second process answering
 every measurement.
 
-    python -m flexure_sim.tools.closed_loop --duration 10 [--monitor-rate 100] [--json]
+    python -m flexure_sim.tools.closed_loop --duration 10 [--monitor-rate 100]
+        [--merge-late-ticks 2] [--json]
 
 The stage is the built-in one with a sensor (`SENSOR`: its noise makes every reading unique,
 which is how commands are matched to the ticks they answer). Figures: the node's missed
@@ -145,7 +146,9 @@ def summary(r: dict[str, Any]) -> str:
     def pct(v: Optional[float]) -> str:
         return "n/a" if v is None else f"{100 * v:.2f} %"
     return (f"closed loop at 1 kHz (pi_controller in a 2nd process, recording on): missed ticks "
-            f"{pct(r.get('missed_fraction'))}, jitter p50/p99 {1e6 * r['jitter_p50_s']:.0f}/"
+            f"{pct(r.get('missed_fraction'))} ({r.get('merged_ticks') or 0} of them merged, "
+            f"real-time factor {r['real_time_factor']:.3f}), "
+            f"jitter p50/p99 {1e6 * r['jitter_p50_s']:.0f}/"
             f"{1e6 * r['jitter_p99_s']:.0f} us, commands applied at the next tick "
             f"{pct(r['applied_next_tick_fraction'])} (late ticks mean "
             f"{None if r['late_ticks_mean'] is None else round(r['late_ticks_mean'], 3)}"
@@ -159,9 +162,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--duration", type=float, default=10.0, help="measuring window, s")
     parser.add_argument("--monitor-rate", type=float, default=0.0,
                         help="the node's monitor_rate, Hz (0: every tick)")
+    parser.add_argument("--merge-late-ticks", type=int, default=0,
+                        help="the node's merge_late_ticks (0: every late tick runs)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
-    r = run(args.duration, params={"monitor_rate": repr(args.monitor_rate)})
+    r = run(args.duration, params={"monitor_rate": repr(args.monitor_rate),
+                                   "merge_late_ticks": repr(args.merge_late_ticks)})
     print(json.dumps(r) if args.json else summary(r))
     return 0
 

@@ -206,7 +206,8 @@ def run_node(
         paced = delta("paced_ticks")
         result.update(missed_ticks=int(delta("missed_ticks")), paced_ticks=int(paced),
                       missed_fraction=delta("missed_ticks") / paced if paced else None,
-                      slips=int(delta("slips")), max_late_us=float(b["max_late_us"]),
+                      slips=int(delta("slips")), merged_ticks=int(delta("merged_ticks")),
+                      max_late_us=float(b["max_late_us"]),
                       jitter_p50_s=1e-6 * float(b.get("jitter_p50_us", "nan")),
                       jitter_p99_s=1e-6 * float(b.get("jitter_p99_us", "nan")),
                       wake_spin_s=1e-6 * float(b.get("wake_spin_us", "nan")))
@@ -257,6 +258,7 @@ def _print_run(r: dict[str, Any]) -> None:
         print(
             f"   missed ticks {r['missed_ticks']} of {r['paced_ticks']} "
             f"({100 * r['missed_fraction']:.2f} %), "
+            f"{r.get('merged_ticks', 0)} of them merged, "
             f"slips {r['slips']}, worst wake-up lateness {r['max_late_us']:.0f} us"
         )
     print(
