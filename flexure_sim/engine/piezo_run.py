@@ -151,8 +151,13 @@ def load_stiffness(sim) -> float:
     k_L (N/m): the exact tangent of the drive force in the drive input at rest.
 
     The static gain of the ``drive_force`` output of the exact linearisation at rest
-    (engine/linear.py).
+    (engine/linear.py), of the mechanism with its stacks made rigid (``actuation.rigid_stacks``:
+    the stage alone, the load the stack works against).
     """
+    from .actuation import rigid_stacks
     from .linear import linearize, static_gain
+    from .solver import Simulation
 
+    if len(sim.model.stack_index):
+        sim = Simulation(rigid_stacks(sim.mechanism))
     return float(static_gain(linearize(sim, 0.0, wrenches=False), ["drive_force"])[0])
