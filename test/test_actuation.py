@@ -56,8 +56,13 @@ def test_without_effects_a_voltage_drive_is_the_plain_drive():
         sim.step(30)
         sim.set_command(command / 3)
         sim.step(30)
-    np.testing.assert_allclose(volts.state.z, plain.state.z, rtol=0, atol=1e-20)
-    np.testing.assert_allclose(volts.state.v, plain.state.v, rtol=1e-12, atol=1e-18)
+    # the motion bit-identical (V d = the plain command to the bit for these values); the
+    # energies summed one step at a time instead of in one call: equal to 1e-15
+    assert np.array_equal(volts.state.z, plain.state.z)
+    assert np.array_equal(volts.state.v, plain.state.v)
+    assert volts.state.u == plain.state.u
+    assert volts.state.drive_work == pytest.approx(plain.state.drive_work, rel=1e-15)
+    assert volts.state.dissipated == pytest.approx(plain.state.dissipated, rel=1e-15)
     snap = volts.snapshot()
     assert snap.drive_commands[0] == 20.0 and snap.drive_voltages[0] == 20.0
     assert snap.drive_free_strokes[0] == pytest.approx(20.0 * gain, rel=1e-15)
@@ -107,14 +112,22 @@ def triangle_loop(sim, frequency=5.0, cycles=3):
 
 @pytest.mark.parametrize("stiffness", [math.inf, K_S])
 def test_triangle_drive_gives_the_analytic_loop_width(stiffness):
-    """The stepped stage's loop at 50 V against 2 w (L2), times k_s / (k_s + k_L) if finite."""
+    """
+    The stepped stage's loop at 50 V against 2 w (L2), times k_s / (k_s + k_L) if finite.
+
+    Rigid stack: the stage follows the free stroke through a 1 us lag, so the loop is the
+    actuator's (measured 3e-7 off at dt = 1e-4). Finite stack: the issue's 2 %; the stack's
+    8 kHz mode is above the 5 kHz Nyquist rate of dt = 1e-4, so the held mean free stroke
+    (a staircase against the triangle's ramp) leaves a ramp-direction offset: measured
+    -0.21 % at dt = 1e-4, -0.03 % at dt = 2e-5 (README, "Piezo actuator", limits).
+    """
     sim = stage(stiffness=stiffness, response_time=1e-6, creep=(), bandwidth=0.0)
     spec = sim.model.drives[0].actuator
     volts, out = triangle_loop(sim)
     width = piezo_run.loop_width(volts, out, 50.0)
     share = 1.0 if math.isinf(stiffness) else K_S / (K_S + guide_stiffness())
     expected = 2.0 * piezo.steady_loop_half_width(spec, 50.0) * share
-    assert width == pytest.approx(expected, rel=2e-3)
+    assert width == pytest.approx(expected, rel=1e-5 if math.isinf(stiffness) else 2e-2)
     assert width > 0.1 * spec.gain * 100.0 * share  # a visible loop: > 10 % of the stroke
 
 
