@@ -186,3 +186,13 @@ def test_splitting_converges_at_second_order_in_dt():
     orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
     assert np.all(orders > 1.8), (errors, orders)
     assert errors[-1] < 1e-4 * abs(ref)
+
+
+def test_command_limits_are_the_stroke_in_the_command_unit():
+    """The example's stroke 0..15 um over 0..100 V and 0.1 m/s: 0..100 V and 0.1/0.15e-6 V/s."""
+    drive = load_mechanism(EXAMPLE).drives[0]
+    lo, hi, rate = piezo.command_limits(drive.actuator, drive.stroke, drive.slew_rate)
+    assert (lo, hi) == (0.0, 100.0)
+    assert rate == pytest.approx(0.1 / (1.5e-5 / 100.0), rel=1e-15)
+    nominal = dataclasses.replace(drive.actuator, command="displacement")
+    assert piezo.command_limits(nominal, drive.stroke, drive.slew_rate) == (0.0, 1.5e-5, 0.1)

@@ -59,7 +59,7 @@ def states(model, s: State) -> np.ndarray:
 
 
 def free_strokes(model, s: State) -> np.ndarray:
-    """Return each actuated drive's free stroke x_a (m, P6) at ``s`` (``model.actuation`` order)."""
+    """Return each actuated drive's free stroke x_a (m, P6) at ``s`` (``model.actuation``)."""
     x = states(model, s)
     return np.array([float(piezo.free_stroke(a.spec, x[a.states])) for a in model.actuation])
 

@@ -16,8 +16,9 @@ A mechanism has any number of named drives (``mechanism.Drive``), in constraint 
 
 The stepping kernel takes the commands in *actuator order*: the displacement drives' commands,
 then the force drives' forces, then the stack drives' free strokes (``actuator_command``; an
-actuated drive's entry is its actuator's free stroke, not the user's command: actuation.py). A state keeps u and the commands in the
-simplest form: a number for a single actuator (single drive), a vector otherwise
+actuated drive's entry is its actuator's free stroke, not the user's command: actuation.py).
+A state keeps u and the commands in the simplest form: a number for a single actuator (single
+drive), a vector otherwise
 (``state_u``; ``Simulation.set_command``).
 """
 from __future__ import annotations

@@ -225,7 +225,8 @@ class Model(DriveMixin):
         damping = self.damping if self.damping is not None else np.zeros((0, 0))
         return (part.free.astype(np.int64), part.prescribed.astype(np.int64), self.mass, zP0, D,
                 tau, sine_index, sine_amp, sine_w, sine_phase, self.force_dir, self.force_z0,
-                self.stack_dir, self.stack_z0, self.stack_k, a._ia, a._ib, a._ca, a._cb, a.phia, a.phib, a._kind, a._W, a._C,
+                self.stack_dir, self.stack_z0, self.stack_k, a._ia, a._ib, a._ca, a._cb,
+                a.phia, a.phib, a._kind, a._W, a._C,
                 np.ascontiguousarray(damping))
 
     # ------------------------------------------------------------- coordinates

@@ -109,9 +109,11 @@ class Simulation:
 
         A displacement drive's target is its actuator output's (m along its axis, rad on theta),
         a force drive's its force (N, N m on theta); a drive with a piezo ``actuator:`` block
-        takes its actuator's command (V for ``command: voltage``, else the nominal m). A number (a single drive), or one value per
-        drive (a sequence in ``model.drive_names`` order or a {name: value} mapping); each must
-        be finite (ValueError naming the drive). Held until the next call.
+        takes its actuator's command (V for ``command: voltage``, else the nominal m; the
+        engine does not clamp it: ``piezo.command_limits`` gives the stroke in that unit). A
+        number (a single drive), or one value per drive (a sequence in ``model.drive_names``
+        order or a {name: value} mapping); each must be finite (ValueError naming the drive).
+        Held until the next call.
         """
         if np.ndim(command) == 0 and not isinstance(command, dict) and not np.isfinite(command):
             raise ValueError(f"drive command must be finite, got {command!r}")
