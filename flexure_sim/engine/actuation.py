@@ -107,17 +107,17 @@ def step(model, data: Data, n: int = 1) -> None:
         dynamics.step(model, data, n)
         return
     dt = model.dt
-    for _ in range(int(n)):
+    commands = np.broadcast_to(np.asarray(data.state.command, dtype=float), (len(model.drives),))
+    volts = [float(piezo.command_voltage(a.spec, commands[a.drive])) for a in model.actuation]
+    for _ in range(int(n)):  # the command is held: only the actuators' states change
         s = data.state
         x = states(model, s)
-        commands = np.broadcast_to(np.asarray(s.command, dtype=float), (len(model.drives),))
         after = np.empty_like(x)
         strokes = np.empty(len(model.actuation))
         for j, a in enumerate(model.actuation):
             spec, xs = a.spec, x[a.states]
-            volts = float(piezo.command_voltage(spec, commands[a.drive]))
-            start = xs if spec.lagged else piezo.jump(spec, xs, volts)
-            after[a.states] = piezo.advance(spec, xs, volts, dt)
+            start = xs if spec.lagged else piezo.jump(spec, xs, volts[j])
+            after[a.states] = piezo.advance(spec, xs, volts[j], dt)
             strokes[j] = 0.5 * (float(piezo.free_stroke(spec, start))
                                 + float(piezo.free_stroke(spec, after[a.states])))
         s.drive_work += anchor_work(model, s.z, held(model, s), strokes)
