@@ -91,8 +91,10 @@ def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
 
 def actuator_figures(sim: Simulation, snap: Snapshot) -> dict:
     """
-    Per drive with a piezo actuator (engine/actuation.py): its command (V or m, ``unit``),
-    amplifier voltage (V), free stroke and applied displacement (m), stack force (N).
+    Return the figures of each drive with a piezo actuator (engine/actuation.py).
+
+    Its command (V or m, ``unit``), amplifier voltage (V), free stroke and applied
+    displacement (m), stack force (N).
     """
     out = {}
     for a in sim.model.actuation:

@@ -26,7 +26,7 @@ X = 3  # the platform's x coordinate (body 1)
 
 
 def stage(dt=1e-4, response_time=None, **actuator):
-    """The example with its actuator block's fields replaced (None: remove the block)."""
+    """Return the example with its actuator block's fields replaced (remove=True: no block)."""
     mech = load_mechanism(EXAMPLE)
     drive = mech.drives[0]
     spec = None if actuator.get("remove") else dataclasses.replace(drive.actuator, **actuator)

@@ -71,8 +71,10 @@ def held(model, s: State) -> np.ndarray:
 
 def kernel_command(model, s: State, strokes=None) -> np.ndarray:
     """
-    Return the kernel's command vector at ``s``: the state's, with each actuated drive's entry
-    replaced by its free stroke ``strokes`` (default: the held ones, ``held``).
+    Return the kernel's command vector at ``s``.
+
+    The state's, with each actuated drive's entry replaced by its free stroke ``strokes``
+    (default: the held ones, ``held``).
     """
     command = model.actuator_command(s.command).copy()
     strokes = held(model, s) if strokes is None else strokes
@@ -99,8 +101,8 @@ def anchor_work(model, z: np.ndarray, before: np.ndarray, after: np.ndarray) -> 
 
 def step(model, data: Data, n: int = 1) -> None:
     """
-    Advance ``data`` n fixed steps, the actuators and the stage split per step (module doc).
-
+    Advance ``data`` by n fixed steps, splitting each into the actuators and the stage.
+    Module doc. Without actuated drives, ``dynamics.step`` itself (one call for the n steps).
     Without actuated drives, ``dynamics.step`` itself (one call for the n steps).
     """
     if not model.actuation:
@@ -127,9 +129,10 @@ def step(model, data: Data, n: int = 1) -> None:
 
 def report(model, s: State, forces: np.ndarray, inputs: np.ndarray) -> dict:
     """
-    Return the per-drive actuator figures of a snapshot (``Snapshot``), filling in place the
-    stack drives' ``forces`` (k_s (x_h - p), P7) and ``inputs`` (p = e . (z - z0), the
-    applied displacement).
+    Return the per-drive actuator figures of a snapshot (``Snapshot``).
+
+    Fills in place the stack drives' ``forces`` (k_s (x_h - p), P7) and ``inputs``
+    (p = e . (z - z0), the applied displacement).
 
     NaN where a drive has no (non-identity) actuator. The stack springs' potential energy
     is returned as ``stack_energy``.

@@ -119,7 +119,7 @@ class DriveMixin:
         self.actuation = actuated(self)
 
     def require_rigid(self, what: str) -> None:
-        """ValueError naming the drives with a finite stack, which ``what`` does not handle."""
+        """Raise ValueError naming the drives with a finite stack, which ``what`` cannot handle."""
         if len(self.stack_index):
             names = ", ".join(self.drive_names[k] for k in self.stack_index)
             raise ValueError(f"{what}: drive {names} has a finite-stiffness piezo stack, whose "
