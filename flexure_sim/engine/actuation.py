@@ -102,8 +102,9 @@ def anchor_work(model, z: np.ndarray, before: np.ndarray, after: np.ndarray) -> 
 def step(model, data: Data, n: int = 1) -> None:
     """
     Advance ``data`` by n fixed steps, splitting each into the actuators and the stage.
-    Module doc. Without actuated drives, ``dynamics.step`` itself (one call for the n steps).
-    Without actuated drives, ``dynamics.step`` itself (one call for the n steps).
+
+    See the module doc. Without actuated drives, ``dynamics.step`` itself (one call for the n
+    steps).
     """
     if not model.actuation:
         dynamics.step(model, data, n)
