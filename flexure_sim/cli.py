@@ -270,7 +270,8 @@ def build_parser() -> argparse.ArgumentParser:
         "mechanism",
         help="built-in name (microstage, fourbar_cantilever, fourbar_mixed) or YAML path",
     )
-    sim.add_argument("--drive", default="none", help="step:AMPLITUDE in metres, or none (default)")
+    sim.add_argument("--drive", default="none", help="step:AMPLITUDE in metres (volts for a "
+                     "drive whose actuator takes a voltage), or none (default)")
     sim.add_argument(
         "--duration", type=float, default=0.05, help="simulated time in seconds (default 0.05)"
     )
