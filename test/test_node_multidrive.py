@@ -165,6 +165,16 @@ def test_each_drive_has_its_own_limits_counters_and_warnings(tmp_path, domain, p
             type=ParameterType.PARAMETER_DOUBLE, double_value=-1.0))]
         result = peer.call(SetParameters, "/stage_node/set_parameters", request).results[0]
         assert not result.successful and "drives.x.slew_rate" in result.reason
+        # A good one applies live to its drive only: x's stroke shrinks to 10 um.
+        request.parameters = [ParameterMsg(name="drives.x.stroke_max", value=ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=1e-5))]
+        result = peer.call(SetParameters, "/stage_node/set_parameters", request).results[0]
+        assert result.successful, result.reason
+        commands["x"].publish(Float64(data=1.0))
+        step_until(peer, lambda: abs(peer.last(INPUTS[0]).data - 1e-5) < 1e-17, "x at 10 um")
+        step_until(peer, lambda: diagnostics_values(peer.last("/diagnostics"))[
+            "commands_x_clamped"] == "2", "the second clamp in the diagnostics", 40)
+        assert diagnostics_values(peer.last("/diagnostics"))["drive_x_target"] == "1e-05"
     finally:
         assert node.stop(signal.SIGINT) == 0, node.stderr
     err = node.stderr
