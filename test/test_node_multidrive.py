@@ -324,3 +324,49 @@ def test_volts_out_of_range_are_clamped_counted_and_warned_in_volts(tmp_path, do
     log = read_log(node.cwd / "volts.mcap")
     recorded = [m.message.data for m in log.messages_on("/drive/voltage")]
     assert recorded[0] == -5.0 and math.isnan(recorded[1]) and len(recorded) == 2
+
+
+# ----------------------------------------------- the stepping loop's ticks with several drives
+def test_ticks_with_new_commands_on_several_drives_reach_the_step_by_step_states():
+    """
+    The loop's shortcut (one compiled call once every drive's ramp has ended) on `xy_stage`.
+
+    Reference: the drives' definition (README: Drive commands) stepped one engine step at a
+    time, each drive's target moving towards its command by at most its slew_rate * dt.
+    """
+    from flexure_sim.engine.config import load_mechanism
+    from flexure_sim.engine.solver import Simulation
+    from flexure_sim.node.drive_bank import FilterBank
+    from flexure_sim.node.drive_input import DriveLimits
+    from flexure_sim.node.interface import StageInterface
+    from flexure_sim.node.session import RecordingSession
+    from flexure_sim.node.stepping import RELINEARIZE_TOL, SteppingLoop
+    from test_node_stepping import DT, N_STEPS, RATE, Log
+
+    xy = load_mechanism("xy_stage")
+    slew = {"x": xy.drives[0].slew_rate, "y": 2e-3}   # y ramps over several steps and ticks
+    bank = FilterBank(DRIVES, [DriveLimits(d.stroke[0], d.stroke[1], slew[d.name])
+                               for d in xy.drives])
+    sim = Simulation(xy, dt=DT, relinearize_tol=RELINEARIZE_TOL)
+    itf = StageInterface(xy, "realtime")
+    loop = SteppingLoop(sim, bank, itf, [None] * len(itf.tick_topics), RecordingSession(Log()),
+                        Log(), time_mode="realtime", rate=RATE, dt=DT, wake_spin=0.0, nice=0)
+    commands = [(1e-6, 0.0), (1e-6, 5e-7), (1e-6 + 3e-9, 5e-7), (0.0, 1e-6), (0.0, 1e-6),
+                (2e-6, 0.0), (2e-6, 0.0)]
+    for tick in commands:
+        for f, value in zip(bank.filters, tick):
+            if value != f.target:
+                f.submit_many([value])
+        loop._advance_engine()
+    ref = Simulation(xy, dt=DT, relinearize_tol=RELINEARIZE_TOL)
+    applied = np.zeros(2)
+    step = np.array([slew[d] * DT for d in DRIVES])
+    for tick in commands:
+        for _ in range(N_STEPS):
+            applied = applied + np.clip(np.array(tick) - applied, -step, step)
+            ref.set_command(applied)
+            ref.step(1)
+    assert sim.state.t == ref.state.t
+    np.testing.assert_array_equal(sim.state.z, ref.state.z)
+    np.testing.assert_array_equal(sim.state.v, ref.state.v)
+    np.testing.assert_array_equal(sim.state.command, applied)
