@@ -291,9 +291,16 @@ def test_a_voltage_commanded_drive_has_its_command_topic_and_limits_in_volts(tmp
 
 
 def test_volts_out_of_range_are_clamped_counted_and_warned_in_volts(tmp_path, domain, peer):
+    from rcl_interfaces.srv import GetParameters
+
     from node_harness import ROOT as REPO
     node = start(tmp_path, domain, peer, mechanism=str(REPO / PIEZO_STAGE), record=True,
                  record_path="volts.mcap")
+
+    def diagnostics(key: str, value: str) -> bool:
+        last = peer.last("/diagnostics")
+        return last is not None and diagnostics_values(last)[key] == value
+
     try:
         peer.subscribe("/clock", Clock)
         peer.subscribe("/drive/input", Float64)
@@ -301,15 +308,20 @@ def test_volts_out_of_range_are_clamped_counted_and_warned_in_volts(tmp_path, do
         command = peer.publisher("/drive/voltage", Float64)
         peer.wait_for_publishers(["/drive/input"])
         peer.wait_for_subscribers(command)
-        command.publish(Float64(data=-5.0))       # below v_min = 0 V: clamped to 0 V
+        command.publish(Float64(data=150.0))      # above v_max = 100 V: clamped to 100 V
         command.publish(Float64(data=math.nan))   # refused
-        step_until(peer, lambda: len(peer.received["/diagnostics"]) > 0, "diagnostics", 20,
+        step_until(peer, lambda: diagnostics("commands_received", "2"), "diagnostics", 40,
                    topics=["/drive/input"])
         d = diagnostics_values(peer.last("/diagnostics"))
-        assert d["commands_received"] == "2" and d["commands_clamped"] == "1"
-        assert d["commands_rejected"] == "1" and float(d["drive_target"]) == 0.0
-        # The stroke parameters are in volts: 80 V is accepted, -1 V/s refused.
-        from rcl_interfaces.srv import GetParameters
+        assert d["commands_clamped"] == "1" and d["commands_rejected"] == "1"
+        assert float(d["drive_target"]) == 100.0
+        # 100 V is the stroke's end: the actuator pushes the platform by at most 15 um.
+        assert 0.0 < peer.last("/drive/input").data <= 1.5e-5 * (1 + 1e-6)
+        command.publish(Float64(data=-5.0))       # below v_min = 0 V: clamped to 0 V
+        step_until(peer, lambda: diagnostics("commands_clamped", "2"), "the second clamp", 40,
+                   topics=["/drive/input"])
+        assert float(diagnostics_values(peer.last("/diagnostics"))["drive_target"]) == 0.0
+        # The stroke parameters are in volts: 80 V is accepted.
         request = GetParameters.Request(names=["stroke_min", "stroke_max", "slew_rate"])
         got = peer.call(GetParameters, "/stage_node/get_parameters", request).values
         assert [v.double_value for v in got] == pytest.approx([0.0, 100.0, 0.1 / 1.5e-7])
@@ -320,10 +332,10 @@ def test_volts_out_of_range_are_clamped_counted_and_warned_in_volts(tmp_path, do
                          request).results[0].successful
     finally:
         assert node.stop(signal.SIGINT) == 0, node.stderr
-    assert "drive command -5 V outside the stroke [0, 100] V: clamped" in node.stderr
+    assert "drive command 150 V outside the stroke [0, 100] V: clamped" in node.stderr
     log = read_log(node.cwd / "volts.mcap")
     recorded = [m.message.data for m in log.messages_on("/drive/voltage")]
-    assert recorded[0] == -5.0 and math.isnan(recorded[1]) and len(recorded) == 2
+    assert recorded[0] == 150.0 and math.isnan(recorded[1]) and recorded[2:] == [-5.0]
 
 
 # ----------------------------------------------- the stepping loop's ticks with several drives
