@@ -171,10 +171,9 @@ class SteppingLoop:
             sim.step(self.n_steps)
             return
         if filt.begin_tick(self.n_steps * self.dt) and self.intake is not None:
-            self.intake.warn("rate_limited", "drive command faster than the slew limit "
-                             f"({filt.limits.slew_rate:g} m/s): ramping")
+            self.intake.warn_rate_limited()
         if filt.settled:
-            if sim.state.command != filt.applied:
+            if filt.differs(sim.state.command):
                 sim.set_command(filt.applied)
             sim.step(self.n_steps)
         else:
@@ -301,7 +300,7 @@ class SteppingLoop:
             self.sensor.reset()
         if self.filter is not None:
             self.filter.reset()
-            if self.filter.applied != 0.0:
+            if self.filter.differs(0.0):
                 self.sim.set_command(self.filter.applied)
         if self.intake is not None:
             self.intake.discard()  # sent before the reset: discarded
