@@ -64,7 +64,7 @@ def defined_step(sim: Simulation) -> None:
 
 
 def drive(sim: Simulation, stepper) -> None:
-    """A 60 V step, then 20 V, then 100 V, each held for a while (one ``stepper`` call each)."""
+    """Step 60 V, then 20 V, then 100 V, each held for a while (one ``stepper`` call each)."""
     for volts, n in ((60.0, 120), (20.0, 70), (100.0, 90)):
         sim.set_command(volts)
         stepper(sim, n)
@@ -120,3 +120,15 @@ def test_a_piezo_step_costs_a_few_plain_steps():
         drive_ if isinstance(c, Drive) else c for c in plain.constraints)))
     plain_sim.set_command(60.0 * piezo_sim.model.drives[0].actuator.gain)
     assert cpu_per_step(piezo_sim) < 4.0 * cpu_per_step(plain_sim)
+
+
+def test_the_compiled_actuator_step_is_piezo_s_own():
+    """piezo_steps compiles piezo.py's functions themselves: no second copy of P2-P6."""
+    from flexure_sim.engine import piezo_steps
+    assert piezo_steps.advance_values is piezo.advance_values
+    assert piezo_steps.jump_values is piezo.jump_values
+    assert piezo.stroke_kernel.py_func is piezo.stroke_values
+    state = np.array([12.0, 3e-7, 1e-8, -2e-9])
+    spec = load_mechanism(EXAMPLE).drives[0].actuator
+    assert piezo.stroke_kernel(state, spec.s_min, spec.gain, spec.v_min) == piezo.free_stroke(
+        spec, state)

@@ -358,4 +358,5 @@ def _interpreted_switch_work(y, t, old, new, model):
 #: The same loop as plain Python, calling ``Model.rhs_python`` (any hinge law); pass the
 #: Model as ``args``.
 advance_interpreted = types.FunctionType(
-    _advance.__code__, {**globals(), "rhs": _interpreted_rhs, "switch": _interpreted_switch_work}, "advance_interpreted")
+    _advance.__code__, {**globals(), "rhs": _interpreted_rhs, "switch": _interpreted_switch_work},
+    "advance_interpreted")
