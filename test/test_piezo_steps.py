@@ -10,7 +10,6 @@ rounding, compiled and interpreted.
 """
 import dataclasses
 import math
-import time
 
 import numpy as np
 import pytest
@@ -92,34 +91,6 @@ def test_n_steps_in_one_call_are_n_defined_steps(variant, compiled):
         assert s.drive_work == pytest.approx(ref.drive_work, rel=4 * EPS)
         assert s.dissipated == pytest.approx(ref.dissipated, rel=4 * EPS)
     assert one_call.stats.linearizations == reference.stats.linearizations
-
-
-def cpu_per_step(sim: Simulation, n: int = 4000) -> float:
-    """Return the best of three CPU times (s) per step of ``sim.step(n)`` after a warm-up."""
-    sim.set_command(sim.state.command if sim.state.command is not None else 0.0)
-    sim.step(50)
-    best = math.inf
-    for _ in range(3):
-        start = time.process_time()
-        sim.step(n)
-        best = min(best, (time.process_time() - start) / n)
-    return best
-
-
-def test_a_piezo_step_costs_a_few_plain_steps():
-    """
-    The example's step within 4 times the plain drive's (CPU time, not wall: robust to load).
-
-    The per-step loop before this module took about 45 times (README, "Piezo actuator").
-    """
-    piezo_sim = Simulation(load_mechanism(EXAMPLE))
-    piezo_sim.set_command(60.0)
-    plain = load_mechanism(EXAMPLE)
-    drive_ = dataclasses.replace(plain.drives[0], actuator=None)
-    plain_sim = Simulation(dataclasses.replace(plain, constraints=tuple(
-        drive_ if isinstance(c, Drive) else c for c in plain.constraints)))
-    plain_sim.set_command(60.0 * piezo_sim.model.drives[0].actuator.gain)
-    assert cpu_per_step(piezo_sim) < 4.0 * cpu_per_step(plain_sim)
 
 
 def test_the_compiled_actuator_step_is_piezo_s_own():
