@@ -32,8 +32,12 @@ How x_a reaches the stage (``drives.stacked``):
 
 Energy: the stack spring's potential 1/2 k_s (x_h - e . (z - z0))^2 is part of the mechanism's
 (conservative while x_h is held); moving the anchor from x_h to x_h' at configuration z
-between steps is the actuator's work 1/2 k_s ((x_h' - p)^2 - (x_h - p)^2), p = e . (z - z0)
-(``anchor_work``), counted in ``drive_work`` like ``dynamics.jump_work``.
+between steps is the actuator's work 1/2 k_s ((x_h' - p)^2 - (x_h - p)^2), p = e . (z - z0),
+counted in ``drive_work`` with the velocity jumps of ``dynamics.jump_work``
+(``stepping.switch_work``).
+
+Cost: the actuators' n steps in one compiled call (``piezo_steps``), then the stage's in one
+call of the stepping loop with one command row per step (``dynamics.step``).
 
 An actuator block that is the identity (``drives.transparent``) is skipped: the drive is
 bit-identical to one without the block.
@@ -83,49 +87,38 @@ def kernel_command(model, s: State, strokes=None) -> np.ndarray:
     return command
 
 
-def anchor_work(model, z: np.ndarray, before: np.ndarray, after: np.ndarray) -> float:
-    """
-    Return the stack drives' work when their springs' anchors move from ``before`` to ``after``.
-
-    At fixed configuration z: sum_s 1/2 k_s ((x' - p_s)^2 - (x - p_s)^2), p_s = e_s . (z - z0),
-    the change of the springs' potential (``stepping.applied_forces``).
-    """
-    work = 0.0
-    for a, x0, x1 in zip(model.actuation, before, after):
-        if a.stack:
-            p = float(model.drive_directions[a.drive] @ (z - model.z0))
-            k = a.spec.stiffness
-            work += 0.5 * k * ((x1 - p) ** 2 - (x0 - p) ** 2)
-    return work
+#: Steps per call of the compiled loops (bounds the per-step command rows' memory).
+BLOCK = 4096
 
 
 def step(model, data: Data, n: int = 1) -> None:
     """
     Advance ``data`` by n fixed steps, splitting each into the actuators and the stage.
 
-    See the module doc. Without actuated drives, ``dynamics.step`` itself (one call for the n
-    steps).
+    See the module doc. The actuators' n steps first (``piezo_steps``: their states do not
+    depend on the stage), then the stage's n steps in one call of the stepping loop
+    (``dynamics.step``), each holding its step's mean strokes; the stack springs' anchor moves
+    between steps are counted there (``stepping.switch_work``).
+    Without actuated drives, ``dynamics.step`` itself (one call for the n steps).
     """
     if not model.actuation:
         dynamics.step(model, data, n)
         return
-    dt = model.dt
     commands = np.broadcast_to(np.asarray(data.state.command, dtype=float), (len(model.drives),))
-    volts = [float(piezo.command_voltage(a.spec, commands[a.drive])) for a in model.actuation]
-    for _ in range(int(n)):  # the command is held: only the actuators' states change
+    volts = np.array([float(piezo.command_voltage(a.spec, commands[a.drive]))
+                      for a in model.actuation])
+    actuators = model.actuators
+    slots = [a.slot for a in model.actuation]
+    remaining = int(n)
+    while remaining > 0:  # the command is held: only the actuators' states change
+        chunk = min(remaining, BLOCK)
         s = data.state
-        x = states(model, s)
-        after = np.empty_like(x)
-        strokes = np.empty(len(model.actuation))
-        for j, a in enumerate(model.actuation):
-            spec, xs = a.spec, x[a.states]
-            start = xs if spec.lagged else piezo.jump(spec, xs, volts[j])
-            after[a.states] = piezo.advance(spec, xs, volts[j], dt)
-            strokes[j] = 0.5 * (float(piezo.free_stroke(spec, start))
-                                + float(piezo.free_stroke(spec, after[a.states])))
-        s.drive_work += anchor_work(model, s.z, held(model, s), strokes)
-        dynamics.step(model, data, 1, kernel_command(model, s, strokes))
-        data.state.actuator, data.state.held = after, strokes
+        after, strokes = actuators.run(chunk, states(model, s), volts, model.dt)
+        rows = np.repeat(model.actuator_command(s.command)[None, :], chunk, axis=0)
+        rows[:, slots] = strokes
+        dynamics.step(model, data, chunk, kernel_command(model, s), rows)
+        data.state.actuator, data.state.held = after, strokes[-1].copy()
+        remaining -= chunk
 
 
 def report(model, s: State, forces: np.ndarray, inputs: np.ndarray) -> dict:

@@ -30,6 +30,7 @@ from typing import Optional, Union
 import numpy as np
 
 from .piezo import PiezoSpec
+from .piezo_steps import Actuators
 
 
 def stacked(drive) -> bool:
@@ -117,6 +118,8 @@ class DriveMixin:
                                       self.stack_index]).astype(int)
         #: The drives with a (non-identity) piezo actuator (engine/actuation.py).
         self.actuation = actuated(self)
+        #: Their numbers as arrays, for stepping them n steps in one call (piezo_steps.py).
+        self.actuators = Actuators(self.actuation)
 
     def require_rigid(self, what: str) -> None:
         """Raise ValueError naming the drives with a finite stack, which ``what`` cannot handle."""

@@ -94,9 +94,9 @@ def moved_too_far(model: Model, data: Data, z: np.ndarray) -> bool:
     return bool(np.max(moved) > tol)
 
 
-def _advance(model: Model, data: Data, n, y, t, command, F0, aux0, ye):
+def _advance(model: Model, data: Data, n, y, t, rows, held, F0, aux0, ye):
     lin = data.lin
-    common = (n, y, t, model.dt, command, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,
+    common = (n, y, t, model.dt, rows, held, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,
               model.atol, model.max_iterations, model.relinearize_after, F0, aux0, ye,
               lin.emats)
     if model.compiled:
@@ -117,19 +117,23 @@ def jump_work(model: Model, s: State, command) -> float:
     return float(0.5 * model.mass[P] @ (vP * vP - s.v[P] * s.v[P]))
 
 
-def step(model: Model, data: Data, n: int = 1, command=None) -> None:
+def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     """
     Advance ``data`` n fixed steps with the drives' commands held at state.command.
 
     ``command``: the kernel's command vector (actuator order) to hold instead of the state's
-    (the piezo actuators' free strokes, engine/actuation.py).
+    (the piezo actuators' free strokes, engine/actuation.py). ``rows``: one such vector per
+    step, shape (n, len(command)), to hold step by step instead (``command`` then is the one
+    held before the first step; each change is the drives' work, ``stepping.switch_work``).
 
     Time is origin + k dt, k the steps taken since the origin (the t of a state this data
     did not step itself), not a running sum: t stays on the step grid however long the
     run, so stamps derived from it stay on the tick grid.
     """
     s = data.state
-    command = model.actuator_command(s.command) if command is None else command
+    command = np.ascontiguousarray(
+        model.actuator_command(s.command) if command is None else command, dtype=float)
+    rows = command.reshape(1, -1) if rows is None else np.ascontiguousarray(rows, dtype=float)
     key = command.tobytes()
     clock = data.clock
     if clock is None or clock[0] is not s:
@@ -150,13 +154,14 @@ def step(model: Model, data: Data, n: int = 1, command=None) -> None:
     remaining = int(n)
     fresh = False
     while remaining > 0:
+        ahead = rows[min(int(n) - remaining, len(rows) - 1):]
         if data.lin is None or (model.relinearize_tol is not None
                                 and moved_too_far(model, data, model.unpack(y, t, command)[0])):
-            linearize(model, data, y, t, command)
+            linearize(model, data, y, t, ahead[0])
             fresh = True
         chunk = 1 if model.relinearize_tol is not None else remaining
-        y, F0, aux0, ye, dd, dw, steps, iterations, status = _advance(
-            model, data, chunk, y, t, command, F0, aux0, ye)
+        y, F0, aux0, ye, command, dd, dw, steps, iterations, status = _advance(
+            model, data, chunk, y, t, ahead, command, F0, aux0, ye)
         dissipated += dd
         work += dw
         remaining -= steps
@@ -180,4 +185,4 @@ def step(model: Model, data: Data, n: int = 1, command=None) -> None:
     data.state = State(t, z, v, model.state_u(u), s.command, dissipated, work)
     data.clock = (data.state, origin, k)
     # F at the new state seeds the next call while the command is unchanged.
-    data.cache = (data.state, key, F0, aux0, ye)
+    data.cache = (data.state, command.tobytes(), F0, aux0, ye)

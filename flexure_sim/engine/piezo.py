@@ -55,6 +55,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import kernel_cache
+from .kernels import njit
+
 #: The command kinds of the ``actuator: {command: ...}`` key.
 COMMANDS = ("displacement", "voltage")
 
@@ -197,9 +200,19 @@ def jacobian(spec: PiezoSpec, s: np.ndarray, v_cmd: float,
 
 def free_stroke(spec: PiezoSpec, s: np.ndarray):
     """x_a = s_min + d (V_a - v_min) - h + sum c_i (P3, P6); ``s`` of shape (n,) or (n, k)."""
-    s = np.asarray(s, dtype=float)
-    return (spec.s_min + spec.gain * (s[0] - spec.v_min) - s[1]
-            + np.sum(s[2:], axis=0))
+    return stroke_values(np.asarray(s, dtype=float), spec.s_min, spec.gain, spec.v_min)
+
+
+def stroke_values(s, s_min, gain, v_min):
+    """`free_stroke` (P6) from the state's entries (rows of ``s``) and the spec's numbers."""
+    creep = 0.0
+    for i in range(2, s.shape[0]):
+        creep = creep + s[i]
+    return s_min + gain * (s[0] - v_min) - s[1] + creep
+
+
+#: `stroke_values` compiled for one state (one source; the Python one also takes rows).
+stroke_kernel = njit(cache=True)(stroke_values)
 
 
 def free_stroke_gradient(spec: PiezoSpec) -> np.ndarray:
@@ -226,6 +239,7 @@ def series_output(k_s: float, k_load: float, x_a):
     return x_a * (k_s / (k_s + k_load))
 
 
+@njit(cache=True)
 def _sweep(h: float, dv: float, a: float, beta: float, gamma: float) -> float:
     """
     Return h after the voltage moves monotonically by ``dv`` from a state with hysteresis h.
@@ -260,36 +274,64 @@ def jump(spec: PiezoSpec, s: np.ndarray, v_new: float) -> np.ndarray:
     instantaneous change is the limit of any fast monotone ramp); creep states are
     continuous (P5 has bounded rates) and keep their values.
     """
-    out = np.array(s, dtype=float)
-    out[1] = _sweep(out[1], v_new - out[0], spec.alpha * spec.gain, spec.beta, spec.gamma)
+    return jump_values(np.array(s, dtype=float), float(v_new), spec.alpha * spec.gain,
+                       spec.beta, spec.gamma)
+
+
+@njit(cache=True)
+def jump_values(s, v_new, a, beta, gamma):
+    """`jump` from the state and the spec's numbers (a = alpha d)."""
+    out = s.copy()
+    out[1] = _sweep(out[1], v_new - out[0], a, beta, gamma)
     out[0] = v_new
     return out
+
+
+def creep_arrays(spec: PiezoSpec) -> tuple[np.ndarray, np.ndarray]:
+    """Return the creep chain's ratios r_i and time constants tau_i (s) as arrays (P5)."""
+    return (np.array([el.ratio for el in spec.creep], dtype=float),
+            np.array([el.tau for el in spec.creep], dtype=float))
 
 
 def advance(spec: PiezoSpec, s: np.ndarray, v_cmd: float, dt: float) -> np.ndarray:
     """
     Return the state after ``dt`` (s) with the command held at ``v_cmd`` (V; zero-order hold).
 
-    The amplifier (P2) exactly: V_1 = V_c + (V_0 - V_c) exp(-dt / tau_a) (without a lag:
-    `jump` to V_c at the step's start). V_a moves monotonically over the step, so h is
-    exact too (`_sweep`: the rate-independent dh/dV). Creep (P5) by its exact solution for
-    x_h linear over the step between its values x_0, x_1 at the ends (the error is second
-    order in dt / tau_i):
-    c_1 = E c_0 + r [x_0 (1 - E) + (x_1 - x_0) (1 - tau (1 - E) / dt)], E = exp(-dt / tau).
+    See `advance_values`, which it calls with the spec's numbers.
     """
     if not dt > 0:
         raise ValueError(f"dt: must be positive, got {dt!r}")
-    s0 = np.array(s, dtype=float) if spec.lagged else jump(spec, s, v_cmd)
+    ratios, taus = creep_arrays(spec)
+    return advance_values(np.array(s, dtype=float), float(v_cmd), float(dt),
+                          spec.tau_amplifier, spec.alpha * spec.gain, spec.beta, spec.gamma,
+                          spec.gain, spec.v_min, ratios, taus)
+
+
+@njit(cache=True)
+def advance_values(s, v_cmd, dt, tau_a, a, beta, gamma, gain, v_min, ratios, taus):
+    """
+    Return the state after ``dt`` under the held ``v_cmd``: `advance` from the spec's numbers.
+
+    tau_a (0: no lag), a = alpha d, beta, gamma, d, v_min, and the creep chain's ratios and
+    taus (`creep_arrays`). The amplifier (P2) exactly: V_1 = V_c + (V_0 - V_c) exp(-dt / tau_a)
+    (without a lag: `jump` to V_c at the step's start). V_a moves monotonically over the step,
+    so h is exact too (`_sweep`: the rate-independent dh/dV). Creep (P5) by its exact solution
+    for x_h linear over the step between its values x_0, x_1 at the ends (the error is second
+    order in dt / tau_i):
+    c_1 = E c_0 + r [x_0 (1 - E) + (x_1 - x_0) (1 - tau (1 - E) / dt)], E = exp(-dt / tau).
+    """
+    lagged = tau_a > 0.0
+    s0 = s.copy() if lagged else jump_values(s, v_cmd, a, beta, gamma)
     out = s0.copy()
-    if spec.lagged:
-        out[0] = v_cmd + (s0[0] - v_cmd) * math.exp(-dt / spec.tau_amplifier)
-        out[1] = _sweep(s0[1], out[0] - s0[0], spec.alpha * spec.gain, spec.beta, spec.gamma)
-    x0 = spec.gain * (s0[0] - spec.v_min) - s0[1]
-    x1 = spec.gain * (out[0] - spec.v_min) - out[1]
-    for i, el in enumerate(spec.creep):
-        one_minus_e = -math.expm1(-dt / el.tau)
-        out[2 + i] = ((1.0 - one_minus_e) * s0[2 + i] + el.ratio * (
-            x0 * one_minus_e + (x1 - x0) * (1.0 - el.tau * one_minus_e / dt)))
+    if lagged:
+        out[0] = v_cmd + (s0[0] - v_cmd) * math.exp(-dt / tau_a)
+        out[1] = _sweep(s0[1], out[0] - s0[0], a, beta, gamma)
+    x0 = gain * (s0[0] - v_min) - s0[1]
+    x1 = gain * (out[0] - v_min) - out[1]
+    for i in range(ratios.shape[0]):
+        one_minus_e = -math.expm1(-dt / taus[i])
+        out[2 + i] = ((1.0 - one_minus_e) * s0[2 + i] + ratios[i] * (
+            x0 * one_minus_e + (x1 - x0) * (1.0 - taus[i] * one_minus_e / dt)))
     return out
 
 
@@ -327,3 +369,7 @@ def steady_loop_half_width(spec: PiezoSpec, amplitude: float) -> float:
         lo, hi = (mid, hi) if closing(mid) > 0.0 else (lo, mid)
     H = 0.5 * (lo + hi)
     return _sweep(-H, amplitude, a, beta, gamma)
+
+
+# Numba's cache of each compiled function is keyed on its own file only (``kernel_cache``).
+kernel_cache.revalidate(kernel_cache.dispatchers_of(globals()), __file__)

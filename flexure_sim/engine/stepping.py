@@ -17,7 +17,8 @@ model (``step_energy``).
 contract (1) or contracts slowly (2), so the caller can re-linearize. The loop calls
 ``rhs(y, t, command, args)`` -> (F, energy rates ``energy_rates``): compiled with the force
 kernel for quadratic laws (``advance``), or as plain Python with ``Model.rhs_python``
-for any law (``advance_interpreted``); one source, two bindings of ``rhs``.
+for any law (``advance_interpreted``); one source, two bindings of ``rhs`` (and of
+``switch``, the work of a change of the held command between steps: ``switch_work``).
 """
 from __future__ import annotations
 
@@ -189,12 +190,58 @@ def energy_rates(aux, Q, v, potential, dissipation, applied, prescribed, mass, D
     return aux
 
 
+@njit(cache=True)
+def switch_work(y, t, old, new, free, prescribed, mass, tau, zP0, D, sine_index, sine_amp,
+                sine_w, sine_phase, n_forces, stack_dir, stack_z0, stack_k):
+    """
+    Return the drives' work when the held command changes from ``old`` to ``new`` at (y, t).
+
+    The prescribed velocities jump (``dynamics.jump_work``): 1/2 M_P (v_P+^2 - v_P-^2); the
+    stack springs' anchors move at fixed z (actuation.py): sum_s 1/2 k_s
+    ((x_s' - p_s)^2 - (x_s - p_s)^2), p_s = e_s . (z - z0). ``n_forces``: the force drives'
+    count (the stacks' strokes follow the force drives' forces in the command).
+    """
+    nF = free.shape[0]
+    nd = tau.shape[0]
+    u = y[2 * nF:2 * nF + nd]
+    zP, v0, _ = prescribed_motion(t, u, old, tau, zP0, D, sine_index, sine_amp, sine_w,
+                                  sine_phase)
+    v1 = prescribed_motion(t, u, new, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase)[1]
+    work = 0.0
+    for i in range(prescribed.shape[0]):
+        work += 0.5 * mass[prescribed[i]] * (v1[i] * v1[i] - v0[i] * v0[i])
+    if stack_dir.shape[0]:
+        z = np.empty(mass.shape[0])
+        for i in range(nF):
+            z[free[i]] = y[i]
+        for i in range(prescribed.shape[0]):
+            z[prescribed[i]] = zP[i]
+        first = nd + n_forces
+        for j in range(stack_dir.shape[0]):
+            p = -stack_z0[j]
+            for i in range(z.shape[0]):
+                p += stack_dir[j, i] * z[i]
+            x0, x1 = old[first + j] - p, new[first + j] - p
+            work += 0.5 * stack_k[j] * (x1 * x1 - x0 * x0)
+    return work
+
+
+@njit(cache=True)
+def kernel_switch_work(y, t, old, new, args):
+    """`switch_work` with the compiled kernel's arguments (``kernel_rhs``)."""
+    (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, force_dir,
+     _, stack_dir, stack_z0, stack_k) = args[:15]
+    return switch_work(y, t, old, new, free, prescribed, mass, tau, zP0, D, sine_index, sine_amp,
+                       sine_w, sine_phase, force_dir.shape[0], stack_dir, stack_z0, stack_k)
+
+
 def _advance(
     n,
     y,
     t,
     dt,
-    command,
+    commands,
+    held,
     A,
     phi1,
     phi2,
@@ -211,20 +258,34 @@ def _advance(
     """
     Up to n steps from (y, t) with F0 = F(y, t) and aux0 its energy rates, taken at ye.
 
-    Returns (y, F, aux, ye, dissipated, work, steps, iterations, status): the state, its F
-    and energy rates after the steps taken (at t + steps dt; the caller keeps time), the
+    Step i holds the command row commands[i] (the last row for the steps beyond: one row holds
+    one command over all). F0 and aux0 are those under ``held``; where a step's row differs
+    from the command held before it, F0 and aux0 are re-evaluated at its start under the row
+    and the switch's work (``switch``) is added to the drive work: a piezo actuator's held
+    strokes, one row per step (actuation.py).
+
+    Returns (y, F, aux, ye, held, dissipated, work, steps, iterations, status): the state, its
+    F and energy rates after the steps taken (at t + steps dt; the caller keeps time), the
     point where those rates were evaluated (the accepted y is one correction further), the
-    dissipated energy and drive work over the steps (``step_energy.step_energy``, with the
-    matrices ``emats``), and why it stopped.
-    ``rhs`` is a global of the function (see the end of this module), not an argument:
-    Numba cannot cache functions that take compiled functions as arguments.
+    command they were taken under, the dissipated energy and drive work over the steps
+    (``step_energy.step_energy``, with the matrices ``emats``), and why it stopped.
+    ``rhs`` and ``switch`` are globals of the function (see the end of this module), not
+    arguments: Numba cannot cache functions that take compiled functions as arguments.
     """
     dissipated = 0.0
     work = 0.0
     steps = 0
     iterations = 0
     status = CONVERGED
+    rows = commands.shape[0]
     for i in range(n):
+        command = commands[min(i, rows - 1)]
+        if np.any(command != held):
+            t0 = t + i * dt
+            F0, aux0 = rhs(y, t0, command, args)
+            ye = y
+            work += switch(y, t0, held, command, args)
+            held = command
         t1 = t + (i + 1) * dt  # on the step grid, not a running sum
         U = y + phi1 @ F0
         weight = rtol * np.abs(U) + atol
@@ -267,11 +328,13 @@ def _advance(
         if k > slow_after:
             status = SLOW
             break
-    return y, F0, aux0, ye, dissipated, work, steps, iterations, status
+    return y, F0, aux0, ye, held, dissipated, work, steps, iterations, status
 
 
 #: The right-hand side the compiled loop calls (resolved when Numba compiles ``advance``).
 rhs = kernel_rhs
+#: The work of a change of the held command, likewise.
+switch = kernel_switch_work
 
 #: The loop, compiled with the quadratic-law kernel.
 advance = njit(cache=True)(_advance)
@@ -285,7 +348,15 @@ def _interpreted_rhs(y, t, command, model):
     return model.rhs_python(y, t, command)
 
 
+def _interpreted_switch_work(y, t, old, new, model):
+    return switch_work(y, t, old, new, model.part.free.astype(np.int64),
+                       model.part.prescribed.astype(np.int64), model.mass, *model.motion,
+                       model.force_dir.shape[0],
+                       model.stack_dir, model.stack_z0, model.stack_k)
+
+
 #: The same loop as plain Python, calling ``Model.rhs_python`` (any hinge law); pass the
 #: Model as ``args``.
 advance_interpreted = types.FunctionType(
-    _advance.__code__, {**globals(), "rhs": _interpreted_rhs}, "advance_interpreted")
+    _advance.__code__, {**globals(), "rhs": _interpreted_rhs, "switch": _interpreted_switch_work},
+    "advance_interpreted")

@@ -152,6 +152,9 @@ def print_table(res: dict) -> None:
         "us, "
         f"matrix exponential {c['matrix_exponential_us']:.0f} us"
     )
+    print(f"  piezo actuator (config/examples/piezo_stage.yaml): per step "
+          f"{c['piezo_step_us']:.2f} us, the same drive without it "
+          f"{c['piezo_plain_step_us']:.2f} us")
     print(f"  without the energy integrals: per step {c['step_no_energy_us']:.2f} us, per "
           f"linearization {c['linearization_no_energy_us']:.0f} us (with: "
           f"{c['linearization_us']:.0f} us)")

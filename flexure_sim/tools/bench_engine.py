@@ -166,7 +166,10 @@ def bench_step_cost(dt: float = DEFAULT_STEP, sim_seconds: float = 1.0) -> dict:
     bare = Simulation(mech, dt=dt, energy=False)
     lin_bare = timeit.timeit(lambda: dynamics.linearize(bare.model, bare.data, y, t, cmd),
                              number=20) / 20
+    piezo_us, piezo_plain_us = _piezo_step_cost()
     return {
+        "piezo_step_us": piezo_us,
+        "piezo_plain_step_us": piezo_plain_us,
         "steps_per_s": n / wall,
         "dt": dt,
         "rtf": sim_seconds / wall,
@@ -185,6 +188,34 @@ def bench_step_cost(dt: float = DEFAULT_STEP, sim_seconds: float = 1.0) -> dict:
         "Jacobian and the matrix exponential (phi-functions) are paid per linearization "
         "(once per run for the stage), there is no linear solve",
     }
+
+
+def _piezo_step_cost(n: int = 10000) -> tuple[float, float]:
+    """
+    Wall time per step (us) of config/examples/piezo_stage.yaml, with and without its actuator.
+
+    The same drive with ``actuator`` removed and the command scaled by the nominal gain is the
+    plain displacement drive; both are stepped n steps after a warm-up.
+    """
+    import dataclasses
+
+    from ..engine.builtins import builtin_dir
+    from ..engine.mechanism import Drive
+
+    mech = load_mechanism(builtin_dir() / "examples" / "piezo_stage.yaml")
+    drive = mech.drives[0]
+    plain = dataclasses.replace(mech, constraints=tuple(
+        dataclasses.replace(c, actuator=None) if isinstance(c, Drive) else c
+        for c in mech.constraints))
+    out = []
+    for m, command in ((mech, 60.0), (plain, 60.0 * drive.actuator.gain)):
+        sim = Simulation(m)
+        sim.set_command(command)
+        sim.step(100)
+        start = time.perf_counter()
+        sim.step(n)
+        out.append((time.perf_counter() - start) / n * 1e6)
+    return out[0], out[1]
 
 
 def bench_static_sweep(levels: int = 1000) -> dict:
