@@ -23,6 +23,8 @@ from ..recording.command_line import report_reading, tool_errors, warn
 from ..recording.errors import EXIT_OK, EXIT_USAGE, RunError
 from ..topics import COMMAND, DRIVE_FORCE, DRIVE_INPUT, OUTPUT
 from . import analysis
+from .analyse_drives import analyse_drives, format_drives
+from .channels import is_single_drive
 from .options import add_file_arguments
 from .response_metrics import DEFAULT_BAND
 from .runlog import Run, load_run, require_stage_run
@@ -41,7 +43,8 @@ def register(subparsers: Any) -> None:
     )
     add_file_arguments(p)
     p.add_argument("--json", action="store_true",
-                   help="print a JSON list of steps (SI units; overshoot as a fraction)")
+                   help="print a JSON list of steps (SI units; overshoot as a fraction); with "
+                   "several drives or outputs an object with the gain matrix, pairs and steps")
     p.add_argument("--band", type=float, default=DEFAULT_BAND,
                    help="settling band as a fraction of the change (default 0.02)")
     p.add_argument("--no-static", action="store_true",
@@ -59,6 +62,13 @@ def _run(args: argparse.Namespace) -> int:
     run_ = load_run(args.run, recover=args.recover, namespace=args.namespace, strict=args.strict,
                     poses=False)
     report_reading(PROG, run_)
+    if not is_single_drive(run_.topics, run_.topic) and run_.drives():
+        result = analyse_drives(run_, band=args.band, static=not args.no_static)
+        for note in result["notes"]:
+            warn(PROG, note)
+        print(json.dumps(_jsonable(result), indent=1) if args.json
+              else format_drives(run_, result))
+        return EXIT_OK
     result = analyse_run(run_, band=args.band, static=not args.no_static)
     for note in result["notes"]:
         warn(PROG, note)
