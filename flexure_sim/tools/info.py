@@ -146,6 +146,44 @@ def summarize(info: LogInfo) -> dict:
         "other_metadata_records": other_records,
         "dropped_messages": info.dropped_messages,
         "undecodable": dict(sorted(info.undecodable.items())) if info.decoded else None,
+        **drives_and_outputs(info),
+    }
+
+
+def drives_and_outputs(info: LogInfo) -> dict:
+    """
+    ``drives`` and ``outputs`` of a run with several drives or outputs (issue 13), else {}.
+
+    Each drive: name, kind, unit and its topics (command, input, force or position); each
+    output: name, unit, topic. A single-drive, single-output run reports nothing more.
+    """
+    from ..recording.errors import RunError
+    from .channels import drive_channels, is_single_drive, output_channels
+    from .mechanism_reload import load_recorded_mechanism
+    from .runlog import find_namespace
+
+    try:
+        ns = find_namespace(info)
+    except RunError:
+        return {}
+
+    def topic(rel: str) -> str:
+        return f"{ns}/{rel}"
+
+    meta = info.flexure_sim or {}
+    if is_single_drive(info.topics, topic):
+        return {}
+    mech = load_recorded_mechanism(meta)[0] if meta else None
+    drives = drive_channels(info.topics, topic, meta, mech)
+    outputs = output_channels(info.topics, topic, meta, mech)
+    if not drives and not outputs:
+        return {}
+    return {
+        "drives": [{"name": d.name, "kind": d.kind, "unit": d.unit, "command": topic(d.command),
+                    "input": topic(d.input),
+                    "response": topic(d.response) if d.response else None,
+                    "response_unit": d.response_unit} for d in drives],
+        "outputs": [{"name": o.name, "unit": o.unit, "topic": topic(o.topic)} for o in outputs],
     }
 
 
@@ -189,6 +227,16 @@ def format_summary(s: dict, show_yaml: bool = False) -> str:
     rows = [[t["name"], t["type"], str(t["count"]), f"{t['rate_hz']:.6g}" if t["rate_hz"] else "-",
              (t["qos"]["reliability"] if t["qos"] else "-")] for t in s["topics"]]
     lines.append(columns(rows, ["topic", "type", "count", "rate [Hz]", "qos"], "<<>><"))
+    if s.get("drives") or s.get("outputs"):
+        lines.append("")
+        for d in s.get("drives", []):
+            response = f", {d['response']} [{d['response_unit']}]" if d["response"] else ""
+            lines.append(f"{'Drives:' if d is s['drives'][0] else '':14s}{d['name']} "
+                         f"({d['kind']}, {d['unit']}): command {d['command']}, "
+                         f"input {d['input']}{response}")
+        for o in s.get("outputs", []):
+            lines.append(f"{'Outputs:' if o is s['outputs'][0] else '':14s}{o['name']} "
+                         f"({o['unit']}): {o['topic']}")
     lines.append("")
     mech = s["mechanism"]
     if mech is None:
