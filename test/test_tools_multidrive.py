@@ -1,0 +1,213 @@
+"""
+The tools on runs with several drives or outputs (issue 13, item 4), written without DDS.
+
+Recordings from engine runs (multidrive_fixtures) and step-response arrays with textbook
+answers: the gain matrix against the engine's static solve at the same inputs (a second
+method: Newton on the static equations, not the dynamic run); settling time and overshoot
+against the first- and second-order formulas; a force drive against Euler-Bernoulli.
+test_tools_multidrive_node.py checks the real node's recording against simulate --static.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+
+from flexure_sim import cli
+from flexure_sim.tools.analysis import Step
+from flexure_sim.tools.gain_matrix import analyse_drive_steps, gain_pairs, matrix
+from flexure_sim.tools.plot import figure_title
+
+from multidrive_fixtures import record_drives_run
+
+U = 1e-6
+#: x steps at 10 ms, y at 60 ms, each held 50 ms (fifty actuator time constants).
+SCHEDULE = [(0.01, "x", U), (0.06, "y", U)]
+
+
+def flexure_sim(capsys, *args) -> tuple[int, str, str]:
+    code = cli.main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture(scope="module")
+def xy(tmp_path_factory):
+    path = tmp_path_factory.mktemp("xy") / "xy.mcap"
+    sim = record_drives_run(path, "xy_stage", SCHEDULE, 0.11)
+    return path, sim
+
+
+def test_gain_matrix_of_an_xy_run_equals_the_static_solve_at_the_same_inputs(capsys, xy):
+    path, sim = xy
+    code, out, err = flexure_sim(capsys, "analyse", path, "--json")
+    assert code == 0, err
+    result = json.loads(out)
+    names = list(sim.model.output_names)
+
+    def outputs(ux: float, uy: float) -> np.ndarray:
+        snap = sim.static({"x": ux, "y": uy}).snapshot
+        return np.array([snap.outputs[o] for o in names])
+
+    # Secant gains of the two steps: x 0 -> U (y at 0), then y 0 -> U (x held at U).
+    expected = np.column_stack([(outputs(U, 0.0) - outputs(0.0, 0.0)) / U,
+                                (outputs(U, U) - outputs(U, 0.0)) / U])
+    gm = result["gain_matrix"]
+    assert gm["drives"] == ["x", "y"] and gm["outputs"] == names == ["x", "y", "theta"]
+    measured = np.array(gm["matrix"], dtype=float)
+    np.testing.assert_allclose(measured, expected, rtol=0, atol=1e-6 * np.abs(expected).max())
+    # The secant over a 1 um step is not the gain at rest: the platform's rotation is
+    # nonlinear (2e-3 of the largest gain per um), which is why the node test steps 10 nm.
+    at_rest = np.array(result["static_gain_matrix"]["matrix"])
+    np.testing.assert_allclose(at_rest, sim.static_gain(), rtol=1e-12)
+    assert abs(measured[2, 0] - at_rest[2, 0]) > 1e-3 * np.abs(at_rest).max()
+    # Per step, the static solve at the same inputs is reported beside the measured gain.
+    for s in result["steps"]:
+        for o in names:
+            r = s["outputs"][o]
+            assert r["gain"] == pytest.approx(r["static_gain"], rel=1e-5, abs=1e-9)
+    assert [(p["drive"], p["output"], p["unit"]) for p in result["pairs"]][:3] == [
+        ("x", "x", "m/m"), ("x", "y", "m/m"), ("x", "theta", "rad/m")]
+    code, out, err = flexure_sim(capsys, "analyse", path)
+    assert code == 0, err
+    assert "gain matrix" in out and "theta [rad]" in out and "per pair" in out
+
+
+# ---------------------------------------------------------------- textbook responses
+def test_gain_settling_and_overshoot_per_pair_of_textbook_responses():
+    dt, tau, zeta, wn = 1e-5, 1e-3, 0.3, 2 * math.pi * 500
+    t = np.arange(1, 30001) * dt                       # 0.3 s
+    t1, t2 = 0.1, 0.2
+
+    def lag(t0: float) -> np.ndarray:  # first-order lag step response, 0 before t0
+        return np.where(t > t0, 1.0 - np.exp(-(t - t0) / tau), 0.0)
+
+    def second(t0: float) -> np.ndarray:  # second-order (zeta < 1) step response
+        s = np.clip(t - t0, 0.0, None)
+        wd = wn * math.sqrt(1 - zeta**2)
+        y = 1 - np.exp(-zeta * wn * s) * (np.cos(wd * s) + zeta / math.sqrt(1 - zeta**2)
+                                          * np.sin(wd * s))
+        return np.where(t > t0, y, 0.0)
+
+    ux, uy = 2e-6 * lag(t1), 1e-6 * lag(t2)
+    inputs = {"x": (t, ux), "y": (t, uy)}
+    outputs = {"a": (t, 3.0 * ux - 0.5 * uy),          # gains 3 and -0.5, lag-shaped
+               "b": (t, 4e-6 * second(t1)),             # 2 per m of x, second order
+               "c": (t, np.zeros_like(t))}              # coupled to nothing
+    steps = {"x": [Step(t1, 2e-6, 0.0)], "y": [Step(t2, 1e-6, 0.0)]}
+    result = analyse_drive_steps(steps, inputs, outputs, float(t[-1]))
+    pairs = gain_pairs(result, ["x", "y"], ["a", "b", "c"])
+    g = np.array(matrix(pairs, ["x", "y"], ["a", "b", "c"]), dtype=float)
+    np.testing.assert_allclose(g, [[3.0, -0.5], [2.0, 0.0], [0.0, 0.0]], rtol=1e-9, atol=1e-12)
+    by = {(p.drive, p.output): p for p in pairs}
+    # A first-order lag settles to 2 % in tau ln 50 and does not overshoot.
+    assert by["x", "a"].settling_time == pytest.approx(tau * math.log(50), rel=1e-3)
+    assert by["x", "a"].overshoot == 0.0
+    # A second-order system overshoots by exp(-pi zeta / sqrt(1 - zeta^2)).
+    assert by["x", "b"].overshoot == pytest.approx(
+        math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2)), rel=1e-4)
+    assert by["x", "c"].settling_time is None and by["x", "c"].steps == 1
+    assert all(s.clean and s.input_settled for s in result)
+
+
+def test_a_step_while_another_drive_moves_measures_no_gain():
+    t = np.arange(1, 2001) * 1e-4
+    ux = np.where(t > 0.05, 1e-6, 0.0)
+    uy = np.where(t > 0.05, 1e-6, 0.0) + np.where(t > 0.12, 1e-6 * (t - 0.12), 0.0)
+    inputs = {"x": (t, ux), "y": (t, uy)}
+    outputs = {"a": (t, ux + uy)}
+    steps = {"x": [Step(0.05, 1e-6, 0.0), Step(0.1, 1e-6 + 1e-9, 1e-6)],
+             "y": [Step(0.05, 1e-6, 0.0)]}
+    result = analyse_drive_steps(steps, inputs, outputs, float(t[-1]))
+    assert [(s.drive, s.clean) for s in result] == [("x", False), ("y", False), ("x", False)]
+    assert "stepped at the same time" in result[0].notes[0]
+    assert any("drive y did not hold" in n for n in result[2].notes)
+    assert matrix(gain_pairs(result, ["x", "y"], ["a"]), ["x", "y"], ["a"]) == [[None, None]]
+
+
+# ---------------------------------------------------------------- a force drive
+LEAF_ROTOR = """
+name: leaf_rotor
+defaults: {law: twistor, damping: {t_char: 1.0e-3}}
+stiffness_models:
+  leaf: {model: cantilever, length: 0.02, thickness: 0.0005, width: 0.01, E: 69.0e9, nu: 0.33}
+bodies:
+  - {name: base, mass: 1.0, inertia: 1.0, pose: [0, 0, 0]}
+  - {name: disc, mass: 0.01, inertia: 1.0e-6, pose: [0, 0.02, 0]}
+hinges:
+  - {name: leaf, a: {body: base, at: [0, 0.02]}, b: {body: disc, at: [0, 0]}, stiffness: leaf}
+constraints:
+  - {type: fixed, body: base}
+  - {type: force, name: torquer, body: disc, axis: theta, response_time: 1.0e-3,
+     stroke: [-0.001, 0.001], slew_rate: 1.0}
+outputs:
+  - {name: angle, body: disc, coordinate: theta}
+"""
+
+
+@pytest.fixture(scope="module")
+def rotor(tmp_path_factory):
+    work = tmp_path_factory.mktemp("rotor")
+    yaml_path = work / "leaf_rotor.yaml"
+    yaml_path.write_text(LEAF_ROTOR)
+    path = work / "rotor.mcap"
+    record_drives_run(path, str(yaml_path), [(0.01, "torquer", 2e-5)], 0.6)
+    return path
+
+
+def test_a_force_drives_gain_is_the_leafs_compliance_in_rad_per_newton_metre(capsys, rotor):
+    # A leaf under an end moment M turns by M L / (E I) (Euler-Bernoulli).
+    k_bend = 69.0e9 * (0.01 * 0.0005**3 / 12) / 0.02
+    code, out, err = flexure_sim(capsys, "analyse", rotor, "--json", "--no-static")
+    assert code == 0, err
+    result = json.loads(out)
+    assert result["drives"][0]["command"] == "/drive/torquer/force"
+    assert result["outputs"] == [{"name": "angle", "unit": "rad",
+                                  "topic": "/output/displacement"}]
+    assert result["gain_matrix"]["matrix"][0][0] == pytest.approx(1 / k_bend, rel=1e-6)
+    assert result["pairs"][0]["unit"] == "rad/(N m)"
+    code, out, err = flexure_sim(capsys, "info", rotor, "--json")
+    assert code == 0, err
+    info = json.loads(out)
+    assert info["drives"] == [{
+        "name": "torquer", "kind": "force", "unit": "N m", "command": "/drive/torquer/force",
+        "input": "/drive/torquer/input", "response": "/drive/torquer/position",
+        "response_unit": "rad"}]
+
+
+def test_export_signals_names_every_drive_and_output_column(capsys, rotor, tmp_path):
+    code, out, err = flexure_sim(capsys, "export", rotor, "--csv", tmp_path, "--signals")
+    assert code == 0, err
+    assert "signals.csv" in out
+    with (tmp_path / "signals.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == ["time", "drive/torquer/force", "drive/torquer/input",
+                             "drive/torquer/position", "output/displacement"]
+    assert len(rows) == 600 and rows[0]["time"] == "0.001000000"
+    # The command is held from the tick it was applied at; before it, no command.
+    assert rows[8]["drive/torquer/force"] == "" and float(rows[9]["drive/torquer/force"]) == 2e-5
+    assert float(rows[-1]["drive/torquer/position"]) == pytest.approx(
+        float(rows[-1]["output/displacement"]), rel=1e-12)
+
+
+def test_plot_draws_every_drive_and_output_with_names_and_units(capsys, xy, tmp_path):
+    path, _ = xy
+    code, out, err = flexure_sim(capsys, "plot", path, "-o", tmp_path)
+    assert code == 0, err
+    assert figure_title(tmp_path / "drives_outputs.png") == "Drives and outputs"
+    assert figure_title(tmp_path / "drive_forces.png") == "Drive forces"
+    assert not (tmp_path / "input_output.png").exists()
+    assert not (tmp_path / "body_poses.png").exists()
+
+
+def test_a_namespaced_run_of_drive_and_output_topics_only_is_found(capsys, tmp_path):
+    path = tmp_path / "ns.mcap"
+    record_drives_run(path, "xy_stage", SCHEDULE, 0.11, namespace="/left")
+    code, out, err = flexure_sim(capsys, "analyse", path, "--json", "--no-static")
+    assert code == 0, err
+    result = json.loads(out)
+    assert result["outputs"][0]["topic"] == "/left/output/x/displacement"
+    assert result["gain_matrix"]["matrix"][0][0] == pytest.approx(6.8725, rel=1e-4)
