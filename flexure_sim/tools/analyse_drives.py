@@ -24,7 +24,7 @@ from .tables import columns, format_si
 
 
 def drive_steps(run: Run, drive: DriveChannel) -> tuple[list[analysis.Step], str]:
-    """Steps of one drive and where they were found (a topic name), as `analyse.find_steps`."""
+    """Return the steps of one drive and where they were found (a topic), as `find_steps`."""
     u = run.scalar(drive.input)
     cmd = run.scalar(drive.command)
     if cmd is not None and not cmd.empty:
@@ -54,7 +54,7 @@ def _matrix_dict(drives: list[str], outputs: list[str], rows) -> dict:
 def static_comparison(run: Run, steps: list[DriveStep], drives: list[str],
                       outputs: list[str]) -> tuple[Optional[dict], str]:
     """
-    The engine's static solve of the recorded mechanism.
+    Compare with the engine's static solve of the recorded mechanism.
 
     Sets each step's ``outputs[o].static_gain`` (static output change between the applied
     inputs of every drive before and after the step, per applied input change of the stepped
@@ -102,7 +102,7 @@ def static_comparison(run: Run, steps: list[DriveStep], drives: list[str],
 
 
 def analyse_drives(run: Run, band: float, static: bool = True) -> dict:
-    """The gain matrix, pairs and steps of a run with several drives or outputs, as a dict."""
+    """Return the gain matrix, pairs and steps of a run with several drives/outputs (dict)."""
     drives, outputs = run.drives(), run.outputs()
     if not drives or not outputs:
         raise RunError(f"{run.path}: analyse needs a drive and an output; this run has "
@@ -161,7 +161,7 @@ def _ms(v: Optional[float]) -> str:
 
 
 def _si(v: Optional[float], unit: str) -> str:
-    """A value with a readable prefix (um, urad, mN...)."""
+    """Format a value with a readable prefix (um, urad, mN...)."""
     if v is None or not math.isfinite(v):
         return "-"
     base = unit.split()[0] if unit else ""

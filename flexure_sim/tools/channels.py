@@ -146,5 +146,5 @@ def is_single_drive(topics: Iterable[str], topic: Callable[[str], str]) -> bool:
 
 
 def gain_unit(output_unit: str, input_unit: str) -> str:
-    """Unit of an output per unit of a drive's input (``m/m``, ``rad/m``, ``m/N``...)."""
+    """Return the unit of an output per unit of a drive's input (``m/m``, ``rad/m``...)."""
     return f"{output_unit}/({input_unit})" if " " in input_unit else f"{output_unit}/{input_unit}"
