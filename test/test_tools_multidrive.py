@@ -22,6 +22,7 @@ from flexure_sim.tools.gain_matrix import analyse_drive_steps, gain_pairs, matri
 from flexure_sim.tools.plot import figure_title
 
 from multidrive_fixtures import record_drives_run
+from test_node_multidrive import LEAF_ROTOR
 
 U = 1e-6
 #: x steps at 10 ms, y at 60 ms, each held 50 ms (fifty actuator time constants).
@@ -129,25 +130,6 @@ def test_a_step_while_another_drive_moves_measures_no_gain():
 
 
 # ---------------------------------------------------------------- a force drive
-LEAF_ROTOR = """
-name: leaf_rotor
-defaults: {law: twistor, damping: {t_char: 1.0e-3}}
-stiffness_models:
-  leaf: {model: cantilever, length: 0.02, thickness: 0.0005, width: 0.01, E: 69.0e9, nu: 0.33}
-bodies:
-  - {name: base, mass: 1.0, inertia: 1.0, pose: [0, 0, 0]}
-  - {name: disc, mass: 0.01, inertia: 1.0e-6, pose: [0, 0.02, 0]}
-hinges:
-  - {name: leaf, a: {body: base, at: [0, 0.02]}, b: {body: disc, at: [0, 0]}, stiffness: leaf}
-constraints:
-  - {type: fixed, body: base}
-  - {type: force, name: torquer, body: disc, axis: theta, response_time: 1.0e-3,
-     stroke: [-0.001, 0.001], slew_rate: 1.0}
-outputs:
-  - {name: angle, body: disc, coordinate: theta}
-"""
-
-
 @pytest.fixture(scope="module")
 def rotor(tmp_path_factory):
     work = tmp_path_factory.mktemp("rotor")

@@ -96,23 +96,34 @@ def _signal(run: Run, topic: str) -> Optional[tuple[np.ndarray, np.ndarray]]:
 
 def find_steps(run: Run) -> tuple[list[analysis.Step], str]:
     """Return the steps of the drive and where they were found (a topic name)."""
-    u = run.scalar(DRIVE_INPUT)
-    cmd = run.scalar(COMMAND)
+    return steps_of(run, COMMAND, DRIVE_INPUT, ("stroke_min", "stroke_max"))
+
+
+def steps_of(run: Run, command: str, applied: str,
+             stroke_keys: tuple[str, str]) -> tuple[list[analysis.Step], str]:
+    """
+    Return the steps of one drive and where they were found (a topic name).
+
+    From its ``command`` topic if recorded (clamped to the stroke the metadata keys
+    ``stroke_keys`` give), else from its ``applied`` input (`analysis`).
+    """
+    u = run.scalar(applied)
+    cmd = run.scalar(command)
     if cmd is not None and not cmd.empty:
         meta = run.metadata
         stroke = None
         try:
-            stroke = (float(meta["stroke_min"]), float(meta["stroke_max"]))
+            stroke = (float(meta[stroke_keys[0]]), float(meta[stroke_keys[1]]))
         except (KeyError, ValueError):
             pass
         initial = float(u.values[0]) if u is not None and not u.empty else (
             min(max(0.0, stroke[0]), stroke[1]) if stroke else 0.0)
         return analysis.command_steps(
             cmd.t, cmd.values, initial=initial, stroke=stroke
-        ), run.topic(COMMAND)
+        ), run.topic(command)
     if u is None or u.empty:
-        return [], run.topic(DRIVE_INPUT)
-    return analysis.input_steps(u.t, u.values), run.topic(DRIVE_INPUT)
+        return [], run.topic(applied)
+    return analysis.input_steps(u.t, u.values), run.topic(applied)
 
 
 def static_gains(run: Run, steps: list[analysis.StepMetrics]) -> tuple[dict[int, float], str]:

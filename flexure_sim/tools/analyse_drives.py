@@ -16,6 +16,7 @@ from typing import Optional
 import numpy as np
 
 from ..recording.errors import RunError
+from ..topics import COMMAND
 from . import analysis
 from .channels import DriveChannel, gain_unit
 from .gain_matrix import DriveStep, analyse_drive_steps, gain_pairs, matrix
@@ -25,25 +26,12 @@ from .tables import columns, format_si
 
 def drive_steps(run: Run, drive: DriveChannel) -> tuple[list[analysis.Step], str]:
     """Return the steps of one drive and where they were found (a topic), as `find_steps`."""
-    u = run.scalar(drive.input)
-    cmd = run.scalar(drive.command)
-    if cmd is not None and not cmd.empty:
-        meta = run.metadata
-        stroke = None
-        named = len(run.drives()) > 1 or drive.command != "drive/displacement"
-        keys = ((f"drives.{drive.name}.stroke_min", f"drives.{drive.name}.stroke_max") if named
-                else ("stroke_min", "stroke_max"))
-        try:
-            stroke = (float(meta[keys[0]]), float(meta[keys[1]]))
-        except (KeyError, ValueError):
-            pass
-        initial = float(u.values[0]) if u is not None and not u.empty else (
-            min(max(0.0, stroke[0]), stroke[1]) if stroke else 0.0)
-        return analysis.command_steps(cmd.t, cmd.values, initial=initial,
-                                      stroke=stroke), run.topic(drive.command)
-    if u is None or u.empty:
-        return [], run.topic(drive.input)
-    return analysis.input_steps(u.t, u.values), run.topic(drive.input)
+    from .analyse import steps_of
+
+    named = drive.command != COMMAND  # per-drive parameters drives.<name>.stroke_min ...
+    keys = ((f"drives.{drive.name}.stroke_min", f"drives.{drive.name}.stroke_max") if named
+            else ("stroke_min", "stroke_max"))
+    return steps_of(run, drive.command, drive.input, keys)
 
 
 def _matrix_dict(drives: list[str], outputs: list[str], rows) -> dict:

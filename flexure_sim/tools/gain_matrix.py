@@ -27,7 +27,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from .analysis import Signal, Step
+from .analysis import Signal, Step, _before, _window
 from .response_metrics import DEFAULT_BAND, DEFAULT_HOLD, step_response
 
 #: A drive holds during another's step if its input moves by at most this fraction of its range.
@@ -75,17 +75,6 @@ class DriveStep:
         d["notes"] = list(self.notes)
         d["outputs"] = {k: dict(v.__dict__) for k, v in self.outputs.items()}
         return d
-
-
-def _before(sig: Signal, t0: float) -> Optional[float]:
-    k = int(np.searchsorted(sig[0], t0, side="right")) - 1
-    return float(sig[1][k]) if k >= 0 else None
-
-
-def _window(sig: Signal, t0: float, t1: float) -> Signal:
-    lo = int(np.searchsorted(sig[0], t0, side="right"))
-    hi = int(np.searchsorted(sig[0], t1, side="right"))
-    return sig[0][lo:hi], sig[1][lo:hi]
 
 
 def _span(sig: Signal) -> float:
