@@ -34,6 +34,36 @@ METADATA_NAME = "flexure_sim"
 PARAMETER_CHANGE_NAME = "flexure_sim.parameters"
 
 
+def drive_command(drive: str, kind: str = "displacement") -> str:
+    """
+    Command of one named drive (several drives; subscribed).
+
+    ``drive/<name>/displacement`` (m, or rad on theta) or, for a force drive,
+    ``drive/<name>/force`` (N, or N m).
+    """
+    return f"drive/{drive}/{'force' if kind == 'force' else 'displacement'}"
+
+
+def drive_input(drive: str) -> str:
+    """Actuator output actually applied by one named drive (a force drive's force)."""
+    return f"drive/{drive}/input"
+
+
+def drive_force(drive: str) -> str:
+    """Force one named displacement drive's actuator applies to its body."""
+    return f"drive/{drive}/force"
+
+
+def drive_position(drive: str) -> str:
+    """Displacement of a named force drive's body from rest along the drive's direction."""
+    return f"drive/{drive}/position"
+
+
+def output_displacement(output: str) -> str:
+    """Displacement of one named output from rest (several outputs)."""
+    return f"output/{output}/displacement"
+
+
 def body_pose(body: str) -> str:
     """Pose of one body's frame."""
     return f"bodies/{body}/pose"

@@ -712,11 +712,3 @@ def test_fourbar_runs_without_drive_topics(tmp_path, domain, peer):
         and "/bodies/link2/pose" in log.topics
         and "/drive/displacement" not in log.topics
     )
-
-
-def test_a_mechanism_with_several_drives_stops_the_node_with_the_reason(tmp_path, domain):
-    node = NodeProcess(tmp_path / "xy", domain, dict(mechanism="xy_stage"))
-    assert node.wait(60) != 0
-    assert "stage_node steps one displacement drive" in node.stderr, node.stderr
-    assert "Traceback" not in node.stderr, node.stderr
-    assert not node.recordings()

@@ -12,6 +12,7 @@ import time
 from typing import Any, Callable, Optional, Sequence
 
 from .cdr import CDR_LE, FAST_DDS, middleware, parse_float64
+from .drive_bank import units
 from .drive_input import CommandFilter, WarningThrottle
 from .interface import COMMAND_DEPTH
 from .polled import take_raw
@@ -55,11 +56,14 @@ class CommandIntake:
     Commands of one polled subscription into one `CommandFilter` and onto a recording channel.
 
     The filter is None: no drive; the channel is ``channel``, through ``record(items, stamp)``.
+    ``label`` and ``unit`` name the drive and its unit in warnings (``drive 'x'``, ``rad``).
     """
 
     def __init__(self, subscription: Any, drive_filter: Optional[CommandFilter], channel: int,
                  record: Callable[[list[tuple[int, bytes]], int], None], log: Any,
-                 throttle: WarningThrottle) -> None:
+                 throttle: WarningThrottle, label: str = "drive", unit: str = "m") -> None:
+        self.label = label
+        self.unit = unit
         self.subscription = subscription
         self.filter = drive_filter
         self.channel = channel
@@ -88,14 +92,17 @@ class CommandIntake:
             for _ in problems:
                 filt.reject_malformed()
             if problems:
-                self.warn("malformed", f"drive command rejected: {problems[0]}", len(problems))
+                self.warn("malformed", f"{self.label} command rejected: {problems[0]}",
+                          len(problems))
             rejected, clamped, bad, outside = filt.submit_many(values)
             if rejected:
-                self.warn("rejected", f"drive command {bad!r} rejected (not finite)", rejected)
+                self.warn("rejected", f"{self.label} command {bad!r} rejected (not finite)",
+                          rejected)
             if clamped:
-                lim = filt.limits
-                self.warn("clamped", f"drive command {outside:g} m outside the stroke "
-                          f"[{lim.stroke_min:g}, {lim.stroke_max:g}] m: clamped", clamped)
+                lim, unit = filt.limits, self.unit
+                self.warn("clamped", f"{self.label} command {outside:g} {unit} outside the "
+                          f"stroke [{lim.stroke_min:g}, {lim.stroke_max:g}] {unit}: clamped",
+                          clamped)
         channel = self.channel
         self._record([(channel, data) for data in commands], stamp)
         self.count += len(commands)
@@ -104,6 +111,11 @@ class CommandIntake:
     def discard(self) -> None:
         """Drop what the reader holds (commands sent before a reset)."""
         take_raw(self.subscription, COMMAND_TAKE_LIMIT)
+
+    def warn_rate_limited(self) -> None:
+        """Warn that the last accepted command is beyond the slew limit within a tick."""
+        self.warn("rate_limited", f"{self.label} command faster than the slew limit "
+                  f"({self.filter.limits.slew_rate:g} {self.unit}/s): ramping")
 
     def warn(self, kind: str, message: str, events: int = 1) -> None:
         """
@@ -117,3 +129,54 @@ class CommandIntake:
             suffix = (f" ({count} such commands since the last warning, {total} in all)"
                       if count > 1 else f" ({total} in all)")
             self._log.warning(message + suffix)
+
+
+class IntakeGroup:
+    """The intakes of several drives (one subscription each), used like one `CommandIntake`."""
+
+    def __init__(self, intakes: Sequence[CommandIntake], bank: Any) -> None:
+        self.intakes = list(intakes)
+        self._bank = bank  # drive_bank.FilterBank: which drives were rate-limited
+
+    @property
+    def count(self) -> int:
+        return sum(i.count for i in self.intakes)
+
+    @property
+    def time_s(self) -> float:
+        return sum(i.time_s for i in self.intakes)
+
+    def apply(self, stamp: int) -> None:
+        for intake in self.intakes:
+            intake.apply(stamp)
+
+    def discard(self) -> None:
+        for intake in self.intakes:
+            intake.discard()
+
+    def warn_rate_limited(self) -> None:
+        """Warn for each drive whose filter counted its command as rate-limited this tick."""
+        for intake, limited in zip(self.intakes, self._bank.limited):
+            if limited:
+                intake.warn_rate_limited()
+
+
+def intake_for(subscriptions: Sequence[Any], drive_filter: Any, named: Sequence[Any],
+               first_channel: int, record: Callable[[list[tuple[int, bytes]], int], None],
+               log: Any, throttle: WarningThrottle) -> Any:
+    """
+    Return the stepping loop's intake of the command ``subscriptions`` (one per drive).
+
+    The single drive's `CommandIntake` (``named`` empty), an `IntakeGroup` of the ``named``
+    drives of the `drive_bank.FilterBank` ``drive_filter``, or None without a drive; drive k
+    records on channel ``first_channel + k``.
+    """
+    if not subscriptions:
+        return None
+    if not named:
+        return CommandIntake(subscriptions[0], drive_filter, first_channel, record, log,
+                             throttle)
+    return IntakeGroup([
+        CommandIntake(sub, drive_filter.filters[k], first_channel + k, record, log, throttle,
+                      f"drive {d.name}", units(d)[0])
+        for k, (sub, d) in enumerate(zip(subscriptions, named))], drive_filter)

@@ -16,6 +16,7 @@ from rcl_interfaces.msg import (
 )
 from rclpy.parameter import Parameter
 
+from .drive_bank import LIMIT_KEYS
 from .interface import TIME_MODES
 from .params import COMMAND_RELIABILITIES, RECORD_FORMATS, ParamSpec, parameter_specs
 
@@ -43,7 +44,7 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
         type=_TYPE_CODES[spec.type],
         description=spec.description + (f" [{spec.unit}]" if spec.unit else ""),
         read_only=spec.read_only,
-        additional_constraints=_CONSTRAINTS.get(spec.name, ""),
+        additional_constraints=_CONSTRAINTS.get(spec.name.rpartition(".")[2], ""),
     )
     if spec.type is float and spec.low is not None and spec.high is not None:
         d.floating_point_range = [
@@ -67,7 +68,8 @@ def coerce_integer_overrides(node: Any) -> None:
     overrides = getattr(node, "_parameter_overrides", None)
     if not isinstance(overrides, dict):
         return
-    for spec in parameter_specs():
-        p = overrides.get(spec.name)
-        if spec.type is float and p is not None and p.type_ == Parameter.Type.INTEGER:
-            overrides[spec.name] = Parameter(spec.name, Parameter.Type.DOUBLE, float(p.value))
+    floats = {s.name for s in parameter_specs() if s.type is float}
+    for name, p in list(overrides.items()):
+        per_drive = name.startswith("drives.") and name.rpartition(".")[2] in LIMIT_KEYS
+        if (name in floats or per_drive) and p.type_ == Parameter.Type.INTEGER:
+            overrides[name] = Parameter(name, Parameter.Type.DOUBLE, float(p.value))

@@ -203,8 +203,7 @@ class Diagnostics:
         values.append(("command_time_mean_us",
                        1e6 * (intake_s - w.intake0[1]) / taken if taken else 0.0))
         if loop.filter is not None:
-            values += [("drive_target", loop.filter.target),
-                       ("drive_applied", loop.filter.applied)]
+            values += loop.filter.values()
         values += extra_values + stress_values
         if loop.display is not None:
             values += loop.display.values()

@@ -245,3 +245,38 @@ class DisplayOutput:
                 ("display_time_max_us", 1e6 * self.time_max),
                 ("hinge_colour", self.display.colouring),
                 ("tf", "on" if self._tf_pub is not None else "off")]
+
+
+def build_display(node: Any, values: Any, qos: QoSProfile, watch: Any,
+                  first_channel: int) -> tuple[list, Any]:
+    """
+    Create the stage node's markers publisher, and TF publishers where tf2_msgs is importable.
+
+    Sets the stepping loop's display output (recording channels from ``first_channel`` on).
+    Returns the recorded display topics, (resolved name, type name, QoS) in channel order, and
+    the /tf_static publisher (None without TF).
+    """
+    from visualization_msgs.msg import MarkerArray
+
+    frames = node.interface.frames
+    display = Display(node.mechanism, frames, float(values["display_scale"]))
+    pub = node.create_publisher(MarkerArray, MARKERS.name, qos,
+                                event_callbacks=watch.publisher_callbacks(MARKERS.name))
+    recorded = [(pub.topic_name, MARKERS.type_name, qos)]
+    tf_class, why = tf_message_class()
+    tf_pub = static_pub = None
+    if tf_class is None:
+        node.get_logger().info(
+            f"TF off: {why}; poses are on bodies/poses and bodies/<body>/pose")
+    else:
+        tf_pub = node.create_publisher(tf_class, TF.name, tf_qos())
+        static_pub = node.create_publisher(tf_class, TF_STATIC.name, tf_static_qos())
+        static_pub.publish(tf_message(static_transforms(node.mechanism, frames),
+                                      node.get_clock().now().nanoseconds, tf_class))
+        recorded += [(tf_pub.topic_name, TF.type_name, tf_qos()),
+                     (static_pub.topic_name, TF_STATIC.type_name, tf_static_qos())]
+    channels = list(range(first_channel, first_channel + len(recorded)))
+    loop = node.loop
+    loop.display = DisplayOutput(display, pub, node.session, channels, tf_pub, tf_class)
+    loop.display_every = display_every(loop.rate, float(values["display_rate"]))
+    return recorded, static_pub

@@ -232,6 +232,15 @@ class CommandFilter:
         self.target = self.applied = self._initial
         self._checked = True
 
+    @staticmethod
+    def describe(value: float) -> str:
+        """Return a target as text (``1e-06 m``)."""
+        return f"{value:g} m"
+
+    def values(self) -> list[tuple[str, float]]:
+        """Diagnostics entries: the target and the applied target."""
+        return [("drive_target", self.target), ("drive_applied", self.applied)]
+
 
 class WarningThrottle:
     """

@@ -37,24 +37,33 @@ class StrokeProbe:
         self._mechanism = mechanism
         self._dt = dt
         self._sim: Optional[Simulation] = None
-        self._known: dict[float, Optional[str]] = {}
+        self._known: dict[tuple, Optional[str]] = {}
 
-    def end_problem(self, name: str, value: float) -> Optional[str]:
-        """Why the engine cannot hold the actuator at ``value`` (m), or None."""
+    def end_problem(self, name: str, value: float, drive: Optional[str] = None,
+                    unit: str = "m") -> Optional[str]:
+        """
+        Why the engine cannot hold the actuator at ``value`` (m), or None.
+
+        ``drive``: of a mechanism with several drives, the one at ``value`` (the others at 0).
+        """
         value = float(value)
-        if value not in self._known:
+        key = (drive, value)
+        if key not in self._known:
             if self._sim is None:
                 self._sim = Simulation(self._mechanism, dt=self._dt)
+            inputs: Any = value
+            if drive is not None:
+                inputs = {d: (value if d == drive else 0.0) for d in self._sim.model.drive_names}
             try:
-                self._sim.static(value)
-                self._known[value] = None
+                self._sim.static(inputs)
+                self._known[key] = None
             except SolverError as exc:
-                self._known[value] = (
+                self._known[key] = (
                     f"{name}: the engine finds no static equilibrium of {self._mechanism.name} at "
-                    f"{value:g} m ({exc}); it could not follow a command there")
+                    f"{value:g} {unit} ({exc}); it could not follow a command there")
             except (ValueError, ArithmeticError):
-                self._known[value] = None  # the static solver cannot judge: run-time hold guards
-        return self._known[value]
+                self._known[key] = None  # the static solver cannot judge: run-time hold guards
+        return self._known[key]
 
     def problem(self, stroke_min: float, stroke_max: float) -> Optional[str]:
         """Why [stroke_min, stroke_max] is beyond the engine, or None."""
@@ -102,8 +111,8 @@ class EngineHold:
         dropped = ""
         if drive_filter is not None and self._targets is not None:
             target, applied = self._targets
-            if drive_filter.target != applied:
-                dropped = f"; drive command {drive_filter.target:g} m dropped"
+            if np.any(drive_filter.target != applied):
+                dropped = f"; drive command {drive_filter.describe(drive_filter.target)} dropped"
             drive_filter.hold(applied)
         self.last_error = f"{type(exc).__name__}: {exc}"
         return (f"the engine failed at t = {sim.state.t:.9g} s ({self.last_error}); state held"

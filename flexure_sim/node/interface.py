@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from typing import Any, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Pose, PoseArray, PoseStamped, TransformStamped, WrenchStamped
+from geometry_msgs.msg import PoseArray, PoseStamped, TransformStamped, WrenchStamped
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
@@ -37,6 +37,7 @@ from .diagnostics_msg import (  # noqa: F401  (re-exported: one import for the n
     ERROR, OK, WARN, diagnostics_message, encode_diagnostics, stamp_msg, value_text)
 from .cdr import (
     ClockPacker, Float64Packer, StampedPacker, packing_applies, split_stamp)
+from .reference_messages import reference_messages, yaw_quaternion  # noqa: F401 (re-export)
 
 TIME_MODES = ("realtime", "fast", "lockstep")
 #: Modes in which the node publishes /clock (simulated time is not wall time).
@@ -118,10 +119,18 @@ def _spec(
     )
 
 
-def yaw_quaternion(yaw: float) -> tuple[float, float, float, float]:
-    """(x, y, z, w) of a rotation by ``yaw`` about z."""
-    half = 0.5 * yaw
-    return 0.0, 0.0, math.sin(half), math.cos(half)
+def _unit(coordinate: Optional[str], force: bool = False) -> str:
+    """SI unit of a displacement (or force) along an axis, or about theta."""
+    if coordinate == "theta":
+        return "N m" if force else "rad"
+    return "N" if force else "m"
+
+
+def _along(text: str, item: Any) -> str:
+    """``text`` with the axis or coordinate of a drive or output."""
+    if item.coordinate is not None:
+        return f"{text}, coordinate {item.coordinate}"
+    return f"{text} along ({item.axis[0]:g}, {item.axis[1]:g})"
 
 
 class StageInterface:
@@ -129,8 +138,12 @@ class StageInterface:
     Topic table of one mechanism in one time mode, and snapshot -> messages.
 
     ``tick_topics`` lists, in publishing order, the topics published every tick (``/clock``
-    first in fast and lockstep modes); ``diagnostics`` and ``command`` are the diagnostics
-    topic and the drive command subscription (None if the mechanism has no drive).
+    first in fast and lockstep modes); ``diagnostics`` is the diagnostics topic, ``commands``
+    the drive command subscriptions, one per drive (``command``: the single drive's, None
+    otherwise). A mechanism with one displacement drive has the topics ``drive/displacement``,
+    ``drive/input``, ``drive/force``; with several drives (or a force drive) each drive has
+    its own (``topics.drive_command`` ...). Likewise one output publishes
+    ``output/displacement``, several one ``output/<name>/displacement`` each.
     """
 
     def __init__(self, mechanism: Mechanism, time_mode: str = "realtime",
@@ -148,8 +161,14 @@ class StageInterface:
         hinges = [h.name for h in mech.hinges]
         self.body_names = bodies
         self.hinge_names = hinges
-        self.has_drive = mech.drive is not None
-        self.has_output = mech.output is not None
+        self.has_drive = mech.drive is not None and len(mech.drives) == 1 \
+            and mech.drive.kind == "displacement"
+        #: The named drives (several, or a force drive): topics per drive; else empty.
+        self.drives = () if self.has_drive else mech.drives
+        outputs = mech.all_outputs
+        self.has_output = len(outputs) == 1
+        #: The named outputs when there are several: a topic each; else empty.
+        self.outputs = outputs if len(outputs) > 1 else ()
         self.has_sensor = self.has_output and mech.sensor is not None
         self.compression_hinge: Optional[str] = mech.compression_hinge if self.has_drive else None
 
@@ -214,14 +233,37 @@ class StageInterface:
                 "body A, along the drive axis"))
         if self.has_output:
             specs.append(_spec(
-                "output", topics.OUTPUT, Float64, "m", "",
-                f"displacement of the output body {mech.output.body} from rest along "
-                f"({mech.output.axis[0]:g}, {mech.output.axis[1]:g})"))
+                "output", topics.OUTPUT, Float64, _unit(outputs[0].coordinate), "",
+                _along(f"displacement of the output body {outputs[0].body} from rest",
+                       outputs[0])))
         if self.has_sensor:
             specs.append(_spec(
                 "measured", topics.MEASURED, Float64, "m", "",
                 "the output as the mechanism's sensor reads it (bandwidth, noise, resolution, "
                 "latency in ticks; engine/sensor.py)"))
+        for o in self.outputs:
+            specs.append(_spec(
+                f"output:{o.name}", topics.output_displacement(o.name), Float64,
+                _unit(o.coordinate), "", _along(f"output {o.name}: displacement of body "
+                                                f"{o.body} from rest", o)))
+        for d in self.drives:
+            force = d.kind == "force"
+            what = ("force applied (after validation and slew limiting)" if force else
+                    "actuator output actually applied (after validation, slew limiting and "
+                    "the actuator lag)")
+            specs.append(_spec(
+                f"drive_input:{d.name}", topics.drive_input(d.name), Float64,
+                _unit(d.coordinate, force), "", _along(f"drive {d.name}: {what}", d)))
+            if force:
+                specs.append(_spec(
+                    f"drive_position:{d.name}", topics.drive_position(d.name), Float64,
+                    _unit(d.coordinate), "",
+                    _along(f"drive {d.name}: displacement of body {d.body} from rest", d)))
+            else:
+                specs.append(_spec(
+                    f"drive_force:{d.name}", topics.drive_force(d.name), Float64,
+                    _unit(d.coordinate, True), "",
+                    _along(f"drive {d.name}: force its actuator applies to body {d.body}", d)))
         if self.has_drive:
             specs.append(_spec(
                 "drive_input", topics.DRIVE_INPUT, Float64, "m", "",
@@ -251,6 +293,12 @@ class StageInterface:
             self.command = _spec("command", topics.COMMAND, Float64, "m", "",
                                  "drive command (subscribed): target actuator displacement "
                                  "along the drive axis")
+        self.commands: tuple[TopicSpec, ...] = (self.command,) if self.command else tuple(
+            _spec(f"command:{d.name}", topics.drive_command(d.name, d.kind), Float64,
+                  _unit(d.coordinate, d.kind == "force"), "",
+                  _along(f"drive {d.name} command (subscribed): target "
+                         + ("force" if d.kind == "force" else "actuator displacement"), d))
+            for d in self.drives)
         self._build_packers()
         #: True: `encode` packs (Fast DDS, every layout known); False: serialize_message.
         self.packed = all(packing_applies(spec.type_name) for spec in self.tick_topics)
@@ -277,8 +325,7 @@ class StageInterface:
         out.extend(self._poses)
         for w, d in zip(self._wrenches, self._deflections):
             out.extend((w, d))
-        n_float = ((self.compression_hinge is not None) + self.has_output + self.has_sensor
-                   + 2 * self.has_drive)
+        n_float = len(self.tick_topics) - len(out)
         out.extend([self._float] * n_float)
         return out
 
@@ -302,15 +349,27 @@ class StageInterface:
         if monitor:
             self._encode_monitoring(snap, sec, nsec, out)
         f = self._float.pack
+        out.extend([f(v) for v in self.scalars(snap, measured)])
+        return out
+
+    def scalars(self, snap: Any, measured: float = 0.0) -> list[float]:
+        """Return the values of the Float64 tick topics (the last ones), `tick_topics` order."""
+        out: list[float] = []
         if self.compression_hinge is not None:
-            out.append(f(float(snap.compression)))
+            out.append(float(snap.compression))
         if self.has_output:
-            out.append(f(float(snap.output)))
+            out.append(float(snap.output))
         if self.has_sensor:
-            out.append(f(float(measured)))
+            out.append(float(measured))
+        if self.outputs:
+            out.extend(snap.outputs[o.name] for o in self.outputs)
+        for k, d in enumerate(self.drives):
+            out.append(float(snap.drive_inputs[k]))
+            out.append(float(snap.drive_positions[k] if d.kind == "force"
+                             else snap.drive_forces[k]))
         if self.has_drive:
-            out.append(f(float(snap.drive_input)))
-            out.append(f(float(snap.drive_force)))
+            out.append(float(snap.drive_input))
+            out.append(float(snap.drive_force))
         return out
 
     def _encode_monitoring(self, snap: Any, sec: int, nsec: int, out: list[bytes]) -> None:
@@ -335,54 +394,4 @@ class StageInterface:
     # ------------------------------------------------------ reference messages
     def messages(self, snap: Any, stamp_ns: int, measured: float = 0.0) -> list[Any]:
         """Return the same messages as `encode`, as rclpy message objects (the reference)."""
-        stamp = stamp_msg(stamp_ns)
-        fr = self.frames
-        out: list[Any] = []
-        if self.publishes_clock:
-            out.append(Clock(clock=stamp))
-        array = PoseArray()
-        array.header.stamp = stamp
-        array.header.frame_id = fr.root
-        poses = []
-        for (x, y, th) in snap.poses.tolist():
-            pose = Pose()
-            pose.position.x, pose.position.y, pose.position.z = x, y, 0.0
-            q = pose.orientation
-            q.x, q.y, q.z, q.w = yaw_quaternion(th)
-            poses.append(pose)
-        array.poses = poses
-        out.append(array)
-        for pose in poses:
-            msg = PoseStamped()
-            msg.header.stamp = stamp
-            msg.header.frame_id = fr.root
-            msg.pose = pose
-            out.append(msg)
-        for name, (m, fx, fy), (a, px, py) in zip(
-            self.hinge_names, snap.wrenches.tolist(), snap.deflections.tolist()
-        ):
-            w = WrenchStamped()
-            w.header.stamp = stamp
-            w.header.frame_id = fr.hinge_b(name)
-            w.wrench.force.x, w.wrench.force.y, w.wrench.force.z = fx, fy, 0.0
-            w.wrench.torque.x, w.wrench.torque.y, w.wrench.torque.z = 0.0, 0.0, m
-            out.append(w)
-            d = TransformStamped()
-            d.header.stamp = stamp
-            d.header.frame_id = fr.hinge_a(name)
-            d.child_frame_id = fr.hinge_b(name)
-            t = d.transform.translation
-            t.x, t.y, t.z = px, py, 0.0
-            r = d.transform.rotation
-            r.x, r.y, r.z, r.w = yaw_quaternion(a)
-            out.append(d)
-        if self.compression_hinge is not None:
-            out.append(Float64(data=float(snap.compression)))
-        if self.has_output:
-            out.append(Float64(data=float(snap.output)))
-        if self.has_sensor:
-            out.append(Float64(data=float(measured)))
-        if self.has_drive:
-            out.append(Float64(data=float(snap.drive_input)))
-            out.append(Float64(data=float(snap.drive_force)))
-        return out
+        return reference_messages(self, snap, stamp_ns, measured)

@@ -153,6 +153,8 @@ def run_metadata(values: Mapping[str, Any], mechanism: Mechanism, mechanism_path
         "root_frame": interface.frames.root,
         "bodies": ",".join(interface.body_names),
         "hinges": ",".join(interface.hinge_names),
+        "drives": ",".join(f"{d.name}:{d.kind}" for d in mechanism.drives),
+        "outputs": ",".join(o.name for o in mechanism.all_outputs),
         "run": str(run),
         "sim_time_start": repr(sim_time),
         "started_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),

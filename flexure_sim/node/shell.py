@@ -15,6 +15,7 @@ import gc
 from pathlib import Path
 from typing import Any, Optional
 
+import numpy as np
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.context import Context
@@ -31,12 +32,13 @@ from ..errors import FlexureSimError
 from ..engine.solver import Simulation
 from ..recording import RecordingError
 from . import interface as itf
-from .commands import CommandIntake
+from .commands import intake_for
 from .declare import coerce_integer_overrides, declare
 from .diagnostics import Diagnostics
 from . import display as dsp
-from .display import Display, DisplayOutput, display_every, static_transforms, tf_message
-from .display import tf_message_class
+from .display import display_every
+from .drive_bank import (LIMIT_KEYS, FilterBank, drive_limits, drive_parameter_specs,
+                         drives_problem, named_drives, parameter_name, stroke_ends)
 from .drive_input import CommandFilter, DriveLimits
 from .engine_guard import StrokeProbe
 from .params import as_declared_type, parameter_specs, validate
@@ -73,12 +75,6 @@ def load(mechanism_arg: Any) -> tuple[Any, Path]:
     except Exception as exc:  # noqa: BLE001 - whatever the loader lets through: one line
         raise StartupError(f"{mechanism_arg}: cannot load the mechanism "
                            f"({type(exc).__name__}: {exc})") from exc
-    drives = mech.drives
-    if len(drives) > 1 or any(d.kind != "displacement" for d in drives):
-        kinds = ", ".join(f"{d.name} ({d.kind})" for d in drives)
-        raise StartupError(f"{path}: mechanism {mech.name} has drives {kinds}: stage_node "
-                           "steps one displacement drive (its statics: flexure-sim simulate "
-                           "--static)")
     return mech, path
 
 
@@ -103,9 +99,12 @@ class StageNode(Node):
         # ---- mechanism and parameters (validated before anything starts) ----
         declare(self, parameter_specs()[0])
         self.mechanism, self.mechanism_path = load(self.get_parameter("mechanism").value)
-        drive = self.mechanism.drive
+        #: The named drives (several, or a force drive; `drive_bank`), else the single drive.
+        self._named = named = named_drives(self.mechanism)
+        drive = self.mechanism.drive if not named else None
         defaults = (drive.stroke[0], drive.stroke[1], drive.slew_rate) if drive else None
-        self._specs = {s.name: s for s in parameter_specs(defaults)}
+        self._specs = {s.name: s for s in parameter_specs(defaults)
+                       + drive_parameter_specs(named)}
         try:
             for spec in list(self._specs.values())[1:]:
                 declare(self, spec)
@@ -114,7 +113,8 @@ class StageNode(Node):
         values = self._values()
         self._probe = StrokeProbe(self.mechanism, float(values["sim_step"]))
         own = {"stroke_min": defaults[0], "stroke_max": defaults[1]} if defaults else {}
-        problem = validate(values) or self._stroke_problem(values, {**values, **own})
+        own.update({s.name: s.default for s in drive_parameter_specs(named)})
+        problem = self._problem(values, {**values, **own})
         if problem:
             raise StartupError(f"invalid parameters: {problem}")
         time_mode = values["time_mode"]
@@ -134,11 +134,14 @@ class StageNode(Node):
         except Exception as exc:  # noqa: BLE001 - the engine's own message, at start-up
             raise StartupError(
                 f"the engine failed its first step: {type(exc).__name__}: {exc}") from exc
-        drive_filter: Optional[CommandFilter] = None
+        drive_filter: Any = None
         if drive is not None:
             drive_filter = CommandFilter(self._limits(values))
-            if drive_filter.applied != 0.0:
-                sim.set_command(drive_filter.applied)
+        elif named:
+            drive_filter = FilterBank([d.name for d in named],
+                                      [drive_limits(values, d.name) for d in named])
+        if drive_filter is not None and np.any(drive_filter.applied != 0.0):
+            sim.set_command(drive_filter.applied)
 
         # ---- publishers, subscription, services ----
         qos = itf.stream_qos()
@@ -159,21 +162,22 @@ class StageNode(Node):
             merge_after=int(values["merge_late_ticks"]),
             monitor_rate=float(values["monitor_rate"]))
         # Recording channels: the tick topics in publishing order, diagnostics, commands.
-        self._command_sub = None
-        if self.interface.command is not None:
-            self._command_sub = self.create_subscription(
-                self.interface.command.msg_type, self.interface.command.name, never_called,
-                itf.command_qos(reliability), raw=True, callback_group=PolledGroup(),
-            )
-            command_topic = self._command_sub.topic_name
-            self.create_timer(0.5, lambda: watch.check_command_publishers(self, command_topic),
+        self._command_subs = [self.create_subscription(
+            spec.msg_type, spec.name, never_called, itf.command_qos(reliability), raw=True,
+            callback_group=PolledGroup()) for spec in self.interface.commands]
+        command_topics = [sub.topic_name for sub in self._command_subs]
+        if command_topics:
+            self.create_timer(0.5, lambda: [watch.check_command_publishers(self, topic)
+                                            for topic in command_topics],
                               callback_group=watch.group)
-            loop.intake = CommandIntake(self._command_sub, drive_filter, len(tick_pubs) + 1,
-                                        self.session.write, self._log, loop.throttle)
+        loop.intake = intake_for(self._command_subs, drive_filter, named, len(tick_pubs) + 1,
+                                 self.session.write, self._log, loop.throttle)
         loop.diagnostics = Diagnostics(loop, diag_pub, len(tick_pubs), self.get_name(),
                                        self.mechanism.name, watch.diagnostics)
-        first = len(tick_pubs) + 1 + (self._command_sub is not None)  # after the command
-        self._build_display(values, qos, watch, first)
+        first = len(tick_pubs) + 1 + len(command_topics)  # after the commands
+        #: Extra recorded topics: (resolved name, type name, QoS), in channel order.
+        self._display_topics, self._tf_static_pub = dsp.build_display(self, values, qos, watch,
+                                                                      first)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/record", self._on_record)
         self.create_service(Trigger, "~/step", self._on_step)
@@ -198,40 +202,6 @@ class StageNode(Node):
         gc.freeze()
         loop.start(self._stepping_ended, self._stepping_failed)
 
-    def _build_display(self, values: dict[str, Any], qos: Any, watch: QosWatch,
-                       first_channel: int) -> None:
-        """
-        Markers publisher.
-
-        TF publishers where tf2_msgs is importable, and the display output of the stepping thread
-        (recording channels from ``first_channel`` on).
-        """
-        from visualization_msgs.msg import MarkerArray
-
-        frames = self.interface.frames
-        display = Display(self.mechanism, frames, float(values["display_scale"]))
-        pub = self.create_publisher(MarkerArray, dsp.MARKERS.name, qos,
-                                    event_callbacks=watch.publisher_callbacks(dsp.MARKERS.name))
-        #: Extra recorded topics: (resolved name, type name, QoS), in channel order.
-        self._display_topics = [(pub.topic_name, dsp.MARKERS.type_name, qos)]
-        tf_class, why = tf_message_class()
-        tf_pub = None
-        if tf_class is None:
-            self._log.info(f"TF off: {why}; poses are on bodies/poses and bodies/<body>/pose")
-        else:
-            tf_pub = self.create_publisher(tf_class, dsp.TF.name, dsp.tf_qos())
-            static_pub = self.create_publisher(tf_class, dsp.TF_STATIC.name, dsp.tf_static_qos())
-            static_pub.publish(tf_message(static_transforms(self.mechanism, frames),
-                                          self.get_clock().now().nanoseconds, tf_class))
-            self._tf_static_pub = static_pub
-            self._display_topics += [(tf_pub.topic_name, dsp.TF.type_name, dsp.tf_qos()),
-                                     (static_pub.topic_name, dsp.TF_STATIC.type_name,
-                                      dsp.tf_static_qos())]
-        channels = list(range(first_channel, first_channel + len(self._display_topics)))
-        loop = self.loop
-        loop.display = DisplayOutput(display, pub, self.session, channels, tf_pub, tf_class)
-        loop.display_every = display_every(loop.rate, float(values["display_rate"]))
-
     @property
     def time_mode(self) -> str:
         return self.loop.time_mode
@@ -245,13 +215,19 @@ class StageNode(Node):
         return DriveLimits(float(values["stroke_min"]), float(values["stroke_max"]),
                            float(values["slew_rate"]))
 
-    def _stroke_problem(self, values: dict[str, Any], current: dict[str, Any]) -> Optional[str]:
-        """Why the engine could not follow the (changed) stroke ends in ``values``, or None."""
-        if self.mechanism.drive is None:
-            return None
-        for name in ("stroke_max", "stroke_min"):
+    def _problem(self, values: dict[str, Any], current: dict[str, Any]) -> Optional[str]:
+        """
+        Why ``values`` are invalid, or None.
+
+        Checked as a whole, per drive, and whether the engine could follow the (changed) stroke
+        ends.
+        """
+        problem = validate(values) or drives_problem(values, [d.name for d in self._named])
+        if problem:
+            return problem
+        for name, drive, unit in stroke_ends(self.mechanism):
             if values[name] != current[name]:
-                problem = self._probe.end_problem(name, values[name])
+                problem = self._probe.end_problem(name, values[name], drive, unit)
                 if problem:
                     return problem
         return None
@@ -271,7 +247,7 @@ class StageNode(Node):
         for p in params:
             if p.name in values:
                 values[p.name] = p.value
-        problem = validate(values) or self._stroke_problem(values, current)
+        problem = self._problem(values, current)
         return SetParametersResult(successful=problem is None, reason=problem or "")
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
@@ -279,9 +255,14 @@ class StageNode(Node):
         names = {p.name for p in params}
         values = self._values()
         loop = self.loop
-        if names & {"stroke_min", "stroke_max", "slew_rate"} and loop.filter is not None:
+        if names & {"stroke_min", "stroke_max", "slew_rate"} and not self._named \
+                and loop.filter is not None:
             limits = self._limits(values)
             loop.requests.call(lambda: loop.filter.set_limits(limits))
+        for d in self._named:
+            if names & {parameter_name(d.name, k) for k in LIMIT_KEYS}:
+                one, limits = loop.filter.filter(d.name), drive_limits(values, d.name)
+                loop.requests.call(lambda one=one, limits=limits: one.set_limits(limits))
         if names & {"publish_rate", "wake_spin", "monitor_rate", "merge_late_ticks"}:
             rate, spin = float(values["publish_rate"]), float(values["wake_spin"])
             monitor, merge = float(values["monitor_rate"]), int(values["merge_late_ticks"])
@@ -343,8 +324,8 @@ class StageNode(Node):
         topics = [(name, spec.type_name, qos)
                   for name, spec in zip(self._tick_names, self.interface.tick_topics)]
         topics.append((self._diag_topic, self.interface.diagnostics.type_name, qos))
-        if self._command_sub is not None:
-            topics.append((self._command_sub.topic_name, self.interface.command.type_name,
+        for sub, spec in zip(self._command_subs, self.interface.commands):
+            topics.append((sub.topic_name, spec.type_name,
                            itf.command_qos(values["command_reliability"])))
         topics += self._display_topics
         loop = self.loop

@@ -19,6 +19,8 @@ import threading
 import time
 from typing import Any, Optional, Sequence
 
+import numpy as np
+
 from ..engine.sensor import Sensor
 from ..engine.solver import Simulation, SolverError
 from .diagnostics import Diagnostics
@@ -171,11 +173,11 @@ class SteppingLoop:
             sim.step(self.n_steps)
             return
         if filt.begin_tick(self.n_steps * self.dt) and self.intake is not None:
-            self.intake.warn("rate_limited", "drive command faster than the slew limit "
-                             f"({filt.limits.slew_rate:g} m/s): ramping")
+            self.intake.warn_rate_limited()
         if filt.settled:
-            if sim.state.command != filt.applied:
-                sim.set_command(filt.applied)
+            applied = filt.applied
+            if np.any(sim.state.command != applied):
+                sim.set_command(applied)
             sim.step(self.n_steps)
         else:
             # Step by step only while the ramp lasts: once the applied target reaches the
@@ -301,7 +303,7 @@ class SteppingLoop:
             self.sensor.reset()
         if self.filter is not None:
             self.filter.reset()
-            if self.filter.applied != 0.0:
+            if np.any(self.filter.applied != 0.0):
                 self.sim.set_command(self.filter.applied)
         if self.intake is not None:
             self.intake.discard()  # sent before the reset: discarded

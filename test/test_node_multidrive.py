@@ -1,0 +1,239 @@
+"""
+stage_node with several drives (issue 13): the XY stage as a real node process.
+
+One command topic per drive, per-drive inputs and forces, one topic per output, per-drive
+parameters, counters and warnings. Acceptance: the gain matrix measured from the node's
+recording (output change per drive step) equals ``flexure-sim simulate xy_stage --static``'s
+to 1e-4.
+"""
+from __future__ import annotations
+
+import json
+import math
+import signal
+import subprocess
+
+import numpy as np
+import pytest
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from std_msgs.msg import Float64
+from diagnostic_msgs.msg import DiagnosticArray
+from rosgraph_msgs.msg import Clock
+from std_srvs.srv import Trigger
+
+from flexure_sim.recording import read_log
+
+from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id
+
+DRIVES = ("x", "y")
+OUTPUTS = ("x", "y", "theta")
+#: Steps from -U to +U about rest: the gain at rest to second order (test_multidrive_stepping).
+U = 1e-6
+INPUTS = [f"/drive/{d}/input" for d in DRIVES]
+FORCES = [f"/drive/{d}/force" for d in DRIVES]
+OUTPUT_TOPICS = [f"/output/{o}/displacement" for o in OUTPUTS]
+
+
+@pytest.fixture
+def domain() -> int:
+    return next_domain_id()
+
+
+@pytest.fixture
+def peer(domain):
+    p = Peer(domain)
+    yield p
+    p.close()
+
+
+def start(tmp_path, domain, peer, **params) -> NodeProcess:
+    node = NodeProcess(tmp_path / "node", domain, {
+        "mechanism": "xy_stage", "time_mode": "lockstep", "sim_step": 1e-4,
+        "publish_rate": 20.0, **params})
+    peer.watch = node
+    return node
+
+
+def step_until(peer: Peer, predicate, what: str, limit: int = 50, topics=INPUTS) -> None:
+    """Lockstep ticks until ``predicate`` holds (e.g. the node has taken a command)."""
+    for _ in range(limit):
+        n = len(peer.received["/clock"])
+        answer = peer.call(Trigger, "/stage_node/step")
+        assert answer.success, answer.message
+        peer.spin_until(lambda: len(peer.received["/clock"]) > n
+                        and all(len(peer.received[t]) > n for t in topics), 10,
+                        "the tick's messages")
+        if predicate():
+            return
+    raise AssertionError(f"{what} not reached in {limit} ticks")
+
+
+def static_gain_matrix() -> np.ndarray:
+    out = subprocess.run(["flexure-sim", "simulate", "xy_stage", "--static", "--json"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    gm = json.loads(out.stdout)["gain_matrix"]
+    assert gm["drives"] == list(DRIVES) and gm["outputs"] == list(OUTPUTS)
+    return np.array(gm["matrix"])
+
+
+def test_xy_stage_node_gain_matrix_equals_simulate_static(tmp_path, domain, peer):
+    node = start(tmp_path, domain, peer, record=True, record_path="xy.mcap",
+                 **{f"drives.{d}.stroke_min": -1.5e-5 for d in DRIVES})
+    try:
+        for topic in ["/clock"] + INPUTS + FORCES + OUTPUT_TOPICS:
+            peer.subscribe(topic, Float64 if topic != "/clock" else Clock)
+        commands = {d: peer.publisher(f"/drive/{d}/displacement", Float64) for d in DRIVES}
+        peer.wait_for_publishers(INPUTS + OUTPUT_TOPICS)
+        for pub in commands.values():
+            peer.wait_for_subscribers(pub)
+        for k, drive in enumerate(DRIVES):
+            for level in (-U, U, 0.0):
+                commands[drive].publish(Float64(data=level))
+                # Taken at a tick: then the 1 ms actuator lag and the hinge modes settle
+                # within the 50 ms tick; two more ticks show the state at rest.
+                step_until(peer, lambda: abs(peer.last(INPUTS[k]).data - level) < 1e-12 * U,
+                           f"drive {drive} at {level:g} m")
+                step_until(peer, lambda: True, "one more tick")
+                step_until(peer, lambda: True, "one more tick")
+    finally:
+        assert node.stop(signal.SIGINT) == 0, node.stderr
+    log = read_log(node.cwd / "xy.mcap")
+    assert log.complete
+    series = {t: [(m.log_time_ns, m.message.data) for m in log.messages_on(t)]
+              for t in INPUTS + FORCES + OUTPUT_TOPICS}
+    for d in DRIVES:
+        recorded = [m.message.data for m in log.messages_on(f"/drive/{d}/displacement")]
+        assert recorded == [-U, U, 0.0]
+    # The settled values just before each next command (the last tick of each level).
+    times = sorted(m.log_time_ns for d in DRIVES
+                   for m in log.messages_on(f"/drive/{d}/displacement"))[1:] + [math.inf]
+
+    def settled(topic: str, before: float) -> float:
+        return [v for t, v in series[topic] if t < before][-1]
+
+    gain = np.zeros((len(OUTPUTS), len(DRIVES)))
+    for k in range(len(DRIVES)):
+        low, high = times[3 * k], times[3 * k + 1]   # ends of the -U and +U levels
+        du = settled(INPUTS[k], high) - settled(INPUTS[k], low)
+        assert du == pytest.approx(2 * U, rel=1e-12)
+        for j, topic in enumerate(OUTPUT_TOPICS):
+            gain[j, k] = (settled(topic, high) - settled(topic, low)) / du
+    np.testing.assert_allclose(gain, static_gain_matrix(), rtol=1e-4)
+
+
+def test_each_drive_has_its_own_limits_counters_and_warnings(tmp_path, domain, peer):
+    node = start(tmp_path, domain, peer, record=False, **{"drives.y.slew_rate": 1e-5})
+    try:
+        peer.subscribe("/clock", Clock)
+        for topic in INPUTS:
+            peer.subscribe(topic, Float64)
+        peer.subscribe("/diagnostics", DiagnosticArray)
+        commands = {d: peer.publisher(f"/drive/{d}/displacement", Float64) for d in DRIVES}
+        peer.wait_for_publishers(INPUTS)
+        for pub in commands.values():
+            peer.wait_for_subscribers(pub)
+        commands["x"].publish(Float64(data=1.0))        # far beyond x's 15 um stroke
+        commands["y"].publish(Float64(data=math.nan))   # refused
+        step_until(peer, lambda: abs(peer.last(INPUTS[0]).data - 1.5e-5) < 1e-17, "x clamped")
+        commands["y"].publish(Float64(data=1e-5))       # ramps at y's own 10 um/s
+        step_until(peer, lambda: peer.last(INPUTS[1]).data > 0, "y moving")
+        assert peer.last(INPUTS[1]).data <= 1e-5 * 0.05 * (1 + 1e-9)  # one 50 ms tick
+        step_until(peer, lambda: len(peer.received["/diagnostics"]) > 0, "diagnostics", 20)
+        d = diagnostics_values(peer.last("/diagnostics"))
+        assert d["commands_x_clamped"] == "1" and d["commands_x_rejected"] == "0"
+        assert d["commands_y_rejected"] == "1" and d["commands_y_clamped"] == "0"
+        assert int(d["commands_y_rate_limited"]) >= 1 and d["commands_x_received"] == "1"
+        assert float(d["drive_x_target"]) == 1.5e-5
+        # A bad per-drive parameter is refused naming the drive.
+        request = SetParameters.Request()
+        request.parameters = [ParameterMsg(name="drives.x.slew_rate", value=ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=-1.0))]
+        result = peer.call(SetParameters, "/stage_node/set_parameters", request).results[0]
+        assert not result.successful and "drives.x.slew_rate" in result.reason
+    finally:
+        assert node.stop(signal.SIGINT) == 0, node.stderr
+    err = node.stderr
+    assert "drive x command 1 m outside the stroke [0, 1.5e-05] m: clamped" in err
+    assert "drive y command nan rejected (not finite)" in err
+    assert "drive y command faster than the slew limit (1e-05 m/s): ramping" in err
+
+
+# ------------------------------------------------------------- the topic table (no process)
+def test_topic_names_per_drive_and_output_and_the_single_drive_names_kept():
+    from rclpy.serialization import deserialize_message
+
+    from flexure_sim.engine.config import load_mechanism
+    from flexure_sim.engine.solver import Simulation
+    from flexure_sim.node.interface import StageInterface
+    xy = StageInterface(load_mechanism("xy_stage"), "fast")
+    names = [t.name for t in xy.tick_topics]
+    floats = ["output/x/displacement", "output/y/displacement", "output/theta/displacement",
+              "drive/x/input", "drive/x/force", "drive/y/input", "drive/y/force"]
+    assert names[-len(floats):] == floats
+    assert not {"drive/input", "drive/force", "output/displacement"} & set(names)
+    assert [c.name for c in xy.commands] == ["drive/x/displacement", "drive/y/displacement"]
+    assert xy.command is None
+    units = {t.name: t.unit for t in xy.tick_topics}
+    assert units["output/theta/displacement"] == "rad" and units["drive/x/force"] == "N"
+    sim = Simulation(xy.mechanism)
+    snap = sim.static({"x": 1e-6, "y": 0.5e-6}).snapshot
+    packed = xy.encode(snap, 123)
+    reference = xy.messages(snap, 123)
+    values = [deserialize_message(p, Float64).data for p in packed[-len(floats):]]
+    assert values == [m.data for m in reference[-len(floats):]]
+    assert values == [snap.outputs["x"], snap.outputs["y"], snap.outputs["theta"],
+                      snap.drive_inputs[0], snap.drive_forces[0], snap.drive_inputs[1],
+                      snap.drive_forces[1]]
+    stage = StageInterface(load_mechanism("microstage"), "fast")
+    assert [c.name for c in stage.commands] == ["drive/displacement"]
+    assert [t.name for t in stage.tick_topics][-4:] == [
+        "hinges/a/compression", "output/displacement", "drive/input", "drive/force"]
+
+
+LEAF_ROTOR = """
+name: leaf_rotor
+defaults: {law: twistor, damping: {t_char: 1.0e-3}}
+stiffness_models:
+  leaf: {model: cantilever, length: 0.02, thickness: 0.0005, width: 0.01, E: 69.0e9, nu: 0.33}
+bodies:
+  - {name: base, mass: 1.0, inertia: 1.0, pose: [0, 0, 0]}
+  - {name: disc, mass: 0.01, inertia: 1.0e-6, pose: [0, 0.02, 0]}
+hinges:
+  - {name: leaf, a: {body: base, at: [0, 0.02]}, b: {body: disc, at: [0, 0]}, stiffness: leaf}
+constraints:
+  - {type: fixed, body: base}
+  - {type: force, name: torquer, body: disc, axis: theta, response_time: 1.0e-3,
+     stroke: [-0.001, 0.001], slew_rate: 1.0}
+outputs:
+  - {name: angle, body: disc, coordinate: theta}
+"""
+
+
+def test_a_force_drive_is_commanded_in_newton_metres_and_turns_its_body(
+        tmp_path, domain, peer):
+    # A leaf spring under an end moment M turns by M L / (E I) (Euler-Bernoulli).
+    k_bend = 69.0e9 * (0.01 * 0.0005**3 / 12) / 0.02
+    path = tmp_path / "leaf_rotor.yaml"
+    path.write_text(LEAF_ROTOR)
+    node = start(tmp_path, domain, peer, mechanism=str(path), record=False)
+    torque = 2e-5
+    try:
+        peer.subscribe("/clock", Clock)
+        topics = ["/drive/torquer/input", "/drive/torquer/position", "/output/displacement"]
+        for topic in topics:
+            peer.subscribe(topic, Float64)
+        command = peer.publisher("/drive/torquer/force", Float64)
+        peer.wait_for_publishers(topics)
+        peer.wait_for_subscribers(command)
+        command.publish(Float64(data=torque))
+        step_until(peer, lambda: peer.last(topics[0]).data == torque, "the torque applied",
+                   topics=topics)
+        for _ in range(10):   # 0.5 s: the disc's swing (~180 /s decay) has died out
+            step_until(peer, lambda: True, "one more tick", topics=topics)
+    finally:
+        assert node.stop(signal.SIGINT) == 0, node.stderr
+    assert peer.last(topics[1]).data == pytest.approx(torque / k_bend, rel=1e-6)
+    assert peer.last(topics[2]).data == pytest.approx(torque / k_bend, rel=1e-6)
