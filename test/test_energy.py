@@ -247,3 +247,29 @@ def test_quadratic_integrals_equal_their_integrals_for_a_stiff_generator():
     assert G == pytest.approx(ref[:n * n].reshape(n, n), rel=1e-8, abs=1e-12 * np.abs(G).max())
     assert integral == pytest.approx(ref[n * n:].reshape(n, n), rel=1e-8,
                                      abs=1e-12 * np.abs(integral).max())
+
+
+@pytest.mark.parametrize("name", ["microstage", "config/fourbar_mixed.yaml"])
+def test_without_energy_bookkeeping_the_motion_is_the_same_to_the_bit(name):
+    """
+    ``energy=False`` (what stage_node runs) skips the energy integrals and nothing else.
+
+    The states after a command step (or the four-bar's sine rate) are bit-identical to a run
+    with the energies; dissipated energy and drive work are NaN, never a stale number.
+    """
+    mech = load_mechanism(ROOT / "config" / f"{name}.yaml" if "/" not in name else ROOT / name)
+    runs = [Simulation(mech, energy=energy) for energy in (True, False)]
+    for sim in runs:
+        if sim.model.n_actuators:
+            sim.set_command(1.35e-6)
+        sim.step(200)
+    with_energy, without = runs
+    assert np.array_equal(with_energy.state.z, without.state.z)
+    assert np.array_equal(with_energy.state.v, without.state.v)
+    assert with_energy.stats.linearizations == without.stats.linearizations
+    assert math.isfinite(with_energy.snapshot().dissipated)
+    snap = without.snapshot()
+    assert math.isnan(snap.dissipated) and math.isnan(snap.drive_work)
+    assert snap.kinetic_energy == with_energy.snapshot().kinetic_energy
+    with pytest.raises(ValueError, match="energy belong to the model"):
+        Simulation(without.model, energy=True)

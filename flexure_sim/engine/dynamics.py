@@ -19,6 +19,8 @@ own (``step_energy``).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.linalg
 
@@ -39,7 +41,10 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
     linear solve with the e^{hA} already at hand (A - I/tau is regular: A's eigenvalues have
     no positive real part for a damped mechanism; an exponential is the fallback).
     """
-    A, g, damping, load_rows = model.jacobian(y, t, command, damping=True)
+    if model.energy:
+        A, g, damping, load_rows = model.jacobian(y, t, command, damping=True)
+    else:
+        A = model.jacobian(y, t, command)
     m, h = A.shape[0], model.dt
     aug = np.zeros((3 * m, 3 * m))
     aug[:m, :m] = h * A
@@ -47,15 +52,18 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
     aug[m:2 * m, 2 * m:] = np.eye(m)
     E = scipy.linalg.expm(aug)
     phi1, phi2 = h * E[:m, m:2 * m], h * E[:m, 2 * m:]
-    part = model.part
-    tau, D = model.motion[0], model.motion[2]
-    shifted = [_shifted_phi1(A, E[:m, :m], h, tk) for tk in tau]
-    drive_mass = [float(dk @ (model.mass[part.prescribed] * dk)) for dk in model.D_rows]
-    sines = np.array([[j, c.amplitude, 2.0 * np.pi * c.frequency, c.phase]
-                      for j, c in part.timed], dtype=float).reshape(-1, 4).T
-    emats = step_energy.energy_matrices(
-        A, phi1, phi2, h, g, damping, part.free, part.prescribed, D, drive_mass, tau, shifted,
-        sines, load_rows[[j for j, _ in part.timed]])
+    if model.energy:
+        part = model.part
+        tau, D = model.motion[0], model.motion[2]
+        shifted = [_shifted_phi1(A, E[:m, :m], h, tk) for tk in tau]
+        drive_mass = [float(dk @ (model.mass[part.prescribed] * dk)) for dk in model.D_rows]
+        sines = np.array([[j, c.amplitude, 2.0 * np.pi * c.frequency, c.phase]
+                          for j, c in part.timed], dtype=float).reshape(-1, 4).T
+        emats = step_energy.energy_matrices(
+            A, phi1, phi2, h, g, damping, part.free, part.prescribed, D, drive_mass, tau,
+            shifted, sines, load_rows[[j for j, _ in part.timed]])
+    else:
+        emats = step_energy.NO_ENERGY
     data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, emats)
     data.stats.linearizations += 1
 
@@ -132,7 +140,10 @@ def step(model: Model, data: Data, n: int = 1) -> None:
     else:
         F0, aux0 = model.rhs(y, t, command)
         ye = y
-    dissipated, work = s.dissipated, s.drive_work + jump_work(model, s, command)
+    if model.energy:
+        dissipated, work = s.dissipated, s.drive_work + jump_work(model, s, command)
+    else:
+        dissipated = work = math.nan
     remaining = int(n)
     fresh = False
     while remaining > 0:

@@ -41,20 +41,21 @@ class Simulation:
     A model, one run's data, and the stepping / static solvers.
 
     ``source``: a Mechanism (a Model is built for it with ``dt`` and ``relinearize_tol``)
-    or a Model to share (then ``dt`` and ``relinearize_tol`` are the model's). See
-    ``model.Model`` for ``dt`` and ``relinearize_tol``.
+    or a Model to share (then ``dt``, ``relinearize_tol`` and ``energy`` are the model's).
+    See ``model.Model`` for ``dt``, ``relinearize_tol`` and ``energy`` (default True).
     """
 
     def __init__(self, source: Union[Mechanism, Model], dt: float = DEFAULT_STEP,
-                 relinearize_tol: Optional[float] = None):
+                 relinearize_tol: Optional[float] = None, energy: Optional[bool] = None):
         if isinstance(source, Model):
             other_dt = dt != DEFAULT_STEP and dt != source.dt
-            if other_dt or relinearize_tol not in (None, source.relinearize_tol):
-                raise ValueError("dt and relinearize_tol belong to the model: "
+            if (other_dt or relinearize_tol not in (None, source.relinearize_tol)
+                    or energy not in (None, source.energy)):
+                raise ValueError("dt, relinearize_tol and energy belong to the model: "
                                  "build another Model to change them")
             self.model = source
         else:
-            self.model = Model(source, dt, relinearize_tol)
+            self.model = Model(source, dt, relinearize_tol, True if energy is None else energy)
         self.data = Data(self.model.z0)
 
     # The model's constants, as attributes of the simulation (read-only views).

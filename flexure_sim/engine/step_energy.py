@@ -55,6 +55,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import scipy.linalg
 
 from .kernels import njit
 
@@ -79,6 +80,8 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
     work, the change of their potential ``AUX_APPLIED`` (exact).
     """
     erows, escal, G, V, Cx, R, SP, B, sines, Trows, T = emats
+    if G.shape[0] == 0:   # NO_ENERGY: the model does not integrate energies
+        return 0.0, 0.0
     m = y0.shape[0]
     nx = Cx.shape[0]
     nF = m - nx
@@ -132,6 +135,13 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
     return dissipated + 0.5 * h * rho, work
 
 
+#: ``emats`` of a model without energy bookkeeping (``Model.energy`` False): empty arrays of
+#: the types ``energy_matrices`` returns, so the compiled loop keeps one signature.
+NO_ENERGY = (np.zeros((0, 3, 0)), np.zeros((0, N_SCALARS)), np.zeros((0, 0)), np.zeros((0, 0)),
+             np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)),
+             np.zeros((4, 0)), np.zeros((0, 0)), np.zeros((0, 0)))
+
+
 def weighted_phi(A, phi1, phi2, h, tau, shifted_phi1):
     """
     Psi_1, Psi_2 = int_0^h e^{-s/tau} (s phi_1(sA), s^2/h phi_2(sA)) ds.
@@ -152,6 +162,22 @@ def weighted_phi(A, phi1, phi2, h, tau, shifted_phi1):
 def quadratic_integrals(M: np.ndarray, Q: np.ndarray, h: float, terms: int = 18):
     """
     G = int_0^h e^{M^T s} Q e^{M s} ds and I = int_0^h e^{M s} ds (and e^{Mh}), by doubling.
+
+    M is first balanced, B = T^-1 M T with T diagonal (powers of 2: exact; LAPACK's gebal via
+    ``scipy.linalg.matrix_balance``), which brings |hM|_1 from ~5e8 to ~1.6e4 for the stage,
+    near its spectral radius 1.3e4: 16 doublings instead of 31, half the cost. Then
+    G = T^-T G_B T^-1 with Q_B = T^T Q T, I = T I_B T^-1, e^{Mh} = T e^{Bh} T^-1.
+    """
+    B, (scale, _) = scipy.linalg.matrix_balance(M, permute=False, separate=True)
+    GB, IB, EB = _doubled_integrals(B, scale[:, None] * Q * scale[None, :], h, terms)
+    inv = 1.0 / scale
+    return (inv[:, None] * GB * inv[None, :], scale[:, None] * IB * inv[None, :],
+            scale[:, None] * EB * inv[None, :])
+
+
+def _doubled_integrals(M: np.ndarray, Q: np.ndarray, h: float, terms: int):
+    """
+    ``quadratic_integrals`` of a (balanced) M by doubling.
 
     At t = h / 2^k with |tM|_1 <= 1/4 the Taylor series G(t) = sum_j t^{j+1}/(j+1)! L_j,
     L_0 = Q, L_{j+1} = M^T L_j + L_j M (and those of I, e^{Mt}) converge to rounding in

@@ -26,6 +26,8 @@ import types
 
 import numpy as np
 
+from . import kernel_cache, kernels
+from . import step_energy as step_energy_module
 from .kernels import njit, quadratic_forces
 from .step_energy import AUX_APPLIED, AUX_DISSIPATION, AUX_ENERGY, AUX_LOAD, AUX_TIMED_POWER
 from .step_energy import step_energy
@@ -253,6 +255,10 @@ rhs = kernel_rhs
 
 #: The loop, compiled with the quadratic-law kernel.
 advance = njit(cache=True)(_advance)
+
+# Numba's cache of each kernel is keyed on its own file only (``kernel_cache``).
+kernel_cache.revalidate(kernel_cache.dispatchers_of(kernels, step_energy_module, globals()),
+                        __file__)
 
 
 def _interpreted_rhs(y, t, command, model):

@@ -124,7 +124,8 @@ class StageNode(Node):
                 self.mechanism, time_mode, values["frame_prefix"])
         except ValueError as exc:
             raise StartupError(str(exc)) from exc
-        sim = Simulation(self.mechanism, dt=dt, relinearize_tol=RELINEARIZE_TOL)
+        # No energy bookkeeping: the node publishes no energies (Model.energy).
+        sim = Simulation(self.mechanism, dt=dt, relinearize_tol=RELINEARIZE_TOL, energy=False)
         try:
             # Warm up (compiled kernels, first Jacobian) before the first paced tick.
             sim.step(1)

@@ -141,6 +141,8 @@ def print_table(res: dict) -> None:
             f"  speedup: {s['speedup']:.1f}x   (reference error estimate "
             f"{s['reference_rel_error_estimate']:.1e})"
         )
+        print(f"  without the energy integrals (energy=False, as stage_node): wall "
+              f"{s['wall_no_energy_s'] * 1e3:.2f} ms, speedup {s['speedup_no_energy']:.1f}x")
     c = res["step_cost"]
     print(f"\nsteps per second at dt {c['dt']:g} s: {c['steps_per_s']:,.0f}  (RTF {c['rtf']:.1f})")
     print(
@@ -150,6 +152,9 @@ def print_table(res: dict) -> None:
         "us, "
         f"matrix exponential {c['matrix_exponential_us']:.0f} us"
     )
+    print(f"  without the energy integrals: per step {c['step_no_energy_us']:.2f} us, per "
+          f"linearization {c['linearization_no_energy_us']:.0f} us (with: "
+          f"{c['linearization_us']:.0f} us)")
     w = res["static_sweep"]
     print(f"\nstatic sweep, {w['levels']} levels over the stroke: {w['wall_s'] * 1e3:.1f} ms "
           f"({w['newton_iterations']} Newton iterations)")

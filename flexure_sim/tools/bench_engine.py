@@ -60,14 +60,19 @@ def bench_stage_step(dt: float = DEFAULT_STEP, radau: bool = True) -> dict:
     warm.step(2)
     ref, ref_err = reference_trajectory(mech, dt, DURATION)
 
-    walls = []
-    for _ in range(REPEATS):  # the median of several runs, each from a fresh Simulation
-        sim = Simulation(mech, dt=dt)
-        sim.set_command(U_STEP)
-        start = time.perf_counter()
-        sim.step(n)
-        walls.append(time.perf_counter() - start)
-    wall = float(np.median(walls))
+    def timed(energy: bool) -> tuple[float, Simulation]:
+        walls = []
+        for _ in range(REPEATS):  # the median of several runs, each from a fresh Simulation
+            sim = Simulation(mech, dt=dt, energy=energy)
+            sim.set_command(U_STEP)
+            start = time.perf_counter()
+            sim.step(n)
+            walls.append(time.perf_counter() - start)
+        return float(np.median(walls)), sim
+
+    # Without the energy integrals (what stage_node runs, and what Radau computes), then with.
+    wall_no_energy, _ = timed(False)
+    wall, sim = timed(True)
     # Same run again, sampled, for the error (sampling costs time, so not timed).
     sampled = Simulation(mech, dt=dt)
     sampled.set_command(U_STEP)
@@ -79,6 +84,7 @@ def bench_stage_step(dt: float = DEFAULT_STEP, radau: bool = True) -> dict:
         "steps": n,
         "wall_s": wall,
         "rtf": DURATION / wall,
+        "wall_no_energy_s": wall_no_energy,
         "max_rel_error": float(np.max(np.abs(traj - ref)) / scale),
         "reference_rel_error_estimate": ref_err,
         "linearizations": sim.stats.linearizations,
@@ -88,6 +94,7 @@ def bench_stage_step(dt: float = DEFAULT_STEP, radau: bool = True) -> dict:
     if radau:
         result.update(_radau_baseline(mech, dt, n, ref))
         result["speedup"] = result["baseline_wall_s"] / wall
+        result["speedup_no_energy"] = result["baseline_wall_s"] / wall_no_energy
     return result
 
 
@@ -137,13 +144,16 @@ def bench_step_cost(dt: float = DEFAULT_STEP, sim_seconds: float = 1.0) -> dict:
     import timeit
 
     mech = load_mechanism("microstage")
-    sim = Simulation(mech, dt=dt)
-    sim.set_command(U_STEP)
-    sim.step(10)
     n = int(round(sim_seconds / dt))
-    start = time.perf_counter()
-    sim.step(n)
-    wall = time.perf_counter() - start
+    walls = {}
+    for energy in (False, True):    # the one with the energies last: its parts are timed below
+        sim = Simulation(mech, dt=dt, energy=energy)
+        sim.set_command(U_STEP)
+        sim.step(10)
+        start = time.perf_counter()
+        sim.step(n)
+        walls[energy] = time.perf_counter() - start
+    wall = walls[True]
     stats = sim.stats
     sim.stats = type(stats)()  # the timings below must not count as the run's work
     model = sim.model
@@ -153,15 +163,21 @@ def bench_step_cost(dt: float = DEFAULT_STEP, sim_seconds: float = 1.0) -> dict:
     force = timeit.timeit(lambda: model.rhs(y, t, cmd), number=reps) / reps
     jac = timeit.timeit(lambda: model.jacobian(y, t, cmd, load_gradient=True), number=50) / 50
     lin = timeit.timeit(lambda: dynamics.linearize(model, sim.data, y, t, cmd), number=20) / 20
+    bare = Simulation(mech, dt=dt, energy=False)
+    lin_bare = timeit.timeit(lambda: dynamics.linearize(bare.model, bare.data, y, t, cmd),
+                             number=20) / 20
     return {
         "steps_per_s": n / wall,
         "dt": dt,
         "rtf": sim_seconds / wall,
         "step_us": wall / n * 1e6,
+        "step_no_energy_us": walls[False] / n * 1e6,
+        "linearization_us": lin * 1e6,
+        "linearization_no_energy_us": lin_bare * 1e6,
         "force_evaluation_us": force * 1e6,
         "jacobian_us": jac * 1e6,
-        "matrix_exponential_us": (lin - jac)
-        * 1e6,  # both exponentials (phi-functions, drive work)
+        # the phi-functions' exponential and the energy integrals' matrices
+        "matrix_exponential_us": (lin - jac) * 1e6,
         "iterations_per_step": stats.iterations / stats.steps,
         "linearizations": stats.linearizations,
         "note": "a step is one force evaluation per remainder iteration plus 3 small "

@@ -38,7 +38,7 @@ def profile(
     if problem:
         raise ValueError(problem)
     mech = load_mechanism(mechanism)
-    sim = Simulation(mech, dt=sim_step, relinearize_tol=RELINEARIZE_TOL)
+    sim = Simulation(mech, dt=sim_step, relinearize_tol=RELINEARIZE_TOL, energy=False)
     if sim.drive is not None:
         sim.set_command(1.35e-6)
     itf = StageInterface(mech, "fast")
