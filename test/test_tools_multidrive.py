@@ -157,7 +157,12 @@ def test_a_force_drives_gain_is_the_leafs_compliance_in_rad_per_newton_metre(cap
     assert info["drives"] == [{
         "name": "torquer", "kind": "force", "unit": "N m", "command": "/drive/torquer/force",
         "input": "/drive/torquer/input", "response": "/drive/torquer/position",
-        "response_unit": "rad"}]
+        "response_unit": "rad", "stroke_min": "-0.001", "stroke_max": "0.001",
+        "slew_rate": None}]
+    assert info["outputs"] == [{"name": "angle", "unit": "rad", "topic": "/output/displacement"}]
+    code, out, err = flexure_sim(capsys, "info", rotor)
+    assert "Drives:       torquer (force, N m; stroke [-0.001, 0.001] N m): command " \
+        "/drive/torquer/force, input /drive/torquer/input, /drive/torquer/position [rad]" in out
 
 
 def test_export_signals_names_every_drive_and_output_column(capsys, rotor, tmp_path):

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import Any
+from typing import Any, Optional
 
 from ..recording import LogInfo, log_info
 from ..recording.command_line import check_path, report_reading, tool_errors
@@ -178,11 +178,19 @@ def drives_and_outputs(info: LogInfo) -> dict:
     outputs = output_channels(info.topics, topic, meta, mech)
     if not drives and not outputs:
         return {}
+
+    def limit(drive: str, key: str) -> Optional[str]:  # the node's per-drive parameters
+        return meta.get(f"drives.{drive}.{key}") if len(drives) > 1 or drives[0].command != \
+            "drive/displacement" else meta.get(key)
+
     return {
         "drives": [{"name": d.name, "kind": d.kind, "unit": d.unit, "command": topic(d.command),
                     "input": topic(d.input),
                     "response": topic(d.response) if d.response else None,
-                    "response_unit": d.response_unit} for d in drives],
+                    "response_unit": d.response_unit,
+                    "stroke_min": limit(d.name, "stroke_min"),
+                    "stroke_max": limit(d.name, "stroke_max"),
+                    "slew_rate": limit(d.name, "slew_rate")} for d in drives],
         "outputs": [{"name": o.name, "unit": o.unit, "topic": topic(o.topic)} for o in outputs],
     }
 
@@ -231,8 +239,12 @@ def format_summary(s: dict, show_yaml: bool = False) -> str:
         lines.append("")
         for d in s.get("drives", []):
             response = f", {d['response']} [{d['response_unit']}]" if d["response"] else ""
+            limits = (f"; stroke [{d['stroke_min']}, {d['stroke_max']}] {d['unit']}"
+                      if d["stroke_min"] is not None else "")
+            if d["slew_rate"] is not None:
+                limits += f", slew rate {d['slew_rate']} {d['unit']}/s"
             lines.append(f"{'Drives:' if d is s['drives'][0] else '':14s}{d['name']} "
-                         f"({d['kind']}, {d['unit']}): command {d['command']}, "
+                         f"({d['kind']}, {d['unit']}{limits}): command {d['command']}, "
                          f"input {d['input']}{response}")
         for o in s.get("outputs", []):
             lines.append(f"{'Outputs:' if o is s['outputs'][0] else '':14s}{o['name']} "
