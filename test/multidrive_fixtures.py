@@ -37,6 +37,7 @@ def record_drives_run(
     namespace: str = "",
     record_command: bool = True,
     mechanism_yaml: Optional[str] = None,
+    nan_ticks: Sequence[int] = (),
 ) -> Simulation:
     """
     Record ``mechanism`` commanded by ``schedule`` ((time s, drive name, value), sorted).
@@ -92,8 +93,9 @@ def record_drives_run(
             for t in commands.values():
                 recorder.add_topic(f"{ns}/{t}", "std_msgs/msg/Float64")
         recorder.add_metadata("flexure_sim", meta)
-        stamp, end_ns = 0, round(duration * 1e9)
+        stamp, end_ns, tick = 0, round(duration * 1e9), 0
         while stamp < end_ns:
+            tick += 1
             while pending and round(pending[0][0] * 1e9) <= stamp:
                 _, drive, value = pending.pop(0)
                 target[drive] = value
@@ -111,6 +113,8 @@ def record_drives_run(
                 values.append(snap.drive_inputs[k])
                 values.append(snap.drive_positions[k] if d.kind == "force"
                               else snap.drive_forces[k])
+            if tick in nan_ticks:
+                values[0] = float("nan")
             for t, v in zip(floats, values):
                 recorder.write(f"{ns}/{t}", serialize_message(Float64(data=float(v))), stamp)
     return sim

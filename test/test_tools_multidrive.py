@@ -198,3 +198,17 @@ def test_a_namespaced_run_of_drive_and_output_topics_only_is_found(capsys, tmp_p
     result = json.loads(out)
     assert result["outputs"][0]["topic"] == "/left/output/x/displacement"
     assert result["gain_matrix"]["matrix"][0][0] == pytest.approx(6.8725, rel=1e-4)
+
+
+def test_non_finite_output_samples_are_ignored_and_counted(capsys, xy, tmp_path):
+    path = tmp_path / "nan.mcap"
+    record_drives_run(path, "xy_stage", SCHEDULE, 0.11, nan_ticks=(30, 80, 110))
+    code, out, err = flexure_sim(capsys, "analyse", path, "--json", "--no-static")
+    assert code == 0, err
+    assert "/output/x/displacement: 3 non-finite sample(s) ignored" in err
+    clean = json.loads(flexure_sim(capsys, "analyse", xy[0], "--json", "--no-static")[1])
+    # The last sample (tick 110) is the settled value of the y step: the one before it is
+    # taken, equal to it to the settling of the 50 ms dwell.
+    np.testing.assert_allclose(np.array(json.loads(out)["gain_matrix"]["matrix"], dtype=float),
+                               np.array(clean["gain_matrix"]["matrix"], dtype=float),
+                               rtol=0, atol=1e-9)

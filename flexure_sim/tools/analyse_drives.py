@@ -89,6 +89,15 @@ def static_comparison(run: Run, steps: list[DriveStep], drives: list[str],
     return _matrix_dict(drives, outputs, at_rest), ""
 
 
+def _finite(run: Run, topic: str, notes: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(t, values) of a Float64 topic without its non-finite samples (counted in ``notes``)."""
+    s = run.scalar(topic)
+    keep = np.isfinite(s.values)
+    if not keep.all():
+        notes.append(f"{run.topic(topic)}: {int((~keep).sum())} non-finite sample(s) ignored")
+    return s.t[keep], s.values[keep]
+
+
 def analyse_drives(run: Run, band: float, static: bool = True) -> dict:
     """Return the gain matrix, pairs and steps of a run with several drives/outputs (dict)."""
     drives, outputs = run.drives(), run.outputs()
@@ -103,12 +112,8 @@ def analyse_drives(run: Run, band: float, static: bool = True) -> dict:
         if steps[d.name] and sources[d.name] != run.topic(d.command):
             notes.append(f"drive {d.name}: no command recorded ({run.topic(d.command)}): "
                          f"steps found in {sources[d.name]}")
-        s = run.scalar(d.input)
-        inputs[d.name] = (s.t, s.values)
-    signals = {}
-    for o in outputs:
-        s = run.scalar(o.topic)
-        signals[o.name] = (s.t, s.values)
+        inputs[d.name] = _finite(run, d.input, notes)
+    signals = {o.name: _finite(run, o.topic, notes) for o in outputs}
     dnames, onames = [d.name for d in drives], [o.name for o in outputs]
     result = analyse_drive_steps(steps, inputs, signals, run.end_ns / 1e9, band=band)
     static_matrix = None
