@@ -212,3 +212,27 @@ def test_non_finite_output_samples_are_ignored_and_counted(capsys, xy, tmp_path)
     np.testing.assert_allclose(np.array(json.loads(out)["gain_matrix"]["matrix"], dtype=float),
                                np.array(clean["gain_matrix"]["matrix"], dtype=float),
                                rtol=0, atol=1e-9)
+
+
+def test_one_drive_with_two_outputs_keeps_the_drives_topics_and_gets_a_column(capsys, tmp_path):
+    from flexure_sim.engine.config import resolve_mechanism_path
+
+    text = resolve_mechanism_path("microstage").read_text().replace(
+        "output: {body: body4, axis: [1.0, 0.0]}",
+        "outputs:\n  - {name: x, body: body4, axis: [1.0, 0.0]}\n"
+        "  - {name: yaw, body: body4, coordinate: theta}")
+    assert "outputs:" in text
+    (tmp_path / "stage2.yaml").write_text(text)
+    path = tmp_path / "stage2.mcap"
+    sim = record_drives_run(path, str(tmp_path / "stage2.yaml"), [(0.01, "drive", 1e-6)], 0.04)
+    code, out, err = flexure_sim(capsys, "analyse", path, "--json")
+    assert code == 0, err
+    result = json.loads(out)
+    assert result["drives"][0]["command"] == "/drive/displacement"
+    assert [o["topic"] for o in result["outputs"]] == ["/output/x/displacement",
+                                                       "/output/yaw/displacement"]
+    snap = sim.static(1e-6).snapshot
+    expected = [[snap.outputs["x"] / 1e-6], [snap.outputs["yaw"] / 1e-6]]
+    np.testing.assert_allclose(result["gain_matrix"]["matrix"], expected, rtol=1e-6,
+                               atol=1e-6 * abs(expected[0][0]))
+    assert result["gain_matrix"]["matrix"][0][0] == pytest.approx(27.628, rel=1e-4)
