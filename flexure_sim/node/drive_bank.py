@@ -138,6 +138,10 @@ class FilterBank:
     def settled(self) -> bool:
         return all(f.settled for f in self.filters)
 
+    def differs(self, command: Any) -> bool:
+        """Whether the applied targets are not ``command`` (a vector, or one value for all)."""
+        return bool(np.any(np.asarray(command) != self.applied))
+
     def begin_tick(self, period: float) -> bool:
         """`CommandFilter.begin_tick` per drive; True if any was counted (see ``limited``)."""
         self.limited = [f.begin_tick(period) for f in self.filters]

@@ -15,7 +15,6 @@ import gc
 from pathlib import Path
 from typing import Any, Optional
 
-import numpy as np
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.context import Context
@@ -140,7 +139,7 @@ class StageNode(Node):
         elif named:
             drive_filter = FilterBank([d.name for d in named],
                                       [drive_limits(values, d.name) for d in named])
-        if drive_filter is not None and np.any(drive_filter.applied != 0.0):
+        if drive_filter is not None and drive_filter.differs(0.0):
             sim.set_command(drive_filter.applied)
 
         # ---- publishers, subscription, services ----
