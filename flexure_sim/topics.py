@@ -34,14 +34,19 @@ METADATA_NAME = "flexure_sim"
 PARAMETER_CHANGE_NAME = "flexure_sim.parameters"
 
 
+#: Command of the one drive when its actuator takes volts (``actuator: {command: voltage}``), V.
+COMMAND_VOLTAGE = "drive/voltage"
+
+
 def drive_command(drive: str, kind: str = "displacement") -> str:
     """
     Command of one named drive (several drives; subscribed).
 
-    ``drive/<name>/displacement`` (m, or rad on theta) or, for a force drive,
-    ``drive/<name>/force`` (N, or N m).
+    ``drive/<name>/displacement`` (m, or rad on theta), for a force drive
+    ``drive/<name>/force`` (N, or N m), for a drive whose actuator takes volts
+    ``drive/<name>/voltage`` (V); ``kind`` is one of those three words.
     """
-    return f"drive/{drive}/{'force' if kind == 'force' else 'displacement'}"
+    return f"drive/{drive}/{kind if kind in ('force', 'voltage') else 'displacement'}"
 
 
 def drive_input(drive: str) -> str:

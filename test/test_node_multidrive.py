@@ -119,9 +119,21 @@ def test_xy_stage_node_gain_matrix_equals_simulate_static(tmp_path, domain, peer
         low, high = times[3 * k], times[3 * k + 1]   # ends of the -U and +U levels
         du = settled(INPUTS[k], high) - settled(INPUTS[k], low)
         assert du == pytest.approx(2 * U, rel=1e-12)
+        # The other drive is at rest (its actuator lag's exponential tail has died out).
+        assert abs(settled(INPUTS[1 - k], high)) < 1e-12 * U
+        assert abs(settled(INPUTS[1 - k], low)) < 1e-12 * U
         for j, topic in enumerate(OUTPUT_TOPICS):
             gain[j, k] = (settled(topic, high) - settled(topic, low)) / du
-    np.testing.assert_allclose(gain, static_gain_matrix(), rtol=1e-4)
+    expected = static_gain_matrix()
+    error = np.max(np.abs(gain - expected)) / np.max(np.abs(expected))
+    print(f"gain matrix from the recording:\n{gain}\nsimulate --static:\n{expected}\n"
+          f"largest difference / largest entry: {error:.2e}")
+    assert error < 1e-4
+    # Every drive's command, input and force, every output: recorded, and named in the metadata.
+    assert {f"/drive/{d}/{t}" for d in DRIVES for t in ("displacement", "input", "force")} \
+        | set(OUTPUT_TOPICS) <= set(log.topics)
+    meta = log.metadata["flexure_sim"]
+    assert meta["drives"] == "x:displacement,y:displacement" and meta["outputs"] == "x,y,theta"
 
 
 def test_each_drive_has_its_own_limits_counters_and_warnings(tmp_path, domain, peer):
@@ -237,3 +249,68 @@ def test_a_force_drive_is_commanded_in_newton_metres_and_turns_its_body(
         assert node.stop(signal.SIGINT) == 0, node.stderr
     assert peer.last(topics[1]).data == pytest.approx(torque / k_bend, rel=1e-6)
     assert peer.last(topics[2]).data == pytest.approx(torque / k_bend, rel=1e-6)
+
+
+# ------------------------------------------------- a drive whose piezo actuator takes volts
+PIEZO_STAGE = "config/examples/piezo_stage.yaml"   # actuator: {command: voltage, v_max: 100}
+
+
+def test_a_voltage_commanded_drive_has_its_command_topic_and_limits_in_volts(tmp_path):
+    from flexure_sim.engine.config import load_mechanism
+    from flexure_sim.node.drive_bank import drive_parameter_specs
+    from flexure_sim.node.interface import StageInterface
+    from node_harness import ROOT as REPO
+    one = StageInterface(load_mechanism(str(REPO / PIEZO_STAGE)), "fast")
+    assert [(c.name, c.unit) for c in one.commands] == [("drive/voltage", "V")]
+    # xy_stage with a 0-150 V stack on drive x: drive/x/voltage, drive y keeps metres.
+    text = (REPO / "config" / "xy_stage.yaml").read_text()
+    x_line = next(line for line in text.splitlines() if "name: x, body: piezo_x" in line)
+    path = tmp_path / "xy_volts.yaml"
+    path.write_text(text.replace(x_line, x_line.rstrip()[:-1]
+                                 + ", actuator: {command: voltage, v_max: 150.0}}"))
+    xy = load_mechanism(str(path))
+    assert [(c.name, c.unit) for c in StageInterface(xy, "fast").commands] == [
+        ("drive/x/voltage", "V"), ("drive/y/displacement", "m")]
+    specs = {s.name: (s.default, s.unit) for s in drive_parameter_specs(xy.drives)}
+    # Stroke 15 um over 150 V: d = 1e-7 m/V, so the 0.01 m/s slew limit is 1e5 V/s.
+    assert specs["drives.x.stroke_min"] == (0.0, "V") and specs["drives.x.stroke_max"] == (
+        150.0, "V")
+    assert specs["drives.x.slew_rate"][0] == pytest.approx(0.01 / (1.5e-5 / 150.0), rel=1e-12)
+    assert specs["drives.x.slew_rate"][1] == "V/s" and specs["drives.y.stroke_max"] == (
+        1.5e-5, "m")
+
+
+def test_volts_out_of_range_are_clamped_counted_and_warned_in_volts(tmp_path, domain, peer):
+    from node_harness import ROOT as REPO
+    node = start(tmp_path, domain, peer, mechanism=str(REPO / PIEZO_STAGE), record=True,
+                 record_path="volts.mcap")
+    try:
+        peer.subscribe("/clock", Clock)
+        peer.subscribe("/drive/input", Float64)
+        peer.subscribe("/diagnostics", DiagnosticArray)
+        command = peer.publisher("/drive/voltage", Float64)
+        peer.wait_for_publishers(["/drive/input"])
+        peer.wait_for_subscribers(command)
+        command.publish(Float64(data=-5.0))       # below v_min = 0 V: clamped to 0 V
+        command.publish(Float64(data=math.nan))   # refused
+        step_until(peer, lambda: len(peer.received["/diagnostics"]) > 0, "diagnostics", 20,
+                   topics=["/drive/input"])
+        d = diagnostics_values(peer.last("/diagnostics"))
+        assert d["commands_received"] == "2" and d["commands_clamped"] == "1"
+        assert d["commands_rejected"] == "1" and float(d["drive_target"]) == 0.0
+        # The stroke parameters are in volts: 80 V is accepted, -1 V/s refused.
+        from rcl_interfaces.srv import GetParameters
+        request = GetParameters.Request(names=["stroke_min", "stroke_max", "slew_rate"])
+        got = peer.call(GetParameters, "/stage_node/get_parameters", request).values
+        assert [v.double_value for v in got] == pytest.approx([0.0, 100.0, 0.1 / 1.5e-7])
+        request = SetParameters.Request()
+        request.parameters = [ParameterMsg(name="stroke_max", value=ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=80.0))]
+        assert peer.call(SetParameters, "/stage_node/set_parameters",
+                         request).results[0].successful
+    finally:
+        assert node.stop(signal.SIGINT) == 0, node.stderr
+    assert "drive command -5 V outside the stroke [0, 100] V: clamped" in node.stderr
+    log = read_log(node.cwd / "volts.mcap")
+    recorded = [m.message.data for m in log.messages_on("/drive/voltage")]
+    assert recorded[0] == -5.0 and math.isnan(recorded[1]) and len(recorded) == 2

@@ -163,19 +163,19 @@ class IntakeGroup:
 
 def intake_for(subscriptions: Sequence[Any], drive_filter: Any, named: Sequence[Any],
                first_channel: int, record: Callable[[list[tuple[int, bytes]], int], None],
-               log: Any, throttle: WarningThrottle) -> Any:
+               log: Any, throttle: WarningThrottle, unit: str = "m") -> Any:
     """
     Return the stepping loop's intake of the command ``subscriptions`` (one per drive).
 
     The single drive's `CommandIntake` (``named`` empty), an `IntakeGroup` of the ``named``
     drives of the `drive_bank.FilterBank` ``drive_filter``, or None without a drive; drive k
-    records on channel ``first_channel + k``.
+    records on channel ``first_channel + k``. ``unit``: the single drive's command unit.
     """
     if not subscriptions:
         return None
     if not named:
         return CommandIntake(subscriptions[0], drive_filter, first_channel, record, log,
-                             throttle)
+                             throttle, unit=unit)
     return IntakeGroup([
         CommandIntake(sub, drive_filter.filters[k], first_channel + k, record, log, throttle,
                       f"drive {d.name}", units(d)[0])

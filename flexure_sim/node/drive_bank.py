@@ -11,11 +11,13 @@ file; a force drive's in N and N/s, or N m on theta) and its own `CommandFilter`
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 
 from .drive_input import CommandFilter, DriveLimits, limits_problem
+from .drive_kind import command_kind, command_limits, units  # noqa: F401 (re-exported)
 from .params import ParamSpec
 
 #: The per-drive limit parameters, as ``drives.<name>.<key>``.
@@ -39,32 +41,33 @@ def parameter_name(drive: str, key: str) -> str:
     return f"drives.{drive}.{key}"
 
 
-def units(drive: Any) -> tuple[str, str]:
-    """(stroke unit, slew-rate unit) of a drive: m, rad, N or N m."""
-    unit = {("displacement", False): "m", ("displacement", True): "rad",
-            ("force", False): "N", ("force", True): "N m"}[
-        (drive.kind, drive.coordinate == "theta")]
-    return unit, f"{unit}/s"
-
-
 def drive_parameter_specs(drives: Sequence[Any]) -> list[ParamSpec]:
     """Return the per-drive limit parameters of ``drives`` (none: the single-drive interface)."""
     out = []
     for d in drives:
         unit, rate = units(d)
-        what = "force" if d.kind == "force" else "actuator stroke"
+        what = {"force": "force", "voltage": "actuator voltage"}.get(
+            command_kind(d), "actuator stroke")
+        lo, hi, slew = command_limits(d)
         out += [
-            ParamSpec(parameter_name(d.name, "stroke_min"), float(d.stroke[0]), float, unit,
+            ParamSpec(parameter_name(d.name, "stroke_min"), lo, float, unit,
                       False, None, None, f"Drive {d.name}: lower end of its {what}; commands "
                       "below it are clamped."),
-            ParamSpec(parameter_name(d.name, "stroke_max"), float(d.stroke[1]), float, unit,
+            ParamSpec(parameter_name(d.name, "stroke_max"), hi, float, unit,
                       False, None, None, f"Drive {d.name}: upper end of its {what}; commands "
                       "above it are clamped."),
-            ParamSpec(parameter_name(d.name, "slew_rate"), float(d.slew_rate), float, rate,
+            ParamSpec(parameter_name(d.name, "slew_rate"), slew, float, rate,
                       False, 0.0, None, f"Drive {d.name}: speed limit (> 0): its target moves "
                       "towards each new command at most this fast."),
         ]
     return out
+
+
+def in_command_units(specs: Sequence[ParamSpec], drive: Any) -> list[ParamSpec]:
+    """``specs`` with the single-drive limit parameters in ``drive``'s command unit (V, V/s)."""
+    unit, rate = units(drive)
+    return [replace(s, unit=rate if s.name == "slew_rate" else unit)
+            if s.name in LIMIT_KEYS else s for s in specs]
 
 
 def stroke_ends(mechanism: Any) -> list[tuple[str, Optional[str], str]]:
@@ -76,7 +79,8 @@ def stroke_ends(mechanism: Any) -> list[tuple[str, Optional[str], str]]:
     """
     named = named_drives(mechanism)
     if not named:
-        return [(k, None, "m") for k in ("stroke_max", "stroke_min") if mechanism.drives]
+        return [(k, None, units(d)[0]) for d in mechanism.drives
+                for k in ("stroke_max", "stroke_min")]
     return [(parameter_name(d.name, k), d.name, units(d)[0]) for d in named
             for k in ("stroke_max", "stroke_min")]
 
@@ -137,6 +141,10 @@ class FilterBank:
     @property
     def settled(self) -> bool:
         return all(f.settled for f in self.filters)
+
+    def differs(self, command: Any) -> bool:
+        """Whether the applied targets are not ``command`` (a vector, or one value for all)."""
+        return bool(np.any(np.asarray(command) != self.applied))
 
     def begin_tick(self, period: float) -> bool:
         """`CommandFilter.begin_tick` per drive; True if any was counted (see ``limited``)."""

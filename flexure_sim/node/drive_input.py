@@ -232,6 +232,10 @@ class CommandFilter:
         self.target = self.applied = self._initial
         self._checked = True
 
+    def differs(self, command: float) -> bool:
+        """Whether the applied target is not ``command`` (a plain float compare: per tick)."""
+        return command != self.applied
+
     @staticmethod
     def describe(value: float) -> str:
         """Return a target as text (``1e-06 m``)."""

@@ -22,7 +22,9 @@ from typing import Any, Optional
 import numpy as np
 
 from ..engine.mechanism import Mechanism
+from ..engine.piezo import nominal_displacement
 from ..engine.solver import Simulation, SolverError
+from .drive_kind import command_kind
 
 
 class StrokeProbe:
@@ -42,18 +44,24 @@ class StrokeProbe:
     def end_problem(self, name: str, value: float, drive: Optional[str] = None,
                     unit: str = "m") -> Optional[str]:
         """
-        Why the engine cannot hold the actuator at ``value`` (m), or None.
+        Why the engine cannot hold the actuator at ``value`` (in ``unit``), or None.
 
         ``drive``: of a mechanism with several drives, the one at ``value`` (the others at 0).
+        A voltage command's ``value`` (V) is held at its nominal displacement (piezo.py, P1).
         """
         value = float(value)
         key = (drive, value)
         if key not in self._known:
             if self._sim is None:
                 self._sim = Simulation(self._mechanism, dt=self._dt)
-            inputs: Any = value
+            one = next((d for d in self._mechanism.drives if d.name == drive),
+                       self._mechanism.drive)
+            held = value
+            if command_kind(one) == "voltage":
+                held = float(nominal_displacement(one.actuator, value))
+            inputs: Any = held
             if drive is not None:
-                inputs = {d: (value if d == drive else 0.0) for d in self._sim.model.drive_names}
+                inputs = {d: (held if d == drive else 0.0) for d in self._sim.model.drive_names}
             try:
                 self._sim.static(inputs)
                 self._known[key] = None

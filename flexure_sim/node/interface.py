@@ -37,6 +37,7 @@ from .diagnostics_msg import (  # noqa: F401  (re-exported: one import for the n
     ERROR, OK, WARN, diagnostics_message, encode_diagnostics, stamp_msg, value_text)
 from .cdr import (
     ClockPacker, Float64Packer, StampedPacker, packing_applies, split_stamp)
+from .drive_kind import command_kind, units
 from .reference_messages import reference_messages, yaw_quaternion  # noqa: F401 (re-export)
 
 TIME_MODES = ("realtime", "fast", "lockstep")
@@ -117,6 +118,11 @@ def _spec(
     return TopicSpec(
         key, name, msg_type, f"{module}/msg/{msg_type.__name__}", unit, frame_id, description
     )
+
+
+#: What a drive's command sets, by `drive_kind.command_kind`.
+_COMMANDED = {"displacement": "actuator displacement", "force": "force",
+              "voltage": "piezo actuator voltage"}
 
 
 def _unit(coordinate: Optional[str], force: bool = False) -> str:
@@ -289,15 +295,18 @@ class StageInterface:
         self.diagnostics = _spec("diagnostics", topics.DIAGNOSTICS, DiagnosticArray, "", "",
                                  "real-time factor, step times, solver work, command counters")
         self.command: Optional[TopicSpec] = None
-        if self.has_drive:
+        if self.has_drive and command_kind(mech.drive) == "voltage":
+            self.command = _spec("command", topics.COMMAND_VOLTAGE, Float64, "V", "",
+                                 "drive command (subscribed): the piezo actuator's voltage")
+        elif self.has_drive:
             self.command = _spec("command", topics.COMMAND, Float64, "m", "",
                                  "drive command (subscribed): target actuator displacement "
                                  "along the drive axis")
         self.commands: tuple[TopicSpec, ...] = (self.command,) if self.command else tuple(
-            _spec(f"command:{d.name}", topics.drive_command(d.name, d.kind), Float64,
-                  _unit(d.coordinate, d.kind == "force"), "",
-                  _along(f"drive {d.name} command (subscribed): target "
-                         + ("force" if d.kind == "force" else "actuator displacement"), d))
+            _spec(f"command:{d.name}", topics.drive_command(d.name, command_kind(d)), Float64,
+                  units(d)[0], "",
+                  _along(f"drive {d.name} command (subscribed): target " + _COMMANDED[
+                      command_kind(d)], d))
             for d in self.drives)
         self._build_packers()
         #: True: `encode` packs (Fast DDS, every layout known); False: serialize_message.

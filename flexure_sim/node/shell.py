@@ -15,7 +15,6 @@ import gc
 from pathlib import Path
 from typing import Any, Optional
 
-import numpy as np
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.context import Context
@@ -37,8 +36,9 @@ from .declare import coerce_integer_overrides, declare
 from .diagnostics import Diagnostics
 from . import display as dsp
 from .display import display_every
-from .drive_bank import (LIMIT_KEYS, FilterBank, drive_limits, drive_parameter_specs,
-                         drives_problem, named_drives, parameter_name, stroke_ends)
+from .drive_bank import (LIMIT_KEYS, FilterBank, command_limits, drive_limits,
+                         drive_parameter_specs, drives_problem, in_command_units, named_drives,
+                         parameter_name, stroke_ends, units)
 from .drive_input import CommandFilter, DriveLimits
 from .engine_guard import StrokeProbe
 from .params import as_declared_type, parameter_specs, validate
@@ -102,8 +102,9 @@ class StageNode(Node):
         #: The named drives (several, or a force drive; `drive_bank`), else the single drive.
         self._named = named = named_drives(self.mechanism)
         drive = self.mechanism.drive if not named else None
-        defaults = (drive.stroke[0], drive.stroke[1], drive.slew_rate) if drive else None
-        self._specs = {s.name: s for s in parameter_specs(defaults)
+        defaults = command_limits(drive) if drive else None
+        specs = parameter_specs(defaults)
+        self._specs = {s.name: s for s in (in_command_units(specs, drive) if drive else specs)
                        + drive_parameter_specs(named)}
         try:
             for spec in list(self._specs.values())[1:]:
@@ -140,7 +141,7 @@ class StageNode(Node):
         elif named:
             drive_filter = FilterBank([d.name for d in named],
                                       [drive_limits(values, d.name) for d in named])
-        if drive_filter is not None and np.any(drive_filter.applied != 0.0):
+        if drive_filter is not None and drive_filter.differs(0.0):
             sim.set_command(drive_filter.applied)
 
         # ---- publishers, subscription, services ----
@@ -171,7 +172,8 @@ class StageNode(Node):
                                             for topic in command_topics],
                               callback_group=watch.group)
         loop.intake = intake_for(self._command_subs, drive_filter, named, len(tick_pubs) + 1,
-                                 self.session.write, self._log, loop.throttle)
+                                 self.session.write, self._log, loop.throttle,
+                                 units(drive)[0] if drive else "m")
         loop.diagnostics = Diagnostics(loop, diag_pub, len(tick_pubs), self.get_name(),
                                        self.mechanism.name, watch.diagnostics)
         first = len(tick_pubs) + 1 + len(command_topics)  # after the commands

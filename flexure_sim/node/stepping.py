@@ -19,8 +19,6 @@ import threading
 import time
 from typing import Any, Optional, Sequence
 
-import numpy as np
-
 from ..engine.sensor import Sensor
 from ..engine.solver import Simulation, SolverError
 from .diagnostics import Diagnostics
@@ -175,9 +173,8 @@ class SteppingLoop:
         if filt.begin_tick(self.n_steps * self.dt) and self.intake is not None:
             self.intake.warn_rate_limited()
         if filt.settled:
-            applied = filt.applied
-            if np.any(sim.state.command != applied):
-                sim.set_command(applied)
+            if filt.differs(sim.state.command):
+                sim.set_command(filt.applied)
             sim.step(self.n_steps)
         else:
             # Step by step only while the ramp lasts: once the applied target reaches the
@@ -303,7 +300,7 @@ class SteppingLoop:
             self.sensor.reset()
         if self.filter is not None:
             self.filter.reset()
-            if np.any(self.filter.applied != 0.0):
+            if self.filter.differs(0.0):
                 self.sim.set_command(self.filter.applied)
         if self.intake is not None:
             self.intake.discard()  # sent before the reset: discarded

@@ -1,0 +1,46 @@
+"""
+What a drive's command is, and its unit and limits in that unit (pure Python, no ROS).
+
+A displacement drive takes metres (radians on theta), a force drive newtons (N m), and a
+displacement drive whose ``actuator:`` block says ``command: voltage`` (engine/piezo.py) volts.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+
+def command_kind(drive: Any) -> str:
+    """
+    What a drive's command is: ``displacement``, ``force``, or ``voltage``.
+
+    ``voltage``: a displacement drive whose ``actuator:`` block takes volts (engine/piezo.py).
+    """
+    if drive.kind == "force":
+        return "force"
+    actuator = getattr(drive, "actuator", None)
+    return "voltage" if actuator is not None and actuator.command == "voltage" else "displacement"
+
+
+def command_limits(drive: Any) -> tuple[float, float, float]:
+    """
+    Return a drive's (stroke_min, stroke_max, slew_rate) in its command's unit.
+
+    The mechanism file's stroke and slew rate; a voltage command's stroke is the actuator's
+    [v_min, v_max] (the voltages of the stroke's ends, by definition: engine/config_actuator.py)
+    and its slew rate slew_rate / d, d the nominal gain (piezo.py, P1), in V/s.
+    """
+    lo, hi, rate = float(drive.stroke[0]), float(drive.stroke[1]), float(drive.slew_rate)
+    if command_kind(drive) != "voltage":
+        return lo, hi, rate
+    spec = drive.actuator
+    return float(spec.v_min), float(spec.v_max), rate / spec.gain
+
+
+def units(drive: Any) -> tuple[str, str]:
+    """(command unit, slew-rate unit) of a drive: m, rad, N, N m or V."""
+    if command_kind(drive) == "voltage":
+        return "V", "V/s"
+    unit = {("displacement", False): "m", ("displacement", True): "rad",
+            ("force", False): "N", ("force", True): "N m"}[
+        (drive.kind, drive.coordinate == "theta")]
+    return unit, f"{unit}/s"
