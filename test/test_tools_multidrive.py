@@ -156,7 +156,8 @@ def test_a_force_drives_gain_is_the_leafs_compliance_in_rad_per_newton_metre(cap
     info = json.loads(out)
     assert info["drives"] == [{
         "name": "torquer", "kind": "force", "unit": "N m", "command": "/drive/torquer/force",
-        "input": "/drive/torquer/input", "response": "/drive/torquer/position",
+        "command_unit": "N m", "input": "/drive/torquer/input",
+        "response": "/drive/torquer/position",
         "response_unit": "rad", "stroke_min": "-0.001", "stroke_max": "0.001",
         "slew_rate": None}]
     assert info["outputs"] == [{"name": "angle", "unit": "rad", "topic": "/output/displacement"}]
@@ -236,3 +237,55 @@ def test_one_drive_with_two_outputs_keeps_the_drives_topics_and_gets_a_column(ca
     np.testing.assert_allclose(result["gain_matrix"]["matrix"], expected, rtol=1e-6,
                                atol=1e-6 * abs(expected[0][0]))
     assert result["gain_matrix"]["matrix"][0][0] == pytest.approx(27.628, rel=1e-4)
+
+
+def _volts_copy(src, dst, volts_per_metre: float) -> None:
+    """Copy a run, its displacement commands turned into drive/<name>/voltage in V."""
+    from mcap.reader import make_reader
+    from rclpy.serialization import deserialize_message, serialize_message
+    from std_msgs.msg import Float64
+
+    from flexure_sim.recording import McapRecorder
+
+    with open(src, "rb") as f, McapRecorder(dst) as rec:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        rename = {}
+        for ch in summary.channels.values():
+            name = ch.topic
+            if name.startswith("/drive/") and name.endswith("/displacement"):
+                name = name[: -len("displacement")] + "voltage"
+            rename[ch.topic] = name
+            rec.add_topic(name, summary.schemas[ch.schema_id].name)
+        for m in reader.iter_metadata():
+            if m.name == "flexure_sim":
+                meta = dict(m.metadata)
+                for d in ("x", "y"):
+                    meta[f"drives.{d}.stroke_min"], meta[f"drives.{d}.stroke_max"] = "0.0", "150.0"
+                rec.add_metadata(m.name, meta)
+        for _, ch, msg in reader.iter_messages(log_time_order=True):
+            data = msg.data
+            if rename[ch.topic] != ch.topic:
+                value = deserialize_message(data, Float64).data * volts_per_metre
+                data = serialize_message(Float64(data=value))
+            rec.write(rename[ch.topic], data, msg.log_time)
+
+
+def test_a_drive_commanded_in_volts_is_stepped_on_its_voltage_topic(capsys, xy, tmp_path):
+    path = tmp_path / "volts.mcap"
+    _volts_copy(xy[0], path, 1e7)                     # 1 um <-> 10 V
+    code, out, err = flexure_sim(capsys, "analyse", path, "--json", "--no-static")
+    assert code == 0, err
+    result = json.loads(out)
+    assert [(d["command"], d["command_unit"], d["unit"], d["steps_from"])
+            for d in result["drives"]] == [
+        ("/drive/x/voltage", "V", "m", "/drive/x/voltage"),
+        ("/drive/y/voltage", "V", "m", "/drive/y/voltage")]
+    assert [(s["input_before"], s["input"]) for s in result["steps"]] == [(0.0, 10.0)] * 2
+    clean = json.loads(flexure_sim(capsys, "analyse", xy[0], "--json", "--no-static")[1])
+    assert result["gain_matrix"] == clean["gain_matrix"]
+    code, out, err = flexure_sim(capsys, "info", path)
+    assert "x (displacement, m; stroke [0.0, 150.0] V): command /drive/x/voltage [V], " in out
+    code, out, err = flexure_sim(capsys, "plot", path, "-o", tmp_path / "plots")
+    assert code == 0, err
+    assert figure_title(tmp_path / "plots" / "drives_outputs.png") == "Drives and outputs"

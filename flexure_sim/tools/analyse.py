@@ -99,13 +99,15 @@ def find_steps(run: Run) -> tuple[list[analysis.Step], str]:
     return steps_of(run, COMMAND, DRIVE_INPUT, ("stroke_min", "stroke_max"))
 
 
-def steps_of(run: Run, command: str, applied: str,
-             stroke_keys: tuple[str, str]) -> tuple[list[analysis.Step], str]:
+def steps_of(run: Run, command: str, applied: str, stroke_keys: tuple[str, str],
+             same_unit: bool = True) -> tuple[list[analysis.Step], str]:
     """
     Return the steps of one drive and where they were found (a topic name).
 
     From its ``command`` topic if recorded (clamped to the stroke the metadata keys
-    ``stroke_keys`` give), else from its ``applied`` input (`analysis`).
+    ``stroke_keys`` give), else from its ``applied`` input (`analysis`). The target before
+    the first command is the first applied input if ``same_unit`` (command and input in one
+    unit), else 0 clamped to the stroke (a command in volts).
     """
     u = run.scalar(applied)
     cmd = run.scalar(command)
@@ -116,7 +118,7 @@ def steps_of(run: Run, command: str, applied: str,
             stroke = (float(meta[stroke_keys[0]]), float(meta[stroke_keys[1]]))
         except (KeyError, ValueError):
             pass
-        initial = float(u.values[0]) if u is not None and not u.empty else (
+        initial = float(u.values[0]) if same_unit and u is not None and not u.empty else (
             min(max(0.0, stroke[0]), stroke[1]) if stroke else 0.0)
         return analysis.command_steps(
             cmd.t, cmd.values, initial=initial, stroke=stroke

@@ -31,7 +31,7 @@ def drive_steps(run: Run, drive: DriveChannel) -> tuple[list[analysis.Step], str
     named = drive.command != COMMAND  # per-drive parameters drives.<name>.stroke_min ...
     keys = ((f"drives.{drive.name}.stroke_min", f"drives.{drive.name}.stroke_max") if named
             else ("stroke_min", "stroke_max"))
-    return steps_of(run, drive.command, drive.input, keys)
+    return steps_of(run, drive.command, drive.input, keys, drive.command_unit == drive.unit)
 
 
 def _matrix_dict(drives: list[str], outputs: list[str], rows) -> dict:
@@ -128,7 +128,8 @@ def analyse_drives(run: Run, band: float, static: bool = True) -> dict:
     ounits = {o.name: o.unit for o in outputs}
     return {
         "drives": [{"name": d.name, "kind": d.kind, "unit": d.unit, "command":
-                    run.topic(d.command), "input": run.topic(d.input),
+                    run.topic(d.command), "command_unit": d.command_unit,
+                    "input": run.topic(d.input),
                     "steps_from": sources[d.name]} for d in drives],
         "outputs": [{"name": o.name, "unit": o.unit, "topic": run.topic(o.topic)}
                     for o in outputs],

@@ -9,7 +9,9 @@ drive ``drive/<name>/displacement`` or, for a force drive, ``drive/<name>/force`
 ``output/<name>/displacement`` each. `drive_channels` and `output_channels` find them in a
 run's topic names; names are ordered as the ``flexure_sim`` metadata record lists them
 (``drives``: ``name:kind,...``; ``outputs``), units come from the recorded mechanism (rad on
-a ``theta`` coordinate, N or N m for a force drive), m when it cannot be loaded.
+a ``theta`` coordinate, N or N m for a force drive), m when it cannot be loaded. A drive
+whose piezo actuator takes volts is commanded on ``drive/voltage`` (``drive/<name>/voltage``)
+in V.
 """
 from __future__ import annotations
 
@@ -17,8 +19,8 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Optional
 
 from ..topics import (
-    COMMAND, DRIVE_FORCE, DRIVE_INPUT, OUTPUT, drive_command, drive_force, drive_input,
-    drive_position, output_displacement,
+    COMMAND, COMMAND_VOLTAGE, DRIVE_FORCE, DRIVE_INPUT, OUTPUT, drive_command, drive_force,
+    drive_input, drive_position, output_displacement,
 )
 
 
@@ -30,7 +32,9 @@ class DriveChannel:
     ``command``: the command topic; ``input``: the applied input (m, rad, or for a force drive
     N, N m); ``response``: the drive's other signal, the actuator force of a displacement drive
     (``force``) or the body's displacement of a force drive (``position``), None if not
-    recorded. ``unit``: the unit of command and input; ``response_unit`` that of ``response``.
+    recorded. ``unit``: the unit of the input (and of the command, but for a drive commanded
+    in volts: ``command_unit`` V, topic ``drive/voltage`` or ``drive/<name>/voltage``);
+    ``response_unit`` that of ``response``.
     """
 
     name: str
@@ -40,6 +44,11 @@ class DriveChannel:
     response: Optional[str]
     unit: str
     response_unit: str
+    command_unit: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.command_unit:
+            object.__setattr__(self, "command_unit", self.unit)
 
 
 @dataclass(frozen=True)
@@ -102,9 +111,10 @@ def drive_channels(topics: Iterable[str], topic: Callable[[str], str],
     if topic(DRIVE_INPUT) in topics:
         name = listed[0][0] if len(listed) == 1 else "drive"
         unit = _unit(coordinates.get(name))
-        return [DriveChannel(name, "displacement", COMMAND, DRIVE_INPUT,
-                             DRIVE_FORCE if topic(DRIVE_FORCE) in topics else None, unit,
-                             _unit(coordinates.get(name), True))]
+        volts = topic(COMMAND_VOLTAGE) in topics and topic(COMMAND) not in topics
+        return [DriveChannel(name, "displacement", COMMAND_VOLTAGE if volts else COMMAND,
+                             DRIVE_INPUT, DRIVE_FORCE if topic(DRIVE_FORCE) in topics else None,
+                             unit, _unit(coordinates.get(name), True), "V" if volts else "")]
     out = []
     for name in _ordered(_names_under(topics, topic("drive/"), "input"),
                          [n for n, _ in listed]):
@@ -117,9 +127,12 @@ def drive_channels(topics: Iterable[str], topic: Callable[[str], str],
         else:
             response = drive_force(name)
             unit, response_unit = _unit(coordinate), _unit(coordinate, True)
-        out.append(DriveChannel(name, kind, drive_command(name, kind), drive_input(name),
-                                response if topic(response) in topics else None, unit,
-                                response_unit))
+        command = drive_command(name, kind)
+        volts = kind == "displacement" and topic(drive_command(name, "voltage")) in topics \
+            and topic(command) not in topics
+        out.append(DriveChannel(name, kind, drive_command(name, "voltage") if volts else command,
+                                drive_input(name), response if topic(response) in topics
+                                else None, unit, response_unit, "V" if volts else ""))
     return out
 
 

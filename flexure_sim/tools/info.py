@@ -185,7 +185,7 @@ def drives_and_outputs(info: LogInfo) -> dict:
 
     return {
         "drives": [{"name": d.name, "kind": d.kind, "unit": d.unit, "command": topic(d.command),
-                    "input": topic(d.input),
+                    "command_unit": d.command_unit, "input": topic(d.input),
                     "response": topic(d.response) if d.response else None,
                     "response_unit": d.response_unit,
                     "stroke_min": limit(d.name, "stroke_min"),
@@ -239,12 +239,15 @@ def format_summary(s: dict, show_yaml: bool = False) -> str:
         lines.append("")
         for d in s.get("drives", []):
             response = f", {d['response']} [{d['response_unit']}]" if d["response"] else ""
-            limits = (f"; stroke [{d['stroke_min']}, {d['stroke_max']}] {d['unit']}"
+            cu = d["command_unit"]  # the node's limits are in the command's unit
+            limits = (f"; stroke [{d['stroke_min']}, {d['stroke_max']}] {cu}"
                       if d["stroke_min"] is not None else "")
             if d["slew_rate"] is not None:
-                limits += f", slew rate {d['slew_rate']} {d['unit']}/s"
+                limits += f", slew rate {d['slew_rate']} {cu}/s"
             lines.append(f"{'Drives:' if d is s['drives'][0] else '':14s}{d['name']} "
-                         f"({d['kind']}, {d['unit']}{limits}): command {d['command']}, "
+                         f"({d['kind']}, {d['unit']}{limits}): command {d['command']}"
+                         + (f" [{d['command_unit']}]" if d["command_unit"] != d["unit"] else "")
+                         + ", "
                          f"input {d['input']}{response}")
         for o in s.get("outputs", []):
             lines.append(f"{'Outputs:' if o is s['outputs'][0] else '':14s}{o['name']} "

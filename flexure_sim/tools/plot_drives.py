@@ -4,9 +4,9 @@ Figures of a run with several drives or outputs (``flexure-sim plot``; issue 13)
 ``drives_outputs.png`` "Drives and outputs": one panel per drive, its command (dashed, held
 until the next one) and applied input, then one panel per output, all against simulation
 time, each labelled with the drive's or output's name and unit (µm for m, µrad for rad, N,
-N·m). ``drive_forces.png`` "Drive forces": one panel per drive with its other recorded
-signal, the actuator force of a displacement drive or the body's displacement of a force
-drive.
+N·m; a command in volts on a second axis, V). ``drive_forces.png`` "Drive forces": one
+panel per drive with its other recorded signal, the actuator force of a displacement drive
+or the body's displacement of a force drive.
 """
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
+from .analyse_drives import drive_steps
 from .runlog import Run
 
 #: Unit -> (unit shown, factor) of the axes.
@@ -51,15 +52,28 @@ def plot_drives(plt: Any, run: Run, tx: Callable[[np.ndarray], np.ndarray], tlab
             what = "force" if d.kind == "force" else "input"
             if u is not None and not u.empty:
                 ax.plot(tx(u.t), u.values * f, color="C0", label=f"drive {d.name}: applied {what}")
+            cax, cf = ax, f
+            if d.command_unit != d.unit:  # volts: the command on an axis of its own
+                cax = ax.twinx()
+                cunit, cf = display(d.command_unit)
+                cax.set_ylabel(f"command [{cunit}]")
             if cmd is not None and not cmd.empty:
                 ct, cv = cmd.t, cmd.values
                 if u is not None and not u.empty and u.t[0] < ct[0]:
-                    ct, cv = np.append(u.t[0], ct), np.append(u.values[0], cv)
+                    # the target before the first command: the rest input (volts: the
+                    # analysis's rest voltage, the first step's starting target)
+                    first = drive_steps(run, d)[0]
+                    rest = u.values[0] if cax is ax or not first else first[0].previous
+                    ct, cv = np.append(u.t[0], ct), np.append(rest, cv)
                 ct, cv = staircase(ct, cv, run.end_ns / 1e9)
-                ax.plot(tx(ct), cv * f, color="C1", linestyle="--", linewidth=1,
-                        label=f"drive {d.name}: command")
+                cax.plot(tx(ct), cv * cf, color="C1", linestyle="--", linewidth=1,
+                         label=f"drive {d.name}: command")
             ax.set_ylabel(f"drive {d.name} [{unit}]")
-            ax.legend(loc="best", fontsize="small")
+            handles = ax.get_legend_handles_labels()
+            if cax is not ax:
+                more = cax.get_legend_handles_labels()
+                handles = (handles[0] + more[0], handles[1] + more[1])
+            ax.legend(*handles, loc="best", fontsize="small")
         for k, (ax, o) in enumerate(zip(axes[len(drives):], outputs)):
             unit, f = display(o.unit)
             y = run.scalar(o.topic)

@@ -30,8 +30,8 @@ from ..recording import TopicInfo
 from ..recording.command_line import check_readable, open_log
 from ..recording.errors import EXIT_USAGE, RunError
 from ..topics import (
-    CLOCK, COMMAND, DRIVE_FORCE, DRIVE_INPUT, METADATA_NAME, OUTPUT, POSE_ARRAY, body_pose,
-    hinge_compression, hinge_wrench,
+    CLOCK, COMMAND, COMMAND_VOLTAGE, DRIVE_FORCE, DRIVE_INPUT, METADATA_NAME, OUTPUT, POSE_ARRAY,
+    body_pose, hinge_compression, hinge_wrench,
 )
 from .channels import DriveChannel, OutputChannel, drive_channels, output_channels
 from .mechanism_reload import hinge_frame_displacements, load_recorded_mechanism
@@ -41,9 +41,9 @@ from .timebase import TimeBase, time_base
 #: Topics whose presence marks the namespace of a stage run.
 _MARKERS = (OUTPUT, DRIVE_INPUT, POSE_ARRAY, DRIVE_FORCE)
 #: Topics (relative to the run's namespace) the time series are taken from.
-_SIGNALS = (OUTPUT, DRIVE_INPUT, COMMAND, DRIVE_FORCE)
+_SIGNALS = (OUTPUT, DRIVE_INPUT, COMMAND, COMMAND_VOLTAGE, DRIVE_FORCE)
 #: Leaves of the per-drive topics ``drive/<name>/<leaf>`` (several drives: `channels`).
-_DRIVE_LEAVES = ("input", "force", "position", "displacement")
+_DRIVE_LEAVES = ("input", "force", "position", "displacement", "voltage")
 
 
 @dataclass
