@@ -289,3 +289,13 @@ def test_a_drive_commanded_in_volts_is_stepped_on_its_voltage_topic(capsys, xy, 
     code, out, err = flexure_sim(capsys, "plot", path, "-o", tmp_path / "plots")
     assert code == 0, err
     assert figure_title(tmp_path / "plots" / "drives_outputs.png") == "Drives and outputs"
+
+
+def test_drives_stepped_together_give_no_gain_and_say_why(capsys, tmp_path):
+    path = tmp_path / "together.mcap"
+    record_drives_run(path, "xy_stage", [(0.01, "x", U), (0.01, "y", U)], 0.04)
+    code, out, err = flexure_sim(capsys, "analyse", path)
+    assert code == 0, err
+    assert "no measured gain to compare (no clean, settled step)" in out
+    assert "step 1: drive(s) y stepped at the same time: no gain" in out
+    assert "! another drive moved during the step: not in the gain matrix" in out

@@ -199,7 +199,8 @@ def format_drives(run: Run, result: dict) -> str:
                   "simulate --static`):", table(result["static_gain_matrix"]),
                   f"largest difference: {diff:.3g} of the largest static gain"
                   + (" (a step's gain is its secant: nonlinearity shows with larger steps)"
-                     if diff > 1e-4 else "")]
+                     if diff > 1e-4 else "") if diff == diff else
+                  "no measured gain to compare (no clean, settled step)"]
     rows = [[p["drive"], p["output"], _num(p["gain"]), p["unit"], str(p["steps"]),
              _ms(p["settling_time"]),
              "-" if p["overshoot"] is None else f"{p['overshoot'] * 100:.3f}"]
