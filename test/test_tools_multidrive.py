@@ -299,3 +299,19 @@ def test_drives_stepped_together_give_no_gain_and_say_why(capsys, tmp_path):
     assert "no measured gain to compare (no clean, settled step)" in out
     assert "step 1: drive(s) y stepped at the same time: no gain" in out
     assert "! another drive moved during the step: not in the gain matrix" in out
+
+
+def test_export_signals_of_a_single_drive_run_uses_its_topics(capsys, tmp_path):
+    from tools_fixtures import record_stage_run
+
+    path = tmp_path / "stage.mcap"
+    record_stage_run(path, levels=(1e-6,), dwell=0.02)
+    code, out, err = flexure_sim(capsys, "export", path, "--csv", tmp_path / "csv", "--signals")
+    assert code == 0, err
+    with (tmp_path / "csv" / "signals.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == ["time", "drive/displacement", "drive/input", "drive/force",
+                             "output/displacement"]
+    with (tmp_path / "csv" / "output.displacement.csv").open() as f:
+        outputs = [r["data"] for r in csv.DictReader(f)]
+    assert [r["output/displacement"] for r in rows] == outputs
