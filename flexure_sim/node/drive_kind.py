@@ -11,7 +11,7 @@ from typing import Any
 
 def command_kind(drive: Any) -> str:
     """
-    What a drive's command is: ``displacement``, ``force``, or ``voltage``.
+    Return what a drive's command is: ``displacement``, ``force``, or ``voltage``.
 
     ``voltage``: a displacement drive whose ``actuator:`` block takes volts (engine/piezo.py).
     """
