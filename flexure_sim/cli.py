@@ -78,6 +78,8 @@ def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
             "drive_work": snap.drive_work,
         },
     }
+    if sim.model.actuation:
+        out["actuators"] = actuator_figures(sim, snap)
     if len(sim.model.drives) > 1 or len(sim.model.outputs) > 1:
         out["drives"] = {name: {"input": float(snap.drive_inputs[k]),
                                 "force": float(snap.drive_forces[k]),
@@ -85,6 +87,32 @@ def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
                          for k, name in enumerate(snap.drive_names)}
         out["outputs"] = dict(snap.outputs)
     return out
+
+
+def actuator_figures(sim: Simulation, snap: Snapshot) -> dict:
+    """
+    Return the figures of each drive with a piezo actuator (engine/actuation.py).
+
+    Its command (V or m, ``unit``), amplifier voltage (V), free stroke and applied
+    displacement (m), stack force (N).
+    """
+    out = {}
+    for a in sim.model.actuation:
+        k = a.drive
+        out[snap.drive_names[k]] = {
+            "command": float(snap.drive_commands[k]),
+            "unit": "V" if a.spec.command == "voltage" else "m",
+            "voltage": float(snap.drive_voltages[k]),
+            "free_stroke": float(snap.drive_free_strokes[k]),
+            "applied": float(snap.drive_positions[k]),
+            "stack_force": float(snap.drive_stack_forces[k]),
+            "stack_stiffness": a.spec.stiffness}
+    return out
+
+
+def _single_command(sim: Simulation) -> bool:
+    """Tell whether ``--drive step:A`` commands the mechanism's one drive (with an actuator)."""
+    return sim.drive is not None or (len(sim.model.drives) == 1 and bool(sim.model.actuation))
 
 
 def run_simulate(args: argparse.Namespace) -> dict:
@@ -103,6 +131,10 @@ def run_simulate(args: argparse.Namespace) -> dict:
                          "reports the gain of every output against every drive")
     if amplitude and sim.drive is None and not sim.model.drives:
         raise UsageError(f"--drive: mechanism {mech.name!r} has no drive")
+    if args.static and len(sim.model.stack_index):
+        raise UsageError(f"--static: mechanism {mech.name!r} has a drive with a finite-stiffness "
+                         "piezo stack (its input is the actuator's free stroke, a dynamic "
+                         "state): simulate without --static to a steady state")
     start = time.perf_counter()
     if args.stroke_limit:
         return _stroke_limit(args, sim)
@@ -117,7 +149,7 @@ def run_simulate(args: argparse.Namespace) -> dict:
                    residual=result.residual, wall_s=wall)
         out["hinge_stress"] = _stress(sim, result.snapshot)
         return out
-    if sim.drive is not None:
+    if _single_command(sim):
         sim.set_command(amplitude)
     n_steps = int(round(args.duration / args.dt))
     samples = {}
@@ -128,6 +160,10 @@ def run_simulate(args: argparse.Namespace) -> dict:
             samples[f"{marks[k]:g}"] = sim.snapshot().output
     wall = time.perf_counter() - start
     out = summarize(sim, sim.snapshot(), amplitude)
+    if _single_command(sim) and sim.drive is None:  # one actuated drive: the scalar figures
+        snap = sim.snapshot()
+        out.update(input=amplitude, drive_input=float(snap.drive_positions[0]),
+                   drive_force=float(snap.drive_forces[0]))
     out.update(
         mechanism_file=str(path),
         mode="dynamic",
@@ -187,10 +223,12 @@ def print_table(out: dict) -> None:
         return
     print(f"mechanism: {out['mechanism']}   mode: {out['mode']}   t = {out['t']:.6g} s")
     print(f"file:      {out['mechanism_file']}")
+    volts = any(a["unit"] == "V" for a in out.get("actuators", {}).values())
     if out["input"] is not None:
-        print(f"input:               {_fmt(out['input'], 'um', 1e6)}")
+        shown = _fmt(out["input"], "V") if volts else _fmt(out["input"], "um", 1e6)
+        print(f"input:               {shown}")
         print(f"output displacement: {_fmt(out['output_displacement'], 'um', 1e6)}")
-        print(f"gain:                {_fmt(out['gain'], '')}")
+        print(f"gain:                {_fmt(out['gain'], 'm/V' if volts else '')}")
         print(f"joint-a compression: {_fmt(out['joint_a_compression'], 'nm', 1e9)}")
         print(f"drive force:         {_fmt(out['drive_force'], 'N')}")
     if out.get("gain_matrix"):
@@ -199,6 +237,11 @@ def print_table(out: dict) -> None:
         print("output   " + "".join(f"{d:>14s}" for d in g["drives"]))
         for name, row in zip(g["outputs"], g["matrix"]):
             print(f"{name:8s} " + "".join(f"{v:14.6g}" for v in row))
+    for name, a in out.get("actuators", {}).items():
+        command = _fmt(a["command"], "V") if a["unit"] == "V" else _fmt(a["command"], "um", 1e6)
+        print(f"actuator {name}: command {command}, amplifier {_fmt(a['voltage'], 'V')}, free "
+              f"stroke {_fmt(a['free_stroke'], 'um', 1e6)}, applied "
+              f"{_fmt(a['applied'], 'um', 1e6)}, stack force {_fmt(a['stack_force'], 'N')}")
     for t, v in out.get("output_at", {}).items():
         print(f"output at {float(t) * 1e3:g} ms:      {_fmt(v, 'um', 1e6)}")
     print("hinge deflection, frame b in frame a:  rotation [urad]  x [nm]  y [nm]")
@@ -227,7 +270,8 @@ def build_parser() -> argparse.ArgumentParser:
         "mechanism",
         help="built-in name (microstage, fourbar_cantilever, fourbar_mixed) or YAML path",
     )
-    sim.add_argument("--drive", default="none", help="step:AMPLITUDE in metres, or none (default)")
+    sim.add_argument("--drive", default="none", help="step:AMPLITUDE in metres (volts for a "
+                     "drive whose actuator takes a voltage), or none (default)")
     sim.add_argument(
         "--duration", type=float, default=0.05, help="simulated time in seconds (default 0.05)"
     )

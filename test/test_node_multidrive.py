@@ -165,6 +165,16 @@ def test_each_drive_has_its_own_limits_counters_and_warnings(tmp_path, domain, p
             type=ParameterType.PARAMETER_DOUBLE, double_value=-1.0))]
         result = peer.call(SetParameters, "/stage_node/set_parameters", request).results[0]
         assert not result.successful and "drives.x.slew_rate" in result.reason
+        # A good one applies live to its drive only: x's stroke shrinks to 10 um.
+        request.parameters = [ParameterMsg(name="drives.x.stroke_max", value=ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=1e-5))]
+        result = peer.call(SetParameters, "/stage_node/set_parameters", request).results[0]
+        assert result.successful, result.reason
+        commands["x"].publish(Float64(data=1.0))
+        step_until(peer, lambda: abs(peer.last(INPUTS[0]).data - 1e-5) < 1e-17, "x at 10 um")
+        step_until(peer, lambda: diagnostics_values(peer.last("/diagnostics"))[
+            "commands_x_clamped"] == "2", "the second clamp in the diagnostics", 40)
+        assert diagnostics_values(peer.last("/diagnostics"))["drive_x_target"] == "1e-05"
     finally:
         assert node.stop(signal.SIGINT) == 0, node.stderr
     err = node.stderr
@@ -281,9 +291,16 @@ def test_a_voltage_commanded_drive_has_its_command_topic_and_limits_in_volts(tmp
 
 
 def test_volts_out_of_range_are_clamped_counted_and_warned_in_volts(tmp_path, domain, peer):
+    from rcl_interfaces.srv import GetParameters
+
     from node_harness import ROOT as REPO
     node = start(tmp_path, domain, peer, mechanism=str(REPO / PIEZO_STAGE), record=True,
                  record_path="volts.mcap")
+
+    def diagnostics(key: str, value: str) -> bool:
+        last = peer.last("/diagnostics")
+        return last is not None and diagnostics_values(last)[key] == value
+
     try:
         peer.subscribe("/clock", Clock)
         peer.subscribe("/drive/input", Float64)
@@ -291,15 +308,20 @@ def test_volts_out_of_range_are_clamped_counted_and_warned_in_volts(tmp_path, do
         command = peer.publisher("/drive/voltage", Float64)
         peer.wait_for_publishers(["/drive/input"])
         peer.wait_for_subscribers(command)
-        command.publish(Float64(data=-5.0))       # below v_min = 0 V: clamped to 0 V
+        command.publish(Float64(data=150.0))      # above v_max = 100 V: clamped to 100 V
         command.publish(Float64(data=math.nan))   # refused
-        step_until(peer, lambda: len(peer.received["/diagnostics"]) > 0, "diagnostics", 20,
+        step_until(peer, lambda: diagnostics("commands_received", "2"), "diagnostics", 40,
                    topics=["/drive/input"])
         d = diagnostics_values(peer.last("/diagnostics"))
-        assert d["commands_received"] == "2" and d["commands_clamped"] == "1"
-        assert d["commands_rejected"] == "1" and float(d["drive_target"]) == 0.0
-        # The stroke parameters are in volts: 80 V is accepted, -1 V/s refused.
-        from rcl_interfaces.srv import GetParameters
+        assert d["commands_clamped"] == "1" and d["commands_rejected"] == "1"
+        assert float(d["drive_target"]) == 100.0
+        # 100 V is the stroke's end: the actuator pushes the platform by at most 15 um.
+        assert 0.0 < peer.last("/drive/input").data <= 1.5e-5 * (1 + 1e-6)
+        command.publish(Float64(data=-5.0))       # below v_min = 0 V: clamped to 0 V
+        step_until(peer, lambda: diagnostics("commands_clamped", "2"), "the second clamp", 40,
+                   topics=["/drive/input"])
+        assert float(diagnostics_values(peer.last("/diagnostics"))["drive_target"]) == 0.0
+        # The stroke parameters are in volts: 80 V is accepted.
         request = GetParameters.Request(names=["stroke_min", "stroke_max", "slew_rate"])
         got = peer.call(GetParameters, "/stage_node/get_parameters", request).values
         assert [v.double_value for v in got] == pytest.approx([0.0, 100.0, 0.1 / 1.5e-7])
@@ -310,7 +332,53 @@ def test_volts_out_of_range_are_clamped_counted_and_warned_in_volts(tmp_path, do
                          request).results[0].successful
     finally:
         assert node.stop(signal.SIGINT) == 0, node.stderr
-    assert "drive command -5 V outside the stroke [0, 100] V: clamped" in node.stderr
+    assert "drive command 150 V outside the stroke [0, 100] V: clamped" in node.stderr
     log = read_log(node.cwd / "volts.mcap")
     recorded = [m.message.data for m in log.messages_on("/drive/voltage")]
-    assert recorded[0] == -5.0 and math.isnan(recorded[1]) and len(recorded) == 2
+    assert recorded[0] == 150.0 and math.isnan(recorded[1]) and recorded[2:] == [-5.0]
+
+
+# ----------------------------------------------- the stepping loop's ticks with several drives
+def test_ticks_with_new_commands_on_several_drives_reach_the_step_by_step_states():
+    """
+    The loop's shortcut (one compiled call once every drive's ramp has ended) on `xy_stage`.
+
+    Reference: the drives' definition (README: Drive commands) stepped one engine step at a
+    time, each drive's target moving towards its command by at most its slew_rate * dt.
+    """
+    from flexure_sim.engine.config import load_mechanism
+    from flexure_sim.engine.solver import Simulation
+    from flexure_sim.node.drive_bank import FilterBank
+    from flexure_sim.node.drive_input import DriveLimits
+    from flexure_sim.node.interface import StageInterface
+    from flexure_sim.node.session import RecordingSession
+    from flexure_sim.node.stepping import RELINEARIZE_TOL, SteppingLoop
+    from test_node_stepping import DT, N_STEPS, RATE, Log
+
+    xy = load_mechanism("xy_stage")
+    slew = {"x": xy.drives[0].slew_rate, "y": 2e-3}   # y ramps over several steps and ticks
+    bank = FilterBank(DRIVES, [DriveLimits(d.stroke[0], d.stroke[1], slew[d.name])
+                               for d in xy.drives])
+    sim = Simulation(xy, dt=DT, relinearize_tol=RELINEARIZE_TOL)
+    itf = StageInterface(xy, "realtime")
+    loop = SteppingLoop(sim, bank, itf, [None] * len(itf.tick_topics), RecordingSession(Log()),
+                        Log(), time_mode="realtime", rate=RATE, dt=DT, wake_spin=0.0, nice=0)
+    commands = [(1e-6, 0.0), (1e-6, 5e-7), (1e-6 + 3e-9, 5e-7), (0.0, 1e-6), (0.0, 1e-6),
+                (2e-6, 0.0), (2e-6, 0.0)]
+    for tick in commands:
+        for f, value in zip(bank.filters, tick):
+            if value != f.target:
+                f.submit_many([value])
+        loop._advance_engine()
+    ref = Simulation(xy, dt=DT, relinearize_tol=RELINEARIZE_TOL)
+    applied = np.zeros(2)
+    step = np.array([slew[d] * DT for d in DRIVES])
+    for tick in commands:
+        for _ in range(N_STEPS):
+            applied = applied + np.clip(np.array(tick) - applied, -step, step)
+            ref.set_command(applied)
+            ref.step(1)
+    assert sim.state.t == ref.state.t
+    np.testing.assert_array_equal(sim.state.z, ref.state.z)
+    np.testing.assert_array_equal(sim.state.v, ref.state.v)
+    np.testing.assert_array_equal(sim.state.command, applied)

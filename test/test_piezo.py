@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 
 from conftest import ROOT
 from flexure_sim.engine import piezo, piezo_run
+from flexure_sim.engine.actuation import rigid_stacks
 from flexure_sim.engine.config import ConfigError, load_mechanism, mechanism_from_dict
 from flexure_sim.engine.mechanism import Drive
 from flexure_sim.engine.piezo import CreepElement, PiezoSpec
@@ -138,8 +139,8 @@ def test_output_loss_under_load_is_the_series_spring_formula():
 
 def test_load_stiffness_is_the_stage_tangent_at_rest():
     """Linearisation's tangent against the guide's beam formula and Newton statics."""
-    sim = Simulation(load_mechanism(EXAMPLE))
-    k = piezo_run.load_stiffness(sim)
+    k = piezo_run.load_stiffness(Simulation(load_mechanism(EXAMPLE)))
+    sim = Simulation(rigid_stacks(load_mechanism(EXAMPLE)))  # statics: the stage, rigid drive
     E, w, t, L = 69.0e9, 0.010, 0.001, 0.015
     assert k == pytest.approx(2 * 12 * E * (w * t**3 / 12) / L**3, rel=1e-9)
     u = 1e-9

@@ -24,7 +24,8 @@ class State:
     numbers (u is 0 for a force drive); with several, u holds one value per displacement drive
     and command one per drive (``Model.drive_names`` order). Energy bookkeeping since the last
     reset: dissipated (J) by hinge damping and drive_work (J) done by the drives and the
-    prescribed coordinates.
+    prescribed coordinates. actuator: the piezo actuators' states (engine/actuation.py; None:
+    at rest, or no actuator); held: their free strokes x_a (m) held over the last step.
     """
 
     t: float
@@ -34,12 +35,16 @@ class State:
     command: Union[float, np.ndarray] = 0.0
     dissipated: float = 0.0
     drive_work: float = 0.0
+    actuator: Optional[np.ndarray] = None
+    held: Optional[np.ndarray] = None
 
     def copy(self) -> "State":
         return replace(self, z=self.z.copy(), v=self.v.copy(), u=np.copy(self.u)
                        if isinstance(self.u, np.ndarray) else self.u,
                        command=np.copy(self.command)
-                       if isinstance(self.command, np.ndarray) else self.command)
+                       if isinstance(self.command, np.ndarray) else self.command,
+                       actuator=None if self.actuator is None else self.actuator.copy(),
+                       held=None if self.held is None else self.held.copy())
 
 
 @dataclass

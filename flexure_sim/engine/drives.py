@@ -7,18 +7,79 @@ A mechanism has any number of named drives (``mechanism.Drive``), in constraint 
   u_d, the actuator output, follows the drive's command c_d as a first-order lag of its own,
   du_d/dt = (c_d - u_d) / tau_d; the u_d are integrated states (y = (z_F, v_F, u));
 - a **force drive** j applies the generalized force e_j f_j (virtual work; e_j its direction)
-  on coordinates that stay free; the commanded force f_j is held as it is (no lag).
+  on coordinates that stay free; the commanded force f_j is held as it is (no lag);
+- a **stack drive** s, a displacement drive whose piezo ``actuator:`` block has a finite stack
+  stiffness k_s (engine/actuation.py): its body's coordinate along the axis is free (its other
+  coordinates held as a displacement drive holds them) and the stack acts as a spring between
+  the actuator's free stroke x_s (held over a step) and the body:
+  Q += e_s k_s (x_s - e_s . (z - z0)), potential 1/2 k_s (x_s - e_s . (z - z0))^2 (piezo.py P7).
 
 The stepping kernel takes the commands in *actuator order*: the displacement drives' commands,
-then the force drives' forces (``actuator_command``). A state keeps u and the commands in the
-simplest form: a number for a single actuator (single drive), a vector otherwise
+then the force drives' forces, then the stack drives' free strokes (``actuator_command``; an
+actuated drive's entry is its actuator's free stroke, not the user's command: actuation.py).
+A state keeps u and the commands in the simplest form: a number for a single actuator (single
+drive), a vector otherwise
 (``state_u``; ``Simulation.set_command``).
 """
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
 from typing import Optional, Union
 
 import numpy as np
+
+from .piezo import PiezoSpec
+
+
+def stacked(drive) -> bool:
+    """Tell whether a drive is a stack drive: a displacement drive with a finite stack k_s."""
+    return (drive.kind == "displacement" and drive.actuator is not None
+            and not math.isinf(drive.actuator.stiffness))
+
+
+def transparent(spec) -> bool:
+    """
+    Tell whether an actuator block is the identity (a drive without it behaves the same).
+
+    A nominal-displacement command, no hysteresis, no creep, unlimited bandwidth, rigid stack:
+    x_a = x_c (P1, P3, P6 with h = c_i = 0); such a drive skips the actuator so that its results
+    are bit-identical to a drive without the block (not merely equal to rounding).
+    """
+    return (spec is None or (spec.command == "displacement" and spec.alpha == 0.0
+                             and not spec.creep and not spec.lagged
+                             and math.isinf(spec.stiffness)))
+
+
+@dataclass(frozen=True)
+class Actuated:
+    """
+    One drive with a (non-identity) actuator.
+
+    ``drive``: its index (``Model.drive_names`` order); ``slot``: its entry in the kernel's
+    command vector (actuator order); ``states``: its slice of ``State.actuator``; ``stack``:
+    whether it is a stack drive (finite k_s).
+    """
+
+    drive: int
+    slot: int
+    spec: PiezoSpec
+    states: slice
+    stack: bool
+
+
+def actuated(model: "DriveMixin") -> tuple[Actuated, ...]:
+    """Return the drives of ``model`` whose actuator block is not the identity."""
+    order = list(model.actuator_command(np.arange(len(model.drives), dtype=float)).astype(int))
+    out, offset = [], 0
+    for k, d in enumerate(model.drives):
+        if d.kind != "displacement" or transparent(d.actuator):
+            continue
+        size = d.actuator.size
+        out.append(Actuated(k, order.index(k), d.actuator, slice(offset, offset + size),
+                            stacked(d)))
+        offset += size
+    return tuple(out)
 
 
 class DriveMixin:
@@ -42,7 +103,28 @@ class DriveMixin:
             self.drive_directions[self.force_index], dtype=float).reshape(
                 len(self.force_index), len(self.z0))
         self.force_z0 = self.force_dir @ self.z0
-        self._order = np.concatenate([self.displacement_index, self.force_index]).astype(int)
+        #: Per stack drive: direction e_s (rows), e_s . z0 and the stack stiffness k_s (N/m).
+        self.stack_dir = np.ascontiguousarray(
+            self.drive_directions[self.stack_index], dtype=float).reshape(
+                len(self.stack_index), len(self.z0))
+        self.stack_z0 = self.stack_dir @ self.z0
+        self.stack_k = np.array([self.drives[k].actuator.stiffness for k in self.stack_index],
+                                dtype=float)
+        #: sum_s k_s e_s e_s^T: minus the stack springs' exact dQ/dz (None without stacks).
+        self.stack_K = (self.stack_dir.T * self.stack_k) @ self.stack_dir if len(
+            self.stack_index) else None
+        self._order = np.concatenate([self.displacement_index, self.force_index,
+                                      self.stack_index]).astype(int)
+        #: The drives with a (non-identity) piezo actuator (engine/actuation.py).
+        self.actuation = actuated(self)
+
+    def require_rigid(self, what: str) -> None:
+        """Raise ValueError naming the drives with a finite stack, which ``what`` cannot handle."""
+        if len(self.stack_index):
+            names = ", ".join(self.drive_names[k] for k in self.stack_index)
+            raise ValueError(f"{what}: drive {names} has a finite-stiffness piezo stack, whose "
+                             "input is its actuator's free stroke; use the stage with rigid "
+                             "stacks (actuation.rigid_stacks) or step to a steady state")
 
     @property
     def n_actuators(self) -> int:
@@ -72,6 +154,8 @@ class DriveMixin:
 
     def actuator_u(self, u) -> np.ndarray:
         """One actuator output per displacement drive from a state's u (number or vector)."""
+        if np.ndim(u) == 0:  # a state's number: np.full is ~10x cheaper than broadcasting
+            return np.full(self.n_actuators, float(u))
         return np.broadcast_to(np.asarray(u, dtype=float), (self.n_actuators,)).astype(float)
 
     def state_u(self, u: np.ndarray) -> Union[float, np.ndarray]:

@@ -117,16 +117,19 @@ def jump_work(model: Model, s: State, command) -> float:
     return float(0.5 * model.mass[P] @ (vP * vP - s.v[P] * s.v[P]))
 
 
-def step(model: Model, data: Data, n: int = 1) -> None:
+def step(model: Model, data: Data, n: int = 1, command=None) -> None:
     """
     Advance ``data`` n fixed steps with the drives' commands held at state.command.
+
+    ``command``: the kernel's command vector (actuator order) to hold instead of the state's
+    (the piezo actuators' free strokes, engine/actuation.py).
 
     Time is origin + k dt, k the steps taken since the origin (the t of a state this data
     did not step itself), not a running sum: t stays on the step grid however long the
     run, so stamps derived from it stay on the tick grid.
     """
     s = data.state
-    command = model.actuator_command(s.command)
+    command = model.actuator_command(s.command) if command is None else command
     key = command.tobytes()
     clock = data.clock
     if clock is None or clock[0] is not s:

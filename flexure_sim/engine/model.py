@@ -36,7 +36,7 @@ from . import stepping
 from .assembly import Assembly
 from .compression import compression_points, point_displacement
 from .damping_models import damping_matrix
-from .drives import DriveMixin
+from .drives import DriveMixin, stacked
 from .mechanism import COORDINATE_NAMES, Drive, Fixed, Mechanism, SineRate
 
 #: Default fixed step (s): 10 steps per millisecond.
@@ -74,6 +74,9 @@ def partition(mech: Mechanism) -> Partition:
         i = mech.body_index(c.body)
         if isinstance(c, Fixed):
             prescribed.update(3 * i + k for k in range(3))
+        elif isinstance(c, Drive) and c.kind == "displacement" and stacked(c):
+            if c.coordinate is None:  # the axis coordinate free (the stack pulls), rest held
+                prescribed.update(3 * i + k for k in range(3) if k != _axis_coordinate(c))
         elif isinstance(c, Drive) and c.kind == "displacement":
             if c.coordinate is None:
                 prescribed.update(3 * i + k for k in range(3))  # along the axis, rest held
@@ -90,6 +93,21 @@ def partition(mech: Mechanism) -> Partition:
         np.zeros((len(P), 0)))
     du = D[:, 0].copy() if D.shape[1] == 1 else np.zeros(len(P))
     return Partition(F, P, du, [(pos[k], c) for k, c in timed], D)
+
+
+def _axis_coordinate(drive: Drive) -> int:
+    """
+    Return the coordinate (0: x, 1: y) a stack drive's axis runs along.
+
+    A finite stack frees its body along the axis and holds the other coordinates as the rigid
+    drive does, so the axis must be a coordinate axis (else ValueError naming the drive).
+    """
+    ax = np.abs(np.asarray(drive.axis, dtype=float))
+    for k in (0, 1):
+        if ax[k] == 1.0 and ax[1 - k] == 0.0:
+            return k
+    raise ValueError(f"drive {drive.name!r}: an actuator with a finite stack stiffness needs an "
+                     f"axis along x or y (or a coordinate), got axis {tuple(drive.axis)}")
 
 
 class Model(DriveMixin):
@@ -136,7 +154,11 @@ class Model(DriveMixin):
         self.drive_directions = np.array([d.direction(mechanism) for d in self.drives]
                                          ).reshape(len(self.drives), 3 * len(mechanism.bodies))
         self.displacement_index = np.array(
-            [k for k, d in enumerate(self.drives) if d.kind == "displacement"], dtype=int)
+            [k for k, d in enumerate(self.drives) if d.kind == "displacement" and not stacked(d)],
+            dtype=int)
+        #: The stack drives (a piezo actuator of finite stiffness k_s: ``drives.stacked``).
+        self.stack_index = np.array([k for k, d in enumerate(self.drives) if stacked(d)],
+                                    dtype=int)
         self.force_index = np.array(
             [k for k, d in enumerate(self.drives) if d.kind == "force"], dtype=int)
         #: The single drive of a mechanism with one displacement drive and no other (the
@@ -203,7 +225,8 @@ class Model(DriveMixin):
         damping = self.damping if self.damping is not None else np.zeros((0, 0))
         return (part.free.astype(np.int64), part.prescribed.astype(np.int64), self.mass, zP0, D,
                 tau, sine_index, sine_amp, sine_w, sine_phase, self.force_dir, self.force_z0,
-                a._ia, a._ib, a._ca, a._cb, a.phia, a.phib, a._kind, a._W, a._C,
+                self.stack_dir, self.stack_z0, self.stack_k, a._ia, a._ib, a._ca, a._cb,
+                a.phia, a.phib, a._kind, a._W, a._C,
                 np.ascontiguousarray(damping))
 
     # ------------------------------------------------------------- coordinates
@@ -282,7 +305,10 @@ class Model(DriveMixin):
         u = y[2 * nF:2 * nF + nd]
         z, v, aP = self.full(y[:nF], y[nF:2 * nF], t, u, command)
         Q, potential, dissipation = self.generalized_forces(z, v)
-        applied = stepping.applied_forces(Q, z, command, nd, self.force_dir, self.force_z0)
+        applied, springs = stepping.applied_forces(Q, z, command, nd, self.force_dir,
+                                                   self.force_z0, self.stack_dir, self.stack_z0,
+                                                   self.stack_k)
+        potential += springs
         F = np.empty_like(y)
         F[:nF] = y[nF:2 * nF]
         F[nF:2 * nF] = Q[part.free] / self.mass_free
@@ -298,7 +324,8 @@ class Model(DriveMixin):
         Exact A = dF/dy for y = (z_F, v_F, u).
 
         Rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v), du_d/dt = (command_d - u_d)/tau_d, with z_P,
-        v_P depending on each u_d through D_d (the force drives' held forces do not depend on y);
+        v_P depending on each u_d through D_d (the force drives' held forces do not depend on y;
+        the stack springs add -k_s e e^T to dQ/dz);
         dQ/dv includes -C (``velocity_jacobian``), also through v_P. With ``load_gradient`` also
         G (rows g_d = dq_d/dy) of the drive loads q_d = D_d^T Q_P: (A, G); with ``damping`` also
         the damping matrix -dQ/dv over all coordinates (1/2 the Hessian of the dissipated power
@@ -313,6 +340,8 @@ class Model(DriveMixin):
         A = np.zeros((m, m))
         A[:nF, nF:2 * nF] = np.eye(nF)
         Kzz, Kvv = hf.dQ_dz, self.velocity_jacobian(hf.dQ_dv)
+        if self.stack_K is not None:  # the stack springs: dQ/dz = -k_s e e^T
+            Kzz = Kzz - self.stack_K
         FF = np.ix_(part.free, part.free)
         A[nF:2 * nF, :nF] = Kzz[FF] / mF[:, None]
         A[nF:2 * nF, nF:2 * nF] = Kvv[FF] / mF[:, None]

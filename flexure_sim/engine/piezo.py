@@ -119,6 +119,19 @@ def command_voltage(spec: PiezoSpec, command):
     return spec.v_min + (np.asarray(command, dtype=float) - spec.s_min) / spec.gain
 
 
+def command_limits(spec: PiezoSpec, stroke, slew_rate: float) -> tuple[float, float, float]:
+    """
+    Return a drive's stroke and slew-rate limits in its actuator's command unit: (lo, hi, rate).
+
+    ``stroke`` [s_min, s_max] (m) and ``slew_rate`` (m/s) are the drive's; a displacement
+    command keeps them, a voltage command maps them through (P1): [v_min, v_max] (V) and
+    slew_rate / d (V/s).
+    """
+    if spec.command == "voltage":
+        return spec.v_min, spec.v_max, float(slew_rate) / spec.gain
+    return float(stroke[0]), float(stroke[1]), float(slew_rate)
+
+
 def nominal_displacement(spec: PiezoSpec, voltage):
     """s_min + d (V - v_min): the displacement of an ideal actuator at voltage V (P1)."""
     return spec.s_min + spec.gain * (np.asarray(voltage, dtype=float) - spec.v_min)

@@ -103,6 +103,39 @@ def simulate(spec: PiezoSpec, times, commands, k_load: float = 0.0, t_eval=None,
     return PiezoRun(t_eval, command, states[0].copy(), states, x_a, x_out, np.asarray(force))
 
 
+def stepped(sim, drive: int, times, commands, every: int = 1) -> PiezoRun:
+    """
+    Step ``sim`` (a ``Simulation``) through the piecewise-linear command of drive ``drive``.
+
+    The dynamic counterpart of `simulate`: the whole mechanism (mass, damping, the stack
+    spring) in the engine's stepping (engine/actuation.py). The command is sampled at each
+    step's start and held over it; every ``every``-th step's end is returned, the command
+    paired with the output it produced. ``force`` is the stack's (P7; the drive force of a
+    rigid stack), ``output`` the driven body's displacement along the drive.
+    """
+    times = np.asarray(times, dtype=float)
+    commands = np.asarray(commands, dtype=float)
+    model = sim.model
+    actuated = [a for a in model.actuation if a.drive == drive]
+    if len(model.drives) != 1 or not actuated:
+        raise ValueError("stepped: needs a mechanism with one drive with an actuator block")
+    n = int(round((times[-1] - times[0]) / sim.dt))
+    held = np.interp(times[0] + np.arange(n) * sim.dt, times, commands)
+    keep = np.arange(every - 1, n, every)
+    spec, states = actuated[0].spec, np.empty((actuated[0].spec.size, len(keep)))
+    out, force, j = np.empty(len(keep)), np.empty(len(keep)), 0
+    for k in range(n):
+        sim.set_command(float(held[k]))
+        sim.step(1)
+        if j < len(keep) and k == keep[j]:
+            snap = sim.snapshot()
+            out[j], force[j] = snap.drive_positions[drive], snap.drive_stack_forces[drive]
+            states[:, j] = sim.state.actuator[actuated[0].states]
+            j += 1
+    return PiezoRun(times[0] + (keep + 1) * sim.dt, held[keep], states[0].copy(), states,
+                    np.asarray(piezo.free_stroke(spec, states)), out, force)
+
+
 def triangle(spec: PiezoSpec, frequency: float, cycles: int) -> tuple[np.ndarray, np.ndarray]:
     """
     Corners (times, commands) of a triangular command over the full range, from its minimum.
@@ -151,8 +184,13 @@ def load_stiffness(sim) -> float:
     k_L (N/m): the exact tangent of the drive force in the drive input at rest.
 
     The static gain of the ``drive_force`` output of the exact linearisation at rest
-    (engine/linear.py).
+    (engine/linear.py), of the mechanism with its stacks made rigid (``actuation.rigid_stacks``:
+    the stage alone, the load the stack works against).
     """
+    from .actuation import rigid_stacks
     from .linear import linearize, static_gain
+    from .solver import Simulation
 
+    if len(sim.model.stack_index):
+        sim = Simulation(rigid_stacks(sim.mechanism))
     return float(static_gain(linearize(sim, 0.0, wrenches=False), ["drive_force"])[0])

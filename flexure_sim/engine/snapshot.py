@@ -6,6 +6,7 @@ from typing import Optional
 
 import numpy as np
 
+from . import actuation
 from .data import State
 from .model import Model
 
@@ -32,6 +33,12 @@ class Snapshot:
     direction. The scalar drive_input, drive_command and drive_force are the first drive's (the
     single drive's, as before).
     outputs: {name: displacement from rest} of every output (``Model.output_values``).
+    Per drive with a piezo actuator (engine/actuation.py; NaN for the others): drive_voltages,
+    the amplifier's output V_a (V); drive_free_strokes, the free stroke x_a (m, piezo.py P6);
+    drive_stack_forces, the force the stack transmits (N: k_s (x_a - x_out) for a finite
+    stack, P7, held x_a; the drive force of a rigid one). Its command is in drive_commands (V
+    for ``command: voltage``), its applied displacement x_out in drive_positions (also its
+    drive_inputs entry for a finite stack). potential_energy includes the stack springs'.
     """
 
     t: float
@@ -54,6 +61,9 @@ class Snapshot:
     drive_positions: np.ndarray = field(default_factory=lambda: np.zeros(0))
     outputs: dict = field(default_factory=dict)
     drive_commands: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    drive_voltages: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    drive_free_strokes: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    drive_stack_forces: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
@@ -65,13 +75,17 @@ def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
     """
     Q, deflections, wrenches, energy, _ = model.assembly.report(s.z, s.v)
     Q = model.add_damping(Q, s.v)[0]  # the drive forces see the damping matrix too
-    _, _, aP = model.prescribed(s.t, s.u, model.actuator_command(s.command))
+    command = (actuation.kernel_command(model, s) if model.actuation
+               else model.actuator_command(s.command))
+    _, _, aP = model.prescribed(s.t, s.u, command)
     if inputs is None:
         inputs = model.state_inputs(s.u, s.command)
     else:
         aP = np.zeros_like(aP)  # a static state: at rest
+    inputs = np.array(inputs, dtype=float)
     commands = np.broadcast_to(np.asarray(s.command, dtype=float), (len(model.drives),))
     forces = model.drive_forces(s.z, s.v, aP, Q, inputs)
+    piezo = actuation.report(model, s, forces, inputs)  # fills the stack drives' entries
     positions = model.drive_positions(s.z)
     nb = len(model.mechanism.bodies)
     return Snapshot(
@@ -86,7 +100,7 @@ def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
         output=model.output_displacement(s.z),
         compression=model.hinge_compression(s.z),
         kinetic_energy=float(0.5 * np.sum(model.mass * s.v**2)),
-        potential_energy=energy,
+        potential_energy=energy + piezo.pop("stack_energy"),
         dissipated=s.dissipated,
         drive_work=s.drive_work,
         drive_names=model.drive_names,
@@ -95,4 +109,5 @@ def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
         drive_positions=positions,
         outputs=dict(zip(model.output_names, model.output_values(s.z).tolist())),
         drive_commands=commands.copy(),
+        **piezo,
     )

@@ -22,7 +22,7 @@ from typing import Optional, Union
 
 import numpy as np
 
-from . import dynamics, statics
+from . import actuation, statics
 from .compression import stiffness_centre
 from .data import Data, State, StepStats
 from .mechanism import Mechanism
@@ -99,18 +99,21 @@ class Simulation:
         """
         Advance n fixed steps with the drives' commands held at state.command (``dynamics.step``).
 
-        T stays on the step grid.
+        T stays on the step grid. Drives with a piezo actuator step it too (``actuation.step``).
         """
-        dynamics.step(self.model, self.data, n)
+        actuation.step(self.model, self.data, n)
 
     def set_command(self, command) -> None:
         """
         Set the drives' targets.
 
         A displacement drive's target is its actuator output's (m along its axis, rad on theta),
-        a force drive's its force (N, N m on theta). A number (a single drive), or one value per
-        drive (a sequence in ``model.drive_names`` order or a {name: value} mapping); each must
-        be finite (ValueError naming the drive). Held until the next call.
+        a force drive's its force (N, N m on theta); a drive with a piezo ``actuator:`` block
+        takes its actuator's command (V for ``command: voltage``, else the nominal m; the
+        engine does not clamp it: ``piezo.command_limits`` gives the stroke in that unit). A
+        number (a single drive), or one value per drive (a sequence in ``model.drive_names``
+        order or a {name: value} mapping); each must be finite (ValueError naming the drive).
+        Held until the next call.
         """
         if np.ndim(command) == 0 and not isinstance(command, dict) and not np.isfinite(command):
             raise ValueError(f"drive command must be finite, got {command!r}")

@@ -56,6 +56,7 @@ def static(model: Model, u, t: float = 0.0, tol: float = 1e-13,
     (relative to the mechanism's size). Without free coordinates (every body fixed or
     driven) the prescribed pose is the equilibrium: 0 iterations, forces as reported.
     """
+    model.require_rigid("static equilibrium")
     inputs = model.drive_inputs(u)
     zF, iterations = newton(model, inputs, t, model.z0[model.part.free].copy(), None, tol,
                             max_iter)[:2]
@@ -75,6 +76,7 @@ def static_sweep(model: Model, inputs, t: float = 0.0, tol: float = 1e-13) -> St
     Each started from the previous one and reusing the factorised stiffness while Newton keeps
     contracting fast.
     """
+    model.require_rigid("static sweep")
     inputs = np.asarray(inputs, dtype=float)
     if not np.all(np.isfinite(inputs)):
         raise ValueError("drive inputs must be finite")
@@ -133,6 +135,7 @@ def static_gain(model: Model, t: float = 0.0) -> np.ndarray:
     force drive applies e_d: dz_F = -K_FF^-1 e_dF (the linearised equilibrium Q_F + E_F f = 0).
     Output k moves by c_k . dz.
     """
+    model.require_rigid("static gain")
     z = _z_static(model, model.z0[model.part.free].copy(), t, np.zeros(len(model.drives)))
     K = model.assembly.forces(z, np.zeros_like(z), jacobian=True).dQ_dz
     F, P = model.part.free, model.part.prescribed

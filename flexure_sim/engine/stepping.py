@@ -69,12 +69,18 @@ def prescribed_motion(t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, 
 
 
 @njit(cache=True, inline="always")
-def applied_forces(Q, z, command, n_actuators, force_dir, force_z0):
+def applied_forces(Q, z, command, n_actuators, force_dir, force_z0, stack_dir, stack_z0,
+                   stack_k):
     """
-    Add the force drives' generalized forces sum_j e_j f_j to Q; return sum_j f_j e_j . (z - z0).
+    Add the force drives' and the stack springs' forces to Q; return (applied, springs).
 
-    f_j = command[n_actuators + j] (held over a step), e_j = row j of force_dir (virtual
-    work); the returned potential of the held forces changes by exactly their work.
+    Force drives: sum_j e_j f_j, f_j = command[n_actuators + j] (held over a step), e_j = row
+    j of force_dir (virtual work); ``applied`` = sum_j f_j e_j . (z - z0), the held forces'
+    potential, changes by exactly their work. Stack drives s (``drives.stacked``, after the
+    force drives in ``command``): the spring k_s between the held free stroke x_s and the
+    body, Q += e_s k_s (x_s - e_s . (z - z0)) (piezo.py P7); ``springs`` = sum_s 1/2 k_s
+    (x_s - e_s . (z - z0))^2, their potential (part of the mechanism's: with x_s held it is
+    conservative; a change of x_s between steps is the actuator's work, actuation.py).
     """
     applied = 0.0
     for j in range(force_dir.shape[0]):
@@ -84,7 +90,17 @@ def applied_forces(Q, z, command, n_actuators, force_dir, force_z0):
             Q[i] += force_dir[j, i] * f
             travel += force_dir[j, i] * z[i]
         applied += f * travel
-    return applied
+    springs = 0.0
+    first = n_actuators + force_dir.shape[0]
+    for j in range(stack_dir.shape[0]):
+        stretch = command[first + j] + stack_z0[j]
+        for i in range(Q.shape[0]):
+            stretch -= stack_dir[j, i] * z[i]
+        f = stack_k[j] * stretch
+        for i in range(Q.shape[0]):
+            Q[i] += stack_dir[j, i] * f
+        springs += 0.5 * f * stretch
+    return applied, springs
 
 
 @njit(cache=True)
@@ -95,12 +111,14 @@ def kernel_rhs(y, t, command, args):
     y = (z_F, v_F, u) with one u per displacement drive; command: the displacement drives'
     commands, then the force drives' forces (``Model.actuator_command``).
     args = (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase,
-    force_dir, force_z0, ia, ib, ca, cb, phia, phib, kind, W, C, damping) -- see
+    force_dir, force_z0, stack_dir, stack_z0, stack_k, ia, ib, ca, cb, phia, phib, kind, W, C,
+    damping) -- see
     Model._kernel_args; ``damping``: the mechanism's damping matrix (0 x 0 without one),
     Q -= damping v and dissipation += v^T damping v (``Model.add_damping``).
     """
     (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, force_dir,
-     force_z0, ia, ib, ca, cb, phia, phib, kind, W, C, damping) = args
+     force_z0, stack_dir, stack_z0, stack_k, ia, ib, ca, cb, phia, phib, kind, W, C,
+     damping) = args
     nF = free.shape[0]
     nd = tau.shape[0]
     u = y[2 * nF:2 * nF + nd]
@@ -125,7 +143,9 @@ def kernel_rhs(y, t, command, args):
         cv = damping @ v
         Q -= cv
         dissipation += v @ cv
-    applied = applied_forces(Q, z, command, nd, force_dir, force_z0)
+    applied, springs = applied_forces(Q, z, command, nd, force_dir, force_z0, stack_dir,
+                                      stack_z0, stack_k)
+    potential += springs
     m = y.shape[0]
     out = np.empty(m + AUX_LOAD + nd)  # F and the energy rates: one allocation
     F = out[:m]

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from ..engine.piezo import command_limits as command_limits_of
+
 
 def command_kind(drive: Any) -> str:
     """
@@ -25,15 +27,13 @@ def command_limits(drive: Any) -> tuple[float, float, float]:
     """
     Return a drive's (stroke_min, stroke_max, slew_rate) in its command's unit.
 
-    The mechanism file's stroke and slew rate; a voltage command's stroke is the actuator's
-    [v_min, v_max] (the voltages of the stroke's ends, by definition: engine/config_actuator.py)
-    and its slew rate slew_rate / d, d the nominal gain (piezo.py, P1), in V/s.
+    The mechanism file's stroke and slew rate; with an ``actuator:`` block, in its command's
+    unit (`piezo.command_limits`: a voltage command's [v_min, v_max] V and slew_rate / d V/s).
     """
-    lo, hi, rate = float(drive.stroke[0]), float(drive.stroke[1]), float(drive.slew_rate)
-    if command_kind(drive) != "voltage":
-        return lo, hi, rate
-    spec = drive.actuator
-    return float(spec.v_min), float(spec.v_max), rate / spec.gain
+    if getattr(drive, "actuator", None) is None:
+        return float(drive.stroke[0]), float(drive.stroke[1]), float(drive.slew_rate)
+    return tuple(float(v) for v in command_limits_of(drive.actuator, drive.stroke,
+                                                     drive.slew_rate))
 
 
 def units(drive: Any) -> tuple[str, str]:

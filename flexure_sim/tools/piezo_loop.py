@@ -2,7 +2,7 @@
 ``flexure-sim piezo-loop``: the hysteresis loop of a drive's piezo actuator (engine/piezo.py).
 
 flexure-sim piezo-loop config/examples/piezo_stage.yaml [--drive NAME] [--frequency HZ]
-                [--cycles N] [--load N/m] [-o loop.png] [--json]
+                [--cycles N] [--load N/m] [--dynamic [--dt S]] [-o loop.png] [--json]
 
 A triangular command over the actuator's full range (v_min .. v_max, or the stroke's ends for
 a displacement command) drives the actuator against the stage's stiffness along the drive (the
@@ -10,6 +10,10 @@ exact tangent at rest, or ``--load``); the applied displacement is plotted again
 and the loop's width at the centre of the range is printed with the analytic steady Bouc-Wen
 loop's (the series spring's share of it, P8), which it equals when there is no creep and the
 amplifier is fast compared with the triangle.
+
+``--dynamic`` steps the whole mechanism instead (the engine's stepping with the actuator,
+engine/actuation.py: the stage's mass and damping, the stack as a spring), the command held
+over each step of ``--dt``; the load is then the mechanism itself (``--load`` is refused).
 """
 from __future__ import annotations
 
@@ -23,7 +27,7 @@ import numpy as np
 from ..engine import piezo, piezo_run
 from ..engine.config import load_mechanism
 from ..engine.mechanism import Drive
-from ..engine.solver import Simulation
+from ..engine.solver import DEFAULT_STEP, Simulation
 from ..errors import FlexureSimError
 
 EXIT_OK, EXIT_USAGE = 0, 2
@@ -53,8 +57,20 @@ def loop_summary(args) -> tuple[dict, piezo_run.PiezoRun]:
     if args.points < 100:
         raise ValueError(f"--points {args.points}: need at least 100 per cycle")
     times, commands = piezo_run.triangle(spec, args.frequency, args.cycles)
-    t_eval = np.linspace(times[0], times[-1], args.points * args.cycles + 1)
-    run = piezo_run.simulate(spec, times, commands, k_load, t_eval)
+    if args.dynamic:
+        if args.load is not None:
+            raise ValueError("--load: not with --dynamic (the stepped stage is the load)")
+        sim = Simulation(mech, dt=args.dt)
+        steps = int(round(args.cycles / args.frequency / sim.dt))
+        if steps > 2_000_000:
+            raise ValueError(f"--dynamic: {steps} steps of {sim.dt:g} s; raise --frequency or "
+                             "--dt, or lower --cycles")
+        every = max(1, steps // (args.points * args.cycles))
+        run = piezo_run.stepped(sim, sim.model.drive_names.index(drive.name), times, commands,
+                                every)
+    else:
+        t_eval = np.linspace(times[0], times[-1], args.points * args.cycles + 1)
+        run = piezo_run.simulate(spec, times, commands, k_load, t_eval)
     centre = 0.5 * (spec.v_min + spec.v_max)
     width = piezo_run.loop_width(run.voltage, run.output, centre)
     half = piezo.steady_loop_half_width(spec, 0.5 * (spec.v_max - spec.v_min))
@@ -68,6 +84,7 @@ def loop_summary(args) -> tuple[dict, piezo_run.PiezoRun]:
         "loop_width_fraction": width / stroke, "stroke": stroke,
         "peak_output": float(np.max(run.output)), "peak_force": float(np.max(run.force)),
         "creep": bool(spec.creep), "bandwidth": spec.bandwidth,
+        "dynamic": bool(args.dynamic), "dt": args.dt if args.dynamic else None,
     }
     return out, run
 
@@ -85,7 +102,8 @@ def plot_loop(out: dict, run: piezo_run.PiezoRun, spec, path: Path) -> None:
     ax.plot(run.command, ideal, ":", color="0.5", lw=1.0, label="without hysteresis and creep")
     ax.set_xlabel(f"command [{unit}]")
     ax.set_ylabel("applied displacement [m]")
-    ax.set_title(f"{out['mechanism']}, drive {out['drive']!r}: {out['cycles']} cycles at "
+    how = f"stepped, dt {out['dt']:g} s" if out["dynamic"] else "quasi-static"
+    ax.set_title(f"{out['mechanism']}, drive {out['drive']!r} ({how}): {out['cycles']} cycles at "
                  f"{out['frequency']:g} Hz, load {out['load_stiffness']:.4g} N/m\n"
                  f"loop width at {out['centre_voltage']:g} V: {out['loop_width']:.4g} m "
                  f"({100 * out['loop_width_fraction']:.3g} % of stroke)", fontsize=9)
@@ -141,5 +159,9 @@ def register(subparsers) -> None:
                    "N/m (default: the mechanism's exact tangent at rest; inf: blocked)")
     p.add_argument("-o", "--output", default="piezo_loop.png", help="PNG file (default "
                    "piezo_loop.png)")
+    p.add_argument("--dynamic", action="store_true", help="step the whole mechanism (mass, "
+                   "damping, stack spring) instead of the quasi-static series spring")
+    p.add_argument("--dt", type=float, default=DEFAULT_STEP, help="step with --dynamic, s "
+                   f"(default {DEFAULT_STEP:g})")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=run_loop)
