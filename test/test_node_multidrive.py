@@ -159,6 +159,15 @@ def test_each_drive_has_its_own_limits_counters_and_warnings(tmp_path, domain, p
         assert d["commands_y_rejected"] == "1" and d["commands_y_clamped"] == "0"
         assert int(d["commands_y_rate_limited"]) >= 1 and d["commands_x_received"] == "1"
         assert float(d["drive_x_target"]) == 1.5e-5
+        # The per-drive parameters describe themselves; the single-drive ones say they are unused.
+        from rcl_interfaces.srv import DescribeParameters
+        names = ["drives.x.stroke_max", "drives.y.slew_rate", "stroke_max"]
+        described = peer.call(DescribeParameters, "/stage_node/describe_parameters",
+                              DescribeParameters.Request(names=names)).descriptors
+        texts = [p.description for p in described]
+        assert texts[0].startswith("Drive x: upper end") and texts[0].endswith("[m]")
+        assert texts[1].startswith("Drive y: speed limit") and texts[1].endswith("[m/s]")
+        assert "Unused: each drive has its own drives.<name>.* limits" in texts[2]
         # A bad per-drive parameter is refused naming the drive.
         request = SetParameters.Request()
         request.parameters = [ParameterMsg(name="drives.x.slew_rate", value=ParameterValue(

@@ -6,7 +6,7 @@ displacement drive whose ``actuator:`` block says ``command: voltage`` (engine/p
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Optional
 
 from ..engine.piezo import command_limits as command_limits_of
 
@@ -36,11 +36,16 @@ def command_limits(drive: Any) -> tuple[float, float, float]:
                                                      drive.slew_rate))
 
 
+def coordinate_unit(coordinate: Optional[str], force: bool = False) -> str:
+    """SI unit of a displacement (or force) along an axis, or about theta."""
+    if coordinate == "theta":
+        return "N m" if force else "rad"
+    return "N" if force else "m"
+
+
 def units(drive: Any) -> tuple[str, str]:
     """(command unit, slew-rate unit) of a drive: m, rad, N, N m or V."""
     if command_kind(drive) == "voltage":
         return "V", "V/s"
-    unit = {("displacement", False): "m", ("displacement", True): "rad",
-            ("force", False): "N", ("force", True): "N m"}[
-        (drive.kind, drive.coordinate == "theta")]
+    unit = coordinate_unit(drive.coordinate, drive.kind == "force")
     return unit, f"{unit}/s"

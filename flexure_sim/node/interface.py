@@ -37,7 +37,7 @@ from .diagnostics_msg import (  # noqa: F401  (re-exported: one import for the n
     ERROR, OK, WARN, diagnostics_message, encode_diagnostics, stamp_msg, value_text)
 from .cdr import (
     ClockPacker, Float64Packer, StampedPacker, packing_applies, split_stamp)
-from .drive_kind import command_kind, units
+from .drive_kind import command_kind, coordinate_unit, units
 from .reference_messages import reference_messages, yaw_quaternion  # noqa: F401 (re-export)
 
 TIME_MODES = ("realtime", "fast", "lockstep")
@@ -123,13 +123,6 @@ def _spec(
 #: What a drive's command sets, by `drive_kind.command_kind`.
 _COMMANDED = {"displacement": "actuator displacement", "force": "force",
               "voltage": "piezo actuator voltage"}
-
-
-def _unit(coordinate: Optional[str], force: bool = False) -> str:
-    """SI unit of a displacement (or force) along an axis, or about theta."""
-    if coordinate == "theta":
-        return "N m" if force else "rad"
-    return "N" if force else "m"
 
 
 def _along(text: str, item: Any) -> str:
@@ -239,7 +232,7 @@ class StageInterface:
                 "body A, along the drive axis"))
         if self.has_output:
             specs.append(_spec(
-                "output", topics.OUTPUT, Float64, _unit(outputs[0].coordinate), "",
+                "output", topics.OUTPUT, Float64, coordinate_unit(outputs[0].coordinate), "",
                 _along(f"displacement of the output body {outputs[0].body} from rest",
                        outputs[0])))
         if self.has_sensor:
@@ -250,8 +243,8 @@ class StageInterface:
         for o in self.outputs:
             specs.append(_spec(
                 f"output:{o.name}", topics.output_displacement(o.name), Float64,
-                _unit(o.coordinate), "", _along(f"output {o.name}: displacement of body "
-                                                f"{o.body} from rest", o)))
+                coordinate_unit(o.coordinate), "",
+                _along(f"output {o.name}: displacement of body {o.body} from rest", o)))
         for d in self.drives:
             force = d.kind == "force"
             what = ("force applied (after validation and slew limiting)" if force else
@@ -259,16 +252,16 @@ class StageInterface:
                     "the actuator lag)")
             specs.append(_spec(
                 f"drive_input:{d.name}", topics.drive_input(d.name), Float64,
-                _unit(d.coordinate, force), "", _along(f"drive {d.name}: {what}", d)))
+                coordinate_unit(d.coordinate, force), "", _along(f"drive {d.name}: {what}", d)))
             if force:
                 specs.append(_spec(
                     f"drive_position:{d.name}", topics.drive_position(d.name), Float64,
-                    _unit(d.coordinate), "",
+                    coordinate_unit(d.coordinate), "",
                     _along(f"drive {d.name}: displacement of body {d.body} from rest", d)))
             else:
                 specs.append(_spec(
                     f"drive_force:{d.name}", topics.drive_force(d.name), Float64,
-                    _unit(d.coordinate, True), "",
+                    coordinate_unit(d.coordinate, True), "",
                     _along(f"drive {d.name}: force its actuator applies to body {d.body}", d)))
         if self.has_drive:
             specs.append(_spec(

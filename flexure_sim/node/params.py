@@ -51,15 +51,16 @@ class ParamSpec:
 
 def parameter_specs(
     drive_defaults: Optional[tuple[float, float, float]] = None,
+    unused_because: str = "the mechanism has no drive",
 ) -> list[ParamSpec]:
     """
     All parameters.
 
     ``drive_defaults`` = (stroke_min, stroke_max, slew_rate) of the mechanism's drive, or None when
-    it has no drive (the limits are then unused).
+    it has no drive (the limits are then unused, ``unused_because`` says why).
     """
     smin, smax, slew = drive_defaults if drive_defaults is not None else (0.0, 0.0, 1.0)
-    unused = "" if drive_defaults is not None else " Unused: the mechanism has no drive."
+    unused = "" if drive_defaults is not None else f" Unused: {unused_because}."
     return [
         ParamSpec(
             "mechanism",

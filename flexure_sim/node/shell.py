@@ -103,7 +103,8 @@ class StageNode(Node):
         self._named = named = named_drives(self.mechanism)
         drive = self.mechanism.drive if not named else None
         defaults = command_limits(drive) if drive else None
-        specs = parameter_specs(defaults)
+        specs = parameter_specs(defaults, "each drive has its own drives.<name>.* limits"
+                                if named else "the mechanism has no drive")
         self._specs = {s.name: s for s in (in_command_units(specs, drive) if drive else specs)
                        + drive_parameter_specs(named)}
         try:
