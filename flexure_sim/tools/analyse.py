@@ -23,6 +23,8 @@ from ..recording.command_line import report_reading, tool_errors, warn
 from ..recording.errors import EXIT_OK, EXIT_USAGE, RunError
 from ..topics import COMMAND, DRIVE_FORCE, DRIVE_INPUT, OUTPUT
 from . import analysis
+from .analyse_drives import analyse_drives, format_drives
+from .channels import is_single_drive
 from .options import add_file_arguments
 from .response_metrics import DEFAULT_BAND
 from .runlog import Run, load_run, require_stage_run
@@ -41,7 +43,8 @@ def register(subparsers: Any) -> None:
     )
     add_file_arguments(p)
     p.add_argument("--json", action="store_true",
-                   help="print a JSON list of steps (SI units; overshoot as a fraction)")
+                   help="print a JSON list of steps (SI units; overshoot as a fraction); with "
+                   "several drives or outputs an object with the gain matrix, pairs and steps")
     p.add_argument("--band", type=float, default=DEFAULT_BAND,
                    help="settling band as a fraction of the change (default 0.02)")
     p.add_argument("--no-static", action="store_true",
@@ -59,6 +62,13 @@ def _run(args: argparse.Namespace) -> int:
     run_ = load_run(args.run, recover=args.recover, namespace=args.namespace, strict=args.strict,
                     poses=False)
     report_reading(PROG, run_)
+    if not is_single_drive(run_.topics, run_.topic) and run_.drives():
+        result = analyse_drives(run_, band=args.band, static=not args.no_static)
+        for note in result["notes"]:
+            warn(PROG, note)
+        print(json.dumps(_jsonable(result), indent=1) if args.json
+              else format_drives(run_, result))
+        return EXIT_OK
     result = analyse_run(run_, band=args.band, static=not args.no_static)
     for note in result["notes"]:
         warn(PROG, note)
@@ -86,23 +96,36 @@ def _signal(run: Run, topic: str) -> Optional[tuple[np.ndarray, np.ndarray]]:
 
 def find_steps(run: Run) -> tuple[list[analysis.Step], str]:
     """Return the steps of the drive and where they were found (a topic name)."""
-    u = run.scalar(DRIVE_INPUT)
-    cmd = run.scalar(COMMAND)
+    return steps_of(run, COMMAND, DRIVE_INPUT, ("stroke_min", "stroke_max"))
+
+
+def steps_of(run: Run, command: str, applied: str, stroke_keys: tuple[str, str],
+             same_unit: bool = True) -> tuple[list[analysis.Step], str]:
+    """
+    Return the steps of one drive and where they were found (a topic name).
+
+    From its ``command`` topic if recorded (clamped to the stroke the metadata keys
+    ``stroke_keys`` give), else from its ``applied`` input (`analysis`). The target before
+    the first command is the first applied input if ``same_unit`` (command and input in one
+    unit), else 0 clamped to the stroke (a command in volts).
+    """
+    u = run.scalar(applied)
+    cmd = run.scalar(command)
     if cmd is not None and not cmd.empty:
         meta = run.metadata
         stroke = None
         try:
-            stroke = (float(meta["stroke_min"]), float(meta["stroke_max"]))
+            stroke = (float(meta[stroke_keys[0]]), float(meta[stroke_keys[1]]))
         except (KeyError, ValueError):
             pass
-        initial = float(u.values[0]) if u is not None and not u.empty else (
+        initial = float(u.values[0]) if same_unit and u is not None and not u.empty else (
             min(max(0.0, stroke[0]), stroke[1]) if stroke else 0.0)
         return analysis.command_steps(
             cmd.t, cmd.values, initial=initial, stroke=stroke
-        ), run.topic(COMMAND)
+        ), run.topic(command)
     if u is None or u.empty:
-        return [], run.topic(DRIVE_INPUT)
-    return analysis.input_steps(u.t, u.values), run.topic(DRIVE_INPUT)
+        return [], run.topic(applied)
+    return analysis.input_steps(u.t, u.values), run.topic(applied)
 
 
 def static_gains(run: Run, steps: list[analysis.StepMetrics]) -> tuple[dict[int, float], str]:

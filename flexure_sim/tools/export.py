@@ -14,7 +14,8 @@ between levels and ``[i]`` for array elements, as PlotJuggler names them
 (``pose/position/x``, ``poses[2]/orientation/z``). A ``diagnostic_msgs/KeyValue`` array
 becomes one column per key (``status[0]/values/real_time_factor``). Floats are written with
 full precision (Python repr). A topic without messages gets a file with the ``time`` column
-only.
+only. ``--signals`` also writes ``signals.csv``: every drive and output of the run in one
+table with named columns (`export_signals`).
 """
 from __future__ import annotations
 
@@ -46,6 +47,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--csv", metavar="DIR", required=True,
                    help="directory for the CSV files (created)")
     p.add_argument("--topics", nargs="+", metavar="TOPIC", help="export only these topics")
+    p.add_argument("--signals", action="store_true",
+                   help="also write signals.csv: every drive's command, input and force and "
+                   "every output, one named column each, one row per tick")
     p.set_defaults(handler=run)
 
 
@@ -85,9 +89,18 @@ def _run(args: argparse.Namespace) -> int:
         finally:
             for spool in spools.values():
                 spool.close()
-    print(f"wrote {len(written)} CSV file(s) to {out_dir}/:")
+    signals = None
+    if args.signals:
+        from .export_signals import write_signals
+        from .runlog import load_run
+
+        signals = write_signals(load_run(args.run, recover=args.recover, strict=args.strict,
+                                         poses=False), out_dir)
+    print(f"wrote {len(written) + (signals is not None)} CSV file(s) to {out_dir}/:")
     for path, rows, topic in written:
         print(f"  {path.name:34s} {rows:7d} rows  {reader.topics[topic].type}")
+    if signals is not None:
+        print(f"  {signals[0].name:34s} {signals[1]:7d} rows  drives and outputs, one column each")
     return EXIT_OK
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import Any
+from typing import Any, Optional
 
 from ..recording import LogInfo, log_info
 from ..recording.command_line import check_path, report_reading, tool_errors
@@ -146,6 +146,52 @@ def summarize(info: LogInfo) -> dict:
         "other_metadata_records": other_records,
         "dropped_messages": info.dropped_messages,
         "undecodable": dict(sorted(info.undecodable.items())) if info.decoded else None,
+        **drives_and_outputs(info),
+    }
+
+
+def drives_and_outputs(info: LogInfo) -> dict:
+    """
+    ``drives`` and ``outputs`` of a run with several drives or outputs (issue 13), else {}.
+
+    Each drive: name, kind, unit and its topics (command, input, force or position); each
+    output: name, unit, topic. A single-drive, single-output run reports nothing more.
+    """
+    from ..recording.errors import RunError
+    from .channels import drive_channels, is_single_drive, output_channels
+    from .mechanism_reload import load_recorded_mechanism
+    from .runlog import find_namespace
+
+    try:
+        ns = find_namespace(info)
+    except RunError:
+        return {}
+
+    def topic(rel: str) -> str:
+        return f"{ns}/{rel}"
+
+    meta = info.flexure_sim or {}
+    if is_single_drive(info.topics, topic):
+        return {}
+    mech = load_recorded_mechanism(meta)[0] if meta else None
+    drives = drive_channels(info.topics, topic, meta, mech)
+    outputs = output_channels(info.topics, topic, meta, mech)
+    if not drives and not outputs:
+        return {}
+
+    def limit(drive: str, key: str) -> Optional[str]:  # the node's per-drive parameters
+        return meta.get(f"drives.{drive}.{key}") if len(drives) > 1 or drives[0].command != \
+            "drive/displacement" else meta.get(key)
+
+    return {
+        "drives": [{"name": d.name, "kind": d.kind, "unit": d.unit, "command": topic(d.command),
+                    "command_unit": d.command_unit, "input": topic(d.input),
+                    "response": topic(d.response) if d.response else None,
+                    "response_unit": d.response_unit,
+                    "stroke_min": limit(d.name, "stroke_min"),
+                    "stroke_max": limit(d.name, "stroke_max"),
+                    "slew_rate": limit(d.name, "slew_rate")} for d in drives],
+        "outputs": [{"name": o.name, "unit": o.unit, "topic": topic(o.topic)} for o in outputs],
     }
 
 
@@ -189,6 +235,23 @@ def format_summary(s: dict, show_yaml: bool = False) -> str:
     rows = [[t["name"], t["type"], str(t["count"]), f"{t['rate_hz']:.6g}" if t["rate_hz"] else "-",
              (t["qos"]["reliability"] if t["qos"] else "-")] for t in s["topics"]]
     lines.append(columns(rows, ["topic", "type", "count", "rate [Hz]", "qos"], "<<>><"))
+    if s.get("drives") or s.get("outputs"):
+        lines.append("")
+        for d in s.get("drives", []):
+            response = f", {d['response']} [{d['response_unit']}]" if d["response"] else ""
+            cu = d["command_unit"]  # the node's limits are in the command's unit
+            limits = (f"; stroke [{d['stroke_min']}, {d['stroke_max']}] {cu}"
+                      if d["stroke_min"] is not None else "")
+            if d["slew_rate"] is not None:
+                limits += f", slew rate {d['slew_rate']} {cu}/s"
+            lines.append(f"{'Drives:' if d is s['drives'][0] else '':14s}{d['name']} "
+                         f"({d['kind']}, {d['unit']}{limits}): command {d['command']}"
+                         + (f" [{d['command_unit']}]" if d["command_unit"] != d["unit"] else "")
+                         + ", "
+                         f"input {d['input']}{response}")
+        for o in s.get("outputs", []):
+            lines.append(f"{'Outputs:' if o is s['outputs'][0] else '':14s}{o['name']} "
+                         f"({o['unit']}): {o['topic']}")
     lines.append("")
     mech = s["mechanism"]
     if mech is None:

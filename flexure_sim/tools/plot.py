@@ -14,6 +14,14 @@ Figures (those the run's topics allow):
 - ``drive_force.png``   "Drive force": the force the actuator applies;
 - ``body_poses.png``    "Body poses" (runs without a drive, e.g. the four-bars).
 
+A run with several drives or outputs (issue 13: ``drive/<name>/...``, ``output/<name>/...``)
+gets, instead of the input/output and drive force figures (`plot_drives`):
+
+- ``drives_outputs.png`` "Drives and outputs": one panel per drive (command and applied
+  input) and one per output, each labelled with its name and unit;
+- ``drive_forces.png``   "Drive forces": per drive, its actuator force (or, for a force
+  drive, its body's displacement).
+
 Each PNG carries its title in its metadata (``Title``). Matplotlib runs with the Agg backend.
 Matplotlib is optional (setup.py's extra ``plot``): without it the command says so in one
 line, before reading the run.
@@ -29,7 +37,9 @@ import numpy as np
 from ..recording.command_line import report_reading, tool_errors
 from ..recording.errors import EXIT_OK, RunError
 from ..topics import COMMAND, DRIVE_FORCE, DRIVE_INPUT, OUTPUT
+from .channels import is_single_drive
 from .options import add_file_arguments
+from .plot_drives import TITLES as DRIVE_TITLES, plot_drives, staircase as _staircase
 from .runlog import Run, load_run
 from .tables import time_unit
 
@@ -39,6 +49,7 @@ TITLES = {
     "hinge_wrenches": "Hinge wrenches",
     "drive_force": "Drive force",
     "body_poses": "Body poses",
+    **DRIVE_TITLES,
 }
 
 
@@ -123,10 +134,14 @@ def plot_run(run: Run, out_dir: Path, dpi: int = 120) -> list[tuple[Path, str]]:
         return t * scale
 
     # ---- input and output (Figure 6.3)
+    multi = not is_single_drive(run.topics, run.topic) and bool(run.drives() or run.outputs())
     out = run.scalar(OUTPUT)
     u = run.scalar(DRIVE_INPUT)
     cmd = run.scalar(COMMAND)
-    if out is not None or u is not None:
+    if multi:  # several drives or outputs: one panel each (plot_drives)
+        for fig, name, title in plot_drives(plt, run, tx, tlabel, mark_steps):
+            save(fig, name, title)
+    elif out is not None or u is not None:
         fig, (ax_in, ax_out) = plt.subplots(2, 1, sharex=True, figsize=(8, 6))
         if u is not None:
             ax_in.plot(tx(u.t), u.values * 1e6, label="drive input (applied)", color="C0")
@@ -235,7 +250,7 @@ def plot_run(run: Run, out_dir: Path, dpi: int = 120) -> list[tuple[Path, str]]:
 
     # ---- drive force
     force = run.scalar(DRIVE_FORCE)
-    if force is not None and not force.empty:
+    if force is not None and not force.empty and not multi:
         fig, ax = plt.subplots(figsize=(8, 4))
         ax.plot(tx(force.t), force.values, color="C4")
         ax.set_ylabel("drive force [N]")
@@ -249,7 +264,7 @@ def plot_run(run: Run, out_dir: Path, dpi: int = 120) -> list[tuple[Path, str]]:
 
     # ---- body poses (runs without a drive)
     poses = run.poses()
-    if poses and out is None and u is None:
+    if poses and out is None and u is None and not run.drives():
         fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 8))
         for name, p in poses.items():
             rest = p.values[0]
@@ -266,25 +281,18 @@ def plot_run(run: Run, out_dir: Path, dpi: int = 120) -> list[tuple[Path, str]]:
     return written
 
 
-def _staircase(t: np.ndarray, v: np.ndarray, t_end: float) -> tuple[np.ndarray, np.ndarray]:
-    """Step-plot points of a command held until the next one (non-finite ones dropped)."""
-    keep = np.isfinite(v)
-    t, v = t[keep], v[keep]
-    if t.shape[0] == 0:
-        return t, v
-    tt = np.append(t, max(t_end, float(t[-1])))
-    vv = np.append(v, v[-1])
-    return np.repeat(tt, 2)[1:-1], np.repeat(vv, 2)[:-2]
-
-
 def _step_times(run: Run) -> list[float]:
     from .analyse import find_steps
+    from .analyse_drives import drive_steps
 
     try:
-        steps, _ = find_steps(run)
+        if is_single_drive(run.topics, run.topic):
+            steps, _ = find_steps(run)
+        else:
+            steps = [s for d in run.drives() for s in drive_steps(run, d)[0]]
     except RunError:
         return []
-    return [s.t for s in steps]
+    return sorted(s.t for s in steps)
 
 
 def _settled_gains(run: Run) -> list[dict]:

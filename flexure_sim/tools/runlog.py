@@ -30,9 +30,10 @@ from ..recording import TopicInfo
 from ..recording.command_line import check_readable, open_log
 from ..recording.errors import EXIT_USAGE, RunError
 from ..topics import (
-    CLOCK, COMMAND, DRIVE_FORCE, DRIVE_INPUT, METADATA_NAME, OUTPUT, POSE_ARRAY, body_pose,
-    hinge_compression, hinge_wrench,
+    CLOCK, COMMAND, COMMAND_VOLTAGE, DRIVE_FORCE, DRIVE_INPUT, METADATA_NAME, OUTPUT, POSE_ARRAY,
+    body_pose, hinge_compression, hinge_wrench,
 )
+from .channels import DriveChannel, OutputChannel, drive_channels, output_channels
 from .mechanism_reload import hinge_frame_displacements, load_recorded_mechanism
 from .series import CLOCK_TYPE, FLOAT64, Series, SeriesBuilder
 from .timebase import TimeBase, time_base
@@ -40,7 +41,9 @@ from .timebase import TimeBase, time_base
 #: Topics whose presence marks the namespace of a stage run.
 _MARKERS = (OUTPUT, DRIVE_INPUT, POSE_ARRAY, DRIVE_FORCE)
 #: Topics (relative to the run's namespace) the time series are taken from.
-_SIGNALS = (OUTPUT, DRIVE_INPUT, COMMAND, DRIVE_FORCE)
+_SIGNALS = (OUTPUT, DRIVE_INPUT, COMMAND, COMMAND_VOLTAGE, DRIVE_FORCE)
+#: Leaves of the per-drive topics ``drive/<name>/<leaf>`` (several drives: `channels`).
+_DRIVE_LEAVES = ("input", "force", "position", "displacement", "voltage")
 
 
 @dataclass
@@ -199,6 +202,20 @@ class Run:
         self._cache["poses"] = out
         return out
 
+    def drives(self) -> list[DriveChannel]:
+        """Return the drives of the run, with their topics and units (`channels`)."""
+        if "drives" not in self._cache:
+            self._cache["drives"] = drive_channels(self.topics, self.topic, self.metadata,
+                                                   self.mechanism())
+        return self._cache["drives"]
+
+    def outputs(self) -> list[OutputChannel]:
+        """Return the outputs of the run, with their topics and units (`channels`)."""
+        if "outputs" not in self._cache:
+            self._cache["outputs"] = output_channels(self.topics, self.topic, self.metadata,
+                                                     self.mechanism())
+        return self._cache["outputs"]
+
     # ------------------------------------------------------------------ mechanism
     def mechanism(self) -> Any:
         """
@@ -255,6 +272,10 @@ def find_namespace(log: Any, requested: Optional[str] = None) -> str:
         for marker in _MARKERS:
             if name.endswith("/" + marker):
                 found.add(name[: -len(marker) - 1])
+        parts = name.split("/")
+        if len(parts) >= 4 and ((parts[-3], parts[-1]) == ("drive", "input")
+                                or (parts[-3], parts[-1]) == ("output", "displacement")):
+            found.add("/".join(parts[:-3]))  # drive/<name>/input, output/<name>/displacement
     if len(found) > 1:
         stages = ", ".join(sorted(n or "/" for n in found))
         raise RunError(f"{path}: topics of several stages ({stages}); choose one with "
@@ -288,6 +309,9 @@ def _needed(rel: str, poses: bool) -> bool:
     if rel in _SIGNALS:
         return True
     if len(parts) == 3 and parts[0] == "hinges" and parts[2] in ("wrench", "compression"):
+        return True
+    if len(parts) == 3 and ((parts[0] == "drive" and parts[2] in _DRIVE_LEAVES)
+                            or (parts[0] == "output" and parts[2] == "displacement")):
         return True
     return poses and (rel == POSE_ARRAY or (len(parts) == 3 and parts[0] == "bodies"
                                             and parts[2] == "pose"))
@@ -343,6 +367,8 @@ def load_run(
 def require_stage_run(run: Run, what: str) -> None:
     """Raise RunError unless the run has the topics ``what`` needs (output, drive input)."""
     missing = [run.topic(t) for t in (OUTPUT, DRIVE_INPUT) if not run.has(t)]
+    if missing and run.drives() and run.outputs():
+        return  # several drives or outputs: drive/<name>/input, output/<name>/displacement
     if missing:
         mech = f" (mechanism {run.mechanism_name})" if run.mechanism_name else ""
         raise RunError(
