@@ -1,4 +1,5 @@
 """Shared test fixtures. The repository root is importable so tests run against the source tree."""
+import os
 import sys
 from pathlib import Path
 
@@ -7,6 +8,12 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
+#: The test process's DDS writers announce unacknowledged samples every 1 ms (the shipped
+#: profile), so a peer can wait for the stage's acknowledgement of a command
+#: (node_harness.Peer.publish_acked) in milliseconds instead of Fast DDS's 3 s heartbeat.
+#: Read when the first participant is created; node subprocesses do not inherit it (node_env).
+FAST_ACK_PROFILE = str(ROOT / "config" / "fastdds_fast_ack.xml")
+os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", FAST_ACK_PROFILE)
 
 
 @pytest.fixture

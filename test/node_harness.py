@@ -42,6 +42,8 @@ def next_domain_id() -> int:
 
 def node_env(domain_id: int, **extra: str) -> dict[str, str]:
     env = dict(os.environ)
+    # The test process's fast-acknowledgement profile (conftest) is for its own peers only.
+    env.pop("FASTRTPS_DEFAULT_PROFILES_FILE", None)
     env.update(
         ROS_DOMAIN_ID=str(domain_id),
         ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
@@ -202,6 +204,21 @@ class Peer:
 
     def publisher(self, topic: str, msg_type: type, depth: int = 1000):
         return self.node.create_publisher(msg_type, topic, reliable(depth))
+
+    def publish_acked(self, publisher: Any, msg: Any, timeout: float = 30.0) -> None:
+        """
+        Publish ``msg`` and return once every matched reliable reader holds it.
+
+        The stage's command reader then has it before the next ``~/step`` (lockstep): the
+        synchronisation the node's README prescribes, not a sleep. Quick under the test
+        process's 1 ms heartbeat profile (conftest).
+        """
+        from rclpy.duration import Duration
+
+        publisher.publish(msg)
+        if not publisher.wait_for_all_acked(Duration(seconds=timeout)):
+            raise AssertionError(
+                f"{publisher.topic_name}: not acknowledged by its readers within {timeout:g} s")
 
     # ---------------------------------------------------------------- spinning
     def spin_for(self, seconds: float) -> None:

@@ -315,10 +315,8 @@ def test_signal_leaves_a_complete_recording_matching_what_was_received(
         drive = peer.publisher("/drive/displacement", Float64)
         peer.wait_for_publishers(topics)
         peer.wait_for_subscribers(drive)
-        peer.spin_for(0.5)
         drive.publish(Float64(data=STEP))
-        drive.publish(Float64(data=math.nan))
-        peer.spin_for(0.3)
+        peer.publish_acked(drive, Float64(data=math.nan))
         for k in range(ticks):
             answer = peer.call(Trigger, "/stage_node/step")
             assert answer.success, answer.message
@@ -380,7 +378,19 @@ def test_fast_mode_publishes_clock_and_a_use_sim_time_node_follows_it(tmp_path, 
         during = follower.node.get_clock().now().nanoseconds
         follower.watch = None
         stop_cleanly(node)
-        follower.spin_for(0.5)  # everything published has arrived
+
+        def caught_up() -> bool:
+            # The node has exited: what it published arrives, on the follower's time source
+            # and on this test's /clock subscription alike (reliable), in any order.
+            last = follower.last("/clock")
+            pose = follower.last("/bodies/body4/pose")
+            if last is None or pose is None:
+                return False
+            final = last.clock.sec * 10**9 + last.clock.nanosec
+            return (follower.node.get_clock().now().nanoseconds == final
+                    and final - stamp_ns(pose) <= 1_000_000)
+
+        follower.spin_until(caught_up, 30, "the follower's clock to reach the last /clock")
         now = follower.node.get_clock().now().nanoseconds
         active = follower.node.get_clock().ros_time_is_active
         clocks = [m.clock.sec * 10**9 + m.clock.nanosec for m in follower.messages("/clock")]
@@ -415,8 +425,7 @@ def test_lockstep_runs_are_deterministic_and_reset_restarts_time(tmp_path, domai
             start_out = len(peer.received["/output/displacement"])
             start_w = len(peer.received["/hinges/b/wrench"])
             for command, steps in ((1.0e-6, 4), (1.8e-6, 3), (0.3e-6, 3)):
-                drive.publish(Float64(data=command))
-                peer.spin_for(0.3)
+                peer.publish_acked(drive, Float64(data=command))
                 for _ in range(steps):
                     assert peer.call(Trigger, "/stage_node/step").success
             peer.spin_until(
