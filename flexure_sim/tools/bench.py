@@ -97,6 +97,7 @@ def bench_node(duration: float = 30.0) -> dict:
         "realtime_rtf": default["real_time_factor"],
         "flood_missed_tick_fraction": runs["realtime_flood"]["missed_fraction"],
         "flood_command_time_us": runs["realtime_flood"]["command_time_mean_us"],
+        "flood_commands_lost": runs["realtime_flood"].get("flood_commands_lost"),
         "closed_loop_missed_tick_fraction": runs["realtime_closed_loop"]["missed_fraction"],
         "closed_loop_applied_next_tick_fraction":
             runs["realtime_closed_loop"]["applied_next_tick_fraction"],
@@ -201,7 +202,9 @@ def print_table(res: dict) -> None:
                     + (f", subscriber on {r['subscribed']}" if r["subscribed"] else "")
                     + (
                         f", {r['flood_sent_per_s']:.0f} commands/s from another process "
-                        f"({r['command_time_mean_us'] or float('nan'):.1f} us each)"
+                        f"({r['command_time_mean_us'] or float('nan'):.1f} us each; "
+                        f"{r.get('flood_sent')} sent, {r.get('flood_commands_recorded')} "
+                        f"recorded, {r.get('flood_commands_lost')} lost)"
                         if r.get("flood_hz")
                         else ""
                     )

@@ -237,6 +237,13 @@ def run_node(
         not_per_tick = {"/diagnostics", "/drive/displacement", "/" + topics.MARKERS,
                         topics.TF, topics.TF_STATIC}
         result["topics_per_tick"] = sum(1 for t in log.topics if t not in not_per_tick)
+        if flood is not None:
+            # The flood ended before the node was stopped: every command it sent must be in
+            # the file (each received command is recorded, rejected ones included).
+            command = log.topics.get("/" + topics.COMMAND)
+            recorded = command.message_count if command is not None else 0
+            result.update(flood_commands_recorded=recorded,
+                          flood_commands_lost=int(flood.get("sent", 0)) - recorded)
     if keep_dir:
         result["workdir"] = str(workdir)
     else:
@@ -276,8 +283,11 @@ def _print_run(r: dict[str, Any]) -> None:
     if r.get("flood_hz"):
         cost = r["command_time_mean_us"]
         print(f"   flood from another process: {r['flood_sent_per_s']:.0f} commands/s sent, "
-              f"{r['commands_received']} received; intake "
+              f"{r['commands_received']} received in the window; intake "
               + (f"{cost:.1f} us per command" if cost is not None else "n/a"))
+        if "flood_commands_recorded" in r:
+            print(f"   flood: {r['flood_sent']} commands sent in all, "
+                  f"{r['flood_commands_recorded']} recorded, {r['flood_commands_lost']} lost")
     if r.get("messages_received_per_s") is not None:
         print(f"   subscriber received {r['messages_received_per_s']:.0f} messages/s")
     if r["record"]:
