@@ -25,7 +25,7 @@ def test_defaults_are_valid_and_give_ten_steps_per_tick():
     assert steps_per_tick(1000.0, 1e-4) == (10, None)
     read_only = {s.name for s in parameter_specs() if s.read_only}
     assert read_only == {"mechanism", "sim_step", "time_mode", "stepping_nice",
-                         "command_reliability", "frame_prefix"}
+                         "cpu_latency_us", "command_reliability", "frame_prefix"}
     assert values["command_reliability"] == "reliable"
 
 
@@ -71,6 +71,9 @@ def test_steps_per_tick(rate, step, n):
     (dict(wake_spin=float("nan")), "wake_spin"),
     (dict(stepping_nice=-21), "stepping_nice"),
     (dict(stepping_nice=2.5), "stepping_nice"),
+    (dict(cpu_latency_us=-2), "cpu_latency_us"),
+    (dict(cpu_latency_us=1.5), "cpu_latency_us"),
+    (dict(cpu_latency_us=True), "cpu_latency_us"),
     (dict(merge_late_ticks=-1), "merge_late_ticks"),
     (dict(merge_late_ticks=2.0), "merge_late_ticks"),
     (dict(command_reliability="sometimes"), "command_reliability"),

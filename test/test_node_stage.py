@@ -26,6 +26,7 @@ from visualization_msgs.msg import MarkerArray
 from flexure_sim.engine.config import ConfigError, load_mechanism, resolve_mechanism_path
 from flexure_sim.recording import CorruptLogError, read_log
 from flexure_sim.engine.solver import Simulation
+from flexure_sim.node.cpu_latency import DEVICE, latency_in_effect
 
 from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id
 
@@ -619,7 +620,10 @@ def test_parameters_are_validated_with_reasons_and_applied_live(tmp_path, domain
         publish_rate=200.0,
         record=False,
         stepping_nice=5,
+        cpu_latency_us=13,
     )
+    # The PM QoS request is granted where this process could make it (root here).
+    granted = os.access(DEVICE, os.W_OK)
     try:
         peer.subscribe("/diagnostics", DiagnosticArray)
         peer.subscribe("/bodies/poses", PoseArray, depth=10000)
@@ -656,9 +660,13 @@ def test_parameters_are_validated_with_reasons_and_applied_live(tmp_path, domain
         assert d["publish_rate"] == "100.0" and d["steps_per_tick"] == "20"
         assert float(d["wake_spin_us"]) == pytest.approx(2000.0)
         assert d["stepping_nice"] == "5"
+        assert d["cpu_latency_us"] == ("13" if granted else "-1")
+        if granted:  # the kernel holds the node's request while it steps in real time ...
+            assert latency_in_effect() == 13
         assert d["commands_clamped"] == "1" and float(d["drive_target"]) == 1e-6
     finally:
         stop_cleanly(node)
+    assert latency_in_effect() != 13  # ... and not once it has stopped
 
 
 def test_invalid_startup_parameters_and_bad_mechanisms_stop_with_the_reason(tmp_path, domain):

@@ -28,6 +28,8 @@ RECORD_FORMATS = ("bag", "mcap")
 WAKE_SPIN_S = 1e-3
 #: Default of ``stepping_nice``: see its description (measured in BENCHMARKS.md).
 STEPPING_NICE = -10
+#: Default of ``cpu_latency_us``: see its description (measured in BENCHMARKS.md).
+CPU_LATENCY_US = 0
 
 
 @dataclass(frozen=True)
@@ -189,6 +191,20 @@ def parameter_specs(
             "processes' it gets a shared core first, which keeps real-time ticks on time "
             "next to busy nodes. Needs CAP_SYS_NICE or an RLIMIT_NICE allowing it; if "
             "refused, the node says so once and runs unchanged. Read-only.",
+        ),
+        ParamSpec(
+            "cpu_latency_us",
+            CPU_LATENCY_US,
+            int,
+            "us",
+            True,
+            -1,
+            100000,
+            "Real-time mode: CPU wake-up latency asked of the kernel while the stage steps "
+            "(Linux PM QoS, /dev/cpu_dma_latency; 0: idle CPUs poll instead of halting, so a "
+            "thread woken on one runs at once; -1: no request). Needs write access to "
+            "/dev/cpu_dma_latency; if refused, the node says so once and runs unchanged. "
+            "Read-only.",
         ),
         ParamSpec(
             "command_reliability",
@@ -391,6 +407,11 @@ def validate(values: Mapping[str, Any]) -> Optional[str]:
     nice = values["stepping_nice"]
     if not (isinstance(nice, int) and not isinstance(nice, bool) and -20 <= nice <= 19):
         return f"stepping_nice: must be an integer in [-20, 19], got {nice!r}"
+    latency = values["cpu_latency_us"]
+    if not (isinstance(latency, int) and not isinstance(latency, bool)
+            and -1 <= latency <= 100000):
+        return f"cpu_latency_us: must be -1 (no request) or an integer in [0, 100000], got " \
+               f"{latency!r}"
     if values["command_reliability"] not in COMMAND_RELIABILITIES:
         return (f"command_reliability: expected one of {', '.join(COMMAND_RELIABILITIES)}, "
                 f"got {values['command_reliability']!r}")

@@ -161,6 +161,7 @@ class StageNode(Node):
             sim, drive_filter, self.interface, tick_pubs, self.session, self._log,
             time_mode=time_mode, rate=float(values["publish_rate"]), dt=dt,
             wake_spin=float(values["wake_spin"]), nice=int(values["stepping_nice"]),
+            cpu_latency_us=int(values["cpu_latency_us"]),
             merge_after=int(values["merge_late_ticks"]),
             monitor_rate=float(values["monitor_rate"]))
         # Recording channels: the tick topics in publishing order, diagnostics, commands.

@@ -24,6 +24,7 @@ from ..engine.solver import Simulation, SolverError
 from .diagnostics import Diagnostics
 from .drive_input import CommandFilter, WarningThrottle
 from .engine_guard import EngineHold, snapshot_finite
+from .cpu_latency import request_cpu_latency
 from .pacing import Pacer, set_thread_nice
 from .params import monitor_every, steps_per_tick
 from .requests import RequestQueue
@@ -52,7 +53,8 @@ class SteppingLoop:
     def __init__(self, sim: Simulation, drive_filter: Optional[CommandFilter], interface: Any,
                  publishers: Sequence[Any], session: RecordingSession, log: Any, *,
                  time_mode: str, rate: float, dt: float, wake_spin: float, nice: int,
-                 monitor_rate: float = 0.0, merge_after: int = 0) -> None:
+                 monitor_rate: float = 0.0, merge_after: int = 0,
+                 cpu_latency_us: int = -1) -> None:
         self.sim = sim
         self.filter = drive_filter
         self.interface = interface
@@ -77,6 +79,10 @@ class SteppingLoop:
         self._set_merge(merge_after)
         self._nice_request = nice
         self.nice = 0
+        #: CPU wake-up latency to ask for in real-time mode (`cpu_latency`; -1: none), and
+        #: the one in effect while the loop runs (-1: none held).
+        self._latency_request = cpu_latency_us if time_mode == "realtime" else -1
+        self.cpu_latency_us = -1
         self.ticks = 0
         self.runs = 0
         self.hold = EngineHold()
@@ -122,10 +128,17 @@ class SteppingLoop:
             thread.join(timeout=timeout)
 
     def _run(self) -> None:
+        latency = None
         try:
             self.nice, refused = set_thread_nice(self._nice_request)
             if refused:
                 self._log.info(f"stepping thread: {refused}")
+            if self._latency_request >= 0:
+                latency, refused = request_cpu_latency(self._latency_request)
+                if latency is None:
+                    self._log.info(f"stepping thread: {refused}")
+                else:
+                    self.cpu_latency_us = latency.latency_us
             pacer = self.pacer
             if pacer is not None:
                 pacer.start()
@@ -147,6 +160,9 @@ class SteppingLoop:
             if not self._stop.is_set() and self._on_failure(exc):
                 self.failure = exc
         finally:
+            if latency is not None:
+                latency.release()
+                self.cpu_latency_us = -1
             self.requests.fail_all()
             self._on_end(self.failure is None)
 
