@@ -78,7 +78,7 @@ def request_cpu_latency(latency_us: int, device: str = DEVICE
 
 
 def latency_in_effect(device: str = DEVICE) -> Optional[int]:
-    """Return the machine's CPU latency limit in effect (us; the smallest request held), or None."""
+    """Return the CPU latency limit in effect (us; the smallest request held), or None."""
     try:
         with open(device, "rb") as f:
             return _VALUE.unpack(f.read(_VALUE.size))[0]
