@@ -320,9 +320,50 @@ def test_linearize_exports_a_model_python_control_loads_and_its_bode_matches_frf
     model = json.loads((tmp_path / "m.json").read_text())
     np.testing.assert_array_equal(np.array(model["C"]), data["C"])
     assert model["state_names"][0] == "body2.x" and model["input_names"] == ["drive"]
-    assert (tmp_path / "frf.png").stat().st_size > 10_000
+    _check_bode_png(tmp_path / "frf.png", csv, ("output", "hinges.c.moment"))
     assert _cli("linearize", "microstage", "-o", tmp_path / "m.txt") == 2
     assert "must end in .npz, .mat or .json" in capsys.readouterr().err
+
+
+# The plots are read back as pixels (matplotlib.image.imread): matplotlib's default colours C0
+# (blue) and C1 (orange), the mode plots' grey rest drawing (0.7) and red hinge markers (C3).
+BLUE, ORANGE, GREY, RED = (31, 119, 180), (255, 127, 14), (179, 179, 179), (214, 39, 40)
+
+
+def _png(path):
+    """Return the RGB pixels of a PNG file (checked to be one by its signature)."""
+    import matplotlib.image
+
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", path
+    return matplotlib.image.imread(path)[..., :3]
+
+
+def _colour(img, rgb, tol=0.05):
+    return np.linalg.norm(img - np.array(rgb) / 255.0, axis=-1) < tol
+
+
+def _in_long_runs(mask, n=10):
+    """Pixels of mask in a horizontal or vertical run of at least n: lines, not text strokes."""
+    out = np.zeros_like(mask)
+    for axis in (0, 1):
+        full = np.lib.stride_tricks.sliding_window_view(mask, n, axis=axis).all(-1)
+        for k in range(n):
+            sl = [slice(None), slice(None)]
+            sl[axis] = slice(k, k + full.shape[axis])
+            out[tuple(sl)] |= full
+    return out
+
+
+def _rest_lines_visible(img):
+    """
+    Grey pixels in straight runs inside the drawing's box (blue and red pixels' extent).
+
+    The displaced drawing (blue, 2 pt) is drawn over the rest drawing (grey, 1.5 pt): grey
+    lines show only where the mode moves a body.
+    """
+    rows, cols = np.nonzero(_colour(img, BLUE) | _colour(img, RED))
+    box = (slice(rows.min(), rows.max() + 1), slice(cols.min(), cols.max() + 1))
+    return int(_in_long_runs(_colour(img, GREY))[box].sum())
 
 
 def test_modes_command_json_and_plots(tmp_path, capsys):
@@ -331,9 +372,136 @@ def test_modes_command_json_and_plots(tmp_path, capsys):
     assert _cli("modes", "microstage", "--count", 2, "--json", "-o", tmp_path) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["undamped_frequencies_hz"][0] == pytest.approx(300.6, rel=1e-3)
-    assert [p.endswith(f"mode_{k}.png") for k, p in enumerate(out["plots"], 1)] == [True, True]
+    assert out["plots"] == [str(tmp_path / f"mode_{k}.png") for k in (1, 2)]
+    images = [_png(tmp_path / f"mode_{k}.png") for k in (1, 2)]
+    for img in images:
+        assert img.shape == (550, 660, 3)  # figsize 6 x 5 in at 110 dpi
+        assert _colour(img, BLUE).sum() > 2000  # the displaced bodies (~4000 px)
+        assert _colour(img, RED).sum() > 200  # 14 hinge markers (~400 px)
+        # The rest drawing shows beside the displaced one (mode 1: ~1000 px, mode 2: ~600).
+        assert _rest_lines_visible(img) > 300
+    # The two modes are different drawings.
+    assert np.mean(np.abs(images[0] - images[1]).max(axis=-1) > 0.1) > 0.02
     assert _cli("modes", "no_such_stage") == 2
     assert "no such built-in mechanism" in capsys.readouterr().err
+
+
+def test_a_mode_plot_without_motion_hides_the_rest_drawing(tmp_path):
+    """
+    The control for the grey-pixel count above: a zero mode shape draws blue over all grey.
+
+    So the count measures the drawn displacement, not the plot's furniture.
+    """
+    from flexure_sim.tools.dynamics import plot_modes
+
+    mech = load_mechanism("microstage")
+    model = linear.linearize(Simulation(mech), 0.0, wrenches=False)
+    md = linear.modes(model)
+    still = dataclasses.replace(md, shapes=np.zeros_like(md.shapes))
+    (path,) = plot_modes(mech, model, still, 1, tmp_path)
+    img = _png(path)
+    assert _colour(img, BLUE).sum() > 2000
+    assert _rest_lines_visible(img) < 30
+
+
+def test_mode_plot_points_are_the_files_hinge_points_moved_by_the_mode_shape():
+    """
+    The plotted points: at rest the YAML's hinge points; the first mode moves the output along x.
+
+    Rest: every body's pose in config/microstage.yaml plus its hinge frames' `at` (all poses
+    have angle 0). Displaced: ground fixed; the output body (body4) translates along the drive
+    axis x (the first mode swings the levers together), its points alike (a translation).
+    """
+    import yaml
+
+    from flexure_sim.engine.config import resolve_mechanism_path
+    from flexure_sim.tools.dynamics import _mode_points
+
+    data = yaml.safe_load(resolve_mechanism_path("microstage").read_text())
+    pose = {b["name"]: np.array(b["pose"][:2]) for b in data["bodies"]}
+    expected = {name: [p] for name, p in pose.items()}
+    for h in data["hinges"]:
+        for side in ("a", "b"):
+            f = h[side]
+            expected[f["body"]].append(pose[f["body"]] + np.array(f["at"]))
+    mech = load_mechanism("microstage")
+    model = linear.linearize(Simulation(mech), 0.0, wrenches=False)
+    md = linear.modes(model)
+    points = {b.name: [] for b in mech.bodies}
+    for h in mech.hinges:
+        points[h.a.body].append(h.a.position)
+        points[h.b.body].append(h.b.position)
+    dz = np.zeros_like(model.z)
+    dz[model.free] = md.shapes[:, 0]
+    pts = _mode_points(mech, points, model.z, dz)
+    for name, (rest, disp) in pts.items():
+        np.testing.assert_allclose(rest, np.array(expected[name]), rtol=0, atol=1e-15)
+    rest, disp = pts["body1"]
+    np.testing.assert_array_equal(disp, rest)
+    move = pts["body4"][1] - pts["body4"][0]
+    assert np.all(np.abs(move[:, 0]) > 1.0)  # M-normalised shape: ~6 m / sqrt(kg)
+    assert np.max(np.abs(move[:, 1])) < 1e-2 * np.min(np.abs(move[:, 0]))
+    # A translation: the points 28 mm apart move alike to 1e-3 (rotation ~0.36 rad per unit).
+    np.testing.assert_allclose(
+        move, np.broadcast_to(move[0], move.shape), rtol=0, atol=2e-3 * abs(move[0, 0])
+    )
+
+
+def _check_bode_png(path, csv, outputs):
+    """
+    Check that the Bode PNG draws the CSV's curves where the CSV says they are.
+
+    Read back from the pixels (matplotlib's C0, C1 for the two outputs): the phase panel (no
+    legend) gives the log-frequency axis from the curves' ends (fmin, fmax) and a linear
+    phase axis fitted to two curve ends, which must then place the other two ends and every
+    curve's phase at 1 kHz; the magnitude panel, log-scaled, is fitted to the two curves at
+    1 kHz and must place them at fmax.
+    """
+    img = _png(path)
+    assert img.shape == (660, 770, 3)  # figsize 7 x 6 in at 110 dpi
+    half = img.shape[0] // 2  # the panels' gap (no curve pixels there)
+    masks = [_colour(img, BLUE, 0.1), _colour(img, ORANGE, 0.1)]
+    assert not any(m[half - 5:half + 5].any() for m in masks)
+    top = [m[:half] for m in masks]
+    bottom = [m[half:] for m in masks]
+    f = csv["frequency_hz"]
+    cols = np.nonzero(bottom[0].any(axis=0))[0]
+    c_lo, c_hi = cols.min(), cols.max()
+    for m in bottom[1:]:
+        c = np.nonzero(m.any(axis=0))[0]
+        assert abs(c.min() - c_lo) <= 1 and abs(c.max() - c_hi) <= 1
+
+    def column(freq):
+        t = (np.log10(freq) - np.log10(f[0])) / (np.log10(f[-1]) - np.log10(f[0]))
+        return int(round(c_lo + t * (c_hi - c_lo)))
+
+    def row(mask, c):
+        r = np.nonzero(mask[:, c - 1:c + 2].any(axis=1))[0]
+        assert len(r) and np.ptp(r) < 12, (c, r)  # one thin curve at this column
+        return r.mean()
+
+    def interp(values, freq):
+        return np.interp(np.log10(freq), np.log10(f), values)
+
+    phase = [csv[f"{o}.phase_deg"] for o in outputs]
+    # Phase: fit row = a + b phase on curve 0 at both ends, check curve 1's ends and 1 kHz.
+    (c0_lo, c0_hi) = (row(bottom[0], c_lo + 1), row(bottom[0], c_hi - 1))
+    b = (c0_hi - c0_lo) / (phase[0][-1] - phase[0][0])
+    a = c0_lo - b * phase[0][0]
+    assert b < 0  # phase up, rows down
+    span = abs(b) * (phase[0][0] - phase[0][-1])
+    for k, m in enumerate(bottom):
+        for c, want in ((c_lo + 1, phase[k][0]), (c_hi - 1, phase[k][-1]),
+                        (column(1e3), interp(phase[k], 1e3))):
+            assert abs(row(m, c) - (a + b * want)) < 0.02 * span, (outputs[k], c)
+    # Magnitude: log scale fitted to both curves at 1 kHz, checked at fmax.
+    mag = [np.log10(csv[f"{o}.magnitude"]) for o in outputs]
+    r_k = [row(top[k], column(1e3)) for k in range(2)]
+    b = (r_k[1] - r_k[0]) / (interp(mag[1], 1e3) - interp(mag[0], 1e3))
+    a = r_k[0] - b * interp(mag[0], 1e3)
+    assert b < 0
+    for k in range(2):
+        assert abs(row(top[k], c_hi - 1) - (a + b * mag[k][-1])) < 4, outputs[k]
 
 
 def test_modal_damping_of_proportional_damping_is_omega_t_char_over_two(stage):
