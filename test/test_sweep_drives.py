@@ -44,7 +44,7 @@ def _xy_study(values, input={"x": 2.0e-6, "y": 1.0e-6}, outputs=("gain", "output
 
 
 def _direct_pivot_x(h: float) -> Simulation:
-    """The XY stage with hinge pivot_x's notch h set here by hand (its own copy of notch)."""
+    """Return the XY stage with hinge pivot_x's notch h set by hand (its own copy of notch)."""
     doc = _xy_doc()
     hinge = next(x for x in doc["hinges"] if x["name"] == "pivot_x")
     hinge["stiffness"] = {**doc["stiffness_models"]["notch"], "h": h}

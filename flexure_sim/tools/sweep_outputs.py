@@ -153,7 +153,7 @@ OUTPUTS: dict[str, Output] = {}
 
 def output(name: str, unit: str, description: str, per: str = "", each_unit: str = ""):
     """
-    Register ``fn(design)`` as an output (``Output``).
+    Register a function of a ``Design`` as a sweep output, an ``Output``.
 
     It returns a float (None: no value, stored as NaN), or with several drives and ``per`` one
     value per column, in ``columns`` order.
@@ -295,7 +295,7 @@ def evaluate_batch(study: Study, start: int, stop: int) -> dict:
 
 
 def _floats(value: Values, size: int) -> np.ndarray:
-    """An output's value(s) as ``size`` floats, None as NaN."""
+    """Return an output's value(s) as ``size`` floats, None as NaN."""
     many = value if size > 1 or isinstance(value, (list, tuple, np.ndarray)) else [value]
     out = np.array([np.nan if v is None else float(v) for v in many], dtype=float)
     if out.shape != (size,):
