@@ -24,6 +24,18 @@ from .stress import StressGeometry
 COORDINATE_NAMES = ("x", "y", "theta")
 
 
+def coordinate_unit(coordinate: Optional[str], force: bool = False) -> str:
+    """
+    Return the SI unit of a displacement (or force) along an axis, or about theta.
+
+    m along an axis, rad about theta; N and N m for a force (the units of drive inputs and
+    outputs, README "Several drives and outputs; the XY stage").
+    """
+    if coordinate == "theta":
+        return "N m" if force else "rad"
+    return "N" if force else "m"
+
+
 @dataclass(frozen=True)
 class Body:
     """

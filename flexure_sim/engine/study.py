@@ -8,7 +8,8 @@ document, and the outputs wanted (see docs/sweeps.md)::
     samples: 10000                   # Monte Carlo only; a grid has as many designs as points
     seed: 20261124                   # Monte Carlo only
     batch_size: 250                  # designs per task (default 100)
-    input: 2.0e-6                    # drive input (m) of the static outputs and the step
+    input: 2.0e-6                    # drive input (m) of the static outputs and the step;
+                                     # several drives: {x: 1.0e-6, y: 0.0} (study_checks.py)
     outputs: [gain, compression, drive_force]
     step: {duration: 0.05, dt: 1.0e-4, band: 0.02}   # dynamic run of settling_time/overshoot
     parameters:
@@ -32,8 +33,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Iterable, Optional, Sequence
 
@@ -43,6 +43,7 @@ from ..errors import FlexureSimError
 from .config import ConfigError, mechanism_from_dict, resolve_mechanism_path
 from .doc_paths import own_stiffness, resolve_path, set_path
 from .mechanism import Mechanism
+from .study_checks import Channels, DriveInput, check_outputs, drive_input, number as _number
 from .yaml_files import read_yaml
 
 #: Designs per task unless the study says otherwise.
@@ -85,7 +86,13 @@ class Parameter:
 
 @dataclass(frozen=True)
 class Study:
-    """A validated study: the base mechanism document, parameters, outputs and batching."""
+    """
+    A validated study: the base mechanism document, parameters, outputs and batching.
+
+    ``input``: the drive input (``study_checks.drive_input``: a number for one drive, a mapping
+    drive name -> value for several; None: every drive's full stroke); ``channels``: the base
+    mechanism's drives and outputs (the names of the columns per drive or output).
+    """
 
     name: str
     source: str
@@ -97,8 +104,9 @@ class Study:
     samples: int
     seed: Optional[int]
     batch_size: int
-    input: Optional[float]
+    input: Optional[DriveInput]
     step: dict
+    channels: Channels = Channels()
 
     @property
     def grid_shape(self) -> tuple[int, ...]:
@@ -206,24 +214,18 @@ def study_from_dict(data: Any, source: str, output_names: Iterable[str],
         name=str(data.get("name", Path(source).stem)), source=source,
         mechanism_source=str(mech_path), base=base, parameters=tuple(params),
         outputs=outputs, monte_carlo=monte_carlo, samples=samples, seed=seed,
-        batch_size=batch, input=_input(data, fail), step=_step(data.get("step"), fail),
+        batch_size=batch, input=None, step=_step(data.get("step"), fail),
     )
     try:
         base_mech = study.mechanism([0.0 if p.offset else p.base[0] for p in params])
     except ConfigError as exc:
         raise fail("mechanism", f"the base mechanism does not load: {exc}") from None
-    drive = base_mech.drive
-    if drive is None:  # every output is a response to the drive input
+    if base_mech.drive is None:  # every output is a response to the drive input
         raise fail("mechanism", f"{base_mech.name!r} has no drive constraint: the outputs are "
                    "responses to the drive input")
-    if "peak_stress_ratio" in outputs and not any(
-            h.stress is not None and h.stress.sigma_y is not None for h in base_mech.hinges):
-        raise fail("outputs", f"peak_stress_ratio: no hinge of {base_mech.name!r} has a yield "
-                   "strength (sigma_y in a notch or cantilever stiffness model)")
-    if study.input is not None and not drive.stroke[0] <= study.input <= drive.stroke[1]:
-        raise fail("input", f"{study.input} m is outside the drive's stroke "
-                   f"[{drive.stroke[0]}, {drive.stroke[1]}] m")
-    return study
+    check_outputs(outputs, base_mech, fail)
+    return replace(study, input=drive_input(data.get("input"), base_mech, fail),
+                   channels=Channels.of(base_mech))
 
 
 def _read(path: Path, error: type[Exception]) -> Any:
@@ -262,19 +264,6 @@ def _outputs(raw: Any, known: set[str], fail) -> tuple[str, ...]:
     return tuple(raw)
 
 
-def _number(value: Any, key: str, fail, positive: bool = False) -> float:
-    if isinstance(value, str):
-        try:
-            value = float(value)
-        except ValueError:
-            pass
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise fail(key, f"expected a finite number, got {value!r}")
-    if positive and value <= 0:
-        raise fail(key, f"must be positive, got {value!r}")
-    return float(value)
-
-
 def _count(data: dict, key: str, fail, required: bool = False, default: int = 0) -> int:
     if key not in data:
         if required:
@@ -284,12 +273,6 @@ def _count(data: dict, key: str, fail, required: bool = False, default: int = 0)
     if isinstance(v, bool) or not isinstance(v, int) or v < 1:
         raise fail(key, f"expected a positive integer, got {v!r}")
     return v
-
-
-def _input(data: dict, fail) -> Optional[float]:
-    if data.get("input") is None:
-        return None  # the drive's full stroke
-    return _number(data["input"], "input", fail)
 
 
 def _step(raw: Any, fail) -> dict:
@@ -388,6 +371,10 @@ def _unique_columns(params: list[Parameter], outputs: tuple[str, ...], fail) -> 
     for i, p in enumerate(params):
         if p.name in seen:
             raise fail(f"parameters[{i}].name", f"column {p.name!r} is already {seen[p.name]}")
+        split = [o for o in outputs if p.name.startswith(o + ".")]
+        if split:  # with several drives, an output has a column per drive or output
+            raise fail(f"parameters[{i}].name", f"column {p.name!r} is named like a column of "
+                       f"the output {split[0]} ({split[0]}.<name>)")
         seen[p.name] = f"parameters[{i}]"
 
 

@@ -6,8 +6,9 @@ displacement drive whose ``actuator:`` block says ``command: voltage`` (engine/p
 """
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import Any
 
+from ..engine.mechanism import coordinate_unit
 from ..engine.piezo import command_limits as command_limits_of
 
 
@@ -34,13 +35,6 @@ def command_limits(drive: Any) -> tuple[float, float, float]:
         return float(drive.stroke[0]), float(drive.stroke[1]), float(drive.slew_rate)
     return tuple(float(v) for v in command_limits_of(drive.actuator, drive.stroke,
                                                      drive.slew_rate))
-
-
-def coordinate_unit(coordinate: Optional[str], force: bool = False) -> str:
-    """SI unit of a displacement (or force) along an axis, or about theta."""
-    if coordinate == "theta":
-        return "N m" if force else "rad"
-    return "N" if force else "m"
 
 
 def units(drive: Any) -> tuple[str, str]:

@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Optional
 
+from ..engine.mechanism import coordinate_unit as _unit
 from ..topics import (
     COMMAND, COMMAND_VOLTAGE, DRIVE_FORCE, DRIVE_INPUT, OUTPUT, drive_command, drive_force,
     drive_input, drive_position, output_displacement,
@@ -58,12 +59,6 @@ class OutputChannel:
     name: str
     topic: str
     unit: str
-
-
-def _unit(coordinate: Optional[str], force: bool = False) -> str:
-    if coordinate == "theta":
-        return "N m" if force else "rad"
-    return "N" if force else "m"
 
 
 def _listed(metadata: dict[str, str], key: str) -> list[tuple[str, str]]:

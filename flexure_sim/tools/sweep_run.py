@@ -31,7 +31,7 @@ from distributed import WorkerPlugin
 
 from ..engine.study import Study
 from ..errors import FlexureSimError
-from .sweep_outputs import FAILED, OUTPUTS, evaluate_batch
+from .sweep_outputs import FAILED, columns, evaluate_batch
 
 MANIFEST = "study.json"
 
@@ -48,11 +48,12 @@ def schema(study: Study) -> pa.Schema:
     """
     Columns of the results.
 
-    sample, parameters, outputs (float64), status, error; the schema's metadata
-    ``flexure_sim.study`` holds what produced them (JSON: study, mechanism, seed, samples, batch
-    size, input, parameters with their paths and distributions, output units, the study's
-    fingerprint).
+    sample, parameters, output columns (float64; ``sweep_outputs.columns``), status, error; the
+    schema's metadata ``flexure_sim.study`` holds what produced them (JSON: study, mechanism,
+    its drives, seed, samples, batch size, input, parameters with their paths and distributions,
+    each output column's unit, the study's fingerprint).
     """
+    table = columns(study)
     about = {
         "name": study.name, "study": study.source, "mechanism": study.mechanism_source,
         "monte_carlo": study.monte_carlo, "seed": study.seed, "samples": study.samples,
@@ -60,12 +61,13 @@ def schema(study: Study) -> pa.Schema:
         "parameters": [{"name": p.name, "paths": [".".join(map(str, q)) for q in p.paths],
                         "offset": p.offset, "kind": p.kind, "loc": p.loc, "scale": p.scale}
                        for p in study.parameters],
-        "units": {o: OUTPUTS[o].unit for o in study.outputs},
+        "drives": [d[0] for d in study.channels.drives],
+        "units": {c.name: c.unit for c in table},
         "fingerprint": study.fingerprint(),
     }
     return pa.schema([("sample", pa.int64())]
                      + [(p.name, pa.float64()) for p in study.parameters]
-                     + [(o, pa.float64()) for o in study.outputs]
+                     + [(c.name, pa.float64()) for c in table]
                      + [("status", pa.string()), ("error", pa.string())],
                      metadata={METADATA_KEY: json.dumps(about)})
 

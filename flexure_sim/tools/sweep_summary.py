@@ -17,7 +17,7 @@ import numpy as np
 import pyarrow as pa
 
 from ..engine.study import Study
-from .sweep_outputs import OK, OUTPUTS
+from .sweep_outputs import OK, columns
 
 
 def correlation(x: np.ndarray, y: np.ndarray) -> float:
@@ -28,7 +28,12 @@ def correlation(x: np.ndarray, y: np.ndarray) -> float:
 
 
 def summarize(table: pa.Table, study: Study) -> dict:
-    """{"designs", "failed", "errors" (the most common messages), "outputs": {name: stats}}."""
+    """
+    Return the summary of a study's results.
+
+    {"designs", "failed", "errors" (the most common messages), "outputs": {column: stats}}, per
+    output column (``sweep_outputs.columns``).
+    """
     status = np.array(table.column("status").to_pylist())
     ok = status == OK
     errors: dict[str, int] = {}
@@ -36,11 +41,12 @@ def summarize(table: pa.Table, study: Study) -> dict:
         errors[msg] = errors.get(msg, 0) + 1
     params = {p.name: table.column(p.name).to_numpy() for p in study.parameters}
     outputs = {}
-    for name in study.outputs:
+    for column in columns(study):
+        name = column.name
         y = table.column(name).to_numpy()
         valid = ok & np.isfinite(y)
         v = y[valid]
-        stats: dict = {"unit": OUTPUTS[name].unit, "count": int(valid.sum())}
+        stats: dict = {"unit": column.unit, "count": int(valid.sum())}
         if v.size:
             stats.update(mean=float(v.mean()), std=float(v.std(ddof=1)) if v.size > 1 else 0.0,
                          p01=float(np.percentile(v, 1)), p99=float(np.percentile(v, 99)),
@@ -88,7 +94,7 @@ def plot(table: pa.Table, study: Study, summary: dict, output: Path) -> list[Pat
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
 
-    names = [n for n in study.outputs if summary["outputs"][n]["count"]]
+    names = [n for n, s in summary["outputs"].items() if s["count"]]
     if not names:
         return []
     ok = np.array(table.column("status").to_pylist()) == OK
