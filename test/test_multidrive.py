@@ -149,9 +149,22 @@ def test_bad_drive_inputs_are_named(value, message):
     assert message in str(err.value)
 
 
-def test_the_linear_model_refuses_several_drives_by_name():
-    with pytest.raises(ValueError, match=r"drives piezo \(displacement\), tilt"):
-        linearize(Simulation(two_drive_microstage()))
+def test_the_linear_model_has_one_input_per_drive_named_after_it():
+    """
+    The linear model of two drives (issue 13): inputs and actuator states by drive name.
+
+    Its static gain D - C A^-1 B equals the exact static gain of the statics (-K_FF^-1 K_FP D,
+    statics.static_gain: another formula on the tangent stiffness alone).
+    """
+    sim = Simulation(two_drive_microstage())
+    lm = linearize(sim, wrenches=False)
+    assert lm.input_names == ["piezo", "tilt"]
+    assert lm.state_names[-2:] == ["drive.piezo.u", "drive.tilt.u"]
+    assert lm.output_names[:6] == ["x", "y", "theta", "compression", "drive_force.piezo",
+                                   "drive_force.tilt"]
+    G = lm.D[:3] - lm.C[:3] @ np.linalg.solve(lm.A, lm.B)
+    want = sim.static_gain()
+    np.testing.assert_allclose(G, want, rtol=1e-7, atol=1e-9 * np.abs(want).max())
 
 
 def test_config_rejects_duplicate_drive_names_and_forces_on_held_coordinates():

@@ -194,7 +194,9 @@ class DriveMixin:
             unknown = sorted(set(value) - set(names))
             missing = [n for n in names if n not in value]
             if unknown or missing:
-                raise ValueError(f"drive inputs: unknown {unknown}, missing {missing} "
+                problems = [f"{what} {names_}" for what, names_ in
+                            (("unknown", unknown), ("missing", missing)) if names_]
+                raise ValueError(f"drive inputs: {', '.join(problems)} "
                                  f"(drives: {', '.join(names) or 'none'})")
             out = np.array([_number(value[n], n) for n in names], dtype=float)
         elif np.ndim(value) == 0:

@@ -1,46 +1,64 @@
 """
-Exact linearisation about a static equilibrium.
+Exact linearisation about a static equilibrium, with any number of drives.
 
-Natural modes, damped poles, frequency response and a named state-space model.
+Natural modes, damped poles, frequency response and a named state-space model
+(``linear_response``: modes, frf, static_gain, gain_matrix, re-exported here).
 
-About the static equilibrium z* at drive input u* (``Simulation.static``), the engine's
-first-order system y' = F(y, command), y = (z_F, v_F, u) (solver.py), has the exact Jacobian
-A = dF/dy (``Simulation._jacobian``: analytic, no finite differences) and input matrix
-B = dF/dcommand. The command enters through the actuator lag du/dt = (command - u)/tau and
-the driven body's velocity v_P = d_u (command - u)/tau, so
+About the static equilibrium z* at the drive inputs u* (``Simulation.static``: one per drive),
+the engine's first-order system y' = F(y, command), y = (z_F, v_F, u_1 .. u_m) with one
+actuator output u_a per displacement drive (``Model.pack``), has the exact Jacobian
+A = dF/dy (``Model.jacobian``: analytic, no finite differences) and input matrix
+B = dF/dcommand, one column per drive (``Model.drive_names`` order). A displacement drive's
+command enters through its actuator lag du_a/dt = (command - u_a)/tau_a and the prescribed
+velocities v_P = sum_a D_a (command_a - u_a)/tau_a (D_a = dz_P/du_a, ``Partition.D``); a force
+drive's command is a generalised force e f on the free coordinates (virtual work, held as
+commanded), so
 
-    B = [0; M_F^-1 dQ_F/dv_P d_u / tau; 1/tau].
+    B[:, displacement a] = [0; M_F^-1 dQ_F/dv_P D_a / tau_a; e_a / tau_a],
+    B[:, force j]        = [0; M_F^-1 e_jF; 0].
 
-Outputs are linear in (x, command) with x = y - y*: the output displacement and the
-compression of the compression hinge (frame positions P + R(theta) c, differentiated in
-theta), the drive force f = m_d (u - command)/tau^2 - d_u . Q_P (the constraint force of
-``Simulation.snapshot``), and each hinge's wrench on its body B, whose derivatives in z and
-v are the derivative parts of one hyper-dual evaluation of ``parametric.forces``.
+Outputs are linear in (x, command) with x = y - y*: each named output c . (z - z0)
+(``Model.output_matrix``), the compression of the compression hinge (along the first drive's
+axis, ``compression.compression_points``; frame positions P + R(theta) c, differentiated in
+theta), each displacement drive's force
+f_d = D_d^T (M_P a_P - Q_P) with a_P = sum_a D_a (u_a - command_a)/tau_a^2 (eq. 6.4,
+``Model.drive_forces``), each force drive's body position e . (z - z0), and each hinge's wrench
+on its body B, whose derivatives in z and v are the derivative parts of one hyper-dual
+evaluation of ``parametric.forces``. A single drive keeps the names of the one-drive model
+(input ``drive``, state ``drive.u``, output ``drive_force``); with several they are
+``<drive>``, ``drive.<drive>.u``, ``drive_force.<drive>`` and ``drive_position.<drive>``.
+A drive with a finite-stiffness piezo stack (input: the actuator's free stroke) is refused by
+name; a rigid piezo actuator's input is its applied displacement (its amplifier, hysteresis
+and creep are not part of the linear model).
 
 Undamped modes solve K phi = omega^2 M phi on the free coordinates with the exact tangent
 stiffness K = -dQ_F/dz_F (symmetric at an equilibrium: the Hessian of the potential) and the
-diagonal mass matrix (``damping_models.natural_modes``: phi^T M phi = I). The damped poles are
-the eigenvalues of A (including the actuator pole -1/tau); with damping scaled to zero they
-tend to +-i omega. Damping: the hinges' and the mechanism file's damping matrix C (a
-``damping:`` block, ``Model.damping``), both in dQ/dv (``tangent_at``) and so in A, B, the
-drive force row and the modal ratios. The frequency response is G(i w) = C (i w I - A)^-1 B + D.
+diagonal mass matrix (``damping_models.natural_modes``: phi^T M phi = I), the displacement
+drives held at their inputs. The damped poles are the eigenvalues of A (including each
+actuator's pole -1/tau); with damping scaled to zero they tend to +-i omega. Damping: the
+hinges' and the mechanism file's damping matrix C (a ``damping:`` block, ``Model.damping``),
+both in dQ/dv (``tangent_at``) and so in A, B, the drive force rows and the modal ratios. The
+frequency response is G(i w) = C (i w I - A)^-1 B + D.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
+from typing import Optional
 
 import numpy as np
 
 from . import hyperdual as hd
 from .kinematics import J
-from .damping_models import natural_modes
 from .design import design_of, hinge_indices, twistor_flags
+from .linear_response import Modes, frf, gain_matrix, modes, static_gain
 from .parametric import forces
 from .solver import Simulation, StaticResult
 
 WRENCH_COMPONENTS = ("moment", "force_x", "force_y")
+
+__all__ = ["LinearModel", "Modes", "frf", "gain_matrix", "layout", "linearize", "modes",
+           "static_gain", "tangent_at", "wrench_jacobians"]
 
 
 # ------------------------------------------------ the engine's internals, in one place
@@ -56,8 +74,9 @@ class Layout:
     """
     How the engine's state is laid out.
 
-    Free and prescribed coordinate indices, the prescribed coordinates' drive-axis components d_u,
-    masses (3 n_bodies), the rest pose z0 and the actuator time constant (None without a drive).
+    Free and prescribed coordinate indices, the prescribed coordinates' drive-axis components d_u
+    and the actuator time constant of a single displacement drive (zeros and None otherwise:
+    ``Partition.D`` and ``Model.tau`` hold every drive's), masses (3 n_bodies), the rest pose z0.
     """
 
     free: np.ndarray
@@ -97,10 +116,13 @@ def tangent_at(sim: Simulation, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 @dataclass
 class LinearModel:
     """
-    x' = A x + B command, y = C x + D command about the equilibrium at drive input u0.
+    x' = A x + B command, y = C x + D command about the equilibrium at the drive inputs.
 
-    x: deviations of (z_F, v_F, u) (m, rad, m/s, rad/s, m); outputs are deviations of the named
-    quantities from their static values ``y0``.
+    x: deviations of (z_F, v_F, u_1 .. u_m) (m, rad, m/s, rad/s, m); command: one per drive
+    (``input_names``, B's columns); outputs are deviations of the named quantities from their
+    static values ``y0``. ``u0``: the drive input of the equilibrium (a number with one drive or
+    none, else one per drive in ``drive_names`` order); ``lags``: per input, the index of its
+    actuator state among the u (-1 for a force drive's input).
     """
 
     A: np.ndarray
@@ -110,110 +132,146 @@ class LinearModel:
     state_names: list
     input_names: list
     output_names: list
-    u0: float
+    u0: object
     z: np.ndarray
     y0: np.ndarray
     stiffness: np.ndarray = field(repr=False)
     mass: np.ndarray = field(repr=False)
     free: np.ndarray = field(repr=False)
     damping: np.ndarray = field(repr=False, default=None)
+    drive_names: tuple = ()
+    lags: tuple = ()
 
     def output_index(self, name: str) -> int:
         if name not in self.output_names:
             raise ValueError(f"unknown output {name!r} (outputs: {', '.join(self.output_names)})")
         return self.output_names.index(name)
 
+    def input_index(self, name: Optional[str] = None) -> int:
+        """
+        Return the column of B of the input ``name``.
 
-def linearize(sim: Simulation, u: float = 0.0, wrenches: bool = True,
+        None: the only input. A single drive's input ``drive`` may also be called by the drive's
+        own name. ValueError listing the inputs otherwise.
+        """
+        names = self.input_names
+        if not names:
+            raise ValueError("the mechanism has no drive input")
+        if name is None:
+            if len(names) > 1:
+                raise ValueError(f"the model has {len(names)} inputs ({', '.join(names)}): "
+                                 "name the drive")
+            return 0
+        if name in names:
+            return names.index(name)
+        if len(names) == 1 and tuple(self.drive_names) == (name,):
+            return 0
+        raise ValueError(f"unknown input {name!r} (inputs: {', '.join(names)})")
+
+
+def linearize(sim: Simulation, u=None, wrenches: bool = True,
               static: Optional[StaticResult] = None) -> LinearModel:
     """
-    Return the exact linear model about the static equilibrium at drive input u (module doc).
+    Return the exact linear model about the static equilibrium at the drive inputs u (module doc).
 
-    ``static``: that equilibrium if already solved (``sim.static(u)``).
+    ``u``: a number (a single drive), one value per drive or a {name: value} mapping
+    (``Model.drive_inputs``); None: every drive at 0. ``static``: that equilibrium if already
+    solved (``sim.static(u)``).
     """
+    model = sim.model
+    model.require_rigid("the linear model")
     mech = sim.mechanism
-    if sim.model.drives and sim.drive is None:
-        kinds = ", ".join(f"{d.name} ({d.kind})" for d in sim.model.drives)
-        raise ValueError(f"mechanism {mech.name!r} has drives {kinds}: the linear model "
-                         f"handles a single displacement drive (its static gain matrix: "
-                         f"simulate --static)")
-    st = static if static is not None else sim.static(u)
+    names = model.drive_names
+    inputs = model.drive_inputs(np.zeros(len(names)) if u is None else u)
+    single = len(names) == 1
+    u0 = float(inputs[0]) if single else 0.0 if not names else inputs.copy()
+    st = static if static is not None else sim.static(u0 if single or not names else inputs)
     z = st.z
     lay = layout(sim)
-    F, P, du = lay.free, lay.prescribed, lay.du
-    nF, N = len(F), len(z)
-    drive = lay.tau is not None
-    y = np.concatenate([z[F], np.zeros(nF)] + ([[u]] if drive else []))
+    F, P = lay.free, lay.prescribed
+    disp, force = model.displacement_index, model.force_index
+    nF, N, na, m = len(F), len(z), len(disp), len(names)
+    y = np.concatenate([z[F], np.zeros(nF)] + ([inputs[disp]] if na else []))
     n = len(y)
-    A = jacobian_at(sim, y, 0.0, u)
+    A = jacobian_at(sim, y, 0.0, u0 if single else model.actuator_command(inputs))
     dQz, dQv = tangent_at(sim, z)
     mF = lay.mass[F]
-    B = np.zeros((n, 1 if drive else 0))
-    Zx, Vx, Vc = np.zeros((N, n)), np.zeros((N, n)), np.zeros((N, 1))
+    B = np.zeros((n, m))
+    Zx, Vx, Vc = np.zeros((N, n)), np.zeros((N, n)), np.zeros((N, m))
     Zx[F, np.arange(nF)] = 1.0
     Vx[F, nF + np.arange(nF)] = 1.0
-    if drive:
-        tau = lay.tau
-        B[nF:2 * nF, 0] = dQv[np.ix_(F, P)] @ du / (tau * mF)
-        B[2 * nF, 0] = 1.0 / tau
-        Zx[P, 2 * nF] = du
-        Vx[P, 2 * nF] = -du / tau
-        Vc[P, 0] = du / tau
-    names, Cs, Ds, y0 = [], [], [], []
+    lags = np.full(m, -1, dtype=int)
+    for a, (k, tau) in enumerate(zip(disp, model.tau)):
+        du = model.D_rows[a]
+        lags[k] = a
+        B[nF:2 * nF, k] = dQv[np.ix_(F, P)] @ du / (tau * mF)
+        B[2 * nF + a, k] = 1.0 / tau
+        Zx[P, 2 * nF + a] = du
+        Vx[P, 2 * nF + a] = -du / tau
+        Vc[P, k] = du / tau
+    for k in force:
+        B[nF:2 * nF, k] = model.drive_directions[k][F] / mF
+    out_names, Cs, Ds, y0 = [], [], [], []
     snap = st.snapshot
-    if mech.output is not None:
-        e = np.zeros(N)
-        i = mech.body_index(mech.output.body)
-        e[3 * i:3 * i + 2] = mech.output.axis
-        names.append("output"), Cs.append(e @ Zx), Ds.append(0.0), y0.append(snap.output)
-    if drive and sim.model.compression is not None:
+
+    def add(name, row, d, value):
+        out_names.append(name), Cs.append(row), Ds.append(d), y0.append(value)
+
+    for name, c in zip(model.output_names, model.output_matrix):
+        add(name, c @ Zx, np.zeros(m), snap.output if len(model.outputs) == 1 else
+            snap.outputs[name])
+    if model.compression is not None:
         # The engine's one definition (engine/compression.py): the drive side's centre of
         # stiffness minus the far side's, along the drive axis.
-        (i_drive, c_drive), (i_far, c_far), axis = sim.model.compression
+        (i_drive, c_drive), (i_far, c_far), axis = model.compression
         G = _point_jacobian(i_drive, c_drive, z) - _point_jacobian(i_far, c_far, z)
         row = axis @ G
-        names.append("compression"), Cs.append(row @ Zx), Ds.append(0.0), y0.append(
-            snap.compression
-        )
-    if drive:
-        md = du @ (lay.mass[P] * du)
-        tau = lay.tau
-        e_u = np.zeros(n)
-        e_u[2 * nF] = 1.0
-        row = md * e_u / tau**2 - du @ (dQz[P] @ Zx + dQv[P] @ Vx)
-        d = -md / tau**2 - du @ (dQv[P] @ Vc)[:, 0]
-        names.append("drive_force"), Cs.append(row), Ds.append(float(d)), y0.append(
-            snap.drive_force
-        )
+        add("compression", row @ Zx, np.zeros(m), snap.compression)
+    dQP = dQz[P] @ Zx + dQv[P] @ Vx
+    dQPc = dQv[P] @ Vc
+    for a, k in enumerate(disp):
+        dk = model.D_rows[a]
+        row = -(dk @ dQP)
+        d = np.array([-(dk @ dQPc[:, j]) for j in range(m)])
+        for b, (j, tau) in enumerate(zip(disp, model.tau)):  # M_P a_P, a_P = D (u - c)/tau^2
+            mkj = dk @ (lay.mass[P] * model.D_rows[b])
+            row[2 * nF + b] += mkj / tau**2
+            d[j] -= mkj / tau**2
+        add("drive_force" if single else f"drive_force.{names[k]}", row, d,
+            float(snap.drive_forces[k]))
+    for k in force:
+        add("drive_position" if single else f"drive_position.{names[k]}",
+            model.drive_directions[k] @ Zx, np.zeros(m), float(snap.drive_positions[k]))
     if wrenches:
         Jz, Jv = wrench_jacobians(mech, z)
         for k, hinge in enumerate(mech.hinges):
             for c, comp in enumerate(WRENCH_COMPONENTS):
-                names.append(f"hinges.{hinge.name}.{comp}")
-                Cs.append(Jz[k, c] @ Zx + Jv[k, c] @ Vx)
-                Ds.append(float(Jv[k, c] @ Vc[:, 0]))
-                y0.append(float(snap.wrenches[k, c]))
+                add(f"hinges.{hinge.name}.{comp}", Jz[k, c] @ Zx + Jv[k, c] @ Vx,
+                    np.array([Jv[k, c] @ Vc[:, j] for j in range(m)]),
+                    float(snap.wrenches[k, c]))
     state_names = (
         [_coord(mech, k) for k in F]
         + [_coord(mech, k, rate=True) for k in F]
-        + (["drive.u"] if drive else [])
+        + (["drive.u"] if single and na else [f"drive.{names[k]}.u" for k in disp])
     )
     K = -dQz[np.ix_(F, F)]
     return LinearModel(
         A,
         B,
         np.array(Cs).reshape(len(Cs), n),
-        np.array(Ds).reshape(len(Ds), 1)[:, : B.shape[1]],
+        np.array(Ds, dtype=float).reshape(len(Ds), m),
         state_names,
-        ["drive"] if drive else [],
-        names,
-        float(u),
+        ["drive"] if single else list(names),
+        out_names,
+        u0,
         z,
         np.array(y0, dtype=float),
         0.5 * (K + K.T),
         mF.copy(),
         F.copy(),
         -dQv[np.ix_(F, F)],
+        tuple(names),
+        tuple(int(a) for a in lags),
     )
 
 
@@ -257,86 +315,3 @@ def wrench_jacobians(mech, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     )
     _, b, c, _ = hd.parts_of(f.wrench)
     return np.moveaxis(b, 0, -1), np.moveaxis(c, 0, -1)
-
-
-# ------------------------------------------------------------------------- modes
-
-
-@dataclass(frozen=True)
-class Modes:
-    """
-    Undamped modes.
-
-    Frequencies (Hz, ascending), shapes (nF, n) M-orthonormal columns on the free coordinates
-    ``free``; damped poles (complex, 1/s, by |pole|), their natural frequencies |pole| / 2 pi (Hz)
-    and damping ratios -Re/|pole| (1 for a real pole); modal damping ratios phi^T C phi / (2 omega)
-    of the undamped modes (exact for the proportional damping B = t_char K, where they are omega
-    t_char / 2: a mode above zeta = 1 splits into two real poles, one near -1/t_char).
-    """
-
-    frequencies: np.ndarray
-    shapes: np.ndarray
-    free: np.ndarray
-    poles: np.ndarray
-    pole_frequencies: np.ndarray
-    damping_ratios: np.ndarray
-    modal_damping: np.ndarray
-
-
-def modes(model: LinearModel) -> Modes:
-    """
-    Return undamped modes and damped poles.
-
-    Undamped modes: the generalised eigenproblem K phi = w^2 M phi; damped poles: eig A.
-    """
-    w2, shapes = natural_modes(model.stiffness, model.mass)
-    poles = np.linalg.eigvals(model.A)
-    poles = poles[np.lexsort((poles.imag, np.abs(poles)))]
-    mag = np.abs(poles)
-    zeta = np.where(mag > 0, -poles.real / np.where(mag > 0, mag, 1.0), 1.0)
-    omega = np.sqrt(w2)
-    modal = np.einsum("ik,ij,jk->k", shapes, model.damping, shapes) / (2.0 * omega)
-    return Modes(omega / (2 * np.pi), shapes, model.free, poles, mag / (2 * np.pi), zeta, modal)
-
-
-# ------------------------------------------------------------ frequency response
-
-
-def frf(
-    model: LinearModel, frequencies: Sequence[float], outputs: Optional[Sequence[str]] = None
-) -> np.ndarray:
-    """
-    G(i 2 pi f) = C (i w I - A)^-1 B + D for the drive input: (n_outputs, n_frequencies).
-
-    The first-order system has the engine's block structure x = (z, v, u) with z' = v, so
-    the solve is done in second-order form: with s = i w, u = command / (1 + tau s) and
-    v = s z, (s^2 I - s A_vv - A_vz) z = A_vu u + B_v command -- an (n_F x n_F) system per
-    frequency instead of (2 n_F + 1), with the same exact result.
-    """
-    if not model.input_names:
-        raise ValueError("the mechanism has no drive input")
-    rows = (
-        [model.output_index(o) for o in outputs]
-        if outputs is not None
-        else list(range(len(model.output_names)))
-    )
-    s = 2j * np.pi * np.asarray(frequencies, dtype=float)
-    A, nF = model.A, len(model.free)
-    Avz, Avv, Avu = A[nF:2 * nF, :nF], A[nF:2 * nF, nF:2 * nF], A[nF:2 * nF, 2 * nF]
-    tau = -1.0 / A[2 * nF, 2 * nF]
-    u = 1.0 / (1.0 + tau * s)
-    M = (s * s)[:, None, None] * np.eye(nF) - s[:, None, None] * Avv - Avz
-    rhs = u[:, None] * Avu + model.B[nF:2 * nF, 0]
-    z = np.linalg.solve(M, rhs[..., None])[..., 0]
-    x = np.concatenate([z, s[:, None] * z, u[:, None]], axis=1)
-    return model.C[rows] @ x.T + model.D[rows]
-
-
-def static_gain(model: LinearModel, outputs: Optional[Sequence[str]] = None) -> np.ndarray:
-    """G(0) = D - C A^-1 B (the derivative of the static outputs in the drive input)."""
-    rows = (
-        [model.output_index(o) for o in outputs]
-        if outputs is not None
-        else list(range(len(model.output_names)))
-    )
-    return (model.D[rows] - model.C[rows] @ np.linalg.solve(model.A, model.B))[:, 0]

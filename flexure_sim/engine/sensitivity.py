@@ -20,7 +20,16 @@ displacement r and the twistor built from it, the wrench) is carried the same wa
 independent infinitesimals e1, e2 and their product for the second derivative.
 
 Outputs: ``gain`` (output displacement / u), ``compression`` (m), ``peak_stress`` (Pa, the
-largest hinge stress, engine/stress.py) and ``first_mode`` (Hz). The first natural frequency
+largest hinge stress, engine/stress.py) and ``first_mode`` (Hz). With several drives (or
+outputs) the equilibrium is at one input per drive and ``gain`` means every entry
+``gain.<output>.<drive>`` of the static gain matrix at that equilibrium, the tangent
+g = c_o . w with w = dz/du_d (what ``simulate --static`` reports at rest, ``linear.gain_matrix``
+at any input): w_P = D_d (a displacement drive) and K w_F = dQ_F/dz_P D_d + e_dF (e_d: a force
+drive's direction), solved in hyper-dual arithmetic like z by the iteration
+w <- w + K^-1 (dQ/dz(z(p), p)[w] + e_d)_F with the real K, whose directional derivative
+dQ/dz[w] is the imaginary part / h of the forces at z + i h w (the complex step below, on every
+hyper-dual part): real part exact after one iteration, e1 and e2 parts after two, e1e2 after
+three. The first natural frequency
 f = sqrt(lambda) / 2 pi comes from eigenvalue sensitivity of (K - lambda M) phi = 0,
 phi^T M phi = 1 (K, M on the free coordinates; K = -dQ_F/dz_F total in p, since z moves with
 p), with r_p = (K_p - lambda_p M - lambda M_p) phi:
@@ -44,7 +53,7 @@ precision, like the hyper-dual parts).
 
 from __future__ import annotations
 
-from typing import Optional, Sequence
+from typing import Sequence
 
 import numpy as np
 import scipy.linalg
@@ -54,6 +63,7 @@ from . import linear
 from .design import ParameterError, Parameters, hinge_indices
 from .parametric import forces
 from .solver import Simulation
+from .statics import _applied
 from .stress import hinge_stress
 
 OUTPUTS = ("gain", "compression", "first_mode", "peak_stress")
@@ -70,7 +80,7 @@ class Sensitivity:
     hyper-dual evaluation.
     """
 
-    def __init__(self, params: Parameters, u: float, static_outputs: bool = True):
+    def __init__(self, params: Parameters, u, static_outputs: bool = True):
         self.params = params
         mech = params.mechanism
         if static_outputs and mech.drive is None:
@@ -78,10 +88,17 @@ class Sensitivity:
                 f"mechanism {mech.name!r} has no drive: gain, compression and peak_stress "
                 "need a drive input (first_mode does not)"
             )
-        if static_outputs and u == 0:
-            raise ParameterError("the drive input must be non-zero (gain = output / input)")
-        self.u = float(u)
         self.sim = Simulation(mech)
+        model = self.sim.model
+        try:
+            inputs = model.drive_inputs(u) if model.drives else np.zeros(0)
+        except ValueError as exc:
+            raise ParameterError(f"--input: {exc}") from None
+        single = len(inputs) <= 1
+        if static_outputs and single and not np.any(inputs):
+            raise ParameterError("the drive input must be non-zero (gain = output / input)")
+        self.u = (float(inputs[0]) if len(inputs) else 0.0) if single else inputs
+        self.applied = _applied(model, inputs)  # the force drives' generalised force
         self.z = self.sim.static(self.u).z
         lay = linear.layout(self.sim)
         self.free = lay.free
@@ -109,16 +126,49 @@ class Sensitivity:
         )
         F = self.free
         for _ in range(2):  # e1, e2 parts exact after one, the e1e2 part after two
-            Q = forces(design, self.twistor, self.ia, self.ib, z).Q
+            Q = forces(design, self.twistor, self.ia, self.ib, z).Q + self.applied
             step = [self._solve(np.asarray(p)[F]) for p in hd.parts_of(Q)]
             for name, dp in zip("abcd", step):
                 part = getattr(z, name)
                 part[F] += dp
         return z
 
+    def tangent(self, design, z, d: int):
+        """
+        Return w = dz/du_d (all coordinates) as a HyperDual (module docstring).
+
+        ``d``: the drive's index (``Model.drive_names``); ``z``: the hyper-dual equilibrium.
+        """
+        model = self.sim.model
+        F, N = self.free, len(self.z)
+        w0, e = np.zeros(N), np.zeros(N)
+        if d in model.displacement_index:
+            w0[model.part.prescribed] = model.part.D[:, list(model.displacement_index).index(d)]
+        else:
+            e = model.drive_directions[d]
+        w = hd.HyperDual(w0, np.zeros(N), np.zeros(N), np.zeros(N))
+        h = COMPLEX_STEP
+        for _ in range(3):
+            zs = [zp + 1j * h * wp for zp, wp in zip(hd.parts_of(z), hd.parts_of(w))]
+            Q = forces(design, self.twistor, self.ia, self.ib, hd.HyperDual(*zs)).Q
+            r = [np.broadcast_to(np.imag(np.asarray(x)), (N,))[F] / h for x in hd.parts_of(Q)]
+            r[0] = r[0] + e[F]
+            for name, dr in zip("abcd", r):
+                getattr(w, name)[F] += self._solve(dr)
+        return w
+
     def outputs(self, design, z, which: Sequence[str]) -> dict:
         mech = self.params.mechanism
         out = {}
+        model = self.sim.model
+        tangents = {}
+        for key in which:
+            if not key.startswith("gain."):
+                continue
+            o, d = _gain_pair(model, key)
+            if d not in tangents:
+                tangents[d] = self.tangent(design, z, d)
+            out[key] = (tangents[d] * model.output_matrix[o]).sum()
         if "gain" in which:
             i = mech.body_index(mech.output.body)
             axis = np.array(mech.output.axis)
@@ -206,36 +256,85 @@ class Sensitivity:
         return dx, dy
 
 
+def gain_keys(mech) -> list:
+    """Every ``gain.<output>.<drive>`` of a mechanism (outputs, then drives, in file order)."""
+    return [f"gain.{o.name}.{d.name}" for o in mech.all_outputs for d in mech.drives]
+
+
+def _gain_pair(model, key: str) -> tuple:
+    """(output row, drive index) of ``gain.<output>.<drive>``; ParameterError listing them."""
+    for o, oname in enumerate(model.output_names):
+        for d, dname in enumerate(model.drive_names):
+            if key == f"gain.{oname}.{dname}":
+                return o, d
+    keys = ", ".join(gain_keys(model.mechanism)) or "none: the mechanism has no drive or output"
+    raise ParameterError(f"--of {key!r}: no such gain (gain.<output>.<drive>: {keys})")
+
+
+def _expand(mech, of: Sequence[str]) -> list:
+    """
+    Return ``of`` with ``gain`` meaning every gain.<output>.<drive> where it is ambiguous.
+
+    ``gain`` stays output / input for one drive and the single ``output:``; with several
+    drives or named outputs it is the gain matrix's entries. Unknown names: ParameterError.
+    """
+    out = []
+    for o in of:
+        if o == "gain" and mech.drives and mech.all_outputs and not (
+                len(mech.drives) == 1 and mech.output is not None):
+            out += [k for k in gain_keys(mech) if k not in out]
+        elif o in OUTPUTS or o.startswith("gain."):
+            out.append(o)
+        else:
+            raise ParameterError(f"--of {o!r}: outputs are {', '.join(OUTPUTS)} and "
+                                 "gain.<output>.<drive>")
+    return out
+
+
+def default_input(mech):
+    """Return the default drive input: the top of each drive's stroke (a number for one drive)."""
+    tops = [d.stroke[1] for d in mech.drives]
+    return tops[0] if len(tops) == 1 else 0.0 if not tops else tops
+
+
 def sensitivities(
-    params: Parameters, wrt: Sequence[str], of: Sequence[str] = OUTPUTS, u: Optional[float] = None
+    params: Parameters, wrt: Sequence[str], of: Sequence[str] = OUTPUTS, u=None
 ) -> dict:
     """
     Values.
 
     Gradients and second derivatives of the outputs ``of`` in the parameters ``wrt`` at drive input
-    u (default: the top of the drive's stroke).
+    u (default: the top of each drive's stroke; with several drives one value per drive or a
+    {name: value} mapping, ``Model.drive_inputs``). ``gain`` on a mechanism with several drives
+    or named outputs means every ``gain.<output>.<drive>`` (``_expand``), which may also be asked
+    for one by one.
 
     Returns {"input", "values": {out: v}, "gradient": {out: {p: d}}, "second": {out:
     {"p|q": d}}}: with one parameter per evaluation d2/dp2 (seeds p + e1 + e2); with exactly
     two parameters also the mixed d2/dp dq (seeds p + e1, q + e2).
     """
-    unknown = [o for o in of if o not in OUTPUTS]
-    if unknown:
-        raise ParameterError(f"--of {unknown[0]!r}: outputs are {', '.join(OUTPUTS)}")
+    mech = params.mechanism
+    if "gain" in of and mech.output is None and not (mech.drives and mech.all_outputs):
+        raise ParameterError(f"gain: mechanism {mech.name!r} names no output body")
+    of = _expand(mech, of)
     for p in wrt:
         params.check(p)
-    mech = params.mechanism
     if u is None:
-        u = mech.drive.stroke[1] if mech.drive else 0.0
-    if "gain" in of and mech.output is None:
-        raise ParameterError(f"gain: mechanism {mech.name!r} names no output body")
+        u = default_input(mech)
     if "compression" in of and mech.compression_hinge is None:
         raise ParameterError(f"compression: mechanism {mech.name!r} names no compression hinge")
     sens = Sensitivity(params, u, any(o != "first_mode" for o in of))
+    model = sens.sim.model
+    loaded = [o for o in of if o in ("compression", "peak_stress")]
+    if loaded and len(mech.drives) > 1 and not np.any(sens.u):
+        raise ParameterError(f"{', '.join(loaded)}: every drive input is 0; give a loaded "
+                             "equilibrium with --input")
+    for o in of:
+        if o.startswith("gain."):
+            _gain_pair(model, o)
     base = params.design()
-    values = {
-        k: float(hd.real(v)) for k, v in sens.outputs(base, hd.HyperDual(sens.z), of).items()
-    }
+    res = sens.outputs(base, hd.HyperDual(sens.z), of)
+    values = {k: float(hd.real(res[k])) for k in of}
     gradient = {o: {} for o in of}
     second = {o: {} for o in of}
     for p in wrt:
@@ -254,4 +353,5 @@ def sensitivities(
         )
         for o, v in sens.outputs(design, sens.equilibrium(design), of).items():
             second[o][f"{p}|{q}"] = float(v.d)
-    return {"input": u, "values": values, "gradient": gradient, "second": second}
+    u0 = sens.u if np.ndim(sens.u) == 0 else dict(zip(model.drive_names, sens.u.tolist()))
+    return {"input": u0, "values": values, "gradient": gradient, "second": second}

@@ -5,6 +5,10 @@ flexure-sim modes microstage [--input U] [--count N] [--json] [-o DIR]
 flexure-sim frf microstage --from drive --to output [--to hinges.a.force_x] [--fmin F --fmax F
                 --points N] [-o DIR] [--csv]
 flexure-sim linearize microstage --input U -o model.npz|model.mat|model.json
+
+With several drives (config/xy_stage.yaml) ``--input`` takes one value per drive (``x=1e-6,y=0``
+or ``1e-6,0``; default every drive at 0), ``frf --from`` names the drive and the model has one
+input per drive (engine/linear.py).
 """
 
 from __future__ import annotations
@@ -19,6 +23,8 @@ from ..engine import linear
 from ..engine.config import ConfigError, load_mechanism
 from ..engine.design import ParameterError
 from ..engine.solver import Simulation, SolverError
+from .dynamics_plots import input_text, plot_bode, plot_modes, write_frf_csv
+from .options import parse_drive_inputs
 
 EXIT_OK, EXIT_USAGE = 0, 2
 
@@ -26,11 +32,31 @@ EXIT_OK, EXIT_USAGE = 0, 2
 def _model(args, wrenches: bool = True) -> tuple:
     mech = load_mechanism(args.mechanism)
     sim = Simulation(mech)
-    if not np.isfinite(args.input):
-        raise ValueError(f"--input {args.input!r}: must be a finite number of metres")
-    if args.input and sim.drive is None:
-        raise ValueError(f"--input: mechanism {mech.name!r} has no drive")
-    return mech, linear.linearize(sim, args.input, wrenches=wrenches)
+    actuated = [sim.model.drive_names[a.drive] for a in sim.model.actuation]
+    if actuated:
+        raise ValueError(f"mechanism {mech.name!r}: drive {', '.join(actuated)} has a piezo "
+                         "actuator block, whose amplifier, hysteresis and creep the linear model "
+                         "does not include; analyse the stage without the actuator: block")
+    value = parse_drive_inputs(args.input)
+    if not sim.model.drives:
+        if value is not None and np.any(np.asarray(list(value.values()) if isinstance(
+                value, dict) else value, dtype=float) != 0):
+            raise ValueError(f"--input: mechanism {mech.name!r} has no drive")
+        value = None
+    elif value is not None:
+        try:
+            value = sim.model.drive_inputs(value)
+        except ValueError as exc:
+            raise ValueError(f"--input {args.input!r}: {exc}") from None
+        value = float(value[0]) if len(value) == 1 else value
+    return mech, linear.linearize(sim, value, wrenches=wrenches)
+
+
+def _u0(model):
+    """Return the model's drive input as JSON: a number (one drive), else {drive: value}."""
+    if np.ndim(model.u0) == 0:
+        return float(model.u0)
+    return {n: float(v) for n, v in zip(model.drive_names, model.u0)}
 
 
 def _guarded(prog: str, work) -> int:
@@ -65,7 +91,7 @@ def modes_summary(mech, model, md, count: int) -> dict:
     ]
     return {
         "mechanism": mech.name,
-        "input": model.u0,
+        "input": _u0(model),
         "undamped_frequencies_hz": md.frequencies.tolist(),
         "modal_damping_ratios": md.modal_damping.tolist(),
         "modes": mech_modes,
@@ -87,8 +113,8 @@ def run_modes(args) -> int:
         if args.json:
             print(json.dumps(out))
             return EXIT_OK
-        where = f"drive input {model.u0 * 1e6:.6g} um" if model.input_names else "rest (no drive)"
-        print(f"mechanism: {mech.name}   linearised at the static equilibrium at {where}")
+        print(f"mechanism: {mech.name}   linearised at the static equilibrium at "
+              f"{input_text(mech, model.u0)}")
         print("mode  undamped f [Hz]  modal damping ratio")
         for k, (f, z) in enumerate(zip(md.frequencies, md.modal_damping), 1):
             print(f"{k:4d} {f:16.6g} {z:20.4g}")
@@ -104,101 +130,34 @@ def run_modes(args) -> int:
     return _guarded("flexure-sim modes", work)
 
 
-def plot_modes(mech, model, md, count: int, out_dir: Path) -> list[Path]:
-    """
-    One PNG per mode.
-
-    Bodies (lines from each body's centre to its hinge points) at rest in grey and displaced by the
-    mode shape (scaled to 12 % of the mechanism's size).
-    """
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    out_dir.mkdir(parents=True, exist_ok=True)
-    z_rest = model.z
-    size = max(float(np.ptp(z_rest.reshape(-1, 3)[:, :2])), 1e-3)
-    points = {b.name: [] for b in mech.bodies}
-    for h in mech.hinges:
-        points[h.a.body].append(h.a.position)
-        points[h.b.body].append(h.b.position)
-    paths = []
-    for k in range(min(count, len(md.frequencies))):
-        dz = np.zeros_like(z_rest)
-        dz[model.free] = md.shapes[:, k]
-        pts = _mode_points(mech, points, z_rest, dz)
-        span = max(np.max(np.abs(d - r)) for r, d in pts.values())
-        scale = 0.12 * size / span if span > 0 else 1.0
-        fig, ax = plt.subplots(figsize=(6, 5))
-        for name, (rest, disp) in pts.items():
-            moved = rest + scale * (disp - rest)
-            for arr, style in ((rest, dict(color="0.7", lw=1.5)), (moved, dict(color="C0", lw=2))):
-                for q in arr[1:]:
-                    ax.plot([arr[0, 0] * 1e3, q[0] * 1e3], [arr[0, 1] * 1e3, q[1] * 1e3], **style)
-            ax.plot(moved[1:, 0] * 1e3, moved[1:, 1] * 1e3, "o", color="C3", ms=5)
-            ax.annotate(name, moved[0] * 1e3, fontsize=8, ha="center", va="bottom")
-        ax.set_aspect("equal")
-        ax.set_xlabel("x [mm]")
-        ax.set_ylabel("y [mm]")
-        ax.set_title(
-            f"{mech.name}: mode {k + 1}, {md.frequencies[k]:.6g} Hz\n"
-            "grey: at rest; blue: displaced (scaled to be visible); red: hinges",
-            fontsize=10,
-        )
-        path = out_dir / f"mode_{k + 1}.png"
-        fig.tight_layout()
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        paths.append(path)
-    return paths
-
-
-def _mode_points(mech, points, z, dz):
-    """
-    Per body.
-
-    (rest, displaced) arrays of [centre, hinge points...] in the root frame (the displacement to
-    first order: d(P + R c) = dP + dtheta J R c).
-    """
-    out = {}
-    for i, body in enumerate(mech.bodies):
-        x, y, th = z[3 * i:3 * i + 3]
-        c, s = np.cos(th), np.sin(th)
-        rest = [np.array([x, y])] + [
-            np.array([x + c * p[0] - s * p[1], y + s * p[0] + c * p[1]]) for p in points[body.name]
-        ]
-        dx, dy, dth = dz[3 * i:3 * i + 3]
-        disp = [q + np.array([dx, dy]) + dth * np.array([-(q[1] - y), q[0] - x]) for q in rest]
-        out[body.name] = (np.array(rest), np.array(disp))
-    return out
-
-
 # -------------------------------------------------------------------------- frf
 
 
 def run_frf(args) -> int:
     def work():
-        if args.source != "drive":
-            raise ValueError(f"--from {args.source!r}: the only input is 'drive'")
         if not (0 < args.fmin < args.fmax) or args.points < 2:
             raise ValueError("need 0 < --fmin < --fmax and --points >= 2")
-        wanted = args.to or ["output"]
+        wanted = args.to or []
         mech, model = _model(args, wrenches=any(o.startswith("hinges.") for o in wanted))
-        if not model.input_names:
-            raise ValueError(f"mechanism {mech.name!r} has no drive input")
-        outputs = args.to or ["output"]
+        k = _source(mech, model, args.source)
+        outputs = args.to or [o.name for o in mech.all_outputs]
+        if not outputs:
+            raise ValueError(f"mechanism {mech.name!r} has no output: name one with --to "
+                             f"({', '.join(model.output_names[:6])}, ...)")
         for o in outputs:
             model.output_index(o)
+        source = model.input_names[k]
         f = np.logspace(np.log10(args.fmin), np.log10(args.fmax), args.points)
-        G = linear.frf(model, f, outputs)
+        G = linear.frf(model, f, outputs, source)
         out_dir = Path(args.output)
         out_dir.mkdir(parents=True, exist_ok=True)
-        png = plot_bode(mech, model, f, G, outputs, out_dir / "frf.png")
+        png = plot_bode(mech, model, f, G, outputs, out_dir / "frf.png", source)
         written = [png]
         if args.csv:
             written.append(write_frf_csv(f, G, outputs, out_dir / "frf.csv"))
-        gains = linear.static_gain(model, outputs)
+        gains = linear.static_gain(model, outputs, source)
+        if len(model.input_names) > 1:
+            print(f"from drive {source}:")
         for name, g, g0 in zip(outputs, G[:, 0], gains):
             print(
                 f"{name}: |G| {abs(g):.6g} at {f[0]:.3g} Hz (static gain {g0:.6g}), "
@@ -211,58 +170,44 @@ def run_frf(args) -> int:
     return _guarded("flexure-sim frf", work)
 
 
-def write_frf_csv(f, G, outputs, path: Path) -> Path:
-    cols = ["frequency_hz"]
-    data = [f]
-    for name, row in zip(outputs, G):
-        cols += [f"{name}.magnitude", f"{name}.phase_deg", f"{name}.real", f"{name}.imag"]
-        data += [np.abs(row), np.degrees(np.unwrap(np.angle(row))), row.real, row.imag]
-    np.savetxt(
-        path, np.column_stack(data), delimiter=",", header=",".join(cols), comments="", fmt="%.10g"
-    )
-    return path
-
-
-def plot_bode(mech, model, f, G, outputs, path: Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
-    for name, row in zip(outputs, G):
-        unit = (
-            "m/m" if name in ("output", "compression") else ("N/m" if "force" in name else "N m/m")
-        )
-        ax1.loglog(f, np.abs(row), label=f"{name} [{unit}]")
-        ax2.semilogx(f, np.degrees(np.unwrap(np.angle(row))), label=name)
-    ax1.set_ylabel("magnitude")
-    ax2.set_ylabel("phase [deg]")
-    ax2.set_xlabel("frequency [Hz]")
-    ax1.legend(fontsize=8)
-    ax1.grid(True, which="both", alpha=0.3)
-    ax2.grid(True, which="both", alpha=0.3)
-    ax1.set_title(f"{mech.name}: drive command -> outputs, linearised at {model.u0 * 1e6:.4g} um")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+def _source(mech, model, name) -> int:
+    """B's column of ``--from`` (None: the only drive); ValueError listing the drives."""
+    if not model.input_names:
+        raise ValueError(f"mechanism {mech.name!r} has no drive input")
+    drives = ", ".join(model.drive_names)
+    if name is None and len(model.input_names) > 1:
+        raise ValueError(f"--from: mechanism {mech.name!r} has {len(model.input_names)} drives "
+                         f"({drives}): name one")
+    try:
+        return model.input_index(name)
+    except ValueError:
+        has = (f"has drives {drives}" if len(model.input_names) > 1 else
+               f"has one drive, {drives!r}" + (" (input 'drive')" if drives != "drive" else ""))
+        raise ValueError(f"--from {name!r}: no such drive; mechanism {mech.name!r} "
+                         f"{has}") from None
 
 
 # -------------------------------------------------------------------- linearize
 
 
 def export_model(model: linear.LinearModel, path: Path, mechanism: str) -> Path:
-    """Return a, B, C, D with names: .npz (numpy), .mat (MATLAB, scipy.io.savemat), .json."""
+    """
+    Write A, B, C, D with names: .npz (numpy), .mat (MATLAB, scipy.io.savemat), .json.
+
+    One input per drive (``input_names``; ``input_u0``: the drive inputs of the equilibrium, a
+    number for one drive, else one per drive in that order).
+    """
+    u0 = model.u0 if np.ndim(model.u0) == 0 else np.asarray(model.u0, dtype=float)
     meta = {
         "mechanism": mechanism,
-        "input_u0": model.u0,
+        "input_u0": u0,
         "state_names": model.state_names,
         "input_names": model.input_names,
         "output_names": model.output_names,
         "y0": model.y0.tolist(),
         "units": "SI; states are deviations of (z_F, v_F, u) from the equilibrium, outputs "
-        "deviations from y0; the input is the drive command (m)",
+        "deviations from y0; the inputs are the drive commands (m, rad on theta; a force "
+        "drive's N, N m)",
     }
     arrays = {"A": model.A, "B": model.B, "C": model.C, "D": model.D}
     suffix = path.suffix.lower()
@@ -282,6 +227,7 @@ def export_model(model: linear.LinearModel, path: Path, mechanism: str) -> Path:
             },
         )
     elif suffix == ".json":
+        meta["input_u0"] = np.asarray(u0).tolist()
         path.write_text(json.dumps({**{k: v.tolist() for k, v in arrays.items()}, **meta}))
     else:
         raise ValueError(f"-o {path}: the file name must end in .npz, .mat or .json")
@@ -292,9 +238,11 @@ def run_linearize(args) -> int:
     def work():
         mech, model = _model(args)
         path = export_model(model, Path(args.output), mech.name)
+        n_in = len(model.input_names)
         print(
-            f"{mech.name}: {len(model.state_names)} states, {len(model.input_names)} input, "
-            f"{len(model.output_names)} outputs at drive input {model.u0:.6g} m -> {path}"
+            f"{mech.name}: {len(model.state_names)} states, {n_in} input"
+            f"{'' if n_in == 1 else 's'} ({', '.join(model.input_names) or 'none'}), "
+            f"{len(model.output_names)} outputs at {input_text(mech, model.u0)} -> {path}"
         )
         return EXIT_OK
 
@@ -308,9 +256,9 @@ def _common(p) -> None:
     p.add_argument("mechanism", help="built-in name or YAML path")
     p.add_argument(
         "--input",
-        type=float,
-        default=0.0,
-        help="drive input (m) of the static equilibrium (default 0)",
+        default=None,
+        help="drive input (m) of the static equilibrium; with several drives one per drive: "
+        "NAME=VALUE,... or V1,V2,... (default: every drive at 0)",
     )
 
 
@@ -326,12 +274,15 @@ def register(subparsers) -> None:
         "frf", help="frequency response (Bode plot, CSV) from the exact linearisation"
     )
     _common(p)
-    p.add_argument("--from", dest="source", default="drive", help="input (only 'drive')")
+    p.add_argument("--from", dest="source", default=None,
+                   help="input: the drive's name (default: the only drive; 'drive' for a "
+                   "single drive)")
     p.add_argument(
         "--to",
         action="append",
-        help="output: output, compression, drive_force, "
-        "hinges.<h>.moment|force_x|force_y (repeatable; default output)",
+        help="output: output (or each named output), compression, drive_force "
+        "(drive_force.<drive> with several drives), hinges.<h>.moment|force_x|force_y "
+        "(repeatable; default: the mechanism's outputs)",
     )
     p.add_argument("--fmin", type=float, default=1.0, help="Hz (default 1)")
     p.add_argument("--fmax", type=float, default=1e5, help="Hz (default 1e5)")

@@ -1,7 +1,7 @@
-"""The command-line options every file tool shares."""
+"""The command-line options the tools share: file tools' RUN options, drive inputs."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Optional
 
 
 def add_file_arguments(parser: Any, recover: bool = True, namespace: bool = True) -> None:
@@ -20,3 +20,34 @@ def add_file_arguments(parser: Any, recover: bool = True, namespace: bool = True
         parser.add_argument("--namespace", default=None,
                             help="namespace of the stage's topics when the file holds several "
                             "(default: inferred)")
+
+
+def parse_drive_inputs(text: Optional[str], option: str = "--input"):
+    """
+    Return the drive inputs written on the command line, as ``Model.drive_inputs`` takes them.
+
+    ``NAME=VALUE,...`` (a mapping; every drive named), ``V1,V2,...`` (one value per drive, in
+    the mechanism's drive order) or one number (a single drive); None stays None. ValueError
+    naming ``option`` for anything that is not a number.
+    """
+    if text is None:
+        return None
+    parts = [p.strip() for p in str(text).split(",")]
+    if any("=" in p for p in parts):
+        out = {}
+        for p in parts:
+            name, eq, value = p.partition("=")
+            if not eq or not name.strip():
+                raise ValueError(f"{option} {text!r}: expected NAME=VALUE for every drive "
+                                 f"(e.g. x=1e-6,y=0), got {p!r}")
+            out[name.strip()] = _float(value, option, text)
+        return out
+    values = [_float(p, option, text) for p in parts]
+    return values[0] if len(values) == 1 else values
+
+
+def _float(value: str, option: str, text: str) -> float:
+    try:
+        return float(value)
+    except ValueError:
+        raise ValueError(f"{option} {text!r}: {value.strip()!r} is not a number") from None

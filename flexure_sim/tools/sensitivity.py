@@ -7,6 +7,11 @@ compression, first_mode and peak_stress.
 PARAM is any numeric key of the mechanism file by path: ``stiffness_models.notch.h``,
 ``hinges.a.a.at.0``, ``bodies.body4.mass``; ``hinges.<h>.stiffness.<key>`` varies one hinge's
 copy of a named stiffness model.
+
+With several drives (config/xy_stage.yaml) ``--input`` takes one value per drive
+(``x=1e-6,y=0`` or ``1e-6,0``; default: the top of every drive's stroke) and ``gain`` means
+every ``gain.<output>.<drive>``, the static gain matrix's entries at that equilibrium (each may
+be asked for alone: ``--of gain.y.x``).
 """
 
 from __future__ import annotations
@@ -18,6 +23,8 @@ from ..engine.config import ConfigError
 from ..engine.design import ParameterError, Parameters
 from ..engine.sensitivity import OUTPUTS, sensitivities
 from ..engine.solver import SolverError
+from .dynamics_plots import input_text
+from .options import parse_drive_inputs
 
 
 def run(args) -> int:
@@ -27,7 +34,7 @@ def run(args) -> int:
         of = [o for o in args.of.split(",") if o]
         if not wrt:
             raise ParameterError("--wrt: give at least one parameter path")
-        res = sensitivities(params, wrt, of, args.input)
+        res = sensitivities(params, wrt, of, parse_drive_inputs(args.input))
     except (ConfigError, ParameterError, SolverError, ValueError) as exc:
         print(f"flexure-sim sensitivity: error: {exc}", file=sys.stderr)
         return 2
@@ -36,11 +43,13 @@ def run(args) -> int:
     if args.json:
         print(json.dumps(res))
         return 0
-    where = f"drive input {res['input'] * 1e6:.6g} um" if params.mechanism.drive else "rest"
+    mech = params.mechanism
+    u0 = list(res["input"].values()) if isinstance(res["input"], dict) else res["input"]
+    where = input_text(mech, u0) if mech.drives else "rest"
     print(f"mechanism: {res['mechanism']}   static equilibrium at {where}")
     for p, v in res["parameters"].items():
         print(f"parameter {p} = {v:.6g}")
-    for o in of:
+    for o in res["values"]:
         print(f"{o} = {res['values'][o]:.10g}")
         for p, d in res["gradient"][o].items():
             print(f"  d/d {p}: {d:.10g}")
@@ -60,10 +69,13 @@ def register(subparsers) -> None:
         help="parameter paths, comma-separated (e.g. stiffness_models.notch.h)",
     )
     p.add_argument(
-        "--of", default=",".join(OUTPUTS), help=f"outputs, comma-separated ({', '.join(OUTPUTS)})"
+        "--of", default=",".join(OUTPUTS),
+        help=f"outputs, comma-separated ({', '.join(OUTPUTS)}, gain.<output>.<drive>)"
     )
     p.add_argument(
-        "--input", type=float, default=None, help="drive input (m); default the top of the stroke"
+        "--input", default=None,
+        help="drive input (m); with several drives one per drive: NAME=VALUE,... or V1,V2,... "
+        "(default: the top of each drive's stroke)"
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=run)
