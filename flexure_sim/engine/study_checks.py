@@ -7,9 +7,10 @@ drive, or a mapping drive name -> value naming every drive (also accepted for on
 Each value is in its drive's unit (m, rad on theta; N, N m for a force drive) and must lie
 within that drive's stroke. Omitted: every drive at the top of its stroke.
 
-Outputs that need one drive are refused at load for a mechanism without one, rather than
-failing in every design: ``first_mode`` and ``first_mode_damping`` come from the linear model
-(engine/linear.py), which takes a single displacement drive with a rigid stack; the outputs
+Outputs a mechanism cannot give are refused at load, rather than failing in every design:
+``first_mode`` and ``first_mode_damping`` come from the linear model (engine/linear.py), which
+takes any number of displacement and force drives but no piezo stack (its input would be the
+applied displacement, not the actuator's command); the outputs
 measured per output need the mechanism to name one when it has several drives;
 ``peak_stress_ratio`` needs a hinge with a yield strength.
 """
@@ -24,7 +25,7 @@ from .mechanism import Mechanism, coordinate_unit
 
 #: A study's drive input: one number (one drive), or {drive name: value} (several drives).
 DriveInput = Union[float, dict]
-#: Outputs of the linear model, which takes a single displacement drive (``linear.linearize``).
+#: Outputs of the linear model, which takes drives without a piezo stack (``linear.linearize``).
 LINEAR_OUTPUTS = ("first_mode", "first_mode_damping")
 #: Outputs measured per output (a column each) with several drives: they need an output.
 PER_OUTPUT = ("gain", "output_displacement", "settling_time", "overshoot")
@@ -121,12 +122,11 @@ def check_outputs(outputs: tuple[str, ...], mech: Mechanism, fail) -> None:
     """Refuse the outputs ``mech`` cannot give (module doc), naming the output."""
     drives = mech.drives
     for name in outputs:
-        if name in LINEAR_OUTPUTS and not (len(drives) == 1 and drives[0].kind == "displacement"
-                                           and not stacked(drives[0])):
-            kinds = ", ".join(f"{d.name} ({'stack' if stacked(d) else d.kind})" for d in drives)
+        if name in LINEAR_OUTPUTS and any(stacked(d) for d in drives):
+            kinds = ", ".join(repr(d.name) for d in drives if stacked(d))
             raise fail("outputs", f"{name}: the linear model (engine/linear.py, flexure-sim "
-                       f"modes) takes a single displacement drive with a rigid stack; "
-                       f"{mech.name!r} has drives {kinds}")
+                       f"modes) takes no drive with a piezo stack (actuator: block); "
+                       f"{mech.name!r} has one on drive {kinds}")
         if name in PER_OUTPUT and len(drives) > 1 and not mech.all_outputs:
             raise fail("outputs", f"{name}: {mech.name!r} has several drives and no output "
                        "(outputs: in the mechanism file)")
