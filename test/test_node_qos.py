@@ -105,3 +105,36 @@ def test_best_effort_command_reliability_hears_both_kinds_of_publisher(
         rc = node.stop(signal.SIGINT)
     assert rc == 0, node.stderr
     assert "incompatible" not in node.stderr
+
+
+def test_the_command_graph_check_never_wakes_the_executor(context, tmp_path, monkeypatch):
+    """
+    The node's executor sleeps until a service or parameter call: nothing periodic wakes it.
+
+    Each executor wake-up takes the GIL from the paced stepping thread, and the old 0.5 s
+    timer of the command publishers' graph check was most of the real-time missed ticks
+    (BENCHMARKS.md). The check now runs in the stepping thread (the warning test above shows
+    it still works); with the timer, the executor below would run it at 0.5 s.
+    """
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from flexure_sim.node.shell import StageNode
+
+    monkeypatch.chdir(tmp_path)
+    overrides = [Parameter(name, value=value) for name, value in PARAMS.items()]
+    node = StageNode(context=context, parameter_overrides=overrides)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        executor.spin_once(timeout_sec=0.05)  # whatever adding the node made ready
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 1.5:
+            executor.spin_once(timeout_sec=1.5 - (time.monotonic() - t0))
+            # Something ran (or the wait ended early): only the timeout may end it.
+            assert time.monotonic() - t0 >= 1.4, "the executor was woken"
+        assert node.loop.ticks > 0  # meanwhile the stage stepped in real time
+    finally:
+        executor.shutdown()
+        node.shutdown()
+        node.destroy_node()

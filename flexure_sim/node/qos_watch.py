@@ -10,8 +10,14 @@ says so. The node therefore handles rmw's incompatible-QoS events:
   transient-local durability): WARN naming the topic and the policy.
 
 The command subscription is polled by the stepping thread and its callback group is never
-served by the executor (`polled`), so its event handlers are moved to a group of their own
-that the executor does serve: events are rare, so they cost the stepping thread nothing.
+served by the executor (`polled`); its QoS event handlers would put the reader in the
+executor's wait set (which then holds it while it waits, and made the stepping thread lose
+commands in a flood). Incompatible command publishers are therefore found by a graph check
+(`check_command_publishers`, ~3-10 us) that the stepping thread runs itself every
+`GRAPH_CHECK_PERIOD_S` between ticks. It used to run on a 0.5 s executor timer: each wake-up
+of the executor took the GIL from the paced stepping thread, and in real time at 1 kHz that
+was most of the node's missed ticks (15 s quiet runs: 17-27 missed with the timer, 0 and 0
+without it; BENCHMARKS.md).
 Counts appear in the diagnostics (`qos_incompatible_publishers`, `..._subscribers`, WARN in
 the window in which one appeared).
 """
@@ -19,11 +25,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.qos import qos_policy_name_from_kind
 
 from . import interface as itf
+
+#: Wall-clock period of the command publishers' graph check (s): a best-effort publisher is
+#: warned about within about this long of appearing.
+GRAPH_CHECK_PERIOD_S = 0.5
 
 
 class QosWatch:
@@ -36,7 +45,6 @@ class QosWatch:
     def __init__(self, log: Any, command_reliability: str) -> None:
         self._log = log
         self.command_reliability = command_reliability
-        self.group = MutuallyExclusiveCallbackGroup()
         self.publishers = 0
         self.subscribers = 0
         self._reported = (0, 0)
@@ -57,9 +65,8 @@ class QosWatch:
         """
         Count best-effort publishers on the command topic that a reliable subscription ignores.
 
-        A graph check on an executor timer: the subscription's own QoS events would put the
-        polled reader in the executor's wait set, which then holds the reader while it waits
-        and made the stepping thread lose commands in a flood.
+        A graph check, run by the stepping thread between ticks (module doc): the
+        subscription's own QoS events would put the polled reader in the executor's wait set.
         """
         if self.command_reliability != "reliable":
             return

@@ -169,10 +169,9 @@ class StageNode(Node):
             spec.msg_type, spec.name, never_called, itf.command_qos(reliability), raw=True,
             callback_group=PolledGroup()) for spec in self.interface.commands]
         command_topics = [sub.topic_name for sub in self._command_subs]
-        if command_topics:
-            self.create_timer(0.5, lambda: [watch.check_command_publishers(self, topic)
-                                            for topic in command_topics],
-                              callback_group=watch.group)
+        if command_topics:  # run by the stepping thread, not on an executor timer (qos_watch)
+            loop.graph_check = lambda: [watch.check_command_publishers(self, topic)
+                                        for topic in command_topics]
         loop.intake = intake_for(self._command_subs, drive_filter, named, len(tick_pubs) + 1,
                                  self.session.write, self._log, loop.throttle,
                                  units(drive)[0] if drive else "m")

@@ -26,6 +26,7 @@ from .drive_input import CommandFilter, WarningThrottle
 from .engine_guard import EngineHold, snapshot_finite
 from .cpu_latency import request_cpu_latency
 from .pacing import Pacer, set_thread_nice
+from .qos_watch import GRAPH_CHECK_PERIOD_S
 from .params import monitor_every, steps_per_tick
 from .requests import RequestQueue
 from .session import RecordingSession
@@ -88,6 +89,10 @@ class SteppingLoop:
         self.hold = EngineHold()
         self.throttle = WarningThrottle(1.0)
         self.intake: Any = None
+        #: A check of the ROS graph (`qos_watch.QosWatch.check_command_publishers`) run
+        #: between ticks every GRAPH_CHECK_PERIOD_S of wall time; None: none.
+        self.graph_check: Any = None
+        self._next_graph_check = 0.0
         self.diagnostics: Optional[Diagnostics] = None
         #: The last published snapshot (the diagnostics' hinge stress ratio), None before.
         self.snapshot: Any = None
@@ -150,12 +155,14 @@ class SteppingLoop:
                 if self.time_mode == "lockstep":
                     requests.wake.wait(0.1)
                     requests.wake.clear()
+                    self._check_graph()
                     continue
                 if pacer is not None:
                     pacer.wait()
                 self.tick()
                 if pacer is not None:
                     pacer.done()
+                self._check_graph()
         except BaseException as exc:  # noqa: BLE001 - reported, then the node shuts down
             if not self._stop.is_set() and self._on_failure(exc):
                 self.failure = exc
@@ -165,6 +172,15 @@ class SteppingLoop:
                 self.cpu_latency_us = -1
             self.requests.fail_all()
             self._on_end(self.failure is None)
+
+    def _check_graph(self) -> None:
+        """Run `graph_check` if it is due (after a tick's work: it never delays one)."""
+        check = self.graph_check
+        if check is not None:
+            now = time.monotonic()
+            if now >= self._next_graph_check:
+                self._next_graph_check = now + GRAPH_CHECK_PERIOD_S
+                check()
 
     def restart_clocks(self) -> None:
         """Start a new run or window now (wall clock and simulated time)."""
