@@ -10,13 +10,15 @@ cyclictest holds the same request while it measures). A limit of 0 selects the p
 state: an idle CPU spins in the kernel instead of halting, and a thread woken on it runs at
 once.
 
-Why the node asks for it: on a virtual machine a halted virtual CPU has to be woken by the
-host before a thread can run on it, and that sometimes takes milliseconds. It hits every
+Why the node can ask for it (``cpu_latency_us``, off by default): on a virtual machine a
+halted virtual CPU has to be woken by the host before a thread can run on it, and that
+sometimes takes milliseconds. It hits every
 thread that sleeps between ticks: the stepping thread after a sleep, the recorder, a
 controller in another process waiting for the next measurement. Measured on this project's
 2-core VM (a paced Python loop of 250 us of work per 1 ms tick, sleeping all but the last
 50 us; load ~1.5 from other jobs): wake-up lateness p99 531 us and 44 of 5000 ticks missed
-without the request, 25 us and 4 of 5000 with it (BENCHMARKS.md has the node's figures).
+without the request, 25 us and 4 of 5000 with it. The node at its default ``wake_spin``
+never sleeps at 1 kHz, and there the request made no consistent difference (BENCHMARKS.md).
 The price: idle CPUs poll instead of resting (power, and host CPU time on a VM).
 """
 from __future__ import annotations

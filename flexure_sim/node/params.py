@@ -29,7 +29,7 @@ WAKE_SPIN_S = 1e-3
 #: Default of ``stepping_nice``: see its description (measured in BENCHMARKS.md).
 STEPPING_NICE = -10
 #: Default of ``cpu_latency_us``: see its description (measured in BENCHMARKS.md).
-CPU_LATENCY_US = 0
+CPU_LATENCY_US = -1
 
 
 @dataclass(frozen=True)
@@ -202,8 +202,8 @@ def parameter_specs(
             100000,
             "Real-time mode: CPU wake-up latency asked of the kernel while the stage steps "
             "(Linux PM QoS, /dev/cpu_dma_latency; 0: idle CPUs poll instead of halting, so a "
-            "thread woken on one runs at once; -1: no request). Needs write access to "
-            "/dev/cpu_dma_latency; if refused, the node says so once and runs unchanged. "
+            "thread woken on one runs at once; -1, the default: no request). Needs write "
+            "access to /dev/cpu_dma_latency; if refused, the node says so once and runs unchanged. "
             "Read-only.",
         ),
         ParamSpec(
