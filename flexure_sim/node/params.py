@@ -203,8 +203,8 @@ def parameter_specs(
             "Real-time mode: CPU wake-up latency asked of the kernel while the stage steps "
             "(Linux PM QoS, /dev/cpu_dma_latency; 0: idle CPUs poll instead of halting, so a "
             "thread woken on one runs at once; -1, the default: no request). Needs write "
-            "access to /dev/cpu_dma_latency; if refused, the node says so once and runs unchanged. "
-            "Read-only.",
+            "access to /dev/cpu_dma_latency; if refused, the node says so once and runs "
+            "unchanged. Read-only.",
         ),
         ParamSpec(
             "command_reliability",
