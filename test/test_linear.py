@@ -392,7 +392,7 @@ def test_a_mode_plot_without_motion_hides_the_rest_drawing(tmp_path):
 
     So the count measures the drawn displacement, not the plot's furniture.
     """
-    from flexure_sim.tools.dynamics import plot_modes
+    from flexure_sim.tools.dynamics_plots import plot_modes
 
     mech = load_mechanism("microstage")
     model = linear.linearize(Simulation(mech), 0.0, wrenches=False)
@@ -415,7 +415,7 @@ def test_mode_plot_points_are_the_files_hinge_points_moved_by_the_mode_shape():
     import yaml
 
     from flexure_sim.engine.config import resolve_mechanism_path
-    from flexure_sim.tools.dynamics import _mode_points
+    from flexure_sim.tools.dynamics_plots import _mode_points
 
     data = yaml.safe_load(resolve_mechanism_path("microstage").read_text())
     pose = {b["name"]: np.array(b["pose"][:2]) for b in data["bodies"]}

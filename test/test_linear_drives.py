@@ -8,7 +8,6 @@ drive, and the undamped frequencies against the damped poles as the damping vani
 """
 
 import copy
-import dataclasses
 import json
 
 import numpy as np
@@ -18,9 +17,10 @@ from flexure_sim.cli import gain_matrix, main
 from flexure_sim.engine import linear
 from flexure_sim.engine.config import (ConfigError, load_mechanism, mechanism_from_dict,
                                        resolve_mechanism_path)
-from flexure_sim.engine.hinge_laws import QuadraticLaw
 from flexure_sim.engine.solver import Simulation, State
 from flexure_sim.engine.yaml_files import read_yaml
+
+from test_linear import _scaled_damping  # one copy of the test helper
 
 U = {"x": 3e-6, "y": 5e-6}  # an equilibrium under load, both drives moved
 OUTPUTS = ["x", "y", "theta", "drive_force.x", "drive_force.y"]
@@ -143,14 +143,6 @@ def test_cross_coupling_frf_matches_the_time_domain_response(model, xy):
         G = linear.frf(model, [freq], ["x"], "y")[0, 0]
         assert abs(abs(measured) - abs(G)) / abs(G) < 1e-3, freq
         assert abs(np.angle(measured / G)) < 1e-3, freq
-
-
-def _scaled_damping(mech, s):
-    hinges = tuple(
-        dataclasses.replace(h, law=QuadraticLaw(h.law.coordinates, h.law.K, h.law.B * s))
-        for h in mech.hinges
-    )
-    return dataclasses.replace(mech, hinges=hinges)
 
 
 def test_modes_are_the_damped_poles_as_the_damping_vanishes(xy):
