@@ -181,7 +181,47 @@ def test_export_signals_names_every_drive_and_output_column(capsys, rotor, tmp_p
         float(rows[-1]["output/displacement"]), rel=1e-12)
 
 
+def _recorded_floats(path) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], float]:
+    """
+    Return every Float64 topic of a run as (log time s, value), and the last log time (s).
+
+    Read with the mcap library and rclpy's deserializer, not with the tools' Run.
+    """
+    from mcap.reader import make_reader
+    from rclpy.serialization import deserialize_message
+    from std_msgs.msg import Float64
+
+    found: dict[str, tuple[list, list]] = {}
+    last = 0
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages(log_time_order=True):
+            last = max(last, message.log_time)
+            if schema.name == "std_msgs/msg/Float64":
+                t, v = found.setdefault(channel.topic, ([], []))
+                t.append(message.log_time / 1e9)
+                v.append(deserialize_message(message.data, Float64).data)
+    return {k: (np.array(t), np.array(v)) for k, (t, v) in found.items()}, last / 1e9
+
+
+def _data_lines(ax) -> dict:
+    """Return the labelled lines of an axis by label (the step markers are unlabelled)."""
+    return {ln.get_label(): ln for ln in ax.get_lines() if not ln.get_label().startswith("_")}
+
+
+def _assert_line(line, t_s, values, factor: float) -> None:
+    """Assert a line draws (t_s, values) in ms and ``factor`` units (to conversion rounding)."""
+    np.testing.assert_allclose(np.asarray(line.get_xdata(), float), np.asarray(t_s) * 1e3,
+                               rtol=1e-14, atol=0)
+    np.testing.assert_allclose(np.asarray(line.get_ydata(), float), np.asarray(values) * factor,
+                               rtol=1e-14, atol=0)
+
+
 def test_plot_draws_every_drive_and_output_with_names_and_units(capsys, xy, tmp_path):
+    import matplotlib.pyplot as plt
+
+    from flexure_sim.tools.plot import plot_run
+    from flexure_sim.tools.runlog import load_run
+
     path, _ = xy
     code, out, err = flexure_sim(capsys, "plot", path, "-o", tmp_path)
     assert code == 0, err
@@ -189,6 +229,58 @@ def test_plot_draws_every_drive_and_output_with_names_and_units(capsys, xy, tmp_
     assert figure_title(tmp_path / "drive_forces.png") == "Drive forces"
     assert not (tmp_path / "input_output.png").exists()
     assert not (tmp_path / "body_poses.png").exists()
+    # The same figures built in-process and left open: every line against the recording.
+    figures: dict = {}
+    written = plot_run(load_run(path), tmp_path / "kept", figures=figures)
+    try:
+        assert sorted(figures) == sorted(p.stem for p, _ in written) == [
+            "drive_forces", "drives_outputs"]
+        rec, t_end = _recorded_floats(path)
+        assert t_end == pytest.approx(0.11)
+        # The 0.11 s run is plotted in ms; displacements in um, the rotation in urad.
+        fig = figures["drives_outputs"]
+        assert [ax.get_ylabel() for ax in fig.axes] == [
+            "drive x [µm]", "drive y [µm]", "output x [µm]", "output y [µm]",
+            "output theta [µrad]"]
+        assert fig.axes[-1].get_xlabel() == "simulation time [ms]"
+        steps = sorted(t for t, _, _ in SCHEDULE)
+        for ax, name in zip(fig.axes, ("x", "y")):
+            lines = _data_lines(ax)
+            labels = [f"drive {name}: applied input", f"drive {name}: command"]
+            assert sorted(lines) == sorted(labels)
+            assert [t.get_text() for t in ax.get_legend().get_texts()] == labels
+            t_u, u = rec[f"/drive/{name}/input"]
+            assert len(t_u) == 110
+            _assert_line(lines[labels[0]], t_u, u, 1e6)
+            # The command, held from the recorded command on, the rest input before it.
+            (t_c,), (c,) = rec[f"/drive/{name}/displacement"]
+            assert c == U and u[0] == 0.0
+            _assert_line(lines[labels[1]], [t_u[0], t_c, t_c, t_end], [u[0], u[0], c, c], 1e6)
+            assert lines[labels[1]].get_linestyle() == "--"
+            # The steps the analysis found are marked where the commands were recorded.
+            marks = sorted(ln.get_xdata()[0] for ln in ax.get_lines()
+                           if ln.get_label().startswith("_"))
+            np.testing.assert_allclose(marks, np.array(steps) * 1e3, rtol=1e-12)
+        for ax, (name, factor) in zip(fig.axes[2:], (("x", 1e6), ("y", 1e6), ("theta", 1e6))):
+            lines = _data_lines(ax)
+            assert list(lines) == [f"output {name}"]
+            assert [t.get_text() for t in ax.get_legend().get_texts()] == [f"output {name}"]
+            _assert_line(lines[f"output {name}"], *rec[f"/output/{name}/displacement"], factor)
+        # Drive forces: one panel per drive, one line each, its recorded actuator force.
+        fig = figures["drive_forces"]
+        assert [ax.get_ylabel() for ax in fig.axes] == ["drive x [N]", "drive y [N]"]
+        for ax, name in zip(fig.axes, ("x", "y")):
+            lines = _data_lines(ax)
+            assert list(lines) == [f"drive {name}: actuator force"]
+            _assert_line(lines[f"drive {name}: actuator force"],
+                         *rec[f"/drive/{name}/force"], 1.0)
+        # Each drive's data differ, so a swapped or repeated line could not pass.
+        assert not np.array_equal(rec["/drive/x/force"][1], rec["/drive/y/force"][1])
+        assert not np.array_equal(rec["/output/x/displacement"][1],
+                                  rec["/output/y/displacement"][1])
+    finally:
+        for f in figures.values():
+            plt.close(f)
 
 
 def test_a_namespaced_run_of_drive_and_output_topics_only_is_found(capsys, tmp_path):

@@ -109,8 +109,14 @@ def _pyplot():
     return plt
 
 
-def plot_run(run: Run, out_dir: Path, dpi: int = 120) -> list[tuple[Path, str]]:
-    """Write every figure the run allows; returns (path, title) of each."""
+def plot_run(run: Run, out_dir: Path, dpi: int = 120,
+             figures: Optional[dict[str, Any]] = None) -> list[tuple[Path, str]]:
+    """
+    Write every figure the run allows; returns (path, title) of each.
+
+    With ``figures`` (a dict), each figure is also left open and stored in it under its file
+    stem (e.g. ``drives_outputs``), for a caller that reads the drawn lines; it closes them.
+    """
     plt = _pyplot()
     out_dir.mkdir(parents=True, exist_ok=True)
     unit, scale = time_unit((run.end_ns - run.start_ns) / 1e9)
@@ -123,7 +129,10 @@ def plot_run(run: Run, out_dir: Path, dpi: int = 120) -> list[tuple[Path, str]]:
         fig.tight_layout()
         path = out_dir / f"{name}.png"
         fig.savefig(path, dpi=dpi, metadata={"Title": title, "Software": "flexure_sim"})
-        plt.close(fig)
+        if figures is None:
+            plt.close(fig)
+        else:
+            figures[name] = fig
         written.append((path, title))
 
     def mark_steps(ax) -> None:
