@@ -5,7 +5,8 @@ import multiprocessing
 import pytest
 
 from flexure_sim.node.pacing import Pacer, PacingStats
-from flexure_sim.node.params import parameter_specs, steps_per_tick, validate
+from flexure_sim.node.param_checks import steps_per_tick, validate
+from flexure_sim.node.params import parameter_specs
 from flexure_sim.node.session import (
     claim_recording_path, node_token, recording_layout, release_claim)
 

@@ -1,20 +1,16 @@
 """
-The stage node's parameters as data, and their validation (pure Python, no side effects).
+The stage node's parameters as data (pure Python, no side effects).
 
 The node declares each `ParamSpec` with a ``ParameterDescriptor`` (description, range,
-read-only), validates every change with `validate` in its on-set callback, and applies
-accepted changes in its post-set callback.
+read-only), validates every change with `param_checks.validate` in its on-set callback, and
+applies accepted changes in its post-set callback.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
-from typing import Any, Mapping, Optional
+from typing import Any, Optional
 
 from ..engine.solver import DEFAULT_STEP
-from .drive_input import limits_problem
-from ..topics import frame_prefix_problem
-from .interface import TIME_MODES
 
 #: Largest relative mismatch between publish period and steps_per_tick * sim_step.
 DIVISION_TOLERANCE = 1e-6
@@ -349,92 +345,3 @@ def as_declared_type(spec: Optional[ParamSpec], value: Any) -> Any:
         except ValueError:
             return value
     return value
-
-
-def steps_per_tick(publish_rate: float, sim_step: float) -> tuple[int, Optional[str]]:
-    """
-    Engine steps per tick.
-
-    round(1 / (publish_rate * sim_step)), and the reason why the pair is invalid (None when valid).
-    """
-    if not (isinstance(publish_rate, (int, float)) and math.isfinite(publish_rate)
-            and 1.0 <= publish_rate <= MAX_PUBLISH_RATE):
-        return 0, f"publish_rate: must be in [1, {MAX_PUBLISH_RATE:g}] Hz, got {publish_rate!r}"
-    if not (isinstance(sim_step, (int, float)) and math.isfinite(sim_step)
-            and 0.0 < sim_step <= MAX_SIM_STEP):
-        return 0, f"sim_step: must be in (0, {MAX_SIM_STEP:g}] s, got {sim_step!r}"
-    ratio = 1.0 / (publish_rate * sim_step)
-    n = round(ratio)
-    if n < 1 or abs(ratio - n) > DIVISION_TOLERANCE * max(n, 1):
-        return 0, (
-            f"sim_step {sim_step:g} s does not divide the publish period {1.0 / publish_rate:g} s "
-            f"(publish_rate {publish_rate:g} Hz): the period is {ratio:.6g} steps; choose "
-            f"sim_step = period / n or a publish_rate of 1 / (n * sim_step)"
-        )
-    return n, None
-
-
-def monitor_every(publish_rate: float, monitor_rate: float) -> int:
-    """
-    Ticks per publication of the monitoring topics.
-
-    round(publish_rate / monitor_rate), 1 for monitor_rate 0.
-    """
-    return 1 if monitor_rate <= 0 else max(1, round(publish_rate / monitor_rate))
-
-
-def validate(values: Mapping[str, Any]) -> Optional[str]:
-    """Why this complete set of parameter values is invalid, or None."""
-    _, problem = steps_per_tick(values["publish_rate"], values["sim_step"])
-    if problem:
-        return problem
-    if values["time_mode"] not in TIME_MODES:
-        return f"time_mode: expected one of {', '.join(TIME_MODES)}, got {values['time_mode']!r}"
-    problem = limits_problem(values["stroke_min"], values["stroke_max"], values["slew_rate"])
-    if problem:
-        return problem
-    monitor = values["monitor_rate"]
-    if not (isinstance(monitor, (int, float)) and math.isfinite(monitor)
-            and 0.0 <= monitor <= values["publish_rate"]):
-        return (f"monitor_rate: must be 0 (every tick) or in (0, publish_rate "
-                f"{values['publish_rate']:g}] Hz, got {monitor!r}")
-    spin = values["wake_spin"]
-    if not (isinstance(spin, (int, float)) and math.isfinite(spin) and 0.0 <= spin <= 1.0):
-        return f"wake_spin: must be in [0, 1] s, got {spin!r}"
-    merge = values["merge_late_ticks"]
-    if not (isinstance(merge, int) and not isinstance(merge, bool) and 0 <= merge <= 1000):
-        return f"merge_late_ticks: must be an integer in [0, 1000], got {merge!r}"
-    nice = values["stepping_nice"]
-    if not (isinstance(nice, int) and not isinstance(nice, bool) and -20 <= nice <= 19):
-        return f"stepping_nice: must be an integer in [-20, 19], got {nice!r}"
-    latency = values["cpu_latency_us"]
-    if not (isinstance(latency, int) and not isinstance(latency, bool)
-            and -1 <= latency <= 100000):
-        return f"cpu_latency_us: must be -1 (no request) or an integer in [0, 100000], got " \
-               f"{latency!r}"
-    if values["command_reliability"] not in COMMAND_RELIABILITIES:
-        return (f"command_reliability: expected one of {', '.join(COMMAND_RELIABILITIES)}, "
-                f"got {values['command_reliability']!r}")
-    for name in ("display_rate", "display_scale"):
-        v = values[name]
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0):
-            return f"{name}: must be a finite number >= 0, got {v!r}"
-    problem = frame_prefix_problem(values["frame_prefix"])
-    if problem:
-        return problem
-    if not isinstance(values["mechanism"], str) or not values["mechanism"].strip():
-        return "mechanism: expected a built-in name or a YAML path, got an empty string"
-    if not isinstance(values["record_dir"], str) or not values["record_dir"].strip():
-        return "record_dir: expected a directory path, got an empty string"
-    if values["record_format"] not in RECORD_FORMATS:
-        return (f"record_format: expected one of {', '.join(RECORD_FORMATS)}, "
-                f"got {values['record_format']!r}")
-    size = values["record_max_bytes"]
-    if not (isinstance(size, int) and not isinstance(size, bool) and size >= 0):
-        return f"record_max_bytes: must be an integer >= 0, got {size!r}"
-    span = values["record_max_duration"]
-    if not (isinstance(span, (int, float)) and math.isfinite(span) and span >= 0.0):
-        return f"record_max_duration: must be a finite number >= 0, got {span!r}"
-    if not isinstance(values["record_path"], str):
-        return f"record_path: expected a string, got {values['record_path']!r}"
-    return None

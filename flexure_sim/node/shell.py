@@ -41,7 +41,8 @@ from .drive_bank import (LIMIT_KEYS, FilterBank, command_limits, drive_limits,
                          parameter_name, stroke_ends, units)
 from .drive_input import CommandFilter, DriveLimits
 from .engine_guard import StrokeProbe
-from .params import as_declared_type, parameter_specs, validate
+from .param_checks import validate
+from .params import as_declared_type, parameter_specs
 from .polled import PolledGroup, never_called
 from .qos_watch import QosWatch
 from .requests import REQUEST_TIMEOUT_S

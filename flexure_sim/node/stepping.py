@@ -27,7 +27,7 @@ from .engine_guard import EngineHold, snapshot_finite
 from .cpu_latency import request_cpu_latency
 from .pacing import Pacer, set_thread_nice
 from .qos_watch import GRAPH_CHECK_PERIOD_S
-from .params import monitor_every, steps_per_tick
+from .param_checks import monitor_every, steps_per_tick
 from .requests import RequestQueue
 from .session import RecordingSession
 

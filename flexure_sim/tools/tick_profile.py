@@ -30,7 +30,7 @@ def profile(
     from ..recording import McapRecorder
     from ..engine.solver import Simulation
     from ..node.interface import StageInterface, stream_qos
-    from ..node.params import steps_per_tick
+    from ..node.param_checks import steps_per_tick
     from ..node.record_process import ProcessRecording, RecorderProcess
     from ..node.stepping import RELINEARIZE_TOL
 
