@@ -207,7 +207,7 @@ def print_table(res: dict) -> None:
                 print(
                     f"  real-time, wake_spin {r['wake_spin_s'] * 1e3:.2f} ms, "
                     f"stepping nice {r['stepping_nice']}, "
-                    f"cpu_latency_us {r['params'].get('cpu_latency_us', 'default')}"
+                    f"cpu_latency_us {r.get('cpu_latency_us')}"
                     + (f", subscriber on {r['subscribed']}" if r["subscribed"] else "")
                     + (
                         f", {r['flood_sent_per_s']:.0f} commands/s from another process "
