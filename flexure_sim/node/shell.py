@@ -17,10 +17,7 @@ from typing import Any, Optional
 
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.context import Context
 from rclpy.exceptions import ParameterException
-from rclpy.executors import Executor, ExternalShutdownException
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
@@ -50,9 +47,6 @@ from .session import PARAMETER_CHANGE_NAME, RecordingSession, run_metadata
 from .stepping import RELINEARIZE_TOL, SteppingLoop
 
 NODE_NAME = "stage_node"
-#: Longest the main loop waits before checking that the node still runs. Each executor
-#: wake-up holds the GIL ~0.4 ms, so it is rare.
-SPIN_TIMEOUT_S = 1.0
 
 
 class StartupError(FlexureSimError, RuntimeError):
@@ -379,24 +373,3 @@ class StageNode(Node):
     @property
     def failure(self) -> Optional[BaseException]:
         return self.loop.failure if self.loop is not None else None
-
-
-def spin_until_stopped(executor: Executor, stopped: Future, context: Context) -> None:
-    """
-    rclpy.spin, except that it also ends when `stopped` is done (the stepping thread ended).
-
-    Only services, parameters and that end wake the executor, and a timeout once per
-    SPIN_TIMEOUT_S: a safety net should a shutdown ever fail to wake it. A shutdown ends it
-    wherever it lands. rclpy's signal handler shuts the context down concurrently with the
-    executor, and when that lands while the executor builds its wait set, rclpy raises
-    RCLError ("the given context is not valid") rather than ExternalShutdownException: the
-    same shutdown, not a failure.
-    """
-    try:
-        while context.ok() and not stopped.done():
-            executor.spin_until_future_complete(stopped, timeout_sec=SPIN_TIMEOUT_S)
-    except ExternalShutdownException:
-        pass
-    except _rclpy.RCLError:
-        if context.ok():
-            raise

@@ -121,7 +121,8 @@ def _start_and_spin(argv: list[str], run: _Run, guard: SignalGuard) -> None:
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    from .shell import StageNode, spin_until_stopped
+    from .main_loop import spin_until_stopped
+    from .shell import StageNode
 
     run.rclpy = rclpy
     # rclpy's handlers sit on top of the guard's: a signal shuts the context down (ending
