@@ -85,6 +85,16 @@ def latest_diagnostics(peer: Peer) -> dict[str, str]:
     return diagnostics_values(peer.last("/diagnostics"))
 
 
+def thread_nices(pid: int) -> list[tuple[str, int]]:
+    """(name, niceness) of every thread of process ``pid``, its main thread first."""
+    out = []
+    for tid in sorted(os.listdir(f"/proc/{pid}/task"), key=lambda t: (int(t) != pid, int(t))):
+        stat = Path(f"/proc/{pid}/task/{tid}/stat").read_text()
+        name = stat[stat.index("(") + 1:stat.rindex(")")]
+        out.append((name, int(stat[stat.rindex(")") + 2:].split()[16])))  # field 19: nice
+    return out
+
+
 def stop_cleanly(node: NodeProcess, sig: int = signal.SIGINT) -> None:
     rc = node.stop(sig)
     assert rc == 0, f"exit code {rc}\n{node.stderr}"
@@ -660,6 +670,13 @@ def test_parameters_are_validated_with_reasons_and_applied_live(tmp_path, domain
         assert d["publish_rate"] == "100.0" and d["steps_per_tick"] == "20"
         assert float(d["wake_spin_us"]) == pytest.approx(2000.0)
         assert d["stepping_nice"] == "5"
+        # The middleware's threads serve the stepping thread's takes and publishes: they run
+        # at its niceness (a priority inversion otherwise), the executor's thread does not.
+        nices = thread_nices(node.proc.pid)
+        dds = [nice for name, nice in nices if name.startswith("dds.")]
+        assert dds and set(dds) == {5}, nices
+        assert nices[0][1] == 0, nices  # the main thread (the executor)
+        assert sum(nice == 5 for _, nice in nices) == int(d["middleware_threads"]) + 1, nices
         assert d["cpu_latency_us"] == ("13" if granted else "-1")
         if granted:  # the kernel holds the node's request while it steps in real time ...
             assert latency_in_effect() == 13

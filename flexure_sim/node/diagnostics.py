@@ -167,6 +167,7 @@ class Diagnostics:
             ("sim_step", loop.dt),
             ("steps_per_tick", loop.n_steps),
             ("stepping_nice", loop.nice),
+            ("middleware_threads", loop.middleware_threads),
             ("cpu_latency_us", loop.cpu_latency_us),
             ("ticks", loop.ticks),
             ("step_time_mean_us", 1e6 * w.step_sum / n),

@@ -25,7 +25,7 @@ import sys
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Iterable
 
 import numpy as np
 
@@ -210,3 +210,31 @@ def set_thread_nice(nice: int) -> tuple[int, str]:
             "Allow it with CAP_SYS_NICE or an RLIMIT_NICE of at least "
             f"{20 - nice} (limits.conf: '<user> - nice {nice}')")
     return os.getpriority(os.PRIO_PROCESS, tid), ""
+
+
+def process_threads() -> set[int]:
+    """Return the native ids of this process's threads (Linux: /proc/self/task; else empty)."""
+    try:
+        return {int(tid) for tid in os.listdir("/proc/self/task")}
+    except OSError:
+        return set()
+
+
+def set_threads_nice(tids: Iterable[int], nice: int) -> tuple[int, str]:
+    """
+    Ask the kernel to run the threads ``tids`` of this process at niceness ``nice``.
+
+    Returns how many of them have it now and, if some were refused, why (empty otherwise).
+    Threads that ended meanwhile are skipped. Same permissions as `set_thread_nice`.
+    """
+    done, refused = 0, ""
+    for tid in sorted(tids):
+        try:
+            os.setpriority(os.PRIO_PROCESS, tid, nice)
+        except ProcessLookupError:
+            continue
+        except OSError as exc:
+            refused = refused or f"niceness {nice} refused ({exc.strerror})"
+            continue
+        done += 1
+    return done, refused

@@ -183,10 +183,11 @@ def parameter_specs(
             True,
             -20,
             19,
-            "Niceness asked for the stepping thread at start-up (Linux). Below the other "
-            "processes' it gets a shared core first, which keeps real-time ticks on time "
-            "next to busy nodes. Needs CAP_SYS_NICE or an RLIMIT_NICE allowing it; if "
-            "refused, the node says so once and runs unchanged. Read-only.",
+            "Niceness asked for the stepping thread at start-up (Linux), and for the ROS "
+            "middleware's threads, whose locks it waits on. Below the other processes' it "
+            "gets a shared core first, which keeps real-time ticks on time next to busy "
+            "nodes. Needs CAP_SYS_NICE or an RLIMIT_NICE allowing it; if refused, the node "
+            "says so once and runs unchanged. Read-only.",
         ),
         ParamSpec(
             "cpu_latency_us",

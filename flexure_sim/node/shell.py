@@ -38,6 +38,7 @@ from .drive_bank import (LIMIT_KEYS, FilterBank, command_limits, drive_limits,
                          parameter_name, stroke_ends, units)
 from .drive_input import CommandFilter, DriveLimits
 from .engine_guard import StrokeProbe
+from .pacing import set_threads_nice
 from .param_checks import validate
 from .params import as_declared_type, parameter_specs
 from .polled import PolledGroup, never_called
@@ -359,6 +360,24 @@ class StageNode(Node):
             self.stopped.set_result(ok)  # wakes the executor
         except Exception:  # noqa: BLE001 - the executor is already gone: nobody to wake
             pass
+
+    def adopt_middleware_threads(self, tids: set[int]) -> None:
+        """
+        Give the middleware's threads ``tids`` the niceness asked for the stepping thread.
+
+        The stepping thread takes and publishes through the middleware and waits on its locks.
+        A middleware thread holding one at niceness 0 waits behind the other processes for the
+        shared core while the stepping thread waits for it (a priority inversion): next to a
+        controller that blocked a tick for 1.1-1.6 ms every one to three seconds
+        (BENCHMARKS.md). Threads they start later inherit the niceness. ``tids``: the threads
+        ROS started in this process (`stage_node` passes them; in-process nodes do not).
+        """
+        nice = self.loop.nice_request
+        done, refused = set_threads_nice(tids, nice) if tids else (0, "")
+        self.loop.middleware_threads = done
+        if refused:
+            self._log.info(f"middleware threads: {refused}; {len(tids) - done} of {len(tids)} "
+                           "keep their niceness")
 
     def shutdown(self) -> None:
         """Stop the stepping thread and finish the recording (idempotent)."""

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import signal
 import sys
+import threading
 from typing import Any, Optional
 
 from ..errors import FlexureSimError
@@ -122,16 +123,21 @@ def _start_and_spin(argv: list[str], run: _Run, guard: SignalGuard) -> None:
     from rclpy.signals import SignalHandlerOptions
 
     from .main_loop import spin_until_stopped
+    from .pacing import process_threads
     from .shell import StageNode
 
     run.rclpy = rclpy
     # rclpy's handlers sit on top of the guard's: a signal shuts the context down (ending
     # spin_until_stopped), then reaches the guard.
+    before = process_threads()
     try:
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.ALL)
     except _rclpy.RCLInvalidROSArgsError as exc:
         raise UsageError(f"{exc} (see --help)") from None
     run.node = StageNode()
+    # The threads ROS started in this process: the middleware's (not Python's own).
+    python = {thread.native_id for thread in threading.enumerate()}
+    run.node.adopt_middleware_threads(process_threads() - before - python)
     guard.started()
     executor = SingleThreadedExecutor()
     executor.add_node(run.node)

@@ -78,8 +78,11 @@ class SteppingLoop:
             Pacer(1.0 / rate, spin_s=min(wake_spin, 1.0 / rate)) if time_mode == "realtime"
             else None)
         self._set_merge(merge_after)
-        self._nice_request = nice
+        #: Niceness asked for the stepping thread (and the middleware's threads, `shell`), and
+        #: the one in effect; middleware threads given it (`StageNode.adopt_middleware_threads`).
+        self.nice_request = nice
         self.nice = 0
+        self.middleware_threads = 0
         #: CPU wake-up latency to ask for in real-time mode (`cpu_latency`; -1: none), and
         #: the one in effect while the loop runs (-1: none held).
         self._latency_request = cpu_latency_us if time_mode == "realtime" else -1
@@ -135,7 +138,7 @@ class SteppingLoop:
     def _run(self) -> None:
         latency = None
         try:
-            self.nice, refused = set_thread_nice(self._nice_request)
+            self.nice, refused = set_thread_nice(self.nice_request)
             if refused:
                 self._log.info(f"stepping thread: {refused}")
             if self._latency_request >= 0:
