@@ -91,6 +91,8 @@ def bench_node(duration: float = 30.0) -> dict:
             duration, params={"cpu_latency_us": "0"}),
         "realtime_closed_loop_low_spin": closed_loop.run(
             duration, params={"cpu_latency_us": "0", "wake_spin": repr(LOW_WAKE_SPIN_S)}),
+        # The stepping thread and the middleware's threads at the other processes' niceness.
+        "realtime_closed_loop_nice0": closed_loop.run(duration, params={"stepping_nice": "0"}),
         # Every tick, late ticks merged: simulated time stays with wall time.
         "realtime_closed_loop_merge": closed_loop.run(
             duration, params={"merge_late_ticks": repr(MERGE_LATE_TICKS)}),
@@ -232,6 +234,8 @@ def print_table(res: dict) -> None:
                             f" [cpu_latency_us 0, wake_spin {LOW_WAKE_SPIN_S * 1e3:g} ms]"),
                            ("realtime_closed_loop_monitor100",
                             f" [monitor_rate {MONITOR_RATE:g} Hz]"),
+                           ("realtime_closed_loop_nice0",
+                            " [stepping_nice 0: stepping and middleware threads]"),
                            ("realtime_closed_loop_merge",
                             f" [merge_late_ticks {MERGE_LATE_TICKS}]")):
             if nd.get(key):

@@ -200,6 +200,9 @@ def run_node(
         "node_cpu_cores": ((cpu_end - cpu_start) / (cpu_wall_end - cpu_wall_start)
                            if cpu_start is not None and cpu_end is not None else None),
         "stepping_nice": int(b["stepping_nice"]) if "stepping_nice" in b else None,
+        # Middleware threads given that niceness (absent before middleware_threads existed).
+        "middleware_threads": (int(b["middleware_threads"]) if "middleware_threads" in b
+                               else None),
         # The PM QoS request the node held (-1: none; absent before cpu_latency_us existed).
         "cpu_latency_us": int(b["cpu_latency_us"]) if "cpu_latency_us" in b else None,
         "exit_code": proc.returncode,
@@ -281,7 +284,8 @@ def _print_run(r: dict[str, Any]) -> None:
     )
     if r.get("node_cpu_cores") is not None:
         print(f"   node process CPU: {r['node_cpu_cores']:.2f} cores; stepping thread niceness "
-              f"{r['stepping_nice']}, CPU latency request {r.get('cpu_latency_us')} us")
+              f"{r['stepping_nice']} (and {r.get('middleware_threads')} middleware threads), CPU "
+              f"latency request {r.get('cpu_latency_us')} us")
     if r.get("flood_hz"):
         cost = r["command_time_mean_us"]
         print(f"   flood from another process: {r['flood_sent_per_s']:.0f} commands/s sent, "
