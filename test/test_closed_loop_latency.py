@@ -36,3 +36,31 @@ def test_late_ticks_are_counted_from_the_answered_reading_to_the_applying_tick(t
     assert r["applied_next_tick_fraction"] == 0.75
     assert r["late_ticks_max"] == 1 and r["late_ticks_min"] == 0
     assert r["late_ticks_mean"] == 0.25
+
+
+def test_the_benchmarks_cpu_hog_is_busy_at_niceness_19_until_stopped():
+    """`closed_loop.Hog`: a CPU-bound process that only takes time nobody else wants."""
+    import os
+    import time
+
+    from flexure_sim.tools.closed_loop import Hog
+
+    def stat(pid):
+        with open(f"/proc/{pid}/stat") as f:
+            text = f.read()
+        fields = text[text.rindex(")") + 2:].split()
+        return int(fields[16]), int(fields[11]) + int(fields[12])  # nice; utime + stime
+
+    hog = Hog()
+    try:
+        deadline = time.monotonic() + 30.0
+        while True:  # until it has used 0.2 s of CPU at niceness 19
+            nice, cpu_ticks = stat(hog.proc.pid)
+            if nice == 19 and cpu_ticks >= 20:
+                break
+            assert time.monotonic() < deadline, f"the hog: niceness {nice}, {cpu_ticks} ticks"
+            assert hog.proc.poll() is None
+        assert os.sched_getscheduler(hog.proc.pid) == os.SCHED_OTHER
+    finally:
+        hog.stop()
+    assert hog.proc.returncode is not None

@@ -26,7 +26,8 @@ def test_defaults_are_valid_and_give_ten_steps_per_tick():
     assert steps_per_tick(1000.0, 1e-4) == (10, None)
     read_only = {s.name for s in parameter_specs() if s.read_only}
     assert read_only == {"mechanism", "sim_step", "time_mode", "stepping_nice",
-                         "cpu_latency_us", "command_reliability", "frame_prefix"}
+                         "stepping_priority", "cpu_latency_us", "command_reliability",
+                         "frame_prefix"}
     assert values["command_reliability"] == "reliable"
 
 
@@ -72,6 +73,10 @@ def test_steps_per_tick(rate, step, n):
     (dict(wake_spin=float("nan")), "wake_spin"),
     (dict(stepping_nice=-21), "stepping_nice"),
     (dict(stepping_nice=2.5), "stepping_nice"),
+    (dict(stepping_priority=-1), "stepping_priority"),
+    (dict(stepping_priority=100), "stepping_priority"),
+    (dict(stepping_priority=50), "wake_spin must be at most 0.0005 s"),  # default spin: 1 ms
+    (dict(stepping_priority=50, wake_spin=6e-4), "stepping_priority 50 (SCHED_FIFO)"),
     (dict(cpu_latency_us=-2), "cpu_latency_us"),
     (dict(cpu_latency_us=1.5), "cpu_latency_us"),
     (dict(cpu_latency_us=True), "cpu_latency_us"),
@@ -88,6 +93,16 @@ def test_invalid_values_are_refused_with_the_reason(changes, word):
 def test_the_division_reason_says_what_to_do():
     problem = validate({**defaults(), "sim_step": 3e-4})
     assert "3.33333 steps" in problem and "sim_step = period / n" in problem
+
+
+def test_a_real_time_stepping_thread_needs_a_spin_of_at_most_half_a_period():
+    fifo = {**defaults(), "stepping_priority": 50}
+    assert fifo["time_mode"] == "realtime" and fifo["publish_rate"] == 1000.0
+    assert validate({**fifo, "wake_spin": 1e-4}) is None
+    assert validate({**fifo, "wake_spin": 5e-4}) is None  # exactly half the 1 ms period
+    assert validate({**fifo, "wake_spin": 1e-3, "publish_rate": 500.0}) is None  # of 2 ms
+    assert validate({**fifo, "time_mode": "fast"}) is None  # real time only
+    assert validate({**fifo, "time_mode": "lockstep"}) is None
 
 
 class FakeClock:

@@ -168,6 +168,7 @@ class Diagnostics:
             ("steps_per_tick", loop.n_steps),
             ("stepping_nice", loop.nice),
             ("middleware_threads", loop.middleware_threads),
+            ("stepping_priority", loop.priority),
             ("cpu_latency_us", loop.cpu_latency_us),
             ("ticks", loop.ticks),
             ("step_time_mean_us", 1e6 * w.step_sum / n),

@@ -76,8 +76,11 @@ def range_problem(spec: ParamSpec, value: Any) -> Optional[str]:
 
 
 #: Numeric parameters whose whole check is their declared type and range (`range_problem`).
-_RANGED = ("wake_spin", "merge_late_ticks", "stepping_nice", "cpu_latency_us", "display_rate",
-           "display_scale", "record_max_bytes", "record_max_duration")
+_RANGED = ("wake_spin", "merge_late_ticks", "stepping_nice", "stepping_priority",
+           "cpu_latency_us", "display_rate", "display_scale", "record_max_bytes",
+           "record_max_duration")
+#: Largest wake_spin, as a fraction of the tick period, with a real-time stepping thread.
+FIFO_MAX_SPIN_FRACTION = 0.5
 _SPECS = {spec.name: spec for spec in parameter_specs()}
 
 
@@ -100,6 +103,9 @@ def validate(values: Mapping[str, Any]) -> Optional[str]:
         problem = range_problem(_SPECS[name], values[name])
         if problem:
             return problem
+    problem = fifo_spin_problem(values)
+    if problem:
+        return problem
     if values["command_reliability"] not in COMMAND_RELIABILITIES:
         return (f"command_reliability: expected one of {', '.join(COMMAND_RELIABILITIES)}, "
                 f"got {values['command_reliability']!r}")
@@ -115,4 +121,24 @@ def validate(values: Mapping[str, Any]) -> Optional[str]:
                 f"got {values['record_format']!r}")
     if not isinstance(values["record_path"], str):
         return f"record_path: expected a string, got {values['record_path']!r}"
+    return None
+
+
+def fifo_spin_problem(values: Mapping[str, Any]) -> Optional[str]:
+    """
+    Why ``wake_spin`` is too long for a real-time (SCHED_FIFO) stepping thread, or None.
+
+    A SCHED_FIFO thread that busy-waits the whole period never yields its core, and the kernel
+    then throttles it (by default 50 ms of every second, sched_rt_runtime_us): a trial with
+    the default wake_spin (the whole 1 ms period) missed 6.6 % of the ticks (BENCHMARKS.md).
+    """
+    priority, rate = values["stepping_priority"], values["publish_rate"]
+    if not priority or values["time_mode"] != "realtime":
+        return None
+    limit = FIFO_MAX_SPIN_FRACTION / rate
+    if values["wake_spin"] > limit:
+        return (f"stepping_priority {priority} (SCHED_FIFO) needs the stepping thread to sleep "
+                f"part of every tick: wake_spin must be at most {limit:g} s (half the tick "
+                f"period at publish_rate {rate:g} Hz), got {values['wake_spin']:g} s; 1e-4 s "
+                "is a good start")
     return None

@@ -26,6 +26,8 @@ WAKE_SPIN_S = 1e-3
 STEPPING_NICE = -10
 #: Default of ``cpu_latency_us``: see its description (measured in BENCHMARKS.md).
 CPU_LATENCY_US = -1
+#: Default of ``stepping_priority``: see its description (measured in BENCHMARKS.md).
+STEPPING_PRIORITY = 0
 
 
 @dataclass(frozen=True)
@@ -188,6 +190,22 @@ def parameter_specs(
             "gets a shared core first, which keeps real-time ticks on time next to busy "
             "nodes. Needs CAP_SYS_NICE or an RLIMIT_NICE allowing it; if refused, the node "
             "says so once and runs unchanged. Read-only.",
+        ),
+        ParamSpec(
+            "stepping_priority",
+            STEPPING_PRIORITY,
+            int,
+            "",
+            True,
+            0,
+            99,
+            "Real-time mode: 1-99 runs the stepping thread under the kernel's real-time "
+            "policy SCHED_FIFO at this priority, so that it preempts every normally scheduled "
+            "process (niceness is weighed against other processes, not absolute); 0, the "
+            "default: normal scheduling with stepping_nice. The thread must then sleep part "
+            "of every tick: wake_spin at most half the tick period (1e-4 s is a good start). "
+            "Needs CAP_SYS_NICE or an RLIMIT_RTPRIO allowing it; if refused, the node says "
+            "so once and runs unchanged. Read-only.",
         ),
         ParamSpec(
             "cpu_latency_us",

@@ -158,6 +158,7 @@ class StageNode(Node):
             time_mode=time_mode, rate=float(values["publish_rate"]), dt=dt,
             wake_spin=float(values["wake_spin"]), nice=int(values["stepping_nice"]),
             cpu_latency_us=int(values["cpu_latency_us"]),
+            priority=int(values["stepping_priority"]),
             merge_after=int(values["merge_late_ticks"]),
             monitor_rate=float(values["monitor_rate"]))
         # Recording channels: the tick topics in publishing order, diagnostics, commands.

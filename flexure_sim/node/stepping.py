@@ -25,7 +25,7 @@ from .diagnostics import Diagnostics
 from .drive_input import CommandFilter, WarningThrottle
 from .engine_guard import EngineHold, snapshot_finite
 from .cpu_latency import request_cpu_latency
-from .pacing import Pacer, set_thread_nice
+from .pacing import Pacer, set_thread_fifo, set_thread_nice
 from .qos_watch import GRAPH_CHECK_PERIOD_S
 from .param_checks import monitor_every, steps_per_tick
 from .requests import RequestQueue
@@ -55,7 +55,7 @@ class SteppingLoop:
                  publishers: Sequence[Any], session: RecordingSession, log: Any, *,
                  time_mode: str, rate: float, dt: float, wake_spin: float, nice: int,
                  monitor_rate: float = 0.0, merge_after: int = 0,
-                 cpu_latency_us: int = -1) -> None:
+                 cpu_latency_us: int = -1, priority: int = 0) -> None:
         self.sim = sim
         self.filter = drive_filter
         self.interface = interface
@@ -83,6 +83,10 @@ class SteppingLoop:
         self.nice_request = nice
         self.nice = 0
         self.middleware_threads = 0
+        #: SCHED_FIFO priority asked for the stepping thread in real time (0: none), and the
+        #: one in effect.
+        self._priority_request = priority if time_mode == "realtime" else 0
+        self.priority = 0
         #: CPU wake-up latency to ask for in real-time mode (`cpu_latency`; -1: none), and
         #: the one in effect while the loop runs (-1: none held).
         self._latency_request = cpu_latency_us if time_mode == "realtime" else -1
@@ -141,6 +145,10 @@ class SteppingLoop:
             self.nice, refused = set_thread_nice(self.nice_request)
             if refused:
                 self._log.info(f"stepping thread: {refused}")
+            if self._priority_request:
+                self.priority, refused = set_thread_fifo(self._priority_request)
+                if refused:
+                    self._log.info(f"stepping thread: {refused}")
             if self._latency_request >= 0:
                 latency, refused = request_cpu_latency(self._latency_request)
                 if latency is None:

@@ -50,6 +50,10 @@ FLOOD_HZ = 10000.0
 MONITOR_RATE = 100.0
 #: merge_late_ticks of the flood and closed-loop runs that merge late ticks.
 MERGE_LATE_TICKS = 2
+#: The closed loop with the stepping thread under SCHED_FIFO (`stepping_priority`), which
+#: needs it to sleep between ticks (wake_spin at most half the period).
+FIFO_PARAMS = {"stepping_priority": "50", "wake_spin": "0.0001"}
+FIFO_LABEL = " [stepping_priority 50, wake_spin 0.1 ms]"
 #: Topics a controller would subscribe to, for the real-time runs next to a subscriber.
 CONTROLLER_TOPICS = (topics.OUTPUT, topics.DRIVE_FORCE, topics.hinge_compression("a"))
 
@@ -93,6 +97,12 @@ def bench_node(duration: float = 30.0) -> dict:
             duration, params={"cpu_latency_us": "0", "wake_spin": repr(LOW_WAKE_SPIN_S)}),
         # The stepping thread and the middleware's threads at the other processes' niceness.
         "realtime_closed_loop_nice0": closed_loop.run(duration, params={"stepping_nice": "0"}),
+        # Under SCHED_FIFO (the thread then sleeps between ticks); and both next to a
+        # CPU-bound process at niceness 19.
+        "realtime_closed_loop_fifo": closed_loop.run(duration, params=FIFO_PARAMS),
+        "realtime_closed_loop_hog": closed_loop.run(duration, hog=True),
+        "realtime_closed_loop_fifo_hog": closed_loop.run(duration, params=FIFO_PARAMS,
+                                                         hog=True),
         # Every tick, late ticks merged: simulated time stays with wall time.
         "realtime_closed_loop_merge": closed_loop.run(
             duration, params={"merge_late_ticks": repr(MERGE_LATE_TICKS)}),
@@ -236,6 +246,10 @@ def print_table(res: dict) -> None:
                             f" [monitor_rate {MONITOR_RATE:g} Hz]"),
                            ("realtime_closed_loop_nice0",
                             " [stepping_nice 0: stepping and middleware threads]"),
+                           ("realtime_closed_loop_fifo", FIFO_LABEL),
+                           ("realtime_closed_loop_hog", " [next to a CPU hog at niceness 19]"),
+                           ("realtime_closed_loop_fifo_hog",
+                            FIFO_LABEL + " [next to a CPU hog at niceness 19]"),
                            ("realtime_closed_loop_merge",
                             f" [merge_late_ticks {MERGE_LATE_TICKS}]")):
             if nd.get(key):

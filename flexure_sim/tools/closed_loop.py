@@ -5,7 +5,7 @@ stage_node in real-time mode (recording on) with ``pi_controller`` in a second p
 every measurement.
 
     python -m flexure_sim.tools.closed_loop --duration 10 [--monitor-rate 100]
-        [--merge-late-ticks 2] [--json]
+        [--merge-late-ticks 2] [--param NAME=VALUE ...] [--hog] [--json]
 
 The stage is the built-in one with a sensor (`SENSOR`: its noise makes every reading unique,
 which is how commands are matched to the ticks they answer). Figures: the node's missed
@@ -16,6 +16,9 @@ the node records each command with the log time of the tick start that applied i
 the very next tick k + 1 is t_k. So ``late = (log time of command i - t_k) / T`` is 0 when
 the command was applied at the first tick after its measurement (latency at most 1 tick) and
 n when it waited n more ticks.
+
+``--hog`` runs a CPU-bound process at niceness 19 next to them for the whole run (`Hog`): the
+machine is then never idle, as a developer's desktop with a build or a browser running.
 """
 from __future__ import annotations
 
@@ -41,6 +44,20 @@ SENSOR = {"noise_rms": 1.0e-9, "latency": 0, "seed": 1}
 #: Setpoint of the run, m of output (the stage's output for ~0.7 um of drive).
 SETPOINT = 2.0e-5
 RATE = 1000.0
+#: A CPU-bound process at the lowest priority: it only takes time nobody else wants.
+HOG = "import os\nos.nice(19)\nwhile True:\n    pass\n"
+
+
+class Hog:
+    """`HOG` in a subprocess until `stop`."""
+
+    def __init__(self) -> None:
+        self.proc = subprocess.Popen([sys.executable, "-c", HOG], stdin=subprocess.DEVNULL,
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    def stop(self) -> None:
+        self.proc.kill()
+        self.proc.wait(30)
 
 
 class ControllerProcess:
@@ -113,16 +130,18 @@ def command_latency(recording: Path, trace: Path, period: float) -> dict[str, An
     }
 
 
-def run(duration: float = 10.0, params: Optional[dict[str, str]] = None) -> dict[str, Any]:
+def run(duration: float = 10.0, params: Optional[dict[str, str]] = None,
+        hog: bool = False) -> dict[str, Any]:
     """
     One real-time closed-loop run of ``duration`` s (after the warm-up).
 
-    The node's figures (`measure.run_node`) plus `command_latency`.
+    The node's figures (`measure.run_node`) plus `command_latency`; ``hog``: next to `Hog`.
     """
     from . import measure  # needs ROS 2
 
     workdir = Path(tempfile.mkdtemp(prefix="stage_closed_loop_"))
     period = 1.0 / RATE
+    hogs = [Hog()] if hog else []
     try:
         stage = sensor_stage(workdir / "stage_with_sensor.yaml")
         controllers: list[ControllerProcess] = []
@@ -136,8 +155,11 @@ def run(duration: float = 10.0, params: Optional[dict[str, str]] = None) -> dict
                                   companion=start)
         result.update(command_latency(workdir / "measure.mcap", controllers[0].trace, period))
         result.pop("workdir", None)
+        result["hog"] = hog
         return result
     finally:
+        for h in hogs:
+            h.stop()
         shutil.rmtree(workdir, ignore_errors=True)
 
 
@@ -164,10 +186,20 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         help="the node's monitor_rate, Hz (0: every tick)")
     parser.add_argument("--merge-late-ticks", type=int, default=0,
                         help="the node's merge_late_ticks (0: every late tick runs)")
+    parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                        help="a further node parameter (e.g. stepping_priority=50)")
+    parser.add_argument("--hog", action="store_true",
+                        help="run a CPU-bound process at niceness 19 next to them")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
-    r = run(args.duration, params={"monitor_rate": repr(args.monitor_rate),
-                                   "merge_late_ticks": repr(args.merge_late_ticks)})
+    params = {"monitor_rate": repr(args.monitor_rate),
+              "merge_late_ticks": repr(args.merge_late_ticks)}
+    for item in args.param:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            parser.error(f"--param {item!r}: expected NAME=VALUE")
+        params[name] = value
+    r = run(args.duration, params=params, hog=args.hog)
     print(json.dumps(r) if args.json else summary(r))
     return 0
 

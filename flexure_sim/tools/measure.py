@@ -200,6 +200,9 @@ def run_node(
         "node_cpu_cores": ((cpu_end - cpu_start) / (cpu_wall_end - cpu_wall_start)
                            if cpu_start is not None and cpu_end is not None else None),
         "stepping_nice": int(b["stepping_nice"]) if "stepping_nice" in b else None,
+        # SCHED_FIFO priority of the stepping thread (0: none; absent before it existed).
+        "stepping_priority": (int(b["stepping_priority"]) if "stepping_priority" in b
+                              else None),
         # Middleware threads given that niceness (absent before middleware_threads existed).
         "middleware_threads": (int(b["middleware_threads"]) if "middleware_threads" in b
                                else None),
@@ -284,7 +287,8 @@ def _print_run(r: dict[str, Any]) -> None:
     )
     if r.get("node_cpu_cores") is not None:
         print(f"   node process CPU: {r['node_cpu_cores']:.2f} cores; stepping thread niceness "
-              f"{r['stepping_nice']} (and {r.get('middleware_threads')} middleware threads), CPU "
+              f"{r['stepping_nice']} (and {r.get('middleware_threads')} middleware threads), "
+              f"SCHED_FIFO priority {r.get('stepping_priority')}, CPU "
               f"latency request {r.get('cpu_latency_us')} us")
     if r.get("flood_hz"):
         cost = r["command_time_mean_us"]
