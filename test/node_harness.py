@@ -40,6 +40,13 @@ def next_domain_id() -> int:
     return (_BASE_DOMAIN - 1 + 37 * next(_offsets)) % 100 + 1
 
 
+def run_python(script: str) -> subprocess.CompletedProcess:
+    """Run ``script`` in a fresh interpreter that imports this checkout; output captured."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          env=env, cwd="/", timeout=60)
+
+
 def node_env(domain_id: int, **extra: str) -> dict[str, str]:
     env = dict(os.environ)
     # The test process's fast-acknowledgement profile (conftest) is for its own peers only.

@@ -1,11 +1,11 @@
 """The CPU wake-up latency request (`node.cpu_latency`), against the real kernel's PM QoS."""
 import os
-import subprocess
-import sys
 
 import pytest
 
 from flexure_sim.node.cpu_latency import DEVICE, latency_in_effect, request_cpu_latency
+
+from node_harness import run_python
 
 pytestmark = pytest.mark.skipif(not os.path.exists(DEVICE),
                                 reason=f"{DEVICE}: this kernel has no PM QoS device")
@@ -41,10 +41,7 @@ sys.exit(0 if request is None else 3)
 @pytest.mark.skipif(os.stat(DEVICE).st_mode & 0o006 if os.path.exists(DEVICE) else True,
                     reason=f"{DEVICE} is writable by everyone here")
 def test_a_refused_request_says_why_and_how_to_allow_it():
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    env = dict(os.environ, PYTHONPATH=root + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    out = subprocess.run([sys.executable, "-c", REFUSED], capture_output=True, text=True,
-                         env=env, cwd="/", timeout=60)
+    out = run_python(REFUSED)
     assert out.returncode == 0, out.stdout + out.stderr
     why = out.stdout.strip()
     assert why.startswith("cpu_latency_us 0 refused (Permission denied: /dev/cpu_dma_latency)")

@@ -7,14 +7,12 @@ reason and the remedy, and normal scheduling.
 """
 import os
 import resource
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 
-from node_harness import NodeProcess, diagnostics_values
+from node_harness import NodeProcess, diagnostics_values, next_domain_id, run_python
 
 SCHED_FIFO = 1
 PRIORITY = 7
@@ -74,8 +72,6 @@ def test_fast_mode_ignores_the_priority(tmp_path, peer_and_domain):
 
 
 def test_a_spin_of_the_whole_period_is_refused_at_start_up_naming_both_parameters(tmp_path):
-    from node_harness import next_domain_id
-
     node = NodeProcess(tmp_path / "node", next_domain_id(), dict(
         time_mode="realtime", record=False, stepping_priority=PRIORITY))  # wake_spin 1 ms
     assert node.wait(60) != 0
@@ -97,10 +93,7 @@ sys.exit(0 if priority == 0 and os.sched_getscheduler(0) == os.SCHED_OTHER else 
 
 
 def test_a_refused_priority_says_why_and_how_to_allow_it():
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    env = dict(os.environ, PYTHONPATH=root + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    out = subprocess.run([sys.executable, "-c", REFUSED], capture_output=True, text=True,
-                         env=env, cwd="/", timeout=60)
+    out = run_python(REFUSED)
     assert out.returncode == 0, out.stdout + out.stderr
     why = out.stdout.strip()
     assert why.startswith("stepping_priority 7 (SCHED_FIFO) refused (Operation not permitted)")
