@@ -57,14 +57,15 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from . import stiffness as stiffness_models
 from .builtins import builtin_names, find_builtin
 from .config_constraints import _constraints, _outputs, _sensor
 from .config_damping import hinge_damping, mechanism_damping
+from .config_stiffness import check_spd as _check_spd
+from .config_stiffness import stiffness as _stiffness
 from .config_values import ConfigError  # noqa: F401  (raised by the loader; re-exported)
 from .config_values import axis as _axis
 from .config_values import body_ref as _body_ref
@@ -84,80 +85,9 @@ from .mechanism import Body, Drive, Frame, Hinge, Mechanism, Output
 from .polynomial import PolynomialLaw
 from .polynomial_files import PolynomialFileError
 from .polynomial_files import load_law as load_polynomial_law
-from .stress import StressGeometry
 
 #: Largest mismatch (m) allowed between a hinge's two frames in the unstressed pose.
 COINCIDENCE_TOLERANCE = 1e-9
-
-
-# ---------------------------------------------------------------------- stiffness
-
-_STIFFNESS_KEYS: dict[str, tuple[Callable[..., np.ndarray], tuple[str, ...]]] = (
-    stiffness_models.MODELS)
-
-
-def _stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str, Any]:
-    """
-    (K, model name, the hinge's StressGeometry or None) of a stiffness specification.
-
-    The stress geometry holds the same numbers the stiffness formula was given.
-    """
-    spec = _mapping(ctx, key, spec)
-    model = _require(ctx, key, spec, "model")
-    if not isinstance(model, str):
-        raise ctx.fail(f"{key}.model",
-                       f"expected a model name (notch, cantilever, matrix), got {_shown(model)}")
-    # Material yield strength (Pa) for the hinge stress ratio (engine/stress.py); optional.
-    sigma_y = (_number(ctx, f"{key}.sigma_y", spec["sigma_y"], positive=True)
-               if "sigma_y" in spec else None)
-    spec = {k: v for k, v in spec.items() if k != "sigma_y"}
-    if model in _STIFFNESS_KEYS:
-        fn, names = _STIFFNESS_KEYS[model]
-        _no_unknown(ctx, key, spec, {"model", *names})
-        args = [
-            _number(ctx, f"{key}.{n}", _require(ctx, key, spec, n), positive=n != "nu")
-            for n in names
-        ]
-        if model in ("notch", "cantilever"):
-            nu = args[-1]
-            if not 0 <= nu < 0.5:
-                raise ctx.fail(f"{key}.nu", f"Poisson's ratio must be in [0, 0.5), got {nu}")
-        with np.errstate(all="ignore"):
-            K = fn(*(np.float64(a) for a in args))  # overflow gives inf, checked below
-        if not np.all(np.isfinite(K)):
-            values = ", ".join(f"{n}={a:g}" for n, a in zip(names, args))
-            raise ctx.fail(key, f"the {model} formula gives a non-finite stiffness for these "
-                           f"values ({values}): check the units")
-        return K, model, StressGeometry.of(model, dict(zip(names, args)), sigma_y)
-    if model == "matrix":
-        if sigma_y is not None:  # would be dropped silently: no geometry, no stress
-            raise ctx.fail(f"{key}.sigma_y", "a matrix stiffness has no geometry to compute "
-                           "stress from (sigma_y is for notch and cantilever models)")
-        _no_unknown(ctx, key, spec, {"model", "K", "Ko", "Kt", "Kc"})
-        if "K" in spec:
-            rows = spec["K"]
-            if not isinstance(rows, list) or len(rows) != 3:
-                raise ctx.fail(f"{key}.K", "expected a 3x3 matrix (three rows of three numbers)")
-            K = np.array([_vector(ctx, f"{key}.K[{i}]", r, (3,)) for i, r in enumerate(rows)])
-        else:
-            Ko = _number(ctx, f"{key}.Ko", _require(ctx, key, spec, "Ko"))
-            kt = _vector(ctx, f"{key}.Kt", _require(ctx, key, spec, "Kt"), (2,))
-            kc = _vector(ctx, f"{key}.Kc", spec.get("Kc", [0.0, 0.0]), (2,))
-            K = np.array([[Ko, kc[0], kc[1]], [kc[0], kt[0], 0.0], [kc[1], 0.0, kt[1]]])
-        return K, "matrix", None
-    raise ctx.fail(f"{key}.model",
-                   f"unknown stiffness model {_shown(model)} (notch, cantilever, matrix)")
-
-
-def _check_spd(ctx: _Ctx, key: str, M: np.ndarray, what: str) -> None:
-    if not np.all(np.isfinite(M)):
-        raise ctx.fail(key, f"{what} matrix is not finite: {M.tolist()}")
-    if not np.allclose(M, M.T, rtol=1e-12, atol=0.0):
-        raise ctx.fail(key, f"{what} matrix is not symmetric: {M.tolist()}")
-    with np.errstate(all="ignore"):
-        eig = np.linalg.eigvalsh(M)
-    if not np.all(eig > 0):  # also false for NaN eigenvalues (entries near the double range)
-        raise ctx.fail(key, f"{what} matrix is not positive definite: {M.tolist()}")
 
 
 # ------------------------------------------------------------------------ loading
@@ -391,10 +321,10 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
 
 def _polynomial_law(ctx: _Ctx, key: str, spec: dict, cache: dict) -> PolynomialLaw:
     """
-    ``law.
+    Return the fitted polynomial law of ``law: {polynomial: FILE}`` (flexure-sim fit).
 
-    {polynomial: FILE}``: a fitted polynomial law (flexure-sim fit), FILE relative to the mechanism
-    file (to the working directory for documents without a file).
+    FILE is relative to the mechanism file (to the working directory for documents without a
+    file).
     """
     _no_unknown(ctx, key, spec, {"polynomial"})
     ref = _require(ctx, key, spec, "polynomial")
