@@ -47,6 +47,18 @@ def run_python(script: str) -> subprocess.CompletedProcess:
                           env=env, cwd="/", timeout=60)
 
 
+def proc_stat(path: str | Path) -> tuple[str, list[str]]:
+    """(name, fields) of a /proc stat file; ``fields[k]`` is field k + 3 of proc(5)."""
+    text = Path(path).read_text()
+    return text[text.index("(") + 1:text.rindex(")")], text[text.rindex(")") + 2:].split()
+
+
+def thread_stats(pid: int) -> list[tuple[str, list[str]]]:
+    """`proc_stat` of every thread of process ``pid``, its main thread first."""
+    tids = sorted(os.listdir(f"/proc/{pid}/task"), key=lambda t: (int(t) != pid, int(t)))
+    return [proc_stat(f"/proc/{pid}/task/{tid}/stat") for tid in tids]
+
+
 def node_env(domain_id: int, **extra: str) -> dict[str, str]:
     env = dict(os.environ)
     # The test process's fast-acknowledgement profile (conftest) is for its own peers only.

@@ -44,11 +44,10 @@ def test_the_benchmarks_cpu_hog_is_busy_at_niceness_19_until_stopped():
     import time
 
     from flexure_sim.tools.closed_loop import Hog
+    from node_harness import proc_stat
 
     def stat(pid):
-        with open(f"/proc/{pid}/stat") as f:
-            text = f.read()
-        fields = text[text.rindex(")") + 2:].split()
+        _, fields = proc_stat(f"/proc/{pid}/stat")
         return int(fields[16]), int(fields[11]) + int(fields[12])  # nice; utime + stime
 
     hog = Hog()

@@ -7,12 +7,12 @@ reason and the remedy, and normal scheduling.
 """
 import os
 import resource
-from pathlib import Path
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 
-from node_harness import NodeProcess, diagnostics_values, next_domain_id, run_python
+from node_harness import (NodeProcess, diagnostics_values, next_domain_id, run_python,
+                          thread_stats)
 
 SCHED_FIFO = 1
 PRIORITY = 7
@@ -20,12 +20,8 @@ PRIORITY = 7
 
 def thread_policies(pid: int) -> list[tuple[str, int, int]]:
     """(name, policy, real-time priority) of every thread of process ``pid``."""
-    out = []
-    for tid in os.listdir(f"/proc/{pid}/task"):
-        stat = Path(f"/proc/{pid}/task/{tid}/stat").read_text()
-        fields = stat[stat.rindex(")") + 2:].split()  # fields[k] is field k + 3 of proc(5)
-        out.append((stat[stat.index("(") + 1:stat.rindex(")")], int(fields[38]), int(fields[37])))
-    return out
+    return [(name, int(fields[38]), int(fields[37]))  # fields 41 and 40 of proc(5)
+            for name, fields in thread_stats(pid)]
 
 
 def _may_use_fifo(priority: int) -> bool:

@@ -28,7 +28,7 @@ from flexure_sim.recording import CorruptLogError, read_log
 from flexure_sim.engine.solver import Simulation
 from flexure_sim.node.cpu_latency import DEVICE, latency_in_effect
 
-from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id
+from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id, thread_stats
 
 STEP = 1.35e-6
 STAGE_TOPICS = (
@@ -87,12 +87,7 @@ def latest_diagnostics(peer: Peer) -> dict[str, str]:
 
 def thread_nices(pid: int) -> list[tuple[str, int]]:
     """(name, niceness) of every thread of process ``pid``, its main thread first."""
-    out = []
-    for tid in sorted(os.listdir(f"/proc/{pid}/task"), key=lambda t: (int(t) != pid, int(t))):
-        stat = Path(f"/proc/{pid}/task/{tid}/stat").read_text()
-        name = stat[stat.index("(") + 1:stat.rindex(")")]
-        out.append((name, int(stat[stat.rindex(")") + 2:].split()[16])))  # field 19: nice
-    return out
+    return [(name, int(fields[16])) for name, fields in thread_stats(pid)]  # field 19: nice
 
 
 def stop_cleanly(node: NodeProcess, sig: int = signal.SIGINT) -> None:

@@ -228,7 +228,7 @@ def set_threads_nice(tids: Iterable[int], nice: int) -> tuple[int, str]:
     Threads that ended meanwhile are skipped. Same permissions as `set_thread_nice`.
     """
     done, refused = 0, ""
-    for tid in sorted(tids):
+    for tid in tids:
         try:
             os.setpriority(os.PRIO_PROCESS, tid, nice)
         except ProcessLookupError:

@@ -141,7 +141,7 @@ def run(duration: float = 10.0, params: Optional[dict[str, str]] = None,
 
     workdir = Path(tempfile.mkdtemp(prefix="stage_closed_loop_"))
     period = 1.0 / RATE
-    hogs = [Hog()] if hog else []
+    hogger = Hog() if hog else None
     try:
         stage = sensor_stage(workdir / "stage_with_sensor.yaml")
         controllers: list[ControllerProcess] = []
@@ -158,8 +158,8 @@ def run(duration: float = 10.0, params: Optional[dict[str, str]] = None,
         result["hog"] = hog
         return result
     finally:
-        for h in hogs:
-            h.stop()
+        if hogger is not None:
+            hogger.stop()
         shutil.rmtree(workdir, ignore_errors=True)
 
 

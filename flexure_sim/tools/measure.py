@@ -199,15 +199,12 @@ def run_node(
         # CPU time of the node process (all its threads, not the recorder) per wall second.
         "node_cpu_cores": ((cpu_end - cpu_start) / (cpu_wall_end - cpu_wall_start)
                            if cpu_start is not None and cpu_end is not None else None),
-        "stepping_nice": int(b["stepping_nice"]) if "stepping_nice" in b else None,
-        # SCHED_FIFO priority of the stepping thread (0: none; absent before it existed).
-        "stepping_priority": (int(b["stepping_priority"]) if "stepping_priority" in b
-                              else None),
-        # Middleware threads given that niceness (absent before middleware_threads existed).
-        "middleware_threads": (int(b["middleware_threads"]) if "middleware_threads" in b
-                               else None),
-        # The PM QoS request the node held (-1: none; absent before cpu_latency_us existed).
-        "cpu_latency_us": int(b["cpu_latency_us"]) if "cpu_latency_us" in b else None,
+        # The stepping thread's niceness and SCHED_FIFO priority (0: none), the middleware
+        # threads given that niceness, the PM QoS request held (-1: none); each None if the
+        # node's diagnostics predate it.
+        **{key: int(b[key]) if key in b else None
+           for key in ("stepping_nice", "stepping_priority", "middleware_threads",
+                       "cpu_latency_us")},
         "exit_code": proc.returncode,
     }
     if "missed_ticks" in b:
