@@ -16,9 +16,9 @@ from setuptools import find_packages, setup
 
 PACKAGE = "flexure_sim"
 EXECUTABLES = {
-    "stage_node": "flexure_sim.node.stage_node:main",
-    "replay": "flexure_sim.node.replay:main",
-    "pi_controller": "flexure_sim.node.pi_controller:main",
+    "stage_node": "flexure_sim.node.stage.stage_node:main",
+    "replay": "flexure_sim.node.apps.replay:main",
+    "pi_controller": "flexure_sim.node.apps.pi_controller:main",
 }
 
 setup(

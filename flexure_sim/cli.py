@@ -18,9 +18,9 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from .errors import FlexureSimError
-from .engine.config import load_mechanism, resolve_mechanism_path
-from .engine.solver import DEFAULT_STEP, Simulation, Snapshot
+from flexure_sim.errors import FlexureSimError
+from flexure_sim.engine.mechanism.loader import load_mechanism, resolve_mechanism_path
+from flexure_sim.engine.solver.simulation import DEFAULT_STEP, Simulation, Snapshot
 
 #: Times (s) at which the step response is reported, as in the acceptance figures.
 REPORT_TIMES = (1e-3, 2e-3, 5e-3)
@@ -91,7 +91,7 @@ def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
 
 def actuator_figures(sim: Simulation, snap: Snapshot) -> dict:
     """
-    Return the figures of each drive with a piezo actuator (engine/actuation.py).
+    Return the figures of each drive with a piezo actuator (engine/solver/actuation.py).
 
     Its command (V or m, ``unit``), amplifier voltage (V), free stroke and applied
     displacement (m), stack force (N).
@@ -190,15 +190,15 @@ def gain_matrix(sim: Simulation) -> dict:
 
 
 def _stress(sim: Simulation, snap: Snapshot) -> dict:
-    """Peak stress and stress ratio per notch/leaf hinge (engine/stress.py)."""
-    from .engine.stress import stress_table
+    """Peak stress and stress ratio per notch/leaf hinge (engine/hinges/stress.py)."""
+    from flexure_sim.engine.hinges.stress import stress_table
 
     return stress_table(snap.wrenches, sim.mechanism)
 
 
 def _stroke_limit(args, sim: Simulation) -> dict:
     """--stroke-limit: the drive input at which the first hinge reaches its yield strength."""
-    from .engine.stress import stroke_limit
+    from flexure_sim.engine.hinges.stress import stroke_limit
 
     if sim.drive is None:
         raise UsageError(f"--stroke-limit: mechanism {sim.mechanism.name!r} has no drive")
@@ -300,8 +300,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_tool_commands(sub) -> None:
-    """Tools that work on recorded runs, fitting, etc. (see tools/commands.py)."""
-    from .tools import commands
+    """Tools that work on recorded runs, fitting, etc. (see tools/registry.py)."""
+    from flexure_sim.tools import registry as commands
 
     commands.register(sub)
 

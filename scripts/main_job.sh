@@ -49,14 +49,14 @@ stop_node() {
 trap 'stop_node' EXIT
 
 echo "== demo drive: steps to 25, 50, 75, 100 % of the stroke and back to 0, 20 ms each"
-if ! python -m flexure_sim.node.demo_drive --record --rest 0.01 --dwell 0.02 --json >"$out/live.json"; then
+if ! python -m flexure_sim.node.apps.demo_drive --record --rest 0.01 --dwell 0.02 --json >"$out/live.json"; then
   echo "main_job: the demo drive failed; stage_node's log:" >&2
   tail -n 20 "$out/stage_node.log" >&2
   exit 1
 fi
 python - "$out/live.json" <<'EOF'
 import json, sys
-from flexure_sim.node.demo_drive import format_live
+from flexure_sim.node.apps.demo_drive import format_live
 print(format_live(json.load(open(sys.argv[1]))))
 EOF
 

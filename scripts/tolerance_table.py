@@ -11,11 +11,11 @@ from __future__ import annotations
 import argparse
 import copy
 
-from flexure_sim.engine import linear
-from flexure_sim.engine.design import Parameters
-from flexure_sim.engine.sensitivity import sensitivities
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.engine.stress import stress_table
+from flexure_sim.engine.analysis import linear
+from flexure_sim.engine.mechanism.parameters import Parameters
+from flexure_sim.engine.analysis.sensitivity import sensitivities
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.engine.hinges.stress import stress_table
 
 
 def resolve(params: Parameters, hinge: str, h: float, u: float) -> tuple[float, float, float]:

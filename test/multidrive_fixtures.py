@@ -18,8 +18,8 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from flexure_sim import topics
-from flexure_sim.engine.config import load_mechanism, resolve_mechanism_path
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.mechanism.loader import load_mechanism, resolve_mechanism_path
+from flexure_sim.engine.solver.simulation import Simulation
 from flexure_sim.recording import McapRecorder
 
 

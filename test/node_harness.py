@@ -28,7 +28,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
-from flexure_sim.node.interface import value_text
+from flexure_sim.node.publish.interface import value_text
 
 ROOT = Path(__file__).resolve().parent.parent
 _BASE_DOMAIN = int(os.environ.get("ROS_DOMAIN_ID") or random.randint(1, 100))
@@ -77,7 +77,7 @@ class NodeProcess:
     """
     ``stage_node`` run as a subprocess in ``cwd`` (output captured to files there).
 
-    By default it runs the source tree (``python -m flexure_sim.node.stage_node`` with the
+    By default it runs the source tree (``python -m flexure_sim.node.stage.stage_node`` with the
     repository on PYTHONPATH); ``command`` runs something else (console script, launcher).
     """
 
@@ -92,7 +92,7 @@ class NodeProcess:
     ) -> None:
         self.cwd = Path(cwd)
         self.cwd.mkdir(parents=True, exist_ok=True)
-        args = list(command or [sys.executable, "-m", "flexure_sim.node.stage_node"])
+        args = list(command or [sys.executable, "-m", "flexure_sim.node.stage.stage_node"])
         args += list(extra_args)
         if params:
             args.append("--ros-args")

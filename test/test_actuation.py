@@ -1,5 +1,5 @@
 """
-The piezo actuator in the engine's stepping (engine/actuation.py; issue 12 item 2).
+The piezo actuator in the engine's stepping (engine/solver/actuation.py; issue 12 item 2).
 
 Expected values from independent sources: the series-spring formula with the stage's tangent
 from its hinge Jacobian (piezo.py P8), the closed-form steady Bouc-Wen loop
@@ -15,10 +15,10 @@ import pytest
 from scipy.integrate import solve_ivp, trapezoid
 
 from conftest import ROOT
-from flexure_sim.engine import piezo, piezo_run
-from flexure_sim.engine.config import load_mechanism
-from flexure_sim.engine.mechanism import Drive
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.actuators import piezo, piezo_run
+from flexure_sim.engine.mechanism.loader import load_mechanism
+from flexure_sim.engine.mechanism.parts import Drive
+from flexure_sim.engine.solver.simulation import Simulation
 
 EXAMPLE = ROOT / "config" / "examples" / "piezo_stage.yaml"
 K_S = 5.0e7  # the example's stack stiffness (N/m)

@@ -19,12 +19,12 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from flexure_sim.engine import linear
-from flexure_sim.engine.config import load_mechanism
-from flexure_sim.engine.design import Parameters
-from flexure_sim.engine.sensitivity import sensitivities
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.engine.stress import notch_concentration, stress_table, stroke_limit
+from flexure_sim.engine.analysis import linear
+from flexure_sim.engine.mechanism.loader import load_mechanism
+from flexure_sim.engine.mechanism.parameters import Parameters
+from flexure_sim.engine.analysis.sensitivity import sensitivities
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.engine.hinges.stress import notch_concentration, stress_table, stroke_limit
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "analyses.md"

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from flexure_sim.tools import bench_engine
-from flexure_sim.engine.config import load_mechanism
-from flexure_sim.engine.solver import DEFAULT_STEP
+from flexure_sim.tools.bench import engine_bench as bench_engine
+from flexure_sim.engine.mechanism.loader import load_mechanism
+from flexure_sim.engine.solver.simulation import DEFAULT_STEP
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +30,7 @@ def test_error_grows_with_the_step_as_second_order():
     ref, _ = bench_engine.reference_trajectory(mech, 4e-4, 0.01)
     errors = []
     for dt in (4e-4, 2e-4):
-        from flexure_sim.engine.solver import Simulation
+        from flexure_sim.engine.solver.simulation import Simulation
         sim = Simulation(mech, dt=dt)
         sim.set_command(bench_engine.U_STEP)
         traj = bench_engine._output_trajectory(sim, int(round(4e-4 / dt)), len(ref))
@@ -46,8 +46,8 @@ def test_static_sweep_figures():
 
 def test_analyses_benchmark_runs_modes_frf_at_1000_frequencies_and_4_outputs_to_20_parameters():
     """The issue's analysis benchmark: what it times (its wall times are printed, not tested)."""
-    from flexure_sim.engine.sensitivity import OUTPUTS
-    from flexure_sim.tools.bench_studies import SENSITIVITY_PARAMETERS, bench_analyses
+    from flexure_sim.engine.analysis.sensitivity import OUTPUTS
+    from flexure_sim.tools.bench.study_bench import SENSITIVITY_PARAMETERS, bench_analyses
 
     res = bench_analyses()
     assert res["frequencies"] == 1000

@@ -18,12 +18,14 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64
 
-from flexure_sim.engine.config import load_mechanism
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.node import cdr, diagnostics_msg
-from flexure_sim.node import interface as itf
-from flexure_sim.node.cdr import packing_applies, parse_float64
-from flexure_sim.node.interface import StageInterface, diagnostics_message, encode_diagnostics
+from flexure_sim.engine.mechanism.loader import load_mechanism
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.node.publish import cdr, diagnostics_msg
+from flexure_sim.node.publish import interface as itf
+from flexure_sim.node.publish.cdr import packing_applies, parse_float64
+from flexure_sim.node.publish.interface import (
+    StageInterface, diagnostics_message, encode_diagnostics,
+)
 
 from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id
 

@@ -21,7 +21,7 @@ import yaml
 from std_msgs.msg import UInt64
 from std_srvs.srv import Trigger
 
-from flexure_sim.engine.config import resolve_mechanism_path
+from flexure_sim.engine.mechanism.loader import resolve_mechanism_path
 from flexure_sim.recording import read_log
 
 from node_harness import ROOT, NodeProcess, Peer, next_domain_id, node_env
@@ -46,7 +46,7 @@ def test_lockstep_closed_loop_settles_to_the_setpoint_and_runs_are_bit_identical
         sim_step=1e-4, record=True, record_path="loop.mcap"))
     controller = NodeProcess(
         tmp_path / "controller", domain, dict(setpoint=SETPOINT, period=1e-3, handshake=True),
-        command=[sys.executable, "-m", "flexure_sim.node.pi_controller"],
+        command=[sys.executable, "-m", "flexure_sim.node.apps.pi_controller"],
         env=node_env(domain, PYTHONPATH=str(ROOT), ROS_LOG_DIR=str(tmp_path / "ros_log"),
                      FASTRTPS_DEFAULT_PROFILES_FILE=str(ROOT / "config/fastdds_fast_ack.xml")))
     peer = Peer(domain)

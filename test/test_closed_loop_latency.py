@@ -10,7 +10,7 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64
 
 from flexure_sim.recording.writer import McapRecorder
-from flexure_sim.tools.closed_loop import command_latency
+from flexure_sim.tools.bench.closed_loop import command_latency
 
 MS = 1_000_000
 
@@ -43,7 +43,7 @@ def test_the_benchmarks_cpu_hog_is_busy_at_niceness_19_until_stopped():
     import os
     import time
 
-    from flexure_sim.tools.closed_loop import Hog
+    from flexure_sim.tools.bench.closed_loop import Hog
     from node_harness import proc_stat
 
     def stat(pid):

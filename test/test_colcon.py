@@ -120,7 +120,7 @@ def test_colcon_installed_code_reads_its_own_builtins_when_a_pip_copy_is_indexed
     runs (the workspace's) must read the workspace's files, and the pip copy its own.
     """
     site = next(workspace.install.glob("lib/python*/site-packages"))
-    probe = ("from flexure_sim.engine.config import resolve_mechanism_path; "
+    probe = ("from flexure_sim.engine.mechanism.loader import resolve_mechanism_path; "
              "import flexure_sim; print(flexure_sim.__file__); "
              "print(resolve_mechanism_path('microstage'))")
     both = os.pathsep.join([sys.prefix, str(workspace.install)])

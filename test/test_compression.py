@@ -8,10 +8,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from flexure_sim.engine import kinematics as kin
-from flexure_sim.engine.config import load_mechanism, mechanism_from_dict
-from flexure_sim.engine.hinge_laws import QuadraticLaw
-from flexure_sim.engine.solver import Simulation, stiffness_centre
+from flexure_sim.engine.kinematics import planar as kin
+from flexure_sim.engine.mechanism.loader import load_mechanism, mechanism_from_dict
+from flexure_sim.engine.laws.quadratic import QuadraticLaw
+from flexure_sim.engine.solver.simulation import Simulation, stiffness_centre
 from test_statics import DRIVEN_PLATFORM
 
 U_IN = 1.35e-6
@@ -104,13 +104,13 @@ def test_stiffness_centre_is_where_the_coupling_vanishes():
 @pytest.mark.parametrize("change", ["swap", "move"])
 def test_the_linear_model_measures_compression_as_the_engine_does(stage, change):
     """
-    The state-space output 'compression' (engine/linear.py) is the engine's definition.
+    The state-space output 'compression' (engine/analysis/linear.py) is the engine's definition.
 
     Its static gain equals the engine's compression per unit input from two static solves (a
     central difference at 1.35 um), on a stage whose compression hinge is relabelled or has
     its frames moved: a second definition at the frame origins would differ there.
     """
-    from flexure_sim.engine import linear
+    from flexure_sim.engine.analysis import linear
 
     R, p = kin.rot(0.7), np.array([2e-3, -1e-3])
     edit = _swap if change == "swap" else (lambda h: _move_frames(h, R, p))

@@ -4,7 +4,7 @@ import copy
 import pytest
 import yaml
 
-from flexure_sim.engine.config import (
+from flexure_sim.engine.mechanism.loader import (
     ConfigError,
     builtin_names,
     load_mechanism,

@@ -24,8 +24,8 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from flexure_sim.engine.config import ConfigError, load_mechanism, resolve_mechanism_path
-from flexure_sim.engine.mechanism import Mechanism
+from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism, resolve_mechanism_path
+from flexure_sim.engine.mechanism.parts import Mechanism
 
 from conftest import ROOT
 

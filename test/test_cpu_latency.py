@@ -3,7 +3,7 @@ import os
 
 import pytest
 
-from flexure_sim.node.cpu_latency import DEVICE, latency_in_effect, request_cpu_latency
+from flexure_sim.node.stage.cpu_latency import DEVICE, latency_in_effect, request_cpu_latency
 
 from node_harness import run_python
 
@@ -29,7 +29,7 @@ def test_a_granted_request_is_in_effect_while_held_and_withdrawn_on_release():
 
 REFUSED = r"""
 import os, sys
-from flexure_sim.node.cpu_latency import request_cpu_latency
+from flexure_sim.node.stage.cpu_latency import request_cpu_latency
 if os.geteuid() == 0:
     os.setgid(65534); os.setuid(65534)      # no longer root: the device is root's, mode 0600
 request, why = request_cpu_latency(0)

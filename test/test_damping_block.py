@@ -19,11 +19,13 @@ import numpy as np
 import pytest
 import yaml
 
-from flexure_sim.engine import linear, stepping
-from flexure_sim.engine.config import (ConfigError, load_mechanism, mechanism_from_dict,
-                                       resolve_mechanism_path)
-from flexure_sim.engine.data import State
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.analysis import linear
+from flexure_sim.engine.solver import step_loop as stepping
+from flexure_sim.engine.mechanism.loader import (
+    ConfigError, load_mechanism, mechanism_from_dict, resolve_mechanism_path,
+)
+from flexure_sim.engine.solver.state import State
+from flexure_sim.engine.solver.simulation import Simulation
 
 ZETA = 0.01  # config/microstage_realistic.yaml
 
@@ -340,7 +342,8 @@ def test_without_the_block_modes_and_frf_are_bit_identical_to_before():
 def test_the_realistic_stage_is_a_builtin_of_the_installed_package(tmp_path):
     # setup.py's data_files glob config/*.yaml: a pip install ships it to share/flexure_sim/config
     # (colcon: test_colcon.py); run from elsewhere, so that the installed copy is imported.
-    code = ("import sys; from flexure_sim.engine.builtins import builtin_names, find_builtin; "
+    code = ("import sys; "
+            "from flexure_sim.engine.mechanism.builtins import builtin_names, find_builtin; "
             "print(sys.prefix); print(find_builtin('microstage_realistic')); "
             "print(' '.join(builtin_names()))")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,

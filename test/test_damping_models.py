@@ -1,5 +1,5 @@
 """
-Rayleigh and modal damping built from the stage's modes at rest (engine/damping_models.py).
+Rayleigh and modal damping from the stage's modes at rest (mechanism/damping_models.py).
 
 Checked by an independent method: the eigenvalues of the damped state matrix [[0, I], [-M^-1 K,
 -M^-1 C]] (their ratios -Re/|lambda|), and the logarithmic decrement of a free decay of the first
@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from flexure_sim.engine.config import load_mechanism
-from flexure_sim.engine.damping_models import (
+from flexure_sim.engine.mechanism.loader import load_mechanism
+from flexure_sim.engine.mechanism.damping_models import (
     modal_matrix, rayleigh_coefficients, rayleigh_matrix, rayleigh_ratios)
-from flexure_sim.engine.linear import linearize, modes
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.analysis.linear import linearize, modes
+from flexure_sim.engine.solver.simulation import Simulation
 
 
 @pytest.fixture(scope="module")

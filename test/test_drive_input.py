@@ -1,9 +1,9 @@
-"""Drive command validation (flexure_sim.node.drive_input), without ROS."""
+"""Drive command validation (flexure_sim.node.inputs.command_checks), without ROS."""
 import math
 
 import pytest
 
-from flexure_sim.node.drive_input import (
+from flexure_sim.node.inputs.command_checks import (
     CommandFilter,
     CommandStatus,
     DriveLimits,

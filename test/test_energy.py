@@ -13,9 +13,9 @@ import scipy.linalg
 import yaml
 
 from conftest import ROOT
-from flexure_sim.engine import step_energy
-from flexure_sim.engine.config import load_mechanism, mechanism_from_dict
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.solver import step_energy
+from flexure_sim.engine.mechanism.loader import load_mechanism, mechanism_from_dict
+from flexure_sim.engine.solver.simulation import Simulation
 from test_statics import DRIVEN_PLATFORM, KX
 
 PARALLELOGRAM = ROOT / "config" / "examples" / "parallelogram_stage.yaml"

@@ -13,8 +13,10 @@ import numpy as np
 import pytest
 
 import flexure_sim
-from flexure_sim.engine import kinematics as kin
-from flexure_sim.engine import datasets, monomials, stiffness
+from flexure_sim.engine.kinematics import planar as kin
+from flexure_sim.engine.fitting import datasets
+from flexure_sim.engine.laws import monomials
+from flexure_sim.engine.hinges import stiffness
 from flexure_sim.errors import FlexureSimError
 
 
@@ -39,16 +41,16 @@ def test_every_package_error_derives_from_the_root():
     # The walk must see the errors the package is known to raise (a guard against a walk
     # that silently imports nothing).
     expected = {
-        "flexure_sim.engine.config_values.ConfigError",
-        "flexure_sim.engine.model.SolverError",
-        "flexure_sim.recording.errors.RecordingError",
-        "flexure_sim.engine.wrench_data.DataError",
-        "flexure_sim.engine.fitting.FitError",
-        "flexure_sim.engine.polynomial_files.PolynomialFileError",
-        "flexure_sim.recording.errors.RunError",
+        "flexure_sim.engine.mechanism.values.ConfigError",
+        "flexure_sim.engine.solver.model.SolverError",
+        "flexure_sim.recording.exceptions.RecordingError",
+        "flexure_sim.engine.fitting.wrench_data.DataError",
+        "flexure_sim.engine.fitting.least_squares.FitError",
+        "flexure_sim.engine.mechanism.polynomial_files.PolynomialFileError",
+        "flexure_sim.recording.exceptions.RunError",
         "flexure_sim.cli.UsageError",
-        "flexure_sim.node.demo_drive.DriveError",
-        "flexure_sim.node.shell.StartupError",
+        "flexure_sim.node.apps.demo_drive.DriveError",
+        "flexure_sim.node.stage.shell.StartupError",
     }
     assert expected <= set(classes), sorted(expected - set(classes))
     outside = sorted(name for name, cls in classes.items() if not issubclass(cls, FlexureSimError))
@@ -58,15 +60,15 @@ def test_every_package_error_derives_from_the_root():
 @pytest.mark.parametrize(
     "name,builtin",
     [
-        ("flexure_sim.engine.config_values.ConfigError", ValueError),
-        ("flexure_sim.engine.polynomial_files.PolynomialFileError", ValueError),
-        ("flexure_sim.engine.wrench_data.DataError", ValueError),
-        ("flexure_sim.engine.fitting.FitError", ValueError),
+        ("flexure_sim.engine.mechanism.values.ConfigError", ValueError),
+        ("flexure_sim.engine.mechanism.polynomial_files.PolynomialFileError", ValueError),
+        ("flexure_sim.engine.fitting.wrench_data.DataError", ValueError),
+        ("flexure_sim.engine.fitting.least_squares.FitError", ValueError),
         ("flexure_sim.cli.UsageError", ValueError),
-        ("flexure_sim.engine.model.SolverError", RuntimeError),
-        ("flexure_sim.node.demo_drive.DriveError", RuntimeError),
-        ("flexure_sim.node.stage_node.UsageError", ValueError),
-        ("flexure_sim.node.shell.StartupError", RuntimeError),
+        ("flexure_sim.engine.solver.model.SolverError", RuntimeError),
+        ("flexure_sim.node.apps.demo_drive.DriveError", RuntimeError),
+        ("flexure_sim.node.stage.stage_node.UsageError", ValueError),
+        ("flexure_sim.node.stage.shell.StartupError", RuntimeError),
     ],
 )
 def test_errors_keep_their_builtin_base(name, builtin):

@@ -19,9 +19,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from conftest import ROOT
-from flexure_sim.engine.fitting import FitError, fit_polynomial
-from flexure_sim.engine.polynomial_files import PolynomialFileError, load_law
-from flexure_sim.engine.wrench_data import MAX_ABS_VALUE, DataError, WrenchData, read_wrench_csv
+from flexure_sim.engine.fitting.least_squares import FitError, fit_polynomial
+from flexure_sim.engine.mechanism.polynomial_files import PolynomialFileError, load_law
+from flexure_sim.engine.fitting.wrench_data import (
+    MAX_ABS_VALUE, DataError, WrenchData, read_wrench_csv,
+)
 
 EXAMPLES = ROOT / "config" / "examples"
 TRAIN = (EXAMPLES / "notch_hinge_train.csv").read_text()

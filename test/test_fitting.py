@@ -16,8 +16,8 @@ import pytest
 import yaml
 
 from conftest import ROOT
-from flexure_sim.engine.config import ConfigError, load_mechanism
-from flexure_sim.engine.datasets import (
+from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism
+from flexure_sim.engine.fitting.datasets import (
     NOTCH_K,
     Leaf,
     cantilever_data,
@@ -26,15 +26,19 @@ from flexure_sim.engine.datasets import (
     leaf_tip,
     sample_box,
 )
-from flexure_sim.engine.fitting import FitError, fit_polynomial, number_of_unknowns, predict_wrench
-from flexure_sim.engine.hinge_laws import QuadraticLaw, evaluate, wrench_on_element
-from flexure_sim.engine.kinematics import rot
-from flexure_sim.engine.monomials import monomial_exponents
-from flexure_sim.engine.polynomial import PolynomialLaw
-from flexure_sim.engine.polynomial_files import load_law
-from flexure_sim.engine.randomtest import randomtest_report
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.engine.wrench_data import DataError, WrenchData, read_wrench_csv, write_wrench_csv
+from flexure_sim.engine.fitting.least_squares import (
+    FitError, fit_polynomial, number_of_unknowns, predict_wrench,
+)
+from flexure_sim.engine.laws.quadratic import QuadraticLaw, evaluate, wrench_on_element
+from flexure_sim.engine.kinematics.planar import rot
+from flexure_sim.engine.laws.monomials import monomial_exponents
+from flexure_sim.engine.laws.polynomial import PolynomialLaw
+from flexure_sim.engine.mechanism.polynomial_files import load_law
+from flexure_sim.engine.fitting.randomtest import randomtest_report
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.engine.fitting.wrench_data import (
+    DataError, WrenchData, read_wrench_csv, write_wrench_csv,
+)
 
 EXAMPLES = ROOT / "config" / "examples"
 K_LEAF = Leaf().small_displacement_stiffness()
@@ -522,7 +526,7 @@ def test_mechanism_errors_for_polynomial_laws(tmp_path):
 
 
 def test_builtins_are_unchanged_and_examples_are_not_builtins():
-    from flexure_sim.engine.config import builtin_names
+    from flexure_sim.engine.mechanism.loader import builtin_names
 
     assert "microstage_polynomial_a" not in builtin_names()
     stage = load_mechanism("microstage")

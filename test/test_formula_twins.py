@@ -9,9 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from flexure_sim.engine import hinge_laws, kernels, kinematics
-from flexure_sim.engine.assembly import Assembly
-from flexure_sim.engine.config import load_mechanism
+from flexure_sim.engine.laws import quadratic as hinge_laws
+from flexure_sim.engine.solver import kernels
+from flexure_sim.engine.kinematics import planar as kinematics
+from flexure_sim.engine.solver.assembly import Assembly
+from flexure_sim.engine.mechanism.loader import load_mechanism
 
 EPS = np.finfo(float).eps
 
@@ -81,7 +83,7 @@ def test_hinge_stiffness_and_damping_live_in_the_law_only():
     """No unread Hinge.K / Hinge.B copies next to the law's own (issue 10 item 5)."""
     import dataclasses
 
-    from flexure_sim.engine.mechanism import Hinge
+    from flexure_sim.engine.mechanism.parts import Hinge
 
     names = {f.name for f in dataclasses.fields(Hinge)}
     assert "K" not in names and "B" not in names

@@ -7,8 +7,8 @@ Wrench = gradient of the potential, invariance (3.3, 4.6), small displacements (
 import numpy as np
 import pytest
 
-from flexure_sim.engine import kinematics as kin
-from flexure_sim.engine.hinge_laws import QuadraticLaw, evaluate, wrench_on_element
+from flexure_sim.engine.kinematics import planar as kin
+from flexure_sim.engine.laws.quadratic import QuadraticLaw, evaluate, wrench_on_element
 
 K_NOTCH = np.diag([2.5096, 1.588e8, 1.661e7])
 # A general, coupled, positive-definite stiffness (moment first), to exercise every term.

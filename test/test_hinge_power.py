@@ -23,10 +23,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexure_sim.engine import kinematics as kin
-from flexure_sim.engine.fitting import basis_exponents
-from flexure_sim.engine.hinge_laws import LawBatch, QuadraticLaw, evaluate, wrench_on_element
-from flexure_sim.engine.polynomial import PolynomialLaw
+from flexure_sim.engine.kinematics import planar as kin
+from flexure_sim.engine.fitting.least_squares import basis_exponents
+from flexure_sim.engine.laws.quadratic import LawBatch, QuadraticLaw, evaluate, wrench_on_element
+from flexure_sim.engine.laws.polynomial import PolynomialLaw
 
 EPS = np.finfo(float).eps
 #: 9-point central difference of the first derivative (error O(h^8)).

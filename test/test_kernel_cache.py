@@ -1,7 +1,7 @@
 """
 Numba's disk cache of the stepping loop follows changes to every source compiled into it.
 
-Numba keys a cached function on its own file only (numba issue #1833); ``kernel_cache``
+Numba keys a cached function on its own file only (numba issue #1833); ``engine.jit``
 adds a digest of the sources a kernel module imports. The test edits a copy of the package
 the way an upgrade or a developer does (one module changed, the loop's own file not) and runs
 it in fresh processes, as a user's next run would.
@@ -16,8 +16,8 @@ import sys
 from conftest import ROOT
 
 RUN = (
-    "from flexure_sim.engine.config import load_mechanism\n"
-    "from flexure_sim.engine.solver import Simulation\n"
+    "from flexure_sim.engine.mechanism.loader import load_mechanism\n"
+    "from flexure_sim.engine.solver.simulation import Simulation\n"
     f"sim = Simulation(load_mechanism({str(ROOT / 'config' / 'microstage.yaml')!r}))\n"
     "sim.set_command(1e-6)\n"
     "sim.step(5)\n"
@@ -41,11 +41,11 @@ def test_a_change_to_a_module_compiled_into_the_loop_reaches_the_cached_loop(tmp
                     ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
     first = _dissipated(tmp_path)
     assert 0.0 < first < 1e-3
-    caches = list((package / "engine" / "__pycache__").glob("stepping._advance-*.nbi"))
+    caches = list((package / "engine" / "solver" / "__pycache__").glob("step_loop._advance-*.nbi"))
     assert caches, "the first run did not cache the compiled loop: the test would prove nothing"
-    # Change only step_energy.py, which Numba inlines into stepping.advance: each step's
+    # Change only step_energy.py, which Numba inlines into step_loop.advance: each step's
     # dissipated energy becomes 1 J, so five steps give 5 J if the change is compiled in.
-    energy = package / "engine" / "step_energy.py"
+    energy = package / "engine" / "solver" / "step_energy.py"
     text = energy.read_text()
     line = "    return dissipated + 0.5 * h * rho, work\n"
     assert text.count(line) == 1

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from flexure_sim.engine import kinematics as kin
+from flexure_sim.engine.kinematics import planar as kin
 
 
 def test_example_2_1_twist_of_a_displacement():

@@ -16,8 +16,8 @@ import pytest
 from rcl_interfaces.srv import GetParameters
 import yaml
 
-from flexure_sim.engine.config import builtin_names, load_mechanism
-from flexure_sim.node.params import parameter_specs
+from flexure_sim.engine.mechanism.loader import builtin_names, load_mechanism
+from flexure_sim.node.params.table import parameter_specs
 
 from node_harness import NodeProcess, Peer, next_domain_id
 

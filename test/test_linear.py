@@ -9,14 +9,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from flexure_sim.engine import hyperdual as hd
-from flexure_sim.engine import linear
-from flexure_sim.engine.assembly import Assembly
-from flexure_sim.engine.config import load_mechanism, mechanism_from_dict
-from flexure_sim.engine.hinge_laws import QuadraticLaw
-from flexure_sim.engine.design import design_of, hinge_indices, twistor_flags
-from flexure_sim.engine.parametric import forces
-from flexure_sim.engine.solver import Simulation, State
+from flexure_sim.engine.kinematics import hyperdual as hd
+from flexure_sim.engine.analysis import linear
+from flexure_sim.engine.solver.assembly import Assembly
+from flexure_sim.engine.mechanism.loader import load_mechanism, mechanism_from_dict
+from flexure_sim.engine.laws.quadratic import QuadraticLaw
+from flexure_sim.engine.mechanism.parameters import design_of, hinge_indices, twistor_flags
+from flexure_sim.engine.analysis.parametric import forces
+from flexure_sim.engine.solver.simulation import Simulation, State
 
 U0 = 1.35e-6
 EPS = np.finfo(float).eps
@@ -69,7 +69,7 @@ def test_a_complex_step_on_the_hyperdual_parts_gives_the_third_derivative():
     """
     Im(f(x + ih)) / h of the e1e2 part is the third derivative, to machine precision.
 
-    The construction engine/sensitivity.py uses for the first mode's second derivative.
+    The construction engine/analysis/sensitivity.py uses for the first mode's second derivative.
     f = sin(x) sqrt(x): f''' = -cos x sqrt x - (3/2) sin x / sqrt x - (3/4) cos x / x^1.5
     + (3/8) sin x / x^2.5.
     """
@@ -83,7 +83,7 @@ def test_a_complex_step_on_the_hyperdual_parts_gives_the_third_derivative():
 
 
 def test_hyperdual_flows_through_the_notch_stiffness_formula():
-    from flexure_sim.engine.stiffness import notch_stiffness
+    from flexure_sim.engine.hinges.stiffness import notch_stiffness
 
     h0 = 0.25e-3
     K = hd.from_objects(notch_stiffness(3e-3, hd.seed(h0, 1.0, 1.0), 0.02, 69e9, 0.33))
@@ -392,7 +392,7 @@ def test_a_mode_plot_without_motion_hides_the_rest_drawing(tmp_path):
 
     So the count measures the drawn displacement, not the plot's furniture.
     """
-    from flexure_sim.tools.dynamics_plots import plot_modes
+    from flexure_sim.tools.design.linear_plots import plot_modes
 
     mech = load_mechanism("microstage")
     model = linear.linearize(Simulation(mech), 0.0, wrenches=False)
@@ -414,8 +414,8 @@ def test_mode_plot_points_are_the_files_hinge_points_moved_by_the_mode_shape():
     """
     import yaml
 
-    from flexure_sim.engine.config import resolve_mechanism_path
-    from flexure_sim.tools.dynamics_plots import _mode_points
+    from flexure_sim.engine.mechanism.loader import resolve_mechanism_path
+    from flexure_sim.tools.design.linear_plots import _mode_points
 
     data = yaml.safe_load(resolve_mechanism_path("microstage").read_text())
     pose = {b["name"]: np.array(b["pose"][:2]) for b in data["bodies"]}

@@ -14,11 +14,12 @@ import numpy as np
 import pytest
 
 from flexure_sim.cli import gain_matrix, main
-from flexure_sim.engine import linear
-from flexure_sim.engine.config import (ConfigError, load_mechanism, mechanism_from_dict,
-                                       resolve_mechanism_path)
-from flexure_sim.engine.solver import Simulation, State
-from flexure_sim.engine.yaml_files import read_yaml
+from flexure_sim.engine.analysis import linear
+from flexure_sim.engine.mechanism.loader import (
+    ConfigError, load_mechanism, mechanism_from_dict, resolve_mechanism_path,
+)
+from flexure_sim.engine.solver.simulation import Simulation, State
+from flexure_sim.engine.mechanism.yaml_files import read_yaml
 
 from test_linear import _scaled_damping  # one copy of the test helper
 

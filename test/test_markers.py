@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from flexure_sim.engine.config import ConfigError, load_mechanism, mechanism_from_dict
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.node.markers import MarkerScene
+from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism, mechanism_from_dict
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.node.publish.markers import MarkerScene
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -122,7 +122,7 @@ def test_hinges_are_coloured_by_load_and_the_most_loaded_is_red(stage):
 def _with_shape(shape):
     import yaml
 
-    from flexure_sim.engine.config import resolve_mechanism_path
+    from flexure_sim.engine.mechanism.loader import resolve_mechanism_path
     data = yaml.safe_load(resolve_mechanism_path("microstage").read_text())
     data["bodies"][3]["shape"] = shape
     return mechanism_from_dict(data, "stage.yaml")

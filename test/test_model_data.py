@@ -9,9 +9,9 @@ import copy
 import numpy as np
 import pytest
 
-from flexure_sim.engine.config import load_mechanism
-from flexure_sim.engine.model import Model
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.mechanism.loader import load_mechanism
+from flexure_sim.engine.solver.model import Model
+from flexure_sim.engine.solver.simulation import Simulation
 
 U_IN = 1.35e-6
 

@@ -11,9 +11,9 @@ import copy
 import numpy as np
 import pytest
 
-from flexure_sim.engine.config import ConfigError, load_mechanism, mechanism_from_dict
-from flexure_sim.engine.linear import linearize, tangent_at
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism, mechanism_from_dict
+from flexure_sim.engine.analysis.linear import linearize, tangent_at
+from flexure_sim.engine.solver.simulation import Simulation
 
 KO = 2.5  # N m / rad
 
@@ -62,8 +62,8 @@ def test_a_commanded_torque_turns_the_body_by_torque_over_ko():
 
 
 def _microstage_doc():
-    from flexure_sim.engine.config import resolve_mechanism_path
-    from flexure_sim.engine.yaml_files import read_yaml
+    from flexure_sim.engine.mechanism.loader import resolve_mechanism_path
+    from flexure_sim.engine.mechanism.yaml_files import read_yaml
     path = resolve_mechanism_path("microstage")
     return read_yaml(path, ConfigError), str(path)
 

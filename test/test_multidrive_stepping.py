@@ -15,12 +15,13 @@ import numpy as np
 import pytest
 from test_xy_stage import hand_gain
 
-from flexure_sim.engine.config import (ConfigError, load_mechanism, mechanism_from_dict,
-                                       resolve_mechanism_path)
-from flexure_sim.engine.linear import tangent_at
-from flexure_sim.engine.mechanism import Drive, Fixed, Mechanism
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.engine.yaml_files import read_yaml
+from flexure_sim.engine.mechanism.loader import (
+    ConfigError, load_mechanism, mechanism_from_dict, resolve_mechanism_path,
+)
+from flexure_sim.engine.analysis.linear import tangent_at
+from flexure_sim.engine.mechanism.parts import Drive, Fixed, Mechanism
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.engine.mechanism.yaml_files import read_yaml
 
 #: Settling time per level (s): the slowest mode of the stages decays in a few ms.
 SETTLE = 0.05

@@ -10,9 +10,9 @@ import math
 import random
 import struct
 
-from flexure_sim.node.cdr import parse_float64
-from flexure_sim.node.commands import decode_float64_batch
-from flexure_sim.node.drive_input import CommandFilter, CommandStatus, DriveLimits
+from flexure_sim.node.publish.cdr import parse_float64
+from flexure_sim.node.inputs.command_intake import decode_float64_batch
+from flexure_sim.node.inputs.command_checks import CommandFilter, CommandStatus, DriveLimits
 
 
 def one_by_one(payloads):

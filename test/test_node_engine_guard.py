@@ -17,8 +17,8 @@ from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from std_msgs.msg import Float64
 
-from flexure_sim.engine.config import load_mechanism
-from flexure_sim.engine.solver import Simulation, SolverError
+from flexure_sim.engine.mechanism.loader import load_mechanism
+from flexure_sim.engine.solver.simulation import Simulation, SolverError
 
 from node_harness import NodeProcess, Peer, diagnostics_values
 

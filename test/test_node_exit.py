@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from flexure_sim.engine.config import resolve_mechanism_path
+from flexure_sim.engine.mechanism.loader import resolve_mechanism_path
 from flexure_sim.recording import read_log
 
 from node_harness import NodeProcess, next_domain_id

@@ -14,7 +14,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
-from flexure_sim.engine.config import load_mechanism
+from flexure_sim.engine.mechanism.loader import load_mechanism
 
 from node_harness import NodeProcess, Peer, next_domain_id
 

@@ -15,16 +15,16 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
-from flexure_sim.engine.config import load_mechanism, mechanism_from_dict
-from flexure_sim.node.cdr import StampedPacker, pack_diagnostics, split_stamp
-from flexure_sim.node.interface import (
+from flexure_sim.engine.mechanism.loader import load_mechanism, mechanism_from_dict
+from flexure_sim.node.publish.cdr import StampedPacker, pack_diagnostics, split_stamp
+from flexure_sim.node.publish.interface import (
     StageInterface,
     check_names,
     diagnostics_message,
     encode_diagnostics,
     yaw_quaternion,
 )
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.solver.simulation import Simulation
 
 STAMPS = [0, 1, 999_999_999, 1_000_000_000, 1_234_567_891_011, 2**31 * 1_000_000_000 - 1]
 

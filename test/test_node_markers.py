@@ -18,13 +18,13 @@ from rclpy.serialization import deserialize_message, serialize_message
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from flexure_sim.engine.config import load_mechanism
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.engine.stress import stress_table
-from flexure_sim.node.display import (
+from flexure_sim.engine.mechanism.loader import load_mechanism
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.engine.hinges.stress import stress_table
+from flexure_sim.node.publish.display import (
     Display, display_every, moving_transforms, static_transforms, tf_message_class)
-from flexure_sim.node.marker_cdr import MarkerArrayPacker
-from flexure_sim.node.markers import MarkerScene, load_colour
+from flexure_sim.node.publish.marker_cdr import MarkerArrayPacker
+from flexure_sim.node.publish.markers import MarkerScene, load_colour
 from flexure_sim.recording import read_log
 from flexure_sim.topics import Frames
 
@@ -82,7 +82,7 @@ def test_hinges_are_coloured_by_stress_ratio_when_the_file_gives_sigma_y(loaded)
     mech, snap = loaded
     display = Display(mech, Frames(""), 1.0)
     assert display.colouring == "stress ratio"
-    # The stress table (engine/stress.py, hinge by hinge) is the reference for the colours.
+    # The stress table (engine/hinges/stress.py, hinge by hinge) is the reference for the colours.
     table = stress_table(snap.wrenches, mech)
     msg = deserialize_message(display.markers(snap, 0), MarkerArray)
     discs = [m for m in msg.markers if m.ns == "hinges"]

@@ -1,5 +1,5 @@
 """
-The node measuring harness behind `python -m flexure_sim.tools.bench --node`.
+The node measuring harness behind `python -m flexure_sim.tools.bench.benchmarks --node`.
 
 It is tested on a short real run (a real stage_node subprocess, Fast DDS on loopback, a real
 recording read back).
@@ -7,7 +7,7 @@ recording read back).
 
 import pytest
 
-from flexure_sim.tools import measure
+from flexure_sim.tools.bench import measure
 
 from node_harness import next_domain_id
 

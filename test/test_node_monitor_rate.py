@@ -11,9 +11,9 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
-from flexure_sim.engine.config import load_mechanism
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.node.interface import StageInterface
+from flexure_sim.engine.mechanism.loader import load_mechanism
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.node.publish.interface import StageInterface
 from flexure_sim.recording import read_log
 
 from node_harness import NodeProcess, Peer, next_domain_id

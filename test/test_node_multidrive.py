@@ -196,9 +196,9 @@ def test_each_drive_has_its_own_limits_counters_and_warnings(tmp_path, domain, p
 def test_topic_names_per_drive_and_output_and_the_single_drive_names_kept():
     from rclpy.serialization import deserialize_message
 
-    from flexure_sim.engine.config import load_mechanism
-    from flexure_sim.engine.solver import Simulation
-    from flexure_sim.node.interface import StageInterface
+    from flexure_sim.engine.mechanism.loader import load_mechanism
+    from flexure_sim.engine.solver.simulation import Simulation
+    from flexure_sim.node.publish.interface import StageInterface
     xy = StageInterface(load_mechanism("xy_stage"), "fast")
     names = [t.name for t in xy.tick_topics]
     floats = ["output/x/displacement", "output/y/displacement", "output/theta/displacement",
@@ -275,9 +275,9 @@ PIEZO_STAGE = "config/examples/piezo_stage.yaml"   # actuator: {command: voltage
 
 
 def test_a_voltage_commanded_drive_has_its_command_topic_and_limits_in_volts(tmp_path):
-    from flexure_sim.engine.config import load_mechanism
-    from flexure_sim.node.drive_bank import drive_parameter_specs
-    from flexure_sim.node.interface import StageInterface
+    from flexure_sim.engine.mechanism.loader import load_mechanism
+    from flexure_sim.node.inputs.drive_bank import drive_parameter_specs
+    from flexure_sim.node.publish.interface import StageInterface
     from node_harness import ROOT as REPO
     one = StageInterface(load_mechanism(str(REPO / PIEZO_STAGE)), "fast")
     assert [(c.name, c.unit) for c in one.commands] == [("drive/voltage", "V")]
@@ -355,13 +355,13 @@ def test_ticks_with_new_commands_on_several_drives_reach_the_step_by_step_states
     Reference: the drives' definition (README: Drive commands) stepped one engine step at a
     time, each drive's target moving towards its command by at most its slew_rate * dt.
     """
-    from flexure_sim.engine.config import load_mechanism
-    from flexure_sim.engine.solver import Simulation
-    from flexure_sim.node.drive_bank import FilterBank
-    from flexure_sim.node.drive_input import DriveLimits
-    from flexure_sim.node.interface import StageInterface
-    from flexure_sim.node.session import RecordingSession
-    from flexure_sim.node.stepping import RELINEARIZE_TOL, SteppingLoop
+    from flexure_sim.engine.mechanism.loader import load_mechanism
+    from flexure_sim.engine.solver.simulation import Simulation
+    from flexure_sim.node.inputs.drive_bank import FilterBank
+    from flexure_sim.node.inputs.command_checks import DriveLimits
+    from flexure_sim.node.publish.interface import StageInterface
+    from flexure_sim.node.record.session import RecordingSession
+    from flexure_sim.node.stage.stepping_thread import RELINEARIZE_TOL, SteppingLoop
     from test_node_stepping import DT, N_STEPS, RATE, Log
 
     xy = load_mechanism("xy_stage")

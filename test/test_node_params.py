@@ -4,10 +4,10 @@ import multiprocessing
 
 import pytest
 
-from flexure_sim.node.pacing import Pacer, PacingStats
-from flexure_sim.node.param_checks import steps_per_tick, validate
-from flexure_sim.node.params import parameter_specs
-from flexure_sim.node.session import (
+from flexure_sim.node.stage.pacing import Pacer, PacingStats
+from flexure_sim.node.params.checks import steps_per_tick, validate
+from flexure_sim.node.params.table import parameter_specs
+from flexure_sim.node.record.session import (
     claim_recording_path, node_token, recording_layout, release_claim)
 
 
@@ -303,7 +303,7 @@ def test_pacer_sleeps_then_busy_waits_the_last_part():
 
 def test_numbers_given_as_integers_or_yaml_strings_set_double_parameters():
     """``ros2 param set`` reads ``2`` as an integer and ``1e-6`` as a string (YAML 1.1)."""
-    from flexure_sim.node.params import as_declared_type
+    from flexure_sim.node.params.table import as_declared_type
 
     specs = {s.name: s for s in parameter_specs((0.0, 2e-6, 0.01))}
     stroke, mode = specs["stroke_max"], specs["time_mode"]

@@ -11,8 +11,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64
 
-from flexure_sim.node.interface import command_qos
-from flexure_sim.node.polled import PolledGroup, take_raw
+from flexure_sim.node.publish.interface import command_qos
+from flexure_sim.node.stage.polled import PolledGroup, take_raw
 
 
 def test_polled_subscription_never_wakes_the_executor_and_loses_nothing(context):

@@ -78,7 +78,7 @@ def test_a_spin_of_the_whole_period_is_refused_at_start_up_naming_both_parameter
 
 REFUSED = r"""
 import os, resource, sys
-from flexure_sim.node.pacing import set_thread_fifo
+from flexure_sim.node.stage.pacing import set_thread_fifo
 resource.setrlimit(resource.RLIMIT_RTPRIO, (0, 0))
 if os.geteuid() == 0:
     os.setgid(65534); os.setuid(65534)      # no longer root: no CAP_SYS_NICE

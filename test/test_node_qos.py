@@ -119,7 +119,7 @@ def test_the_command_graph_check_never_wakes_the_executor(context, tmp_path, mon
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
-    from flexure_sim.node.shell import StageNode
+    from flexure_sim.node.stage.shell import StageNode
 
     monkeypatch.chdir(tmp_path)
     overrides = [Parameter(name, value=value) for name, value in PARAMS.items()]

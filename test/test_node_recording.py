@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
-from flexure_sim.node.record_process import MAX_BACKLOG_ENV, WRITE_DELAY_ENV
+from flexure_sim.node.record.process import MAX_BACKLOG_ENV, WRITE_DELAY_ENV
 from flexure_sim.recording import read_log
 
 from node_harness import ROOT, NodeProcess, Peer, diagnostics_values, next_domain_id, node_env

@@ -23,10 +23,10 @@ from rclpy.serialization import serialize_message
 from scipy import signal
 from std_msgs.msg import Float64
 
-from flexure_sim.engine.config import load_mechanism, resolve_mechanism_path
-from flexure_sim.engine.sensor import SensorSpec
-from flexure_sim.node.interface import StageInterface
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.mechanism.loader import load_mechanism, resolve_mechanism_path
+from flexure_sim.engine.actuators.sensor import SensorSpec
+from flexure_sim.node.publish.interface import StageInterface
+from flexure_sim.engine.solver.simulation import Simulation
 from flexure_sim.recording import read_log
 
 from node_harness import NodeProcess, Peer, next_domain_id

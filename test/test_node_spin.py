@@ -16,7 +16,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.task import Future
 from std_msgs.msg import Float64
 
-from flexure_sim.node.main_loop import spin_until_stopped
+from flexure_sim.node.stage.main_loop import spin_until_stopped
 
 
 class ShutdownWhileCollecting(CallbackGroup):

@@ -23,10 +23,10 @@ from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
-from flexure_sim.engine.config import ConfigError, load_mechanism, resolve_mechanism_path
+from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism, resolve_mechanism_path
 from flexure_sim.recording import CorruptLogError, read_log
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.node.cpu_latency import DEVICE, latency_in_effect
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.node.stage.cpu_latency import DEVICE, latency_in_effect
 
 from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id, thread_stats
 

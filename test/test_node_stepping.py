@@ -10,12 +10,12 @@ import time
 import numpy as np
 import pytest
 
-from flexure_sim.engine.config import load_mechanism
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.node.drive_input import CommandFilter, DriveLimits
-from flexure_sim.node.interface import StageInterface
-from flexure_sim.node.session import RecordingSession
-from flexure_sim.node.stepping import RELINEARIZE_TOL, SteppingLoop
+from flexure_sim.engine.mechanism.loader import load_mechanism
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.node.inputs.command_checks import CommandFilter, DriveLimits
+from flexure_sim.node.publish.interface import StageInterface
+from flexure_sim.node.record.session import RecordingSession
+from flexure_sim.node.stage.stepping_thread import RELINEARIZE_TOL, SteppingLoop
 
 DT = 1.0e-4
 RATE = 1000.0

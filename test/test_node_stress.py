@@ -10,9 +10,9 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from std_msgs.msg import Float64
 
-from flexure_sim.engine.config import load_mechanism, resolve_mechanism_path
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.engine.stress import peak_ratio, stress_table
+from flexure_sim.engine.mechanism.loader import load_mechanism, resolve_mechanism_path
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.engine.hinges.stress import peak_ratio, stress_table
 from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id
 
 FULL_STROKE = 2.0e-6

@@ -3,7 +3,7 @@ Packaging.
 
 package.xml names every dependency setup.py declares (by rosdep key), matplotlib is an optional
 extra the node never imports, and the plot tool says what to install without it. Built-in
-mechanisms: found in the running code's own install (engine/builtins.py).
+mechanisms: found in the running code's own install (engine/mechanism/builtins.py).
 """
 from __future__ import annotations
 
@@ -68,7 +68,7 @@ def test_package_xml_names_every_python_dependency_by_its_rosdep_key():
 
 
 def test_the_node_does_not_import_matplotlib():
-    probe = ("import sys; import flexure_sim.node.stage_node, flexure_sim.cli; "
+    probe = ("import sys; import flexure_sim.node.stage.stage_node, flexure_sim.cli; "
              "print(sorted(m for m in sys.modules if m.split('.')[0] == 'matplotlib'))")
     p = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120,
                        cwd=ROOT, check=True)
@@ -97,7 +97,7 @@ def test_builtins_come_from_the_install_the_code_belongs_to(tmp_path):
     An installed copy reads <prefix>/share, a checkout its config/, code in neither layout finds
     nothing of its own (then only the ament index can answer).
     """
-    from flexure_sim.engine import builtins
+    from flexure_sim.engine.mechanism import builtins
 
     prefix = tmp_path / "prefix"
     installed = prefix / "lib" / "python3.11" / "site-packages" / "flexure_sim"

@@ -1,5 +1,5 @@
 """
-The piezo actuator model (engine/piezo.py, piezo_run.py, config_actuator.py); no ROS.
+The piezo actuator model (engine/actuators/piezo.py, piezo_run.py, config_actuator.py); no ROS.
 
 Expected values come from closed forms written here (series springs, sums of exponentials,
 the gamma = 0 Bouc-Wen loop), a second method (time integration against the loop's dh/dV
@@ -15,12 +15,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from conftest import ROOT
-from flexure_sim.engine import piezo, piezo_run
-from flexure_sim.engine.actuation import rigid_stacks
-from flexure_sim.engine.config import ConfigError, load_mechanism, mechanism_from_dict
-from flexure_sim.engine.mechanism import Drive
-from flexure_sim.engine.piezo import CreepElement, PiezoSpec
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.actuators import piezo, piezo_run
+from flexure_sim.engine.solver.actuation import rigid_stacks
+from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism, mechanism_from_dict
+from flexure_sim.engine.mechanism.parts import Drive
+from flexure_sim.engine.actuators.piezo import CreepElement, PiezoSpec
+from flexure_sim.engine.solver.simulation import Simulation
 
 EXAMPLE = ROOT / "config" / "examples" / "piezo_stage.yaml"
 GAIN = 1.5e-5 / 100.0  # the example's stroke over its voltage range, m/V

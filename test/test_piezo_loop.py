@@ -73,7 +73,7 @@ def test_loop_of_the_shipped_example_and_bad_input(tmp_path):
 def test_bad_options_are_named(change, message):
     from argparse import Namespace
 
-    from flexure_sim.tools.piezo_loop import loop_summary
+    from flexure_sim.tools.design.piezo_loop import loop_summary
 
     args = Namespace(mechanism=str(EXAMPLE), drive=None, frequency=1.0, cycles=3, points=200,
                      load=1e6)

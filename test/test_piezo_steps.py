@@ -1,5 +1,5 @@
 """
-The piezo actuators' fast stepping (engine/piezo_steps.py, actuation.step) against its definition.
+The piezo actuators' fast stepping (actuators/piezo_steps.py, actuation.step) vs its definition.
 
 The definition (actuation.py's module doc), one engine step at a time from public pieces: the
 actuator by `piezo.advance` (after `piezo.jump` without an amplifier lag), the stage by one
@@ -15,10 +15,11 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from flexure_sim.engine import actuation, dynamics, piezo
-from flexure_sim.engine.config import load_mechanism
-from flexure_sim.engine.mechanism import Drive
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.solver import actuation, integrator as dynamics
+from flexure_sim.engine.actuators import piezo
+from flexure_sim.engine.mechanism.loader import load_mechanism
+from flexure_sim.engine.mechanism.parts import Drive
+from flexure_sim.engine.solver.simulation import Simulation
 
 EXAMPLE = ROOT / "config" / "examples" / "piezo_stage.yaml"
 EPS = np.finfo(float).eps
@@ -95,7 +96,7 @@ def test_n_steps_in_one_call_are_n_defined_steps(variant, compiled):
 
 def test_the_compiled_actuator_step_is_piezo_s_own():
     """piezo_steps compiles piezo.py's functions themselves: no second copy of P2-P6."""
-    from flexure_sim.engine import piezo_steps
+    from flexure_sim.engine.actuators import piezo_steps
     assert piezo_steps.advance_values is piezo.advance_values
     assert piezo_steps.jump_values is piezo.jump_values
     assert piezo.stroke_kernel.py_func is piezo.stroke_values

@@ -10,21 +10,21 @@ import numpy as np
 import pytest
 import yaml
 
-from flexure_sim.engine import kinematics as kin
-from flexure_sim.engine.hinge_laws import QuadraticLaw, evaluate
-from flexure_sim.engine.monomials import (
+from flexure_sim.engine.kinematics import planar as kin
+from flexure_sim.engine.laws.quadratic import QuadraticLaw, evaluate
+from flexure_sim.engine.laws.monomials import (
     derivative_coefficients,
     monomial_exponents,
     monomial_index,
     monomials,
 )
-from flexure_sim.engine.polynomial import (
+from flexure_sim.engine.laws.polynomial import (
     PolynomialLaw,
     quadratic_as_polynomial,
     swap_bodies,
     transform_frames,
 )
-from flexure_sim.engine.polynomial_files import (
+from flexure_sim.engine.mechanism.polynomial_files import (
     PolynomialFileError,
     law_from_dict,
     load_law,

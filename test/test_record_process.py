@@ -9,7 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from flexure_sim.node.record_process import (
+from flexure_sim.node.record.process import (
     MAX_BACKLOG_ENV,
     RECORDER_NICE,
     WRITE_DELAY_ENV,

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from flexure_sim.cli import main
-from flexure_sim.engine import linear
-from flexure_sim.engine.config import mechanism_from_dict
-from flexure_sim.engine.design import ParameterError, Parameters
-from flexure_sim.engine.sensitivity import sensitivities
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.engine.stress import stress_table
+from flexure_sim.engine.analysis import linear
+from flexure_sim.engine.mechanism.loader import mechanism_from_dict
+from flexure_sim.engine.mechanism.parameters import ParameterError, Parameters
+from flexure_sim.engine.analysis.sensitivity import sensitivities
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.engine.hinges.stress import stress_table
 
 U = 1.35e-6
 H_C, X_C = "hinges.c.stiffness.h", "hinges.e.stiffness.D"
@@ -136,7 +136,7 @@ def test_first_mode_second_derivatives_agree_with_central_differences(params, re
     d2 f1 / dh2, dD2 and dh dD (two hinges) against re-solved eigen-analyses.
 
     Exact by Nelson's eigenvector derivative and a complex step on the hyper-dual parts
-    (engine/sensitivity.py).
+    (engine/analysis/sensitivity.py).
     """
     h0, d0 = params.value(H_C), params.value(X_C)
     fd = _second_differences(lambda h, d: _resolve(params, {H_C: h, X_C: d})[2],
@@ -361,7 +361,7 @@ def test_compression_sensitivity_does_not_depend_on_hinge_labels(params, tmp_pat
     """
     Relabel the compression hinge (A and B swapped): the derivative stays the engine's.
 
-    The engine measures compression drive side minus far side (engine/compression.py); the
+    The engine measures compression drive side minus far side (engine/solver/compression.py); the
     sensitivity must differentiate that same definition, not B minus A.
     """
     import yaml

@@ -15,11 +15,11 @@ import pytest
 import yaml
 
 from flexure_sim.cli import gain_matrix, main
-from flexure_sim.engine import linear
-from flexure_sim.engine.config import mechanism_from_dict
-from flexure_sim.engine.design import ParameterError, Parameters
-from flexure_sim.engine.sensitivity import sensitivities
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.analysis import linear
+from flexure_sim.engine.mechanism.loader import mechanism_from_dict
+from flexure_sim.engine.mechanism.parameters import ParameterError, Parameters
+from flexure_sim.engine.analysis.sensitivity import sensitivities
+from flexure_sim.engine.solver.simulation import Simulation
 
 U = {"x": 1e-5, "y": 4e-6}
 H, T = "stiffness_models.notch.h", "stiffness_models.leaf.thickness"

@@ -1,5 +1,5 @@
 """
-The output sensor (engine/sensor.py) without ROS, against closed forms.
+The output sensor (engine/actuators/sensor.py) without ROS, against closed forms.
 
 The first-order step response 1 - exp(-t/tau), exact latency, quantisation, seeded noise; and the
 ``sensor:`` block's validation.
@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 import yaml
 
-from flexure_sim.engine.config import ConfigError, mechanism_from_dict, resolve_mechanism_path
-from flexure_sim.engine.sensor import Sensor, SensorSpec
+from flexure_sim.engine.mechanism.loader import (
+    ConfigError, mechanism_from_dict, resolve_mechanism_path,
+)
+from flexure_sim.engine.actuators.sensor import Sensor, SensorSpec
 
 T = 1e-3
 

@@ -9,10 +9,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from flexure_sim.engine import kinematics as kin
-from flexure_sim.engine.config import load_mechanism
-from flexure_sim.engine.hinge_laws import QuadraticLaw
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.kinematics import planar as kin
+from flexure_sim.engine.mechanism.loader import load_mechanism
+from flexure_sim.engine.laws.quadratic import QuadraticLaw
+from flexure_sim.engine.solver.simulation import Simulation
 
 U_IN = 1.35e-6
 

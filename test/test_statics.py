@@ -8,8 +8,8 @@ import pytest
 import yaml
 from conftest import ROOT
 
-from flexure_sim.engine.config import load_mechanism, mechanism_from_dict
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.mechanism.loader import load_mechanism, mechanism_from_dict
+from flexure_sim.engine.solver.simulation import Simulation
 
 KO, KX, KY = 2.0, 1.0e8, 1.0e7
 #: A platform driven directly on fixed ground through one hinge of known stiffness: no
@@ -85,7 +85,7 @@ def test_the_parallelogram_example_moves_on_its_leaves_shear_stiffness():
     snap = result.snapshot
     E, t, w, L = 69.0e9, 0.0005, 0.005, 0.020
     leaves = 2 * 12.0 * E * (w * t**3 / 12.0) / L**3
-    notch_axial = 3.97092544e7  # kappa_1t E t of the input notch (engine/stiffness.py check)
+    notch_axial = 3.97092544e7  # kappa_1t E t (engine/hinges/stiffness.py check)
     expected = u / (1.0 / leaves + 1.0 / notch_axial)
     assert snap.drive_force == pytest.approx(expected, rel=1.0e-3)
     # Parallel guidance: both leaves shear alike and the platform barely tilts.

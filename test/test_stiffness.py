@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from flexure_sim.engine.stiffness import cantilever_stiffness, notch_stiffness
+from flexure_sim.engine.hinges.stiffness import cantilever_stiffness, notch_stiffness
 
 
 def test_stage_notch_hinge_matches_chapter_6():

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from flexure_sim.cli import main
-from flexure_sim.engine import stress
-from flexure_sim.engine.config import load_mechanism, mechanism_from_dict
-from flexure_sim.engine.design import Parameters
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.hinges import stress
+from flexure_sim.engine.mechanism.loader import load_mechanism, mechanism_from_dict
+from flexure_sim.engine.mechanism.parameters import Parameters
+from flexure_sim.engine.solver.simulation import Simulation
 
 
 def test_notch_concentration_factor_is_roarks_semicircular_u_notch_in_bending():
@@ -130,7 +130,7 @@ def test_static_stress_with_a_polynomial_hinge_covers_the_notch_hinges(capsys):
     No stress for it, the others as usual; the analyses that need the generic force chain say why
     they cannot run.
     """
-    from flexure_sim.engine.config import resolve_mechanism_path
+    from flexure_sim.engine.mechanism.loader import resolve_mechanism_path
 
     path = str(
         resolve_mechanism_path("microstage").parent / "examples" / "microstage_polynomial_a.yaml"
@@ -177,7 +177,7 @@ def test_stress_geometry_is_part_of_the_loaded_mechanism_with_the_stiffness_numb
 
     The numbers its stiffness formula used, sigma_y as a number; none for a matrix hinge.
     """
-    from flexure_sim.engine.stiffness import cantilever_stiffness, notch_stiffness
+    from flexure_sim.engine.hinges.stiffness import cantilever_stiffness, notch_stiffness
 
     mech = mechanism_from_dict(_two_hinge_doc(), source="<no file>")
     n, leaf, k = mech.hinges

@@ -1,12 +1,12 @@
-"""Study files (engine/study.py): validation, parameter paths, grids and sampling. No Dask."""
+"""Study files (engine/analysis/study.py): validation, parameter paths, grids, samples. No Dask."""
 import math
 
 import numpy as np
 import pytest
 import yaml
 
-from flexure_sim.engine.stiffness import notch_stiffness
-from flexure_sim.engine.study import StudyError, load_study, study_from_dict
+from flexure_sim.engine.hinges.stiffness import notch_stiffness
+from flexure_sim.engine.analysis.study import StudyError, load_study, study_from_dict
 
 OUTPUTS = ("gain", "compression", "drive_force")
 NOTCH = dict(D=0.003, h=0.00025, t=0.02, E=69.0e9, nu=0.33)  # config/microstage.yaml
@@ -142,7 +142,7 @@ def test_batches_cover_every_sample_once():
 def test_the_shipped_studies_load(tmp_path):
     from pathlib import Path
 
-    from flexure_sim.tools.sweep_outputs import OUTPUTS as REGISTERED
+    from flexure_sim.tools.design.sweep_outputs import OUTPUTS as REGISTERED
 
     path = Path(__file__).resolve().parent.parent / "config" / "studies" / "stage_tolerance.yaml"
     study = load_study(path, REGISTERED)  # the shipped files name the runner's outputs

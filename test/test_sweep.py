@@ -18,11 +18,12 @@ import pyarrow.parquet as pq
 import pytest
 import yaml
 
-from flexure_sim.engine.config import load_mechanism
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.engine.study import load_study, study_from_dict
-from flexure_sim.tools import response_metrics, sweep_run as sweep, sweep_summary
-from flexure_sim.tools.sweep_outputs import OUTPUTS, evaluate_batch
+from flexure_sim.engine.mechanism.loader import load_mechanism
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.engine.analysis.study import load_study, study_from_dict
+from flexure_sim.tools.run import response_metrics
+from flexure_sim.tools.design import sweep_run as sweep, sweep_summary
+from flexure_sim.tools.design.sweep_outputs import OUTPUTS, evaluate_batch
 
 ROOT = Path(__file__).resolve().parent.parent
 STAGE_STUDY = ROOT / "config" / "studies" / "stage_tolerance.yaml"
@@ -112,13 +113,13 @@ def test_monte_carlo_spread_of_the_gain_agrees_with_the_first_order_prediction(t
     2000 designs of the stage study (h +- 5 um on all seven hinges, independent).
 
     To first order the standard deviation of the gain is sqrt(sum (dg/dh_i)^2) * 5 um, with dg/dh_i
-    the exact sensitivities (engine/sensitivity.py, hyper-dual). The sample standard deviation of n
-    normal values has a relative standard error 1/sqrt(2 (n - 1)): agreement within 4 of those,
-    plus 1 % for the neglected second-order terms (the second derivatives times (5 um)^2 are below
-    1e-3 of the first-order spread).
+    the exact sensitivities (engine/analysis/sensitivity.py, hyper-dual). The sample standard
+    deviation of n normal values has a relative standard error 1/sqrt(2 (n - 1)): agreement within
+    4 of those, plus 1 % for the neglected second-order terms (the second derivatives times (5
+    um)^2 are below 1e-3 of the first-order spread).
     """
-    from flexure_sim.engine.design import Parameters
-    from flexure_sim.engine.sensitivity import sensitivities
+    from flexure_sim.engine.mechanism.parameters import Parameters
+    from flexure_sim.engine.analysis.sensitivity import sensitivities
 
     study = load_study(_small_stage_study(tmp_path, samples=2000, batch_size=2000,
                                           outputs=["gain"]), OUTPUTS)

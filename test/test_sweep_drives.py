@@ -18,12 +18,14 @@ import pyarrow.parquet as pq
 import pytest
 import yaml
 
-from flexure_sim.engine.config import ConfigError, mechanism_from_dict, resolve_mechanism_path
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.engine.study import StudyError, load_study, study_from_dict
-from flexure_sim.engine.yaml_files import read_yaml
-from flexure_sim.tools import response_metrics
-from flexure_sim.tools.sweep_outputs import OUTPUTS, columns, evaluate_batch
+from flexure_sim.engine.mechanism.loader import (
+    ConfigError, mechanism_from_dict, resolve_mechanism_path,
+)
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.engine.analysis.study import StudyError, load_study, study_from_dict
+from flexure_sim.engine.mechanism.yaml_files import read_yaml
+from flexure_sim.tools.run import response_metrics
+from flexure_sim.tools.design.sweep_outputs import OUTPUTS, columns, evaluate_batch
 
 ROOT = Path(__file__).resolve().parent.parent
 XY_GRID = ROOT / "config" / "studies" / "xy_stage_grid.yaml"
@@ -283,7 +285,7 @@ def test_first_mode_of_an_xy_design_is_what_the_modes_command_reports():
 def test_first_mode_of_a_mechanism_with_a_piezo_stack_is_refused_at_load():
     path = ROOT / "config" / "examples" / "piezo_stage.yaml"
     with pytest.raises(StudyError, match=r"s.yaml: outputs: first_mode: the linear model "
-                       r"\(engine/linear.py, flexure-sim modes\) takes no drive with a piezo "
-                       r"stack \(actuator: block\)"):
+                       r"\(engine/analysis/linear.py, flexure-sim modes\) takes no drive with a "
+                       r"piezo stack \(actuator: block\)"):
         study_from_dict({"mechanism": str(path), "outputs": ["first_mode"], "parameters": [
             {"path": "stiffness_models.leaf.thickness", "values": [1.0e-3]}]}, "s.yaml", OUTPUTS)

@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from flexure_sim.node.pacing import set_thread_nice
+from flexure_sim.node.stage.pacing import set_thread_nice
 
 pytestmark = pytest.mark.skipif(
     not sys.platform.startswith("linux"), reason="per-thread niceness is Linux only"
@@ -32,7 +32,7 @@ def test_a_thread_gets_its_own_niceness_and_the_others_keep_theirs():
 
 REFUSED = r"""
 import os, resource, sys
-from flexure_sim.node.pacing import set_thread_nice
+from flexure_sim.node.stage.pacing import set_thread_nice
 soft, hard = resource.getrlimit(resource.RLIMIT_NICE)
 resource.setrlimit(resource.RLIMIT_NICE, (0, hard))   # no lowering allowed by the limit
 if os.geteuid() == 0:

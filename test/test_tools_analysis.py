@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from flexure_sim.tools import analysis, response_metrics
-from flexure_sim.tools.analysis import Step
+from flexure_sim.tools.run import step_analysis as analysis, response_metrics
+from flexure_sim.tools.run.step_analysis import Step
 
 
 def first_order(

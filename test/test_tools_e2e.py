@@ -2,7 +2,7 @@
 The tools on a run recorded through the real node, and replay to real rclpy subscribers.
 
 A stage_node subprocess (lockstep mode, 2 kHz ticks) is driven by the demo driver
-(``python -m flexure_sim.node.demo_drive --record``), a real rclpy node that advances it with
+(``python -m flexure_sim.node.apps.demo_drive --record``), a real rclpy node that advances it with
 ~/step, publishes the demo profile and reports the gain it saw live; then ``flexure-sim
 analyse / plot / export / info`` run on the recording and ``replay`` publishes it again to a
 real subscriber. Each test gets its own ROS domain (node_harness).
@@ -24,13 +24,13 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64
 
 from flexure_sim import cli
-from flexure_sim.engine.config import load_mechanism
+from flexure_sim.engine.mechanism.loader import load_mechanism
 from flexure_sim.recording import log_info, read_log
 from flexure_sim.recording.bag import bag_files
-from flexure_sim.engine.solver import Simulation
-from flexure_sim.tools.export import csv_name
-from flexure_sim.tools.plot import figure_title
-from flexure_sim.node.replay import _message_class
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.tools.run.export import csv_name
+from flexure_sim.tools.run.plot import figure_title
+from flexure_sim.node.apps.replay import _message_class
 
 from node_harness import ROOT, NodeProcess, Peer, diagnostics_values, next_domain_id, node_env
 
@@ -62,7 +62,7 @@ def recorded(tmp_path_factory):
             [
                 sys.executable,
                 "-m",
-                "flexure_sim.node.demo_drive",
+                "flexure_sim.node.apps.demo_drive",
                 "--record",
                 "--json",
                 "--timeout",
@@ -233,7 +233,7 @@ def _subscribe_all(peer: Peer, log, topics) -> None:
 
 def _replay(domain: int, work: Path, *args: str, command=None, env=None) -> subprocess.Popen:
     env = env or node_env(domain, PYTHONPATH=str(ROOT), ROS_LOG_DIR=str(work / "ros_log"))
-    cmd = command or [sys.executable, "-m", "flexure_sim.node.replay"]
+    cmd = command or [sys.executable, "-m", "flexure_sim.node.apps.replay"]
     return subprocess.Popen([*cmd, *args], env=env, cwd=work, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
 

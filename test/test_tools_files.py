@@ -23,9 +23,9 @@ from std_msgs.msg import Float64, String
 
 from flexure_sim import cli
 from flexure_sim.recording import McapRecorder, read_log
-from flexure_sim.tools.export import csv_name
-from flexure_sim.tools.plot import figure_title
-from flexure_sim.tools.runlog import RunError, find_namespace
+from flexure_sim.tools.run.export import csv_name
+from flexure_sim.tools.run.plot import figure_title
+from flexure_sim.tools.run.runlog import RunError, find_namespace
 
 from tools_fixtures import DEMO_LEVELS, live_gains, record_long_run, record_stage_run
 
@@ -227,7 +227,7 @@ def test_plot_writes_the_figures_with_their_titles(capsys, stage, tmp_path):
 
 
 def test_joint_frame_displacements_differ_by_the_recorded_compression(stage):
-    from flexure_sim.tools.runlog import load_run
+    from flexure_sim.tools.run.runlog import load_run
 
     run = load_run(stage[0])
     t, da, db, body_a, body_b = run.hinge_frame_displacements("a")

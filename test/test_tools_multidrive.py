@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from flexure_sim import cli
-from flexure_sim.tools.analysis import Step
-from flexure_sim.tools.gain_matrix import analyse_drive_steps, gain_pairs, matrix
-from flexure_sim.tools.plot import figure_title
+from flexure_sim.tools.run.step_analysis import Step
+from flexure_sim.tools.run.gain_matrix import analyse_drive_steps, gain_pairs, matrix
+from flexure_sim.tools.run.plot import figure_title
 
 from multidrive_fixtures import record_drives_run
 from test_node_multidrive import LEAF_ROTOR
@@ -219,8 +219,8 @@ def _assert_line(line, t_s, values, factor: float) -> None:
 def test_plot_draws_every_drive_and_output_with_names_and_units(capsys, xy, tmp_path):
     import matplotlib.pyplot as plt
 
-    from flexure_sim.tools.plot import plot_run
-    from flexure_sim.tools.runlog import load_run
+    from flexure_sim.tools.run.plot import plot_run
+    from flexure_sim.tools.run.runlog import load_run
 
     path, _ = xy
     code, out, err = flexure_sim(capsys, "plot", path, "-o", tmp_path)
@@ -308,7 +308,7 @@ def test_non_finite_output_samples_are_ignored_and_counted(capsys, xy, tmp_path)
 
 
 def test_one_drive_with_two_outputs_keeps_the_drives_topics_and_gets_a_column(capsys, tmp_path):
-    from flexure_sim.engine.config import resolve_mechanism_path
+    from flexure_sim.engine.mechanism.loader import resolve_mechanism_path
 
     text = resolve_mechanism_path("microstage").read_text().replace(
         "output: {body: body4, axis: [1.0, 0.0]}",

@@ -20,7 +20,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
-from flexure_sim.tools.plot import figure_title
+from flexure_sim.tools.run.plot import figure_title
 
 from node_harness import NodeProcess, Peer, next_domain_id
 

@@ -14,9 +14,9 @@ import subprocess
 import numpy as np
 import pytest
 
-from flexure_sim.engine import stiffness
-from flexure_sim.engine.config import load_mechanism, resolve_mechanism_path
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.hinges import stiffness
+from flexure_sim.engine.mechanism.loader import load_mechanism, resolve_mechanism_path
+from flexure_sim.engine.solver.simulation import Simulation
 
 J = np.array([[0.0, -1.0], [1.0, 0.0]])
 

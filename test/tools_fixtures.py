@@ -22,9 +22,9 @@ from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
-from flexure_sim.engine.config import load_mechanism, resolve_mechanism_path
+from flexure_sim.engine.mechanism.loader import load_mechanism, resolve_mechanism_path
 from flexure_sim.recording import McapRecorder
-from flexure_sim.engine.solver import Simulation
+from flexure_sim.engine.solver.simulation import Simulation
 
 #: The demo profile of the main job (m): up to the stage's full stroke and back.
 DEMO_LEVELS = (0.5e-6, 1.0e-6, 1.5e-6, 2.0e-6, 0.0)

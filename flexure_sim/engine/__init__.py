@@ -1,21 +1,16 @@
 """
 The engine: planar flexure mechanics with the twistor-based potential energy method.
 
-No ROS here. Layers, each importing only the ones above it:
+No ROS here. Sub-packages, each importing only the ones listed before it:
 
-- ``kinematics``: rotations, (R, p) <-> twist <-> twistor, adjoint maps;
-- ``stiffness``: hinge stiffness from geometry (notch, cantilever);
-- ``hinge_laws``, ``polynomial``: potentials, wrenches, damping, energy and power of the
-  hinge laws (``monomials`` holds the polynomials' Appendix B algebra, ``polynomial_files``
-  reads and writes the polynomial hinge files);
-- ``mechanism``: bodies, hinges, constraints and drives as plain data; ``config`` loads and
-  validates them from YAML (``yaml_files`` reads the files);
-- ``assembly`` (+ the compiled ``kernels``): hinge forces on the bodies with exact Jacobians;
-- ``model`` (constants of a mechanism prepared for stepping, as MuJoCo's mjModel) and
-  ``data`` (state and integrator caches, as mjData); ``compression`` (where a hinge's
-  compression is measured); ``dynamics`` (+ the compiled ``stepping`` loop), ``statics``,
-  ``snapshot``: stepping, equilibria and reports, reading the model and updating the data;
-  ``solver``: the ``Simulation`` facade over them;
-- ``wrench_data``, ``fitting``, ``datasets``: measured wrenches and their CSV files, polynomial
-  laws fitted to them, and the data sets (``randomtest``: Chapter 7.1).
+- ``kinematics``: rotations, twists, twistors; hyper-dual numbers;
+- ``laws``: hinge potentials (quadratic, polynomial) with wrench, damping, energy, power;
+- ``hinges``: hinge stiffness and peak stress from geometry;
+- ``actuators``: the piezo stack and the output sensor;
+- ``mechanism``: bodies, hinges, drives as data, loaded and checked from YAML;
+- ``solver``: Model (constants) and State, hinge forces, stepping, statics, Simulation;
+- ``analysis``: linearisation, modes, FRF, sensitivities, sweeps;
+- ``fitting``: wrench data and polynomial laws fitted to them (Chapter 7).
+
+``jit`` holds Numba's ``njit`` and the kernel cache every compiled module uses.
 """

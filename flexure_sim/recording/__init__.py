@@ -4,26 +4,20 @@ MCAP recording in the rosbag2 (ROS 2 Jazzy) format.
 Write with `McapRecorder`, read back streaming with `LogReader` (or whole with `read_log`),
 summarise with `log_info`. Needs mcap and mcap-ros2-support; never imports rclpy.
 """
-from .bag_metadata import (
-    TopicRecord,
-    build_bag_metadata,
-    metadata_yaml,
-    parse_serialized_metadata,
+from flexure_sim.recording.bag_metadata import (
+    TopicRecord, build_bag_metadata, metadata_yaml, parse_serialized_metadata,
 )
-from .errors import (
-    CorruptLogError,
-    RecorderClosedError,
-    RecorderFailedError,
-    RecordingError,
-    RunError,
-    SchemaNotFoundError,
-    UndecodableMessageError,
+from flexure_sim.recording.exceptions import (
+    CorruptLogError, RecorderClosedError, RecorderFailedError, RecordingError, RunError,
+    SchemaNotFoundError, UndecodableMessageError,
 )
-from .info import LogInfo, log_info
-from .qos import QosDescription, parse_qos_profiles_yaml, qos_profiles_yaml
-from .reader import LogMessage, LogReader, McapLog, TopicInfo, read_log, undecodable_note
-from .schema import MessageSchema, SchemaResolver, ament_prefixes, load_schema
-from .writer import McapRecorder, RecordingStats
+from flexure_sim.recording.log_info import LogInfo, log_info
+from flexure_sim.recording.qos import QosDescription, parse_qos_profiles_yaml, qos_profiles_yaml
+from flexure_sim.recording.reader import (
+    LogMessage, LogReader, McapLog, TopicInfo, read_log, undecodable_note,
+)
+from flexure_sim.recording.schema import MessageSchema, SchemaResolver, ament_prefixes, load_schema
+from flexure_sim.recording.writer import McapRecorder, RecordingStats
 
 __all__ = [
     "CorruptLogError",

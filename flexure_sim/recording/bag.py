@@ -22,9 +22,11 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from .bag_metadata import combine_bag_metadata, metadata_yaml, parse_metadata_yaml
-from .errors import RecordingError
-from .writer import McapRecorder, Output, RecordingStats
+from flexure_sim.recording.bag_metadata import (
+    combine_bag_metadata, metadata_yaml, parse_metadata_yaml,
+)
+from flexure_sim.recording.exceptions import RecordingError
+from flexure_sim.recording.writer import McapRecorder, Output, RecordingStats
 
 METADATA_FILE = "metadata.yaml"
 _INDEX = re.compile(r"_(\d+)\.mcap$")

@@ -19,9 +19,9 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from .bag import METADATA_FILE, bag_files, read_bag_metadata
-from .bag_metadata import combine_bag_metadata
-from .errors import CorruptLogError
+from flexure_sim.recording.bag import METADATA_FILE, bag_files, read_bag_metadata
+from flexure_sim.recording.bag_metadata import combine_bag_metadata
+from flexure_sim.recording.exceptions import CorruptLogError
 
 
 def _files(directory: Path) -> list[Path]:
@@ -75,7 +75,7 @@ class BagReader:
 
     def __init__(self, directory: str | os.PathLike[str], recover: bool = False,
                  strict: bool = False) -> None:
-        from .reader import LogReader
+        from flexure_sim.recording.reader import LogReader
 
         self.path = Path(directory)
         self.recover = recover

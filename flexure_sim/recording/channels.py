@@ -7,9 +7,9 @@ from pathlib import Path
 
 from mcap.records import Channel, Header, Schema
 
-from .errors import CorruptLogError
-from .qos import QosDescription, parse_qos_profiles_yaml
-from .scan import FileScan
+from flexure_sim.recording.exceptions import CorruptLogError
+from flexure_sim.recording.qos import QosDescription, parse_qos_profiles_yaml
+from flexure_sim.recording.scan import FileScan
 
 PROFILE = "ros2"
 

@@ -14,16 +14,11 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from .errors import (
-    EXIT_BAD_FILE,
-    EXIT_OK,
-    CorruptLogError,
-    RecordingError,
-    RunError,
-    UndecodableMessageError,
+from flexure_sim.recording.exceptions import (
+    EXIT_BAD_FILE, EXIT_OK, CorruptLogError, RecordingError, RunError, UndecodableMessageError,
 )
-from .bag import is_bag_directory
-from .reader import LogReader, open_reader, undecodable_note
+from flexure_sim.recording.bag import is_bag_directory
+from flexure_sim.recording.reader import LogReader, open_reader, undecodable_note
 
 
 def check_path(path: str | os.PathLike[str]) -> Path:

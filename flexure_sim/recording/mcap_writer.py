@@ -31,14 +31,11 @@ from typing import BinaryIO
 
 from mcap.writer import CompressionType, Writer
 
-from .bag_metadata import (
-    METADATA_RECORD_KEY,
-    METADATA_RECORD_NAME,
-    TopicRecord,
-    build_bag_metadata,
+from flexure_sim.recording.bag_metadata import (
+    METADATA_RECORD_KEY, METADATA_RECORD_NAME, TopicRecord, build_bag_metadata,
     dump_serialized_metadata,
 )
-from .errors import RecorderFailedError, RecordingError
+from flexure_sim.recording.exceptions import RecorderFailedError, RecordingError
 
 PROFILE = "ros2"
 MESSAGE_ENCODING = "cdr"

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
-from .reader import open_reader
+from flexure_sim.recording.reader import open_reader
 
 
 class OrderedLog:

@@ -29,11 +29,13 @@ from typing import Any
 from mcap.records import Channel, Header, Schema
 from mcap_ros2.decoder import DecoderFactory
 
-from .bag_metadata import METADATA_RECORD_KEY, METADATA_RECORD_NAME, parse_serialized_metadata
-from .channels import TopicInfo, TopicTable, check_profile, topic_infos
-from .errors import CorruptLogError, UndecodableMessageError
-from .scan import FileScan, iter_file, scan_file, start_scan
-from .summary import read_summary
+from flexure_sim.recording.bag_metadata import (
+    METADATA_RECORD_KEY, METADATA_RECORD_NAME, parse_serialized_metadata,
+)
+from flexure_sim.recording.channels import TopicInfo, TopicTable, check_profile, topic_infos
+from flexure_sim.recording.exceptions import CorruptLogError, UndecodableMessageError
+from flexure_sim.recording.scan import FileScan, iter_file, scan_file, start_scan
+from flexure_sim.recording.summary import read_summary
 
 
 @dataclass(frozen=True)
@@ -263,7 +265,7 @@ def open_reader(path: str | os.PathLike[str], recover: bool = False,
     The BagReader has the same interface and reads the bag's files in order as one run.
     """
     if Path(path).is_dir():
-        from .bag_read import BagReader
+        from flexure_sim.recording.bag_read import BagReader
         return BagReader(path, recover=recover, strict=strict)
     return LogReader(path, recover=recover, strict=strict)
 

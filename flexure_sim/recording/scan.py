@@ -32,7 +32,7 @@ from mcap.records import (
 )
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 
-from .summary import MAGIC, SummarySection, read_summary, summary_crc_problem
+from flexure_sim.recording.summary import MAGIC, SummarySection, read_summary, summary_crc_problem
 
 
 @dataclass

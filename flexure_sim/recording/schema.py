@@ -20,7 +20,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import RecordingError, SchemaNotFoundError
+from flexure_sim.recording.exceptions import RecordingError, SchemaNotFoundError
 
 SCHEMA_ENCODING = "ros2msg"
 SEPARATOR = "=" * 80

@@ -29,20 +29,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
-from .. import __version__
-from .bag_metadata import METADATA_RECORD_NAME
-from .errors import RecorderClosedError, RecorderFailedError, RecordingError
-from .mcap_writer import (
-    DROPPED_KEY,
-    AddMetadata,
-    AddTopic,
-    Worker,
-    describe,
-    metadata_items,
-    start_writer,
+from flexure_sim import __version__
+from flexure_sim.recording.bag_metadata import METADATA_RECORD_NAME
+from flexure_sim.recording.exceptions import (
+    RecorderClosedError, RecorderFailedError, RecordingError,
 )
-from .qos import QosDescription, QosLike, qos_profiles_yaml
-from .schema import SchemaResolver, normalize_type_name
+from flexure_sim.recording.mcap_writer import (
+    DROPPED_KEY, AddMetadata, AddTopic, Worker, describe, metadata_items, start_writer,
+)
+from flexure_sim.recording.qos import QosDescription, QosLike, qos_profiles_yaml
+from flexure_sim.recording.schema import SchemaResolver, normalize_type_name
 
 __all__ = ["DROPPED_KEY", "McapRecorder", "RecordingStats"]
 _TOPIC_NAME = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_]*)+$")

@@ -1,0 +1,136 @@
+"""
+A study's checks against its base mechanism: the drive input, and the outputs it can give.
+
+The study's ``input`` (docs/sweeps.md, "Several drives") is the drives' static input, as
+``Simulation.static`` takes it (``Model.drive_inputs``): a number for a mechanism with one
+drive, or a mapping drive name -> value naming every drive (also accepted for one drive).
+Each value is in its drive's unit (m, rad on theta; N, N m for a force drive) and must lie
+within that drive's stroke. Omitted: every drive at the top of its stroke.
+
+Outputs a mechanism cannot give are refused at load, rather than failing in every design:
+``first_mode`` and ``first_mode_damping`` come from the linear model (engine/analysis/linear.py),
+which takes any number of displacement and force drives but no piezo stack (its input would be the
+applied displacement, not the actuator's command); the outputs
+measured per output need the mechanism to name one when it has several drives;
+``peak_stress_ratio`` needs a hinge with a yield strength.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Optional, Union
+
+from flexure_sim.engine.solver.drives import stacked
+from flexure_sim.engine.mechanism.parts import Mechanism, coordinate_unit
+
+#: A study's drive input: one number (one drive), or {drive name: value} (several drives).
+DriveInput = Union[float, dict]
+#: Outputs of the linear model, which takes drives without a piezo stack (``linear.linearize``).
+LINEAR_OUTPUTS = ("first_mode", "first_mode_damping")
+#: Outputs measured per output (a column each) with several drives: they need an output.
+PER_OUTPUT = ("gain", "output_displacement", "settling_time", "overshoot")
+
+
+@dataclass(frozen=True)
+class Channels:
+    """
+    The base mechanism's drives and outputs, in ``Model`` order, with their units.
+
+    ``drives``: (name, input unit, force unit) per drive; ``outputs``: (name, unit) per output.
+    They name the columns of the outputs measured per drive or per output (tools/sweep_outputs).
+    """
+
+    drives: tuple[tuple[str, str, str], ...] = ()
+    outputs: tuple[tuple[str, str], ...] = ()
+
+    @property
+    def several(self) -> bool:
+        """Tell whether the mechanism has several drives (outputs then get a column each)."""
+        return len(self.drives) > 1
+
+    @classmethod
+    def of(cls, mech: Mechanism) -> "Channels":
+        """Return the channels of ``mech``."""
+        return cls(tuple((d.name, coordinate_unit(d.coordinate, d.kind == "force"),
+                          coordinate_unit(d.coordinate, True)) for d in mech.drives),
+                   tuple((o.name, coordinate_unit(o.coordinate)) for o in mech.all_outputs))
+
+
+def number(value: Any, key: str, fail, positive: bool = False) -> float:
+    """Return ``value`` as a finite float (a numeric string too), else ``fail(key, problem)``."""
+    if isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise fail(key, f"expected a finite number, got {value!r}")
+    if positive and value <= 0:
+        raise fail(key, f"must be positive, got {value!r}")
+    return float(value)
+
+
+def drive_input(raw: Any, mech: Mechanism, fail) -> Optional[DriveInput]:
+    """
+    Return the study's validated ``input`` (module doc); None: every drive's full stroke.
+
+    A number for one drive, or that drive's value of a one-entry mapping; a mapping in drive
+    order for several drives. ``fail(key, problem)`` builds the error, naming ``input`` or
+    ``input.<drive>``.
+    """
+    if raw is None:
+        return None
+    drives = mech.drives
+    names = [d.name for d in drives]
+    listed = ", ".join(names)
+    if isinstance(raw, dict):
+        for key in raw:
+            if key not in names:
+                raise fail(f"input.{key}", f"unknown drive {key!r} (drives of {mech.name!r}: "
+                           f"{listed})")
+        missing = [n for n in names if n not in raw]
+        if missing:
+            raise fail("input", f"no value for drive {', '.join(missing)}: give every drive's "
+                       f"input ({listed})")
+        values = {d.name: _within(d, number(raw[d.name], f"input.{d.name}", fail),
+                                  f"input.{d.name}", fail) for d in drives}
+        return values[names[0]] if len(drives) == 1 else values
+    if isinstance(raw, (list, tuple)):
+        raise fail("input", f"expected a number (one drive) or a mapping drive name -> value "
+                   f"(drives of {mech.name!r}: {listed}), got {raw!r}")
+    if len(drives) > 1:
+        shown = raw if isinstance(raw, (int, float)) else "VALUE"
+        example = ", ".join(f"{n}: {shown}" if k == 0 else f"{n}: 0.0"
+                            for k, n in enumerate(names))
+        raise fail("input", f"one number for the {len(drives)} drives of {mech.name!r} "
+                   f"({listed}): give one value per drive by name, e.g. input: {{{example}}}")
+    value = number(raw, "input", fail)
+    return _within(drives[0], value, "input", fail) if drives else value
+
+
+def _within(drive, value: float, key: str, fail) -> float:
+    """Return ``value`` if it lies within the drive's stroke, else fail naming both."""
+    lo, hi = drive.stroke
+    if not lo <= value <= hi:
+        unit = coordinate_unit(drive.coordinate, drive.kind == "force")
+        which = "the drive's" if key == "input" else f"drive {drive.name}'s"
+        raise fail(key, f"{value} {unit} is outside {which} stroke [{lo}, {hi}] {unit}")
+    return value
+
+
+def check_outputs(outputs: tuple[str, ...], mech: Mechanism, fail) -> None:
+    """Refuse the outputs ``mech`` cannot give (module doc), naming the output."""
+    drives = mech.drives
+    for name in outputs:
+        if name in LINEAR_OUTPUTS and any(stacked(d) for d in drives):
+            kinds = ", ".join(repr(d.name) for d in drives if stacked(d))
+            raise fail("outputs", f"{name}: the linear model (engine/analysis/linear.py, "
+                       f"flexure-sim modes) takes no drive with a piezo stack (actuator: block); "
+                       f"{mech.name!r} has one on drive {kinds}")
+        if name in PER_OUTPUT and len(drives) > 1 and not mech.all_outputs:
+            raise fail("outputs", f"{name}: {mech.name!r} has several drives and no output "
+                       "(outputs: in the mechanism file)")
+    if "peak_stress_ratio" in outputs and not any(
+            h.stress is not None and h.stress.sigma_y is not None for h in mech.hinges):
+        raise fail("outputs", f"peak_stress_ratio: no hinge of {mech.name!r} has a yield "
+                   "strength (sigma_y in a notch or cantilever stiffness model)")

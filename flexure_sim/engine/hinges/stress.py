@@ -1,0 +1,226 @@
+"""
+Peak stress in notch and leaf hinges from their wrench, and the stress ratio sigma / sigma_y.
+
+The wrench (m, f_x, f_y) is the one a hinge exerts on its body B, in frame b at the hinge's
+centre (solver.Snapshot.wrenches); its magnitude is the section load. Works on floats and
+on HyperDual values (kinematics/hyperdual.py), so sensitivities of the peak stress are exact.
+
+Circular notch hinge (stiffness.notch_stiffness: hole diameter D, neck thickness h, plate
+thickness t; axial direction x of the hinge frame, as in microstage.sci). The thinnest
+section is at the centre, where the moment is given, so the shear force has no lever arm
+there. Nominal stresses: bending 6 |m| / (t h^2), axial |f_x| / (t h). The peak is
+
+    sigma = K_t (6 |m| / (t h^2) + |f_x| / (t h)),
+
+with K_t the elastic stress-concentration factor of two opposite U-notches in a member of
+rectangular section under in-plane bending, W. C. Young and R. G. Budynas, "Roark's
+Formulas for Stress and Strain", 7th ed. (McGraw-Hill, 2002), Table 17.1:
+
+    K_t = C1 + C2 (2a/W) + C3 (2a/W)^2 + C4 (2a/W)^3,   Ci = ci1 + ci2 sqrt(a/r) + ci3 a/r,
+
+for notch depth a, notch radius r and gross width W. A circular notch hinge is the case of
+semicircular notches, a = r = D/2, W = h + D (a/r = 1, 2a/W = D/(h + D)); the factor tends to
+1 for a thin neck between large holes (2a/W -> 1), as flexure hinges are designed. Checked
+against Peterson's Chart 2.24 (opposite semicircular notches in bending; W. D. and D. F.
+Pilkey, "Peterson's Stress Concentration Factors", 3rd ed., 2008) within 2 % for 2a/W <= 0.5,
+and for thin necks against a plane-stress finite-element model: at the stage's h/D = 1/12
+it is 1.2 % above (conservative), where Peterson's polynomial is 5.7 % high. Applying
+the bending factor to the axial part too is conservative (the tension factor of the same
+notch is smaller).
+
+Leaf (cantilever) hinge (stiffness.cantilever_stiffness: length L along the hinge frame's y
+axis, thickness T along x, width w; frame at the centroid). The shear force f_x adds a
+moment f_x L / 2 at either end, so the largest end moment is |m| + |f_x| L / 2:
+
+    sigma = 6 (|m| + |f_x| L / 2) / (w T^2) + |f_y| / (w T)
+
+(straight beam, no concentration: the fillets at the clamps are not modelled).
+Hinges with a ``matrix`` stiffness or a fitted polynomial law have no geometry: no stress.
+
+Each hinge's ``StressGeometry`` (model, dimensions, sigma_y) is part of the loaded mechanism
+(``Hinge.stress``, set by mechanism/loader.py from the very numbers the stiffness formula used), so
+any Mechanism -- loaded, swept or recorded -- has its stresses without its YAML file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Mapping, Optional
+
+import numpy as np
+
+from flexure_sim.engine.kinematics import hyperdual as hd
+
+if TYPE_CHECKING:
+    from flexure_sim.engine.mechanism.parts import Mechanism
+
+#: Roark's Table 17.1, two U-notches in a rectangular member, in-plane bending: rows C1..C4,
+#: columns (constant, sqrt(a/r), a/r), for 0.25 <= a/r <= 2 and 2 < a/r <= 50.
+_ROARK_U_NOTCH_BENDING = (
+    (
+        (0.723, 2.845, -0.504),
+        (-1.836, -5.746, 1.314),
+        (7.254, -1.885, 1.646),
+        (-5.140, 4.785, -2.456),
+    ),
+    (
+        (0.833, 2.069, -0.009),
+        (0.024, -5.383, 0.126),
+        (-0.856, 6.460, -0.199),
+        (0.999, -3.146, 0.082),
+    ),
+)
+
+
+def u_notch_bending_factor(depth, radius, width):
+    """
+    Return K_t of two opposite U-notches (depth a, radius r) in a member of gross width W.
+
+    The member is under in-plane bending (Roark, Table 17.1; module docstring); 0.25 <= a/r <= 50.
+    """
+    ar = depth / radius
+    ar_real = float(hd.real(ar))
+    if not 0.25 <= ar_real <= 50.0:
+        raise ValueError(f"notch depth / radius {ar_real:.3g} outside Roark's range [0.25, 50]")
+    rows = _ROARK_U_NOTCH_BENDING[0 if ar_real <= 2.0 else 1]
+    x = 2.0 * depth / width
+    root = np.sqrt(ar)
+    c = [k0 + k1 * root + k2 * ar for k0, k1, k2 in rows]
+    return c[0] + x * (c[1] + x * (c[2] + x * c[3]))
+
+
+def notch_concentration(h, D):
+    """
+    K_t of a circular notch hinge (neck h, holes D) in bending.
+
+    Semicircular U-notches, a = r = D/2 in a member of width h + D (module docstring).
+    """
+    return u_notch_bending_factor(0.5 * D, 0.5 * D, h + D)
+
+
+def notch_stress(wrench, D, h, t):
+    """Peak stress (Pa) of a circular notch hinge under wrench (m, f_x, f_y)."""
+    m, fx = wrench[..., 0], wrench[..., 1]
+    return notch_concentration(h, D) * (6.0 * np.abs(m) / (t * h * h) + np.abs(fx) / (t * h))
+
+
+def leaf_stress(wrench, length, thickness, width):
+    """Peak stress (Pa) of a leaf hinge under wrench (m, f_x, f_y) at its centroid."""
+    m, fx, fy = wrench[..., 0], wrench[..., 1], wrench[..., 2]
+    return 6.0 * (np.abs(m) + 0.5 * length * np.abs(fx)) / (
+        width * thickness * thickness
+    ) + np.abs(fy) / (width * thickness)
+
+
+#: Per stiffness model with a geometry: the keys of its stiffness formula the stress uses, in
+#: the order of the stress function's arguments.
+STRESS_KEYS = {"notch": ("D", "h", "t"), "cantilever": ("length", "thickness", "width")}
+_STRESS_FUNCTIONS = {"notch": notch_stress, "cantilever": leaf_stress}
+
+
+@dataclass(frozen=True)
+class StressGeometry:
+    """
+    What one hinge's stress needs.
+
+    Its stiffness ``model`` (notch or cantilever), the ``dimensions`` (m) of that model in the
+    order of STRESS_KEYS[model], and the yield strength ``sigma_y`` (Pa) or None. Floats in a
+    loaded mechanism; HyperDual values where mechanism/parameters.py varies them.
+    """
+
+    model: str
+    dimensions: tuple
+    sigma_y: Optional[Any] = None
+
+    @classmethod
+    def of(cls, model: str, values: Mapping[str, Any],
+           sigma_y: Optional[Any] = None) -> Optional["StressGeometry"]:
+        """From a stiffness model's numbers by key; None for a model without a geometry."""
+        keys = STRESS_KEYS.get(model)
+        if keys is None:
+            return None
+        return cls(model, tuple(values[k] for k in keys), sigma_y)
+
+    def stress(self, wrench):
+        """Return the peak stress, Pa, under one wrench or an array (..., 3) (module docstring)."""
+        return _STRESS_FUNCTIONS[self.model](wrench, *self.dimensions)
+
+    def ratio_coefficients(self) -> np.ndarray:
+        """
+        Return the coefficients c (3,) with sigma / sigma_y = c .
+
+        |wrench|: both formulas are sums of positive factors times |m|, |f_x|, |f_y|, so c is the
+        stress of unit wrenches over sigma_y.
+        """
+        if self.sigma_y is None:
+            raise ValueError(f"a {self.model} hinge without sigma_y has no stress ratio")
+        return np.asarray(self.stress(np.eye(3)), dtype=float) / float(self.sigma_y)
+
+
+def hinge_stress(wrench, geometry: Optional[StressGeometry]) -> Optional[Any]:
+    """Peak stress of one hinge (floats or HyperDual), or None for a hinge without geometry."""
+    return None if geometry is None else geometry.stress(wrench)
+
+
+def stress_table(wrenches, mechanism: "Mechanism") -> dict:
+    """
+    Per notch/leaf hinge of the mechanism.
+
+    Stress (Pa), yield strength (Pa or None) and their ratio (None without a yield strength);
+    wrenches (n, 3) floats (Snapshot.wrenches).
+    """
+    out = {}
+    for hinge, w in zip(mechanism.hinges, np.asarray(wrenches, dtype=float)):
+        g = hinge.stress
+        if g is None:
+            continue
+        s = float(g.stress(w))
+        sy = None if g.sigma_y is None else float(g.sigma_y)
+        out[hinge.name] = {"stress": s, "sigma_y": sy, "ratio": s / sy if sy else None}
+    return out
+
+
+def ratio_map(mechanism: "Mechanism") -> tuple[list[str], np.ndarray, np.ndarray]:
+    """
+    Return the hinges with a yield strength.
+
+    Returns (names, their indices, C (k, 3)) such that (C * |wrenches[indices]|).sum(1) are
+    their stress ratios -- a few microseconds per call, for the node's per-tick diagnostics.
+    """
+    rows = [(h.name, i, h.stress.ratio_coefficients()) for i, h in enumerate(mechanism.hinges)
+            if h.stress is not None and h.stress.sigma_y is not None]
+    return ([r[0] for r in rows], np.array([r[1] for r in rows], dtype=int),
+            np.array([r[2] for r in rows], dtype=float).reshape(-1, 3))
+
+
+def peak_ratio(table: dict) -> Optional[tuple[str, float]]:
+    """(hinge, largest stress ratio) of a stress table; None if no hinge has a yield strength."""
+    ratios = [(name, v["ratio"]) for name, v in table.items() if v["ratio"] is not None]
+    return max(ratios, key=lambda x: x[1]) if ratios else None
+
+
+def stroke_limit(sim, tol: float = 1e-9, max_iter: int = 30) -> tuple[float, str]:
+    """
+    Drive input (m) at which the first hinge reaches yield.
+
+    The secant method on max_h sigma_h / sigma_y,h (u) = 1 with static solves
+    (``Simulation.static``), from the linear estimate u / ratio(u) at the drive's stroke. Returns
+    (input, hinge).
+    """
+    def ratio(u):
+        snap = sim.static(u).snapshot
+        found = peak_ratio(stress_table(snap.wrenches, sim.mechanism))
+        if found is None:
+            raise ValueError("no hinge has a yield strength (sigma_y in its stiffness model)")
+        return found[1] - 1.0, found[0]
+
+    u0 = sim.drive.stroke[1] if sim.drive.stroke[1] > 0 else -sim.drive.stroke[0]
+    r0, _ = ratio(u0)
+    u1 = u0 / (r0 + 1.0)
+    r1, hinge = ratio(u1)
+    for _ in range(max_iter):
+        if abs(r1) < tol:
+            return u1, hinge
+        u0, u1, r0 = u1, u1 - r1 * (u1 - u0) / (r1 - r0), r1
+        r1, hinge = ratio(u1)
+    raise ValueError(f"stroke limit did not converge (ratio - 1 = {r1:.3g} at {u1:.6g} m)")

@@ -1,0 +1,9 @@
+"""
+Hinge laws: potentials in twistor or twist coordinates and what follows from them.
+
+- ``monomials``: Monomial algebra of the polynomial hinge laws (Appendix B of the dissertation).
+- ``polynomial``: Polynomial hinge laws: potentials of order N in twistor or twist coordinates
+  (4.69, 3.67).
+- ``quadratic``: Hinge laws: potential energy, wrench and dissipation of an elastic element (Ch. 3,
+  4).
+"""

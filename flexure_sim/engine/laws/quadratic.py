@@ -1,0 +1,360 @@
+"""
+Hinge laws: potential energy, wrench and dissipation of an elastic element (Ch. 3, 4).
+
+A hinge joins frame a (on body A) and frame b (on body B) that coincide when unstressed.
+Its state is the relative displacement of b in a, written r = (alpha, p1, p2): alpha the
+rotation of b relative to a, p the origin of b in a's coordinates.
+
+A law is a potential U(c) in *law coordinates* c(r), plus a dissipation function
+D = 1/2 c_dot^T C c_dot in the rates of the same coordinates:
+- ``twistor``: c = (sigma, xi, x1, x2) (eqs. 2.132-2.135); the quadratic potential is
+  U = 2 [xi; x]^T K [xi; x] (eq. 4.7) and the damping wrench 2 Lambda^T B dx (4.40-4.42)
+  is the gradient of D = 2 [xi_dot; x_dot]^T B [xi_dot; x_dot].
+- ``twist``: c = (tau, t1, t2) (eqs. 2.107-2.108); U = 1/2 d^T K d (eq. 3.4), and
+  D = 1/2 d_dot^T B d_dot (the printed 3.62-3.64 repeat the twistor form; the two agree to
+  second order in the displacement).
+
+The wrench exerted *by body B on the element*, in frame b coordinates, moment about b's
+origin (m_b of eqs. 3.53 and 4.35), follows from the virtual work
+dW = m_b . (delta tau, delta t_b): with delta r = (delta tau, R(alpha) delta t_b),
+m_b = (dU/dalpha, R(alpha)^T dU/dp). The element exerts -m_b on body B and the opposite
+wrench on body A (the potential depends on the relative displacement only).
+
+*Energy and power* (``LawBatch.power``, and ``potential_energy``, ``conservative_power``,
+``dissipated_power`` on every law): U(r); the conservative power P_c = -dU/dt =
+-(dU/dr) . r_dot, the power the element's elastic wrenches deliver to the two bodies (the
+wrench -m_b on B dotted with the twist of b relative to a, in frame b: (alpha_dot,
+R(alpha)^T p_dot)); the dissipated power P_d = r_dot^T C_r r_dot = 2 D >= 0, the power the
+damping wrenches take from the bodies.
+
+Everything is vectorised over hinges: alpha has shape (n,), p shape (n, 2), r_dot (n, 3);
+arguments of another shape raise a ValueError naming the argument.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, Sequence
+
+import numpy as np
+
+from flexure_sim.errors import as_array
+from flexure_sim.engine.kinematics.planar import J, half_cot_derivatives, rot
+
+# ------------------------------------------------------------------ law coordinates
+
+
+def deflections(alpha, p, rdot=None):
+    """
+    Return alpha (n,), p (n, 2) (and rdot (n, 3)) as float arrays, checked.
+
+    A ValueError names the argument of a wrong shape.
+    """
+    alpha = as_array("alpha", alpha, (None,))
+    p = as_array("p", p, (alpha.shape[0], 2))
+    if rdot is None:
+        return alpha, p
+    return alpha, p, as_array("rdot", rdot, (alpha.shape[0], 3))
+
+
+@dataclass(frozen=True)
+class CoordinateMap:
+    """
+    Law coordinates c(r) with first and second derivatives with respect to r.
+
+    c: (n, k); dc: (n, k, 3) = dc/dr; d2c: (n, k, 3, 3) = d2c/dr2.
+    """
+
+    c: np.ndarray
+    dc: np.ndarray
+    d2c: np.ndarray
+
+
+def twistor_coordinates(alpha: np.ndarray, p: np.ndarray, second: bool = True) -> CoordinateMap:
+    """
+    Twistor parameters (sigma, xi, x1, x2) of r = (alpha, p) and their derivatives.
+
+    sigma = cos(alpha/2), xi = sin(alpha/2), x = 1/2 R(-alpha/2) p (eq. 2.178), with
+    R(-alpha/2) = [[sigma, xi], [-xi, sigma]]. From d/dalpha R(-alpha/2) = -1/2 J R(-alpha/2):
+    dx/dalpha = -1/2 J x, dx/dp = 1/2 R(-alpha/2) -- the virtual displacement map of eq.
+    4.27 written in r. ``second=False`` skips the second derivatives (d2c is then None).
+    """
+    alpha, p = deflections(alpha, p)
+    n = alpha.shape[0]
+    sigma, xi = np.cos(0.5 * alpha), np.sin(0.5 * alpha)
+    p1, p2 = p[:, 0], p[:, 1]
+    x1 = 0.5 * (sigma * p1 + xi * p2)
+    x2 = 0.5 * (-xi * p1 + sigma * p2)
+    c = np.empty((n, 4))
+    c[:, 0], c[:, 1], c[:, 2], c[:, 3] = sigma, xi, x1, x2
+    dc = np.zeros((n, 4, 3))
+    dc[:, 0, 0] = -0.5 * xi
+    dc[:, 1, 0] = 0.5 * sigma
+    dc[:, 2, 0] = 0.5 * x2          # -1/2 (J x)_1 = +1/2 x2
+    dc[:, 3, 0] = -0.5 * x1         # -1/2 (J x)_2 = -1/2 x1
+    dc[:, 2, 1] = dc[:, 3, 2] = 0.5 * sigma
+    dc[:, 2, 2] = 0.5 * xi
+    dc[:, 3, 1] = -0.5 * xi
+    if not second:
+        return CoordinateMap(c, dc, None)
+    d2c = np.zeros((n, 4, 3, 3))
+    d2c[:, 0, 0, 0] = -0.25 * sigma
+    d2c[:, 1, 0, 0] = -0.25 * xi
+    d2c[:, 2, 0, 0] = -0.25 * x1
+    d2c[:, 3, 0, 0] = -0.25 * x2
+    # d2x/dalpha dp = -1/4 J R(-alpha/2) = -1/4 [[xi, -sigma], [sigma, xi]]
+    for i, j, val in (
+        (2, 1, -0.25 * xi),
+        (2, 2, 0.25 * sigma),
+        (3, 1, -0.25 * sigma),
+        (3, 2, -0.25 * xi),
+    ):
+        d2c[:, i, 0, j] = val
+        d2c[:, i, j, 0] = val
+    return CoordinateMap(c, dc, d2c)
+
+
+def twist_coordinates(alpha: np.ndarray, p: np.ndarray, second: bool = True) -> CoordinateMap:
+    """
+    Twist (tau, t1, t2) of r = (alpha, p) and its derivatives (eqs. 2.106-2.108).
+
+    tau = alpha, t = f(alpha) p - (alpha/2) J p with f = (alpha/2) cot(alpha/2).
+    """
+    alpha, p = deflections(alpha, p)
+    n = alpha.shape[0]
+    f, f1, f2 = half_cot_derivatives(alpha)
+    Jp = p @ J.T
+    t = f[:, None] * p - 0.5 * alpha[:, None] * Jp
+    c = np.column_stack([alpha, t])
+    dc = np.zeros((n, 3, 3))
+    dc[:, 0, 0] = 1.0
+    dc[:, 1:, 0] = f1[:, None] * p - 0.5 * Jp
+    dc[:, 1:, 1:] = f[:, None, None] * np.eye(2) - 0.5 * alpha[:, None, None] * J
+    if not second:
+        return CoordinateMap(c, dc, None)
+    d2c = np.zeros((n, 3, 3, 3))
+    d2c[:, 1:, 0, 0] = f2[:, None] * p
+    mixed = f1[:, None, None] * np.eye(2) - 0.5 * J
+    d2c[:, 1:, 0, 1:] = mixed
+    d2c[:, 1:, 1:, 0] = mixed
+    return CoordinateMap(c, dc, d2c)
+
+
+COORDINATES = {"twistor": twistor_coordinates, "twist": twist_coordinates}
+
+# ------------------------------------------------------------------------ the laws
+
+
+@dataclass(frozen=True)
+class LawEvaluation:
+    """
+    Laws evaluated at r = (alpha, p) with rates r_dot, for n hinges.
+
+    energy (n,); grad (n, 3) = dU/dr; hess (n, 3, 3) = d2U/dr2;
+    damping (n, 3, 3) = C_r, the matrix of the dissipation D = 1/2 r_dot^T C_r r_dot;
+    damping_force (n, 3) = C_r r_dot; damping_force_dr (n, 3, 3) = d(C_r r_dot)/dr at fixed
+    r_dot (exact, from the second derivatives of the coordinate map).
+    """
+
+    energy: np.ndarray
+    grad: np.ndarray
+    hess: np.ndarray
+    damping: np.ndarray
+    damping_force: np.ndarray
+    damping_force_dr: np.ndarray
+
+
+@dataclass(frozen=True)
+class HingePower:
+    """
+    Energy and power of n hinges (each (n,)).
+
+    Energy U (J); conservative = P_c = -dU/dt (W), the power the elastic wrenches deliver to the
+    bodies; dissipated = P_d = r_dot^T C_r r_dot = 2 D >= 0 (W), the power the damping wrenches
+    take from them.
+    """
+
+    energy: np.ndarray
+    conservative: np.ndarray
+    dissipated: np.ndarray
+
+
+class HingeLaw(Protocol):
+    """What the solver needs of a hinge law."""
+
+    coordinates: str
+
+    def potential(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """U(c), dU/dc, d2U/dc2 for c of shape (m, k) (rows are configurations)."""
+
+    def dissipation_matrix(self) -> np.ndarray:
+        """C (k, k) of D = 1/2 c_dot^T C c_dot."""
+
+
+class LawPower:
+    """
+    Energy and power of one law at m states.
+
+    The states are r = (alpha (m,), p (m, 2)) with rates r_dot (m, 3) (module docstring): the
+    methods every law offers, through `LawBatch.power`.
+    """
+
+    def potential_energy(self: HingeLaw, alpha, p) -> np.ndarray:
+        """Potential energy U(r) (J), shape (m,)."""
+        alpha, p = deflections(alpha, p)
+        return LawBatch([self] * len(alpha)).power(alpha, p, np.zeros((len(alpha), 3))).energy
+
+    def conservative_power(self: HingeLaw, alpha, p, rdot) -> np.ndarray:
+        """P_c = -dU/dt = -(dU/dr) . r_dot (W), shape (m,)."""
+        return LawBatch([self] * len(np.atleast_1d(alpha))).power(alpha, p, rdot).conservative
+
+    def dissipated_power(self: HingeLaw, alpha, p, rdot) -> np.ndarray:
+        """P_d = r_dot^T C_r r_dot = 2 D >= 0 (W), shape (m,)."""
+        return LawBatch([self] * len(np.atleast_1d(alpha))).power(alpha, p, rdot).dissipated
+
+
+@dataclass(frozen=True)
+class QuadraticLaw(LawPower):
+    """
+    Potential U = 1/2 c^T W c and dissipation D = 1/2 c_dot^T C c_dot in the law coordinates c(r).
+
+    The quadratic laws of eqs. 3.4 and 4.7 with the damping of 4.40.
+
+    ``twistor`` (c = sigma, xi, x1, x2): U = 2 [xi; x]^T K [xi; x] (4.7, W = 4 K on
+    (xi, x1, x2)) and D = 2 [xi_dot; x_dot]^T B [xi_dot; x_dot] (C = 4 B);
+    ``twist`` (c = tau, t1, t2): U = 1/2 d^T K d (3.4) and D = 1/2 d_dot^T B d_dot.
+    K, B: 3x3, moment first, forces second, in the hinge frame. Power: `LawPower`.
+    """
+
+    coordinates: str
+    K: np.ndarray
+    B: np.ndarray
+
+    def __post_init__(self) -> None:
+        if self.coordinates not in COORDINATES:
+            raise ValueError(f"coordinates: expected one of {', '.join(COORDINATES)}, "
+                             f"got {self.coordinates!r}")
+        object.__setattr__(self, "K", as_array("K", self.K, (3, 3)))
+        object.__setattr__(self, "B", as_array("B", self.B, (3, 3)))
+
+    def _embed(self, M: np.ndarray) -> np.ndarray:
+        if self.coordinates == "twistor":
+            out = np.zeros((4, 4))
+            out[1:, 1:] = 4.0 * M
+            return out
+        return np.array(M, dtype=float)
+
+    def metric(self) -> np.ndarray:
+        """W (k, k) with U = 1/2 c^T W c."""
+        return self._embed(self.K)
+
+    def potential(self, c):
+        W = self.metric()
+        Wc = c @ W.T
+        return 0.5 * np.einsum("ni,ni->n", c, Wc), Wc, np.broadcast_to(W, (c.shape[0],) + W.shape)
+
+    def dissipation_matrix(self):
+        return self._embed(self.B)
+
+
+class LawBatch:
+    """
+    Hinges that share one coordinate type, evaluated together.
+
+    Quadratic laws are evaluated all at once from their stacked metrics (built here,
+    once); other laws one hinge at a time through ``potential``.
+    """
+
+    def __init__(self, laws: Sequence[HingeLaw]):
+        coords = {law.coordinates for law in laws}
+        if len(coords) != 1:
+            raise ValueError(f"laws must share one coordinate type, got {sorted(coords)}")
+        self.laws = list(laws)
+        self.coordinates = coords.pop()
+        self._map = COORDINATES[self.coordinates]
+        self.quadratic = all(isinstance(law, QuadraticLaw) for law in laws)
+        # One law at many states (LawPower) evaluates its potential once, on every row.
+        self.single = bool(laws) and all(law is laws[0] for law in laws)
+        self.W = np.stack([law.metric() for law in laws]) if self.quadratic else None
+        self.C = np.stack([law.dissipation_matrix() for law in laws])
+
+    def evaluate(
+        self, alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray, jacobian: bool = True
+    ) -> LawEvaluation:
+        """
+        Energy, dU/dr and C_r r_dot by the chain rule through c(r).
+
+        With ``jacobian`` also d2U/dr2, C_r and d(C_r r_dot)/dr (else those fields are None):
+
+        grad_r = dc^T U_c; hess_r = dc^T U_cc dc + sum_k U_c,k d2c_k; C_r = dc^T C dc;
+        d(C_r r_dot)/dr = sum_k (C dc r_dot)_k d2c_k + dc^T C (d2c . r_dot).
+        """
+        alpha, p, rdot = deflections(alpha, p, rdot)
+        if len(alpha) != len(self.laws):
+            raise ValueError(f"alpha: expected {len(self.laws)} deflections (one per law), "
+                             f"got {len(alpha)}")
+        cmap = self._map(alpha, p, second=jacobian)
+        c, dc = cmap.c, cmap.dc
+        if self.quadratic:
+            Uc = np.einsum("nij,nj->ni", self.W, c)
+            energy = 0.5 * np.einsum("ni,ni->n", c, Uc)
+            Ucc = self.W
+        elif self.single:
+            energy, Uc, Ucc = self.laws[0].potential(c)
+        else:
+            n, k = c.shape
+            energy, Uc, Ucc = np.empty(n), np.empty((n, k)), np.empty((n, k, k))
+            for i, law in enumerate(self.laws):
+                e, g, h = law.potential(c[i:i + 1])
+                energy[i], Uc[i], Ucc[i] = e[0], g[0], h[0]
+        grad = np.einsum("nki,nk->ni", dc, Uc)
+        cdot = np.einsum("nki,ni->nk", dc, rdot)
+        w = np.einsum("nkl,nl->nk", self.C, cdot)
+        damping_force = np.einsum("nki,nk->ni", dc, w)
+        if not jacobian:
+            return LawEvaluation(energy, grad, None, None, damping_force, None)
+        d2c = cmap.d2c
+        hess = np.einsum("nki,nkl,nlj->nij", dc, Ucc, dc) + np.einsum("nk,nkij->nij", Uc, d2c)
+        CJ = np.einsum("nkl,nlj->nkj", self.C, dc)
+        damping = np.einsum("nki,nkj->nij", dc, CJ)
+        d2c_rdot = np.einsum("nkjl,nl->nkj", d2c, rdot)
+        damping_force_dr = np.einsum("nk,nkij->nij", w, d2c) + np.einsum(
+            "nki,nkj->nij", CJ, d2c_rdot
+        )
+        return LawEvaluation(energy, grad, hess, damping, damping_force, damping_force_dr)
+
+    def power(self, alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray) -> HingePower:
+        """
+        U, P_c = -(dU/dr) .
+
+        r_dot and P_d = (C_r r_dot) . r_dot of each hinge (module docstring; the wrench identities
+        are in test_hinge_power.py).
+        """
+        ev = self.evaluate(alpha, p, rdot, jacobian=False)
+        rdot = np.asarray(rdot, dtype=float)
+        return HingePower(ev.energy, -np.einsum("ni,ni->n", ev.grad, rdot),
+                          np.einsum("ni,ni->n", ev.damping_force, rdot))
+
+
+def evaluate(
+    laws: Sequence[HingeLaw], alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray
+) -> LawEvaluation:
+    """Evaluate n hinges sharing one coordinate type, with all derivatives (see LawBatch)."""
+    return LawBatch(laws).evaluate(alpha, p, rdot, jacobian=True)
+
+
+def wrench_on_element(alpha: np.ndarray, grad_r: np.ndarray) -> np.ndarray:
+    """
+    m_b: wrench by body B on the element, frame b coordinates, about b's origin.
+
+    From dW = grad_r . delta r and delta r = (delta tau, R(alpha) delta t_b):
+    m_b = (dU/dalpha, R(alpha)^T dU/dp) -- eqs. 3.53 and 4.35 (for the twistor quadratic
+    law this equals 2 Lambda^T K [xi; x], a test checks it against comply_quat2.sci).
+    Works for the dissipative part too with grad_r replaced by C_r r_dot.
+    """
+    alpha = as_array("alpha", alpha, (None,))
+    grad_r = as_array("grad_r", grad_r, (alpha.shape[0], 3))
+    R = rot(alpha)
+    m = np.empty_like(grad_r)
+    m[:, 0] = grad_r[:, 0]
+    m[:, 1:] = np.einsum("nji,nj->ni", R, grad_r[:, 1:])
+    return m

@@ -1,0 +1,91 @@
+"""
+Hinge stiffness in a mechanism file, checked: a ``stiffness`` specification and K's validity.
+
+Part of the loader (`config.mechanism_from_dict`); messages name the file, key and problem.
+Models: ``notch`` (D, h, t, E, nu), ``cantilever`` (length, thickness, width, E, nu), both
+with an optional yield strength ``sigma_y`` (Pa) for the stress analyses, and ``matrix`` (K:
+3x3, or Ko, Kt: [kx, ky] and optional Kc: [cx, cy]); the formulas are in `stiffness`.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+
+from flexure_sim.engine.hinges import stiffness as stiffness_models
+from flexure_sim.engine.mechanism.values import Ctx as _Ctx
+from flexure_sim.engine.mechanism.values import mapping as _mapping
+from flexure_sim.engine.mechanism.values import no_unknown as _no_unknown
+from flexure_sim.engine.mechanism.values import number as _number
+from flexure_sim.engine.mechanism.values import require as _require
+from flexure_sim.engine.mechanism.values import shown as _shown
+from flexure_sim.engine.mechanism.values import vector as _vector
+from flexure_sim.engine.hinges.stress import StressGeometry
+
+_STIFFNESS_KEYS: dict[str, tuple[Callable[..., np.ndarray], tuple[str, ...]]] = (
+    stiffness_models.MODELS)
+
+
+def stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str, Any]:
+    """
+    (K, model name, the hinge's StressGeometry or None) of a stiffness specification.
+
+    The stress geometry holds the same numbers the stiffness formula was given.
+    """
+    spec = _mapping(ctx, key, spec)
+    model = _require(ctx, key, spec, "model")
+    if not isinstance(model, str):
+        raise ctx.fail(f"{key}.model",
+                       f"expected a model name (notch, cantilever, matrix), got {_shown(model)}")
+    # Material yield strength (Pa) for the hinge stress ratio (engine/hinges/stress.py); optional.
+    sigma_y = (_number(ctx, f"{key}.sigma_y", spec["sigma_y"], positive=True)
+               if "sigma_y" in spec else None)
+    spec = {k: v for k, v in spec.items() if k != "sigma_y"}
+    if model in _STIFFNESS_KEYS:
+        fn, names = _STIFFNESS_KEYS[model]
+        _no_unknown(ctx, key, spec, {"model", *names})
+        args = [
+            _number(ctx, f"{key}.{n}", _require(ctx, key, spec, n), positive=n != "nu")
+            for n in names
+        ]
+        if model in ("notch", "cantilever"):
+            nu = args[-1]
+            if not 0 <= nu < 0.5:
+                raise ctx.fail(f"{key}.nu", f"Poisson's ratio must be in [0, 0.5), got {nu}")
+        with np.errstate(all="ignore"):
+            K = fn(*(np.float64(a) for a in args))  # overflow gives inf, checked below
+        if not np.all(np.isfinite(K)):
+            values = ", ".join(f"{n}={a:g}" for n, a in zip(names, args))
+            raise ctx.fail(key, f"the {model} formula gives a non-finite stiffness for these "
+                           f"values ({values}): check the units")
+        return K, model, StressGeometry.of(model, dict(zip(names, args)), sigma_y)
+    if model == "matrix":
+        if sigma_y is not None:  # would be dropped silently: no geometry, no stress
+            raise ctx.fail(f"{key}.sigma_y", "a matrix stiffness has no geometry to compute "
+                           "stress from (sigma_y is for notch and cantilever models)")
+        _no_unknown(ctx, key, spec, {"model", "K", "Ko", "Kt", "Kc"})
+        if "K" in spec:
+            rows = spec["K"]
+            if not isinstance(rows, list) or len(rows) != 3:
+                raise ctx.fail(f"{key}.K", "expected a 3x3 matrix (three rows of three numbers)")
+            K = np.array([_vector(ctx, f"{key}.K[{i}]", r, (3,)) for i, r in enumerate(rows)])
+        else:
+            Ko = _number(ctx, f"{key}.Ko", _require(ctx, key, spec, "Ko"))
+            kt = _vector(ctx, f"{key}.Kt", _require(ctx, key, spec, "Kt"), (2,))
+            kc = _vector(ctx, f"{key}.Kc", spec.get("Kc", [0.0, 0.0]), (2,))
+            K = np.array([[Ko, kc[0], kc[1]], [kc[0], kt[0], 0.0], [kc[1], 0.0, kt[1]]])
+        return K, "matrix", None
+    raise ctx.fail(f"{key}.model",
+                   f"unknown stiffness model {_shown(model)} (notch, cantilever, matrix)")
+
+
+def check_spd(ctx: _Ctx, key: str, M: np.ndarray, what: str) -> None:
+    """Refuse a ``what`` matrix at ``key`` that is not finite, symmetric, positive definite."""
+    if not np.all(np.isfinite(M)):
+        raise ctx.fail(key, f"{what} matrix is not finite: {M.tolist()}")
+    if not np.allclose(M, M.T, rtol=1e-12, atol=0.0):
+        raise ctx.fail(key, f"{what} matrix is not symmetric: {M.tolist()}")
+    with np.errstate(all="ignore"):
+        eig = np.linalg.eigvalsh(M)
+    if not np.all(eig > 0):  # also false for NaN eigenvalues (entries near the double range)
+        raise ctx.fail(key, f"{what} matrix is not positive definite: {M.tolist()}")

@@ -1,0 +1,254 @@
+"""
+Generalized forces of all hinges on all bodies, with exact Jacobians.
+
+Body coordinates z = (x, y, theta) per body, velocities v = dz/dt (root frame), stacked as
+vectors of length 3 * n_bodies in body order. For a hinge joining frame a (body A, offset
+c_a, angle phi_a) and frame b (body B), its relative displacement r = (alpha, p) is
+
+    alpha = theta_B + phi_b - theta_A - phi_a,
+    p     = R(theta_A + phi_a)^T (P_B + R(theta_B) c_b - P_A - R(theta_A) c_a),
+
+(eq. 2.81 with the poses of eq. 6.1). With U(r) and D = 1/2 r_dot^T C_r r_dot from the
+hinge law, the generalized force is Q = -dr/dz^T (dU/dr + C_r r_dot): the virtual-work
+form of eqs. 4.34-4.39 (dynam.sci applies the same wrench, transformed to the root frame,
+to both bodies). Jacobians dQ/dz and dQ/dv are exact (second derivatives of r(z) and of
+the law coordinates, no finite differences).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from flexure_sim.engine.solver import kernels
+from flexure_sim.engine.laws.quadratic import LawBatch, QuadraticLaw, wrench_on_element
+from flexure_sim.engine.kinematics.planar import J
+from flexure_sim.engine.mechanism.parts import Mechanism
+
+
+@dataclass(frozen=True)
+class HingeForces:
+    """
+    Everything the hinges contribute at one state (n hinges, N = 3 n_bodies).
+
+    Q (N,): generalized forces (forces in N, moments in N m about each body's origin).
+    dQ_dz, dQ_dv (N, N): exact Jacobians (None unless asked for).
+    r (n, 3): deflection (alpha, p1, p2) of each hinge, frame b relative to frame a, in a.
+    r_dot (n, 3): its rate. energy (n,): potential energy (J). dissipation (n,): power
+    dissipated by damping (W, = r_dot^T C_r r_dot).
+    wrench_b (n, 3): wrench the hinge exerts on body B, in frame b coordinates, moment
+    about b's origin (moment N m, force N): -(m_b elastic + viscous), eqs. 4.35, 4.40.
+    """
+
+    Q: np.ndarray
+    dQ_dz: np.ndarray | None
+    dQ_dv: np.ndarray | None
+    r: np.ndarray
+    r_dot: np.ndarray
+    energy: np.ndarray
+    dissipation: np.ndarray
+    wrench_b: np.ndarray
+
+
+class Assembly:
+    """Precomputed hinge geometry of a mechanism; evaluates hinge forces at a state."""
+
+    def __init__(self, mechanism: Mechanism):
+        self.mechanism = mechanism
+        hinges = mechanism.hinges
+        self.n_bodies = len(mechanism.bodies)
+        self.ia = np.array([mechanism.body_index(h.a.body) for h in hinges])
+        self.ib = np.array([mechanism.body_index(h.b.body) for h in hinges])
+        self.ca = np.array([h.a.position for h in hinges], dtype=float)
+        self.cb = np.array([h.b.position for h in hinges], dtype=float)
+        self.phia = np.array([h.a.angle for h in hinges], dtype=float)
+        self.phib = np.array([h.b.angle for h in hinges], dtype=float)
+        # Global coordinate indices of (x_A, y_A, th_A, x_B, y_B, th_B) per hinge.
+        self.dofs = np.concatenate(
+            [3 * self.ia[:, None] + np.arange(3), 3 * self.ib[:, None] + np.arange(3)], axis=1
+        )
+        # Batches share a coordinate type and a law kind, so quadratic laws stay vectorised.
+        groups: dict[tuple[str, bool], list[int]] = {}
+        for i, h in enumerate(hinges):
+            groups.setdefault((h.law.coordinates, isinstance(h.law, QuadraticLaw)), []).append(i)
+        self.groups = [
+            (np.array(idx), LawBatch([hinges[i].law for i in idx])) for idx in groups.values()
+        ]
+        # Scatter of each hinge's six local coordinates into the global vector:
+        # S[a, h, j] = 1 where global coordinate a is local coordinate j of hinge h.
+        n, N = len(hinges), 3 * self.n_bodies
+        self.scatter = np.zeros((N, n, 6))
+        for h in range(n):
+            for j in range(6):
+                self.scatter[self.dofs[h, j], h, j] += 1.0
+        self._scatter_flat = self.scatter.reshape(N, 6 * n)
+        # Compiled path (kernels.quadratic_forces) when every law is quadratic.
+        self.compiled = all(isinstance(h.law, QuadraticLaw) for h in hinges)
+        if self.compiled:
+            offset = [1 if h.law.coordinates == "twistor" else 0 for h in hinges]
+            self._kind = np.array(
+                [kernels.TWISTOR if o else kernels.TWIST for o in offset], dtype=np.int64
+            )
+            self._W = np.ascontiguousarray(
+                [h.law.metric()[o:, o:] for h, o in zip(hinges, offset)]
+            )
+            self._C = np.ascontiguousarray(
+                [h.law.dissipation_matrix()[o:, o:] for h, o in zip(hinges, offset)]
+            )
+            self._ia, self._ib = self.ia.astype(np.int64), self.ib.astype(np.int64)
+            self._ca, self._cb = np.ascontiguousarray(self.ca), np.ascontiguousarray(self.cb)
+
+    # ------------------------------------------------------------------ geometry
+    def relative(self, z: np.ndarray, second: bool = True):
+        """
+        Return r (n, 3), dr/dzz (n, 3, 6) and, if asked, d2r/dzz2 (n, 3, 6, 6).
+
+        zz are the six coordinates (x_A, y_A, theta_A, x_B, y_B, theta_B) of each hinge's bodies.
+
+        With beta = theta_A + phi_a, w_a = R(theta_A) c_a, w_b = R(theta_B) c_b and
+        Delta = P_B + w_b - P_A - w_a: p = R(beta)^T Delta, so
+        dp/dP_B = -dp/dP_A = R(beta)^T, dp/dtheta_A = -J p - R(beta)^T J w_a,
+        dp/dtheta_B = R(beta)^T J w_b.
+        """
+        Z = np.asarray(z, dtype=float).reshape(self.n_bodies, 3)
+        A, B = Z[self.ia], Z[self.ib]
+        ca, sa = np.cos(A[:, 2]), np.sin(A[:, 2])
+        cb, sb = np.cos(B[:, 2]), np.sin(B[:, 2])
+        beta = A[:, 2] + self.phia
+        cbe, sbe = np.cos(beta), np.sin(beta)
+        wa1 = ca * self.ca[:, 0] - sa * self.ca[:, 1]
+        wa2 = sa * self.ca[:, 0] + ca * self.ca[:, 1]
+        wb1 = cb * self.cb[:, 0] - sb * self.cb[:, 1]
+        wb2 = sb * self.cb[:, 0] + cb * self.cb[:, 1]
+        d1 = B[:, 0] + wb1 - A[:, 0] - wa1
+        d2 = B[:, 1] + wb2 - A[:, 1] - wa2
+        # p = R(beta)^T Delta; R(beta)^T = [[c, s], [-s, c]]
+        p1 = cbe * d1 + sbe * d2
+        p2 = -sbe * d1 + cbe * d2
+        alpha = B[:, 2] + self.phib - beta
+        n = len(alpha)
+        r = np.empty((n, 3))
+        r[:, 0], r[:, 1], r[:, 2] = alpha, p1, p2
+        # R(beta)^T J w = R(beta)^T (-w2, w1)
+        ta1 = -cbe * wa2 + sbe * wa1
+        ta2 = sbe * wa2 + cbe * wa1
+        tb1 = -cbe * wb2 + sbe * wb1
+        tb2 = sbe * wb2 + cbe * wb1
+        dr = np.zeros((n, 3, 6))
+        dr[:, 0, 2], dr[:, 0, 5] = -1.0, 1.0
+        dr[:, 1, 0], dr[:, 1, 1] = -cbe, -sbe
+        dr[:, 2, 0], dr[:, 2, 1] = sbe, -cbe
+        dr[:, 1, 3], dr[:, 1, 4] = cbe, sbe
+        dr[:, 2, 3], dr[:, 2, 4] = -sbe, cbe
+        dr[:, 1, 2] = p2 - ta1          # -J p = (p2, -p1)
+        dr[:, 2, 2] = -p1 - ta2
+        dr[:, 1, 5] = tb1
+        dr[:, 2, 5] = tb2
+        if not second:
+            return r, dr, None
+        RbT = np.empty((n, 2, 2))
+        RbT[:, 0, 0], RbT[:, 0, 1], RbT[:, 1, 0], RbT[:, 1, 1] = cbe, sbe, -sbe, cbe
+        wa = np.column_stack([wa1, wa2])
+        wb = np.column_stack([wb1, wb2])
+        RbT_Jwa = np.column_stack([ta1, ta2])
+        RbT_Jwb = np.column_stack([tb1, tb2])
+        dp_dthA = dr[:, 1:, 2]
+        d2 = np.zeros((n, 3, 6, 6))
+        J_RbT = np.einsum("ij,njk->nik", J, RbT)
+        d2[:, 1:, 2, 2] = (
+            -dp_dthA @ J.T + np.einsum("ij,nj->ni", J, RbT_Jwa) + np.einsum("nij,nj->ni", RbT, wa)
+        )
+        d2[:, 1:, 2, 0:2] = J_RbT
+        d2[:, 1:, 0:2, 2] = J_RbT
+        d2[:, 1:, 2, 3:5] = -J_RbT
+        d2[:, 1:, 3:5, 2] = -J_RbT
+        cross = -np.einsum("ij,nj->ni", J, RbT_Jwb)
+        d2[:, 1:, 2, 5] = cross
+        d2[:, 1:, 5, 2] = cross
+        d2[:, 1:, 5, 5] = -np.einsum("nij,nj->ni", RbT, wb)
+        return r, dr, d2
+
+    # -------------------------------------------------------------------- forces
+    def _assemble(self, local: np.ndarray) -> np.ndarray:
+        """Global matrix sum_h S_h local_h S_h^T from per-hinge 6x6 blocks."""
+        n = local.shape[0]
+        block = np.zeros((n, 6, n, 6))
+        block[np.arange(n), :, np.arange(n), :] = local
+        S = self._scatter_flat
+        return S @ block.reshape(6 * n, 6 * n) @ S.T
+
+    def generalized_forces(self, z: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, float, float]:
+        """
+        Q, total potential energy and total dissipated power: the per-step hot path.
+
+        Uses the compiled kernel when every law is quadratic, else ``forces``.
+        """
+        Q, _, _, energy, dissipation = self.report(z, v)
+        return Q, energy, dissipation
+
+    def report(self, z: np.ndarray, v: np.ndarray):
+        """
+        Q.
+
+        Deflections r (n, 3), wrenches on body B (n, 3), total energy and dissipated power (as in
+        ``forces``), by the compiled kernel when every law is quadratic.
+        """
+        if self.compiled:
+            n = len(self.ia)
+            Q, r, wrench = np.empty(3 * self.n_bodies), np.empty((n, 3)), np.empty((n, 3))
+            energy, dissipation = kernels.quadratic_forces(
+                np.asarray(z, dtype=float),
+                np.asarray(v, dtype=float),
+                self._ia,
+                self._ib,
+                self._ca,
+                self._cb,
+                self.phia,
+                self.phib,
+                self._kind,
+                self._W,
+                self._C,
+                Q,
+                r,
+                wrench,
+            )
+            return Q, r, wrench, float(energy), float(dissipation)
+        hf = self.forces(z, v)
+        return hf.Q, hf.r, hf.wrench_b, float(hf.energy.sum()), float(hf.dissipation.sum())
+
+    def forces(self, z: np.ndarray, v: np.ndarray, jacobian: bool = False) -> HingeForces:
+        """Hinge forces at coordinates z and velocities v (both length 3 n_bodies)."""
+        r, dr, d2 = self.relative(z, second=jacobian)
+        V = np.asarray(v, dtype=float).reshape(self.n_bodies, 3)
+        vv = np.concatenate([V[self.ia], V[self.ib]], axis=1)  # (n, 6)
+        rdot = np.einsum("nij,nj->ni", dr, vv)
+        n = len(r)
+        energy = np.empty(n)
+        grad = np.empty((n, 3))
+        fdamp = np.empty((n, 3))
+        hess = Cr = fdamp_dr = None
+        if jacobian:
+            hess, Cr, fdamp_dr = np.empty((n, 3, 3)), np.empty((n, 3, 3)), np.empty((n, 3, 3))
+        for idx, batch in self.groups:
+            ev = batch.evaluate(r[idx, 0], r[idx, 1:], rdot[idx], jacobian=jacobian)
+            energy[idx], grad[idx], fdamp[idx] = ev.energy, ev.grad, ev.damping_force
+            if jacobian:
+                hess[idx], Cr[idx], fdamp_dr[idx] = ev.hess, ev.damping, ev.damping_force_dr
+        total = grad + fdamp
+        q_local = -np.einsum("nki,nk->ni", dr, total)  # (n, 6)
+        Q = self._scatter_flat @ q_local.ravel()
+        dQ_dz = dQ_dv = None
+        if jacobian:
+            # d/dzz of dr^T (grad + fdamp(r, rdot)) with rdot = dr . vv
+            d2_vv = np.einsum("nkij,nj->nki", d2, vv)  # d(rdot)/dzz
+            K_local = (
+                np.einsum("nki,nkl,nlj->nij", dr, hess + fdamp_dr, dr)
+                + np.einsum("nk,nkij->nij", total, d2)
+                + np.einsum("nki,nkl,nlj->nij", dr, Cr, d2_vv)
+            )
+            C_local = np.einsum("nki,nkl,nlj->nij", dr, Cr, dr)
+            dQ_dz = -self._assemble(K_local)
+            dQ_dv = -self._assemble(C_local)
+        dissipation = np.einsum("ni,ni->n", fdamp, rdot)
+        wrench_b = -wrench_on_element(r[:, 0], total)
+        return HingeForces(Q, dQ_dz, dQ_dv, r, rdot, energy, dissipation, wrench_b)

@@ -1,0 +1,188 @@
+"""
+Fixed-step stiff-stable stepping of a ``Model``, updating a ``Data``.
+
+Stepping uses the **exponential trapezoidal rule**: with A an exact Jacobian dF/dy taken
+at some earlier state, F0 = F(y_n, t_n) and N(y, t) = F(y, t) - F0 - A (y - y_n),
+
+    y_{n+1} = y_n + h phi_1(hA) F0 + h phi_2(hA) N(y_{n+1}, t_{n+1}),
+
+the variation-of-constants formula with the remainder N interpolated linearly over the
+step. The linear part is integrated exactly at any step, so the stage's stiff, heavily
+damped hinge modes (eigenvalues near -1e8 1/s) are no constraint on h; the remainder is
+solved by fixed-point iteration, which contracts by about |J - A| / |J| per sweep (two
+sweeps for the stage), so A can be reused for many steps: it is re-computed only when the
+iteration stops contracting (or, optionally, when the configuration moved by more than
+``relinearize_tol``). The converged step does not depend on where A was taken; the method
+is second order. phi_1 and phi_2 come from one matrix exponential per linearization. The
+dissipated energy and the drive work are integrated as exactly as the motion, each on its
+own (``step_energy``).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.linalg
+
+from flexure_sim.engine.solver import step_energy, step_loop as stepping
+from flexure_sim.engine.solver.state import Data, Linearization, State
+from flexure_sim.engine.solver.model import Model, SolverError
+
+
+def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> None:
+    """
+    Exact Jacobian A at y and the matrices h phi_1(hA), h phi_2(hA) of the step, into ``data.lin``.
+
+    Both come from one exponential of the block matrix [[hA, I, 0], [0, 0, I], [0, 0, 0]]
+    (its first block row is [e^{hA}, h phi_1(hA), h^2 phi_2(hA)] up to the powers of h).
+    Also the matrices of the step's energy integrals (``step_energy.energy_matrices``): the
+    damping matrix C = -dQ/dv, and per displacement drive g = dq/dy of its load
+    q = D_d^T Q_P and h phi_1(h (A - I/tau)) = (A - I/tau)^-1 (e^{-h/tau} e^{hA} - I), one
+    linear solve with the e^{hA} already at hand (A - I/tau is regular: A's eigenvalues have
+    no positive real part for a damped mechanism; an exponential is the fallback).
+    """
+    if model.energy:
+        A, g, damping, load_rows = model.jacobian(y, t, command, damping=True)
+    else:
+        A = model.jacobian(y, t, command)
+    m, h = A.shape[0], model.dt
+    aug = np.zeros((3 * m, 3 * m))
+    aug[:m, :m] = h * A
+    aug[:m, m:2 * m] = np.eye(m)
+    aug[m:2 * m, 2 * m:] = np.eye(m)
+    E = scipy.linalg.expm(aug)
+    phi1, phi2 = h * E[:m, m:2 * m], h * E[:m, 2 * m:]
+    if model.energy:
+        part = model.part
+        tau, D = model.motion[0], model.motion[2]
+        shifted = [_shifted_phi1(A, E[:m, :m], h, tk) for tk in tau]
+        drive_mass = [float(dk @ (model.mass[part.prescribed] * dk)) for dk in model.D_rows]
+        sines = np.array([[j, c.amplitude, 2.0 * np.pi * c.frequency, c.phase]
+                          for j, c in part.timed], dtype=float).reshape(-1, 4).T
+        emats = step_energy.energy_matrices(
+            A, phi1, phi2, h, g, damping, part.free, part.prescribed, D, drive_mass, tau,
+            shifted, sines, load_rows[[j for j, _ in part.timed]])
+    else:
+        emats = step_energy.NO_ENERGY
+    data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, emats)
+    data.stats.linearizations += 1
+
+
+def _shifted_phi1(A: np.ndarray, expA: np.ndarray, h: float, tau: float) -> np.ndarray:
+    """Return h phi_1(h (A - I/tau)) from e^{hA} by one solve (see ``linearize``)."""
+    m = A.shape[0]
+    shifted = A - np.eye(m) / tau
+    try:
+        out = np.linalg.solve(shifted, np.exp(-h / tau) * expA - np.eye(m))
+        if np.all(np.isfinite(out)):
+            return out
+    except np.linalg.LinAlgError:
+        pass
+    aug = np.zeros((2 * m, 2 * m))
+    aug[:m, :m], aug[:m, m:] = h * shifted, np.eye(m)
+    return h * scipy.linalg.expm(aug)[:m, m:]
+
+
+def moved_too_far(model: Model, data: Data, z: np.ndarray) -> bool:
+    """Whether z is further than ``relinearize_tol`` from the linearization's z."""
+    tol = model.relinearize_tol
+    if tol is None:
+        return False
+    moved = np.abs(z - data.lin.z)
+    moved[0::3] /= model.length_scale
+    moved[1::3] /= model.length_scale
+    return bool(np.max(moved) > tol)
+
+
+def _advance(model: Model, data: Data, n, y, t, rows, held, F0, aux0, ye):
+    lin = data.lin
+    common = (n, y, t, model.dt, rows, held, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,
+              model.atol, model.max_iterations, model.relinearize_after, F0, aux0, ye,
+              lin.emats)
+    if model.compiled:
+        return stepping.advance(*common, model.kernel_args)
+    return stepping.advance_interpreted(*common, model)
+
+
+def jump_work(model: Model, s: State, command) -> float:
+    """
+    Work of the drives' velocity jumps when the commands change (``command``: actuator order).
+
+    The prescribed velocities jump from those of ``s`` to those of the new command, which takes the
+    kinetic energy 1/2 M_P (v_P+^2 - v_P-^2) from the actuator (an impulse M_P dv_P acting at the
+    mean velocity).
+    """
+    P = model.part.prescribed
+    vP = model.prescribed(s.t, s.u, command)[1]
+    return float(0.5 * model.mass[P] @ (vP * vP - s.v[P] * s.v[P]))
+
+
+def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
+    """
+    Advance ``data`` n fixed steps with the drives' commands held at state.command.
+
+    ``command``: the kernel's command vector (actuator order) to hold instead of the state's
+    (the piezo actuators' free strokes, engine/solver/actuation.py). ``rows``: one such vector per
+    step, shape (n, len(command)), to hold step by step instead (``command`` then is the one
+    held before the first step; each change is the drives' work, ``stepping.switch_work``).
+
+    Time is origin + k dt, k the steps taken since the origin (the t of a state this data
+    did not step itself), not a running sum: t stays on the step grid however long the
+    run, so stamps derived from it stay on the tick grid.
+    """
+    s = data.state
+    command = np.ascontiguousarray(
+        model.actuator_command(s.command) if command is None else command, dtype=float)
+    rows = command.reshape(1, -1) if rows is None else np.ascontiguousarray(rows, dtype=float)
+    key = command.tobytes()
+    clock = data.clock
+    if clock is None or clock[0] is not s:
+        clock = (s, s.t, 0)
+    _, origin, k = clock
+    dt = model.dt
+    y, t = model.pack(s), s.t
+    cache = data.cache
+    if cache is not None and cache[0] is s and cache[1] == key:
+        F0, aux0, ye = cache[2:5]
+    else:
+        F0, aux0 = model.rhs(y, t, command)
+        ye = y
+    if model.energy:
+        dissipated, work = s.dissipated, s.drive_work + jump_work(model, s, command)
+    else:
+        dissipated = work = math.nan
+    remaining = int(n)
+    fresh = False
+    while remaining > 0:
+        ahead = rows[min(int(n) - remaining, len(rows) - 1):]
+        if data.lin is None or (model.relinearize_tol is not None
+                                and moved_too_far(model, data, model.unpack(y, t, command)[0])):
+            linearize(model, data, y, t, ahead[0])
+            fresh = True
+        chunk = 1 if model.relinearize_tol is not None else remaining
+        y, F0, aux0, ye, command, dd, dw, steps, iterations, status = _advance(
+            model, data, chunk, y, t, ahead, command, F0, aux0, ye)
+        dissipated += dd
+        work += dw
+        remaining -= steps
+        k += steps
+        t = origin + k * dt
+        data.stats.steps += steps
+        data.stats.iterations += iterations
+        if status == stepping.NOT_CONTRACTING:
+            if steps == 0 and fresh:
+                raise SolverError(
+                    f"step to t = {t + dt:.6g} s did not converge even with a fresh Jacobian; "
+                    f"reduce the step ({dt:g} s)")
+            data.lin = None
+        elif status == stepping.SLOW:
+            data.lin = None
+        if steps:
+            fresh = False
+    if not np.all(np.isfinite(y)):
+        raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
+    z, v, u = model.unpack(y, t, command)
+    data.state = State(t, z, v, model.state_u(u), s.command, dissipated, work)
+    data.clock = (data.state, origin, k)
+    # F at the new state seeds the next call while the command is unchanged.
+    data.cache = (data.state, command.tobytes(), F0, aux0, ye)

@@ -1,0 +1,102 @@
+"""
+The mutable side of a simulation (as MuJoCo's mjData): state, counters, integrator caches.
+
+A ``Data`` belongs to one run of one ``model.Model``; many may share the model (sweeps,
+the node's reset). Nothing here knows the mechanism: stepping, statics and snapshots
+read the model and update the data.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Optional, Union
+
+import numpy as np
+
+
+@dataclass
+class State:
+    """
+    Simulation state.
+
+    z, v: (x, y, theta) and (vx, vy, omega) per body in the root frame (3 n_bodies, body order). u:
+    actuator output along the drive's direction (m, rad on theta); command: the actuators'
+    current targets (m or rad; a force drive's force, N or N m). With a single drive both are
+    numbers (u is 0 for a force drive); with several, u holds one value per displacement drive
+    and command one per drive (``Model.drive_names`` order). Energy bookkeeping since the last
+    reset: dissipated (J) by hinge damping and drive_work (J) done by the drives and the
+    prescribed coordinates. actuator: the piezo actuators' states (engine/solver/actuation.py;
+    None: at rest, or no actuator); held: their free strokes x_a (m) held over the last step.
+    """
+
+    t: float
+    z: np.ndarray
+    v: np.ndarray
+    u: Union[float, np.ndarray] = 0.0
+    command: Union[float, np.ndarray] = 0.0
+    dissipated: float = 0.0
+    drive_work: float = 0.0
+    actuator: Optional[np.ndarray] = None
+    held: Optional[np.ndarray] = None
+
+    def copy(self) -> "State":
+        return replace(self, z=self.z.copy(), v=self.v.copy(), u=np.copy(self.u)
+                       if isinstance(self.u, np.ndarray) else self.u,
+                       command=np.copy(self.command)
+                       if isinstance(self.command, np.ndarray) else self.command,
+                       actuator=None if self.actuator is None else self.actuator.copy(),
+                       held=None if self.held is None else self.held.copy())
+
+
+@dataclass
+class StepStats:
+    """Counters of the stepping work, for diagnostics and benchmarks."""
+
+    steps: int = 0
+    linearizations: int = 0
+    iterations: int = 0
+
+
+@dataclass(frozen=True)
+class Linearization:
+    """
+    Where and what.
+
+    Configuration z, Jacobian A, h phi_1(hA), h phi_2(hA), and the matrices of the step's
+    dissipated energy and drive work (``step_energy.energy_matrices``).
+    """
+
+    z: np.ndarray
+    A: np.ndarray
+    phi1: np.ndarray
+    phi2: np.ndarray
+    emats: tuple
+
+
+class Data:
+    """
+    State, statistics and the integrator's caches of one run.
+
+    ``lin``: the current linearization (None: compute at the next step); ``cache``:
+    (state, command, F, energy rates) at the last stepped state, to seed the next call;
+    ``clock``: (state, origin t, steps since origin), so time stays on the step grid.
+    """
+
+    def __init__(self, z0: np.ndarray):
+        self.z0 = np.asarray(z0, dtype=float)
+        self.state = State(0.0, self.z0.copy(), np.zeros_like(self.z0))
+        self.stats = StepStats()
+        self.lin: Optional[Linearization] = None
+        self.cache: Optional[tuple] = None
+        self.clock: Optional[tuple] = None
+
+    def reset(self) -> None:
+        """
+        Back to the initial state (unstressed poses, at rest, actuator at 0, t = 0).
+
+        Statistics and caches restart.
+        """
+        self.state = State(0.0, self.z0.copy(), np.zeros_like(self.z0))
+        self.stats = StepStats()
+        self.lin = None
+        self.cache = None
+        self.clock = None

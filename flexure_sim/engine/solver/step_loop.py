@@ -1,0 +1,366 @@
+"""
+The exponential trapezoidal rule, as one loop that Numba compiles when it can.
+
+For y' = F(y, t), an exact Jacobian A = dF/dy taken at some earlier state,
+F0 = F(y_n, t_n) and the remainder N(y, t) = F(y, t) - F0 - A (y - y_n), a step is
+
+    y_{n+1} = U + h phi_2(hA) N(y_{n+1}, t_{n+1}),     U = y_n + h phi_1(hA) F0,
+
+(the variation-of-constants formula with N interpolated linearly over the step), solved by
+fixed-point iteration from y_{n+1} = U. The iteration contracts by about |J - A| / |J| per
+sweep; it has converged when its last change is below rtol |U| + atol in every component.
+
+The dissipated energy and drive work are integrated within each step from the same linear
+model (``step_energy``).
+
+``advance`` runs up to n steps and stops early with a status when the iteration does not
+contract (1) or contracts slowly (2), so the caller can re-linearize. The loop calls
+``rhs(y, t, command, args)`` -> (F, energy rates ``energy_rates``): compiled with the force
+kernel for quadratic laws (``advance``), or as plain Python with ``Model.rhs_python``
+for any law (``advance_interpreted``); one source, two bindings of ``rhs`` (and of
+``switch``, the work of a change of the held command between steps: ``switch_work``).
+"""
+from __future__ import annotations
+
+import math
+import types
+
+import numpy as np
+
+from flexure_sim.engine import jit as kernel_cache
+from flexure_sim.engine.solver import kernels
+from flexure_sim.engine.solver import step_energy as step_energy_module
+from flexure_sim.engine.jit import njit
+from flexure_sim.engine.solver.kernels import quadratic_forces
+from flexure_sim.engine.solver.step_energy import (
+    AUX_APPLIED, AUX_DISSIPATION, AUX_ENERGY, AUX_LOAD, AUX_TIMED_POWER,
+)
+from flexure_sim.engine.solver.step_energy import step_energy
+
+CONVERGED, NOT_CONTRACTING, SLOW = 0, 1, 2
+
+
+@njit(cache=True)
+def prescribed_motion(t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase):
+    """
+    z_P, v_P, a_P.
+
+    Held coordinates, the displacement drives (column k of D: dz_P/du_k; u_k a first-order lag
+    of command[k] with time constant tau[k], so v_P = sum_k D_k (command_k - u_k)/tau_k) and
+    prescribed sine rates (omega = a sin(w t + phase)).
+    """
+    nP = zP0.shape[0]
+    zP = zP0.copy()
+    vP = np.zeros(nP)
+    aP = np.zeros(nP)
+    for k in range(tau.shape[0]):
+        udot = (command[k] - u[k]) / tau[k]
+        udd = -udot / tau[k]
+        for i in range(nP):
+            zP[i] += D[i, k] * u[k]
+            if k == 0:  # assigned, not added to 0: keeps the sign of a zero rate
+                vP[i] = D[i, k] * udot
+                aP[i] = D[i, k] * udd
+            else:
+                vP[i] += D[i, k] * udot
+                aP[i] += D[i, k] * udd
+    for i in range(sine_index.shape[0]):
+        j = sine_index[i]
+        a, w, ph = sine_amp[i], sine_w[i], sine_phase[i]
+        zP[j] += a / w * (math.cos(ph) - math.cos(w * t + ph))
+        vP[j] = a * math.sin(w * t + ph)
+        aP[j] = a * w * math.cos(w * t + ph)
+    return zP, vP, aP
+
+
+@njit(cache=True, inline="always")
+def applied_forces(Q, z, command, n_actuators, force_dir, force_z0, stack_dir, stack_z0,
+                   stack_k):
+    """
+    Add the force drives' and the stack springs' forces to Q; return (applied, springs).
+
+    Force drives: sum_j e_j f_j, f_j = command[n_actuators + j] (held over a step), e_j = row
+    j of force_dir (virtual work); ``applied`` = sum_j f_j e_j . (z - z0), the held forces'
+    potential, changes by exactly their work. Stack drives s (``drives.stacked``, after the
+    force drives in ``command``): the spring k_s between the held free stroke x_s and the
+    body, Q += e_s k_s (x_s - e_s . (z - z0)) (actuators/piezo.py P7); ``springs`` = sum_s 1/2 k_s
+    (x_s - e_s . (z - z0))^2, their potential (part of the mechanism's: with x_s held it is
+    conservative; a change of x_s between steps is the actuator's work, solver/actuation.py).
+    """
+    applied = 0.0
+    for j in range(force_dir.shape[0]):
+        f = command[n_actuators + j]
+        travel = -force_z0[j]
+        for i in range(Q.shape[0]):
+            Q[i] += force_dir[j, i] * f
+            travel += force_dir[j, i] * z[i]
+        applied += f * travel
+    springs = 0.0
+    first = n_actuators + force_dir.shape[0]
+    for j in range(stack_dir.shape[0]):
+        stretch = command[first + j] + stack_z0[j]
+        for i in range(Q.shape[0]):
+            stretch -= stack_dir[j, i] * z[i]
+        f = stack_k[j] * stretch
+        for i in range(Q.shape[0]):
+            Q[i] += stack_dir[j, i] * f
+        springs += 0.5 * f * stretch
+    return applied, springs
+
+
+@njit(cache=True)
+def kernel_rhs(y, t, command, args):
+    """
+    F(y, t) and the energy rates (``step_energy.AUX_*``) with the compiled quadratic-law forces.
+
+    y = (z_F, v_F, u) with one u per displacement drive; command: the displacement drives'
+    commands, then the force drives' forces (``Model.actuator_command``).
+    args = (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase,
+    force_dir, force_z0, stack_dir, stack_z0, stack_k, ia, ib, ca, cb, phia, phib, kind, W, C,
+    damping) -- see
+    Model._kernel_args; ``damping``: the mechanism's damping matrix (0 x 0 without one),
+    Q -= damping v and dissipation += v^T damping v (``Model.add_damping``).
+    """
+    (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, force_dir,
+     force_z0, stack_dir, stack_z0, stack_k, ia, ib, ca, cb, phia, phib, kind, W, C,
+     damping) = args
+    nF = free.shape[0]
+    nd = tau.shape[0]
+    u = y[2 * nF:2 * nF + nd]
+    zP, vP, aP = prescribed_motion(
+        t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase
+    )
+    N = mass.shape[0]
+    z = np.empty(N)
+    v = np.empty(N)
+    for i in range(nF):
+        z[free[i]] = y[i]
+        v[free[i]] = y[nF + i]
+    for i in range(prescribed.shape[0]):
+        z[prescribed[i]] = zP[i]
+        v[prescribed[i]] = vP[i]
+    Q = np.empty(N)
+    n = ia.shape[0]
+    potential, dissipation = quadratic_forces(
+        z, v, ia, ib, ca, cb, phia, phib, kind, W, C, Q, np.empty((n, 3)), np.empty((n, 3))
+    )
+    if damping.shape[0]:
+        cv = damping @ v
+        Q -= cv
+        dissipation += v @ cv
+    applied, springs = applied_forces(Q, z, command, nd, force_dir, force_z0, stack_dir,
+                                      stack_z0, stack_k)
+    potential += springs
+    m = y.shape[0]
+    out = np.empty(m + AUX_LOAD + nd)  # F and the energy rates: one allocation
+    F = out[:m]
+    for i in range(nF):
+        F[i] = y[nF + i]
+        F[nF + i] = Q[free[i]] / mass[free[i]]
+    for k in range(nd):
+        F[2 * nF + k] = (command[k] - u[k]) / tau[k]
+    return F, energy_rates(out[m:], Q, v, potential, dissipation, applied, prescribed, mass, D,
+                           sine_index, aP)
+
+
+@njit(cache=True, inline="always")
+def energy_rates(aux, Q, v, potential, dissipation, applied, prescribed, mass, D, sine_index,
+                 aP):
+    """
+    Fill and return ``aux``: the energy figures the stepping loop integrates.
+
+    The figures are indexed by ``step_energy.AUX_*``.
+
+    Power of the timed (sine-rate) constraints sum v_P (M a_P - Q_P), dissipated power,
+    mechanical energy T + U, the held forces' potential (``applied_forces``) and per
+    displacement drive k its load D_k . Q_P.
+    """
+    for k in range(D.shape[1]):
+        load = 0.0
+        for i in range(prescribed.shape[0]):
+            load += D[i, k] * Q[prescribed[i]]
+        aux[AUX_LOAD + k] = load
+    timed = 0.0
+    for i in range(sine_index.shape[0]):
+        j = prescribed[sine_index[i]]
+        timed += (mass[j] * aP[sine_index[i]] - Q[j]) * v[j]
+    kinetic = 0.0
+    for j in range(mass.shape[0]):
+        kinetic += 0.5 * mass[j] * v[j] * v[j]
+    aux[AUX_TIMED_POWER] = timed
+    aux[AUX_DISSIPATION] = dissipation
+    aux[AUX_ENERGY] = kinetic + potential
+    aux[AUX_APPLIED] = applied
+    return aux
+
+
+@njit(cache=True)
+def switch_work(y, t, old, new, free, prescribed, mass, tau, zP0, D, sine_index, sine_amp,
+                sine_w, sine_phase, n_forces, stack_dir, stack_z0, stack_k):
+    """
+    Return the drives' work when the held command changes from ``old`` to ``new`` at (y, t).
+
+    The prescribed velocities jump (``dynamics.jump_work``): 1/2 M_P (v_P+^2 - v_P-^2); the
+    stack springs' anchors move at fixed z (solver/actuation.py): sum_s 1/2 k_s
+    ((x_s' - p_s)^2 - (x_s - p_s)^2), p_s = e_s . (z - z0). ``n_forces``: the force drives'
+    count (the stacks' strokes follow the force drives' forces in the command).
+    """
+    nF = free.shape[0]
+    nd = tau.shape[0]
+    u = y[2 * nF:2 * nF + nd]
+    zP, v0, _ = prescribed_motion(t, u, old, tau, zP0, D, sine_index, sine_amp, sine_w,
+                                  sine_phase)
+    v1 = prescribed_motion(t, u, new, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase)[1]
+    work = 0.0
+    for i in range(prescribed.shape[0]):
+        work += 0.5 * mass[prescribed[i]] * (v1[i] * v1[i] - v0[i] * v0[i])
+    if stack_dir.shape[0]:
+        z = np.empty(mass.shape[0])
+        for i in range(nF):
+            z[free[i]] = y[i]
+        for i in range(prescribed.shape[0]):
+            z[prescribed[i]] = zP[i]
+        first = nd + n_forces
+        for j in range(stack_dir.shape[0]):
+            p = -stack_z0[j]
+            for i in range(z.shape[0]):
+                p += stack_dir[j, i] * z[i]
+            x0, x1 = old[first + j] - p, new[first + j] - p
+            work += 0.5 * stack_k[j] * (x1 * x1 - x0 * x0)
+    return work
+
+
+@njit(cache=True)
+def kernel_switch_work(y, t, old, new, args):
+    """`switch_work` with the compiled kernel's arguments (``kernel_rhs``)."""
+    (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, force_dir,
+     _, stack_dir, stack_z0, stack_k) = args[:15]
+    return switch_work(y, t, old, new, free, prescribed, mass, tau, zP0, D, sine_index, sine_amp,
+                       sine_w, sine_phase, force_dir.shape[0], stack_dir, stack_z0, stack_k)
+
+
+def _advance(
+    n,
+    y,
+    t,
+    dt,
+    commands,
+    held,
+    A,
+    phi1,
+    phi2,
+    rtol,
+    atol,
+    max_iter,
+    slow_after,
+    F0,
+    aux0,
+    ye,
+    emats,
+    args,
+):
+    """
+    Up to n steps from (y, t) with F0 = F(y, t) and aux0 its energy rates, taken at ye.
+
+    Step i holds the command row commands[i] (the last row for the steps beyond: one row holds
+    one command over all). F0 and aux0 are those under ``held``; where a step's row differs
+    from the command held before it, F0 and aux0 are re-evaluated at its start under the row
+    and the switch's work (``switch``) is added to the drive work: a piezo actuator's held
+    strokes, one row per step (solver/actuation.py).
+
+    Returns (y, F, aux, ye, held, dissipated, work, steps, iterations, status): the state, its
+    F and energy rates after the steps taken (at t + steps dt; the caller keeps time), the
+    point where those rates were evaluated (the accepted y is one correction further), the
+    command they were taken under, the dissipated energy and drive work over the steps
+    (``step_energy.step_energy``, with the matrices ``emats``), and why it stopped.
+    ``rhs`` and ``switch`` are globals of the function (see the end of this module), not
+    arguments: Numba cannot cache functions that take compiled functions as arguments.
+    """
+    dissipated = 0.0
+    work = 0.0
+    steps = 0
+    iterations = 0
+    status = CONVERGED
+    rows = commands.shape[0]
+    for i in range(n):
+        command = commands[min(i, rows - 1)]
+        if np.any(command != held):
+            t0 = t + i * dt
+            F0, aux0 = rhs(y, t0, command, args)
+            ye = y
+            work += switch(y, t0, held, command, args)
+            held = command
+        t1 = t + (i + 1) * dt  # on the step grid, not a running sum
+        U = y + phi1 @ F0
+        weight = rtol * np.abs(U) + atol
+        y1 = U.copy()
+        previous = np.inf
+        converged = False
+        k = 0
+        F1, aux1 = F0, aux0
+        N1 = F0  # replaced in the first iteration
+        ye1 = y1
+        for k in range(1, max_iter + 1):
+            F1, aux1 = rhs(y1, t1, command, args)
+            N1 = F1 - F0 - A @ (y1 - y)
+            y_next = U + phi2 @ N1
+            change = np.max(np.abs(y_next - y1) / weight)
+            if not math.isfinite(change):
+                break
+            if change <= 1.0:
+                # F at the accepted point, to first order in a change below tolerance;
+                # the energy rates stay where they were evaluated (ye1).
+                F1 = F1 + A @ (y_next - y1)
+                ye1 = y1
+                y1 = y_next
+                converged = True
+                break
+            if change > 0.5 * previous:
+                break
+            previous = change
+            y1 = y_next
+        if not converged:
+            status = NOT_CONTRACTING
+            break
+        dd, dw = step_energy(y, ye, y1, ye1, F0, N1, aux0, aux1, command, t1 - dt, dt, emats)
+        dissipated += dd
+        work += dw
+        y = y1
+        F0, aux0, ye = F1, aux1, ye1
+        steps += 1
+        iterations += k
+        if k > slow_after:
+            status = SLOW
+            break
+    return y, F0, aux0, ye, held, dissipated, work, steps, iterations, status
+
+
+#: The right-hand side the compiled loop calls (resolved when Numba compiles ``advance``).
+rhs = kernel_rhs
+#: The work of a change of the held command, likewise.
+switch = kernel_switch_work
+
+#: The loop, compiled with the quadratic-law kernel.
+advance = njit(cache=True)(_advance)
+
+# Numba's cache of each kernel is keyed on its own file only (``kernel_cache``).
+kernel_cache.revalidate(kernel_cache.dispatchers_of(kernels, step_energy_module, globals()),
+                        __file__)
+
+
+def _interpreted_rhs(y, t, command, model):
+    return model.rhs_python(y, t, command)
+
+
+def _interpreted_switch_work(y, t, old, new, model):
+    return switch_work(y, t, old, new, model.part.free.astype(np.int64),
+                       model.part.prescribed.astype(np.int64), model.mass, *model.motion,
+                       model.force_dir.shape[0],
+                       model.stack_dir, model.stack_z0, model.stack_k)
+
+
+#: The same loop as plain Python, calling ``Model.rhs_python`` (any hinge law); pass the
+#: Model as ``args``.
+advance_interpreted = types.FunctionType(
+    _advance.__code__, {**globals(), "rhs": _interpreted_rhs, "switch": _interpreted_switch_work},
+    "advance_interpreted")

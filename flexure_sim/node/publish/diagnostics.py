@@ -1,0 +1,224 @@
+"""
+The stage node's ``diagnostics`` topic.
+
+One ``DiagnosticStatus`` per window of ticks (~10 Hz of simulated time) with timings, pacing,
+solver work, command counters, engine failures, recording state, QoS problems and the largest hinge
+stress ratio, at level OK, WARN or ERROR (README "Diagnostics").
+"""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from flexure_sim.engine.hinges.stress import ratio_map
+from flexure_sim.node.publish import interface as itf
+
+
+class Window:
+    """
+    Accumulators of one diagnostics window and the cumulative counters at its start.
+
+    The accumulators are wall-clock timings of the stepping thread.
+    """
+
+    __slots__ = ("ticks", "step_sum", "step_max", "snap_sum", "pub_sum", "pub_max", "tick_max",
+                 "wall0", "sim0", "missed0", "lin0", "steps0", "counters0", "engine_failures0",
+                 "intake0")
+
+    def __init__(self, wall0: float, sim0: float, missed0: int, lin0: int, steps0: int,
+                 counters0: dict[str, int], engine_failures0: int,
+                 intake0: tuple[int, float]) -> None:
+        self.ticks = 0
+        self.step_sum = self.step_max = self.snap_sum = self.pub_sum = self.pub_max = 0.0
+        self.tick_max = 0.0
+        self.wall0, self.sim0, self.missed0 = wall0, sim0, missed0
+        self.lin0, self.steps0 = lin0, steps0
+        self.counters0 = counters0
+        self.engine_failures0 = engine_failures0
+        self.intake0 = intake0
+
+    def add(self, step_time: float, snap_time: float, pub_time: float, tick_time: float) -> None:
+        """
+        One tick's wall-clock times (s).
+
+        Engine steps, snapshot, pack + record + publish, whole tick.
+        """
+        self.ticks += 1
+        self.step_sum += step_time
+        self.snap_sum += snap_time
+        self.pub_sum += pub_time
+        if step_time > self.step_max:
+            self.step_max = step_time
+        if pub_time > self.pub_max:
+            self.pub_max = pub_time
+        if tick_time > self.tick_max:
+            self.tick_max = tick_time
+
+
+class Diagnostics:
+    """
+    Builds and publishes the status of the stepping loop ``loop`` (a `SteppingLoop`).
+
+    Recorded on channel ``channel`` of its recording session, then published by ``publisher``.
+    ``extra`` returns further (counters, notes, level) from the node (QoS problems).
+    """
+
+    def __init__(self, loop: Any, publisher: Any, channel: int, name: str, hardware_id: str,
+                 extra: Any = None) -> None:
+        self.loop = loop
+        self._publisher = publisher
+        self._channel = channel
+        self._name = name
+        self._hardware_id = hardware_id
+        self._extra = extra
+        #: Hinges with a yield strength: names, indices, sigma/sigma_y = C . |wrench|.
+        self._stress = ratio_map(loop.sim.mechanism)
+        self.window = self.new_window()
+
+    def stress_ratio(self) -> tuple[list[tuple[str, Any]], list[str], int]:
+        """
+        (values, notes, level).
+
+        The largest hinge stress ratio sigma / sigma_y at the window's last tick
+        (engine/hinges/stress.py), WARN above 1; nothing if no hinge has sigma_y.
+        """
+        names, index, coefficients = self._stress
+        snap = self.loop.snapshot
+        if not names or snap is None:
+            return [], [], itf.OK
+        ratios = (coefficients * np.abs(snap.wrenches[index])).sum(axis=1)
+        k = int(np.argmax(ratios))
+        ratio = float(ratios[k])
+        values = [("stress_ratio_max", ratio), ("stress_ratio_hinge", names[k])]
+        if ratio > 1.0:
+            return values, [f"hinge {names[k]} above its yield strength "
+                            f"(stress ratio {ratio:.3g})"], itf.WARN
+        return values, [], itf.OK
+
+    def counters(self) -> dict[str, int]:
+        filt = self.loop.filter
+        return filt.counters.as_dict() if filt is not None else {}
+
+    def intake(self) -> tuple[int, float]:
+        """Commands taken so far and the time their intake took (s)."""
+        intake = self.loop.intake
+        return (intake.count, intake.time_s) if intake is not None else (0, 0.0)
+
+    def new_window(self) -> Window:
+        loop = self.loop
+        pacer = loop.pacer
+        stats = loop.sim.stats
+        return Window(time.perf_counter(), loop.sim.state.t, pacer.stats.missed if pacer else 0,
+                      stats.linearizations, stats.steps, self.counters(), loop.hold.failures,
+                      self.intake())
+
+    def publish(self, stamp: int) -> None:
+        """Publish (and record) the status of the window ending now; start a new window."""
+        loop = self.loop
+        w = self.window
+        now = time.perf_counter()
+        t = loop.sim.state.t
+        wall = now - w.wall0
+        rtf = (t - w.sim0) / wall if wall > 0 else 0.0
+        n = max(w.ticks, 1)
+        pacer = loop.pacer
+        counters = self.counters()
+        new = {k: counters[k] - w.counters0.get(k, 0) for k in counters}
+        stats = loop.sim.stats
+        steps = stats.steps - w.steps0
+        level, notes = itf.OK, []
+        missed_window = (pacer.stats.missed - w.missed0) if pacer else 0
+        if missed_window:
+            level, notes = itf.WARN, notes + [f"{missed_window} missed ticks"]
+        if new.get("rejected"):
+            level, notes = itf.WARN, notes + [f"{new['rejected']} commands rejected"]
+        if new.get("clamped"):
+            level, notes = itf.WARN, notes + [f"{new['clamped']} commands clamped"]
+        if new.get("rate_limited"):
+            notes.append(f"{new['rate_limited']} commands rate-limited")
+        extra_values: list[tuple[str, Any]] = []
+        if self._extra is not None:
+            extra_values, extra_notes, extra_level = self._extra()
+            notes += extra_notes
+            level = max(level, extra_level)
+        stress_values, stress_notes, stress_level = self.stress_ratio()
+        notes += stress_notes
+        level = max(level, stress_level)
+        hold = loop.hold
+        failures = hold.failures - w.engine_failures0
+        if failures:
+            level, notes = itf.ERROR, notes + [
+                f"{failures} engine failures, state held: {hold.last_error}"]
+        session = loop.session
+        rec = session.current
+        if session.error:
+            level, notes = itf.ERROR, notes + [f"recording failed: {session.error}"]
+        elif rec is not None and rec.dropped_count:
+            level, notes = max(level, itf.WARN), notes + [
+                f"{rec.dropped_count} messages not recorded"]
+        values: list[tuple[str, Any]] = [
+            ("sim_time", t),
+            ("time_mode", loop.time_mode),
+            ("real_time_factor", rtf),
+            ("real_time_factor_run", (t - loop.run_sim0) / max(now - loop.run_wall0, 1e-9)),
+            ("publish_rate", loop.rate),
+            ("sim_step", loop.dt),
+            ("steps_per_tick", loop.n_steps),
+            ("stepping_nice", loop.nice),
+            ("middleware_threads", loop.middleware_threads),
+            ("stepping_priority", loop.priority),
+            ("cpu_latency_us", loop.cpu_latency_us),
+            ("ticks", loop.ticks),
+            ("step_time_mean_us", 1e6 * w.step_sum / n),
+            ("step_time_max_us", 1e6 * w.step_max),
+            ("engine_step_time_mean_us", 1e6 * w.step_sum / max(steps, 1)),
+            ("snapshot_time_mean_us", 1e6 * w.snap_sum / n),
+            ("publish_time_mean_us", 1e6 * w.pub_sum / n),
+            ("publish_time_max_us", 1e6 * w.pub_max),
+            ("tick_time_mean_us", 1e6 * (w.step_sum + w.snap_sum + w.pub_sum) / n),
+            ("tick_time_max_us", 1e6 * w.tick_max),
+            ("solver_iterations", getattr(stats, "iterations", 0)),
+            ("linearizations", stats.linearizations),
+            ("linearizations_window", stats.linearizations - w.lin0),
+            ("engine_steps", stats.steps),
+            ("engine_failures", hold.failures),
+            ("engine_error", hold.last_error),
+        ]
+        if pacer is not None:
+            p50, p99 = pacer.stats.late_percentiles(0.5, 0.99)
+            values += [
+                ("missed_ticks", pacer.stats.missed),
+                ("missed_ticks_window", missed_window),
+                ("paced_ticks", pacer.stats.ticks),
+                ("slips", pacer.stats.slips),
+                ("skipped_ticks", pacer.stats.skipped),
+                ("merged_ticks", pacer.stats.merged),
+                ("max_late_us", 1e6 * pacer.stats.max_late_s),
+                ("wake_spin_us", 1e6 * pacer.spin_s),
+                ("jitter_p50_us", 1e6 * p50),
+                ("jitter_p99_us", 1e6 * p99),
+            ]
+        values += [(f"commands_{k}", v) for k, v in counters.items()]
+        taken, intake_s = self.intake()
+        taken -= w.intake0[0]
+        values.append(("command_time_mean_us",
+                       1e6 * (intake_s - w.intake0[1]) / taken if taken else 0.0))
+        if loop.filter is not None:
+            values += loop.filter.values()
+        values += extra_values + stress_values
+        if loop.display is not None:
+            values += loop.display.values()
+        values += [
+            ("recording", rec is not None),
+            ("recording_path", str(rec.path) if rec is not None else ""),
+            ("recorded_messages", rec.accepted_count if rec is not None else 0),
+            ("recording_dropped", rec.dropped_count if rec is not None else 0),
+        ]
+        payload = itf.encode_diagnostics(
+            stamp, f"{self._name}: simulation", self._hardware_id, level,
+            "; ".join(notes) if notes else "running", values)
+        session.write(((self._channel, payload),), stamp)
+        self._publisher.publish(payload)
+        self.window = self.new_window()

@@ -1,0 +1,396 @@
+"""
+`StageNode`: the rclpy node around the engine, a thin shell.
+
+It loads the mechanism, declares and validates the parameters (`params`, `declare`), creates
+the publishers, the polled command subscription (`polled`, `commands`) and the services, and
+hands everything that touches the simulation or the recording to the stepping thread
+(`stepping`) through its request queue (`requests`). Recording files are managed by a
+`session.RecordingSession`, diagnostics by `diagnostics`, incompatible QoS by `qos_watch`.
+The executor (main thread) serves only services, parameter changes and QoS events. Topics,
+parameters and services are documented in README.md, "## stage_node".
+"""
+from __future__ import annotations
+
+import gc
+from pathlib import Path
+from typing import Any, Optional
+
+import rclpy
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.exceptions import ParameterException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.task import Future
+from std_srvs.srv import SetBool, Trigger
+
+from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism, resolve_mechanism_path
+from flexure_sim.errors import FlexureSimError
+from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.recording import RecordingError
+from flexure_sim.node.publish import interface as itf
+from flexure_sim.node.inputs.command_intake import intake_for
+from flexure_sim.node.params.declare import coerce_integer_overrides, declare
+from flexure_sim.node.publish.diagnostics import Diagnostics
+from flexure_sim.node.publish import display as dsp
+from flexure_sim.node.publish.display import display_every
+from flexure_sim.node.inputs.drive_bank import (
+    LIMIT_KEYS, FilterBank, command_limits, drive_limits, drive_parameter_specs, drives_problem,
+    in_command_units, named_drives, parameter_name, stroke_ends, units,
+)
+from flexure_sim.node.inputs.command_checks import CommandFilter, DriveLimits
+from flexure_sim.node.stage.engine_guard import StrokeProbe
+from flexure_sim.node.stage.pacing import set_threads_nice
+from flexure_sim.node.params.checks import validate
+from flexure_sim.node.params.table import as_declared_type, parameter_specs
+from flexure_sim.node.stage.polled import PolledGroup, never_called
+from flexure_sim.node.stage.qos_watch import QosWatch
+from flexure_sim.node.stage.requests import REQUEST_TIMEOUT_S
+from flexure_sim.node.record.session import PARAMETER_CHANGE_NAME, RecordingSession, run_metadata
+from flexure_sim.node.stage.stepping_thread import RELINEARIZE_TOL, SteppingLoop
+
+NODE_NAME = "stage_node"
+
+
+class StartupError(FlexureSimError, RuntimeError):
+    """The node cannot start (bad mechanism, invalid parameters, recording impossible)."""
+
+
+def load(mechanism_arg: Any) -> tuple[Any, Path]:
+    """
+    Return the mechanism named by the ``mechanism`` parameter and its file.
+
+    StartupError with the loader's one-line message (file: key: problem) if it does not load.
+    """
+    if not isinstance(mechanism_arg, str) or not mechanism_arg.strip():
+        raise StartupError("parameter mechanism: expected a built-in name or a YAML path, got "
+                           f"{mechanism_arg!r}")
+    try:
+        mech = load_mechanism(mechanism_arg)
+        path = resolve_mechanism_path(mechanism_arg).resolve()
+    except ConfigError as exc:
+        raise StartupError(str(exc)) from exc
+    except Exception as exc:  # noqa: BLE001 - whatever the loader lets through: one line
+        raise StartupError(f"{mechanism_arg}: cannot load the mechanism "
+                           f"({type(exc).__name__}: {exc})") from exc
+    return mech, path
+
+
+class StageNode(Node):
+    """The stage node. Construct after ``rclpy.init``; call `shutdown` before destroy_node."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self._log = self.get_logger()
+        #: Done when the stepping thread has ended (main() spins until then).
+        self.stopped = Future()
+        self.loop: Optional[SteppingLoop] = None
+        self.session = RecordingSession(self._log)
+        try:
+            self._build()
+        except BaseException:
+            self.shutdown()  # a recorder process may already run
+            raise
+
+    def _build(self) -> None:
+        coerce_integer_overrides(self)
+        # ---- mechanism and parameters (validated before anything starts) ----
+        declare(self, parameter_specs()[0])
+        self.mechanism, self.mechanism_path = load(self.get_parameter("mechanism").value)
+        #: The named drives (several, or a force drive; `drive_bank`), else the single drive.
+        self._named = named = named_drives(self.mechanism)
+        drive = self.mechanism.drive if not named else None
+        defaults = command_limits(drive) if drive else None
+        specs = parameter_specs(defaults, "each drive has its own drives.<name>.* limits"
+                                if named else "the mechanism has no drive")
+        self._specs = {s.name: s for s in (in_command_units(specs, drive) if drive else specs)
+                       + drive_parameter_specs(named)}
+        try:
+            for spec in list(self._specs.values())[1:]:
+                declare(self, spec)
+        except ParameterException as exc:
+            raise StartupError(f"invalid parameter: {exc}") from exc
+        values = self._values()
+        self._probe = StrokeProbe(self.mechanism, float(values["sim_step"]))
+        own = {"stroke_min": defaults[0], "stroke_max": defaults[1]} if defaults else {}
+        own.update({s.name: s.default for s in drive_parameter_specs(named)})
+        problem = self._problem(values, {**values, **own})
+        if problem:
+            raise StartupError(f"invalid parameters: {problem}")
+        time_mode = values["time_mode"]
+        dt = float(values["sim_step"])
+        try:
+            self.interface = itf.StageInterface(
+                self.mechanism, time_mode, values["frame_prefix"])
+        except ValueError as exc:
+            raise StartupError(str(exc)) from exc
+        # No energy bookkeeping: the node publishes no energies (Model.energy).
+        sim = Simulation(self.mechanism, dt=dt, relinearize_tol=RELINEARIZE_TOL, energy=False)
+        try:
+            # Warm up (compiled kernels, first Jacobian) before the first paced tick.
+            sim.step(1)
+            sim.snapshot()
+            sim.reset()
+        except Exception as exc:  # noqa: BLE001 - the engine's own message, at start-up
+            raise StartupError(
+                f"the engine failed its first step: {type(exc).__name__}: {exc}") from exc
+        drive_filter: Any = None
+        if drive is not None:
+            drive_filter = CommandFilter(self._limits(values))
+        elif named:
+            drive_filter = FilterBank([d.name for d in named],
+                                      [drive_limits(values, d.name) for d in named])
+        if drive_filter is not None and drive_filter.differs(0.0):
+            sim.set_command(drive_filter.applied)
+
+        # ---- publishers, subscription, services ----
+        qos = itf.stream_qos()
+        reliability = values["command_reliability"]
+        self.qos_watch = watch = QosWatch(self._log, reliability)
+        tick_pubs = [self.create_publisher(t.msg_type, t.name, qos,
+                                           event_callbacks=watch.publisher_callbacks(t.name))
+                     for t in self.interface.tick_topics]
+        self._tick_names = [p.topic_name for p in tick_pubs]
+        diag_pub = self.create_publisher(
+            self.interface.diagnostics.msg_type, self.interface.diagnostics.name, qos,
+            event_callbacks=watch.publisher_callbacks(self.interface.diagnostics.name))
+        self._diag_topic = diag_pub.topic_name
+        self.loop = loop = SteppingLoop(
+            sim, drive_filter, self.interface, tick_pubs, self.session, self._log,
+            time_mode=time_mode, rate=float(values["publish_rate"]), dt=dt,
+            wake_spin=float(values["wake_spin"]), nice=int(values["stepping_nice"]),
+            cpu_latency_us=int(values["cpu_latency_us"]),
+            priority=int(values["stepping_priority"]),
+            merge_after=int(values["merge_late_ticks"]),
+            monitor_rate=float(values["monitor_rate"]))
+        # Recording channels: the tick topics in publishing order, diagnostics, commands.
+        self._command_subs = [self.create_subscription(
+            spec.msg_type, spec.name, never_called, itf.command_qos(reliability), raw=True,
+            callback_group=PolledGroup()) for spec in self.interface.commands]
+        command_topics = [sub.topic_name for sub in self._command_subs]
+        if command_topics:  # run by the stepping thread, not on an executor timer (qos_watch)
+            loop.graph_check = lambda: [watch.check_command_publishers(self, topic)
+                                        for topic in command_topics]
+        loop.intake = intake_for(self._command_subs, drive_filter, named, len(tick_pubs) + 1,
+                                 self.session.write, self._log, loop.throttle,
+                                 units(drive)[0] if drive else "m")
+        loop.diagnostics = Diagnostics(loop, diag_pub, len(tick_pubs), self.get_name(),
+                                       self.mechanism.name, watch.diagnostics)
+        first = len(tick_pubs) + 1 + len(command_topics)  # after the commands
+        #: Extra recorded topics: (resolved name, type name, QoS), in channel order.
+        self._display_topics, self._tf_static_pub = dsp.build_display(self, values, qos, watch,
+                                                                      first)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_service(SetBool, "~/record", self._on_record)
+        self.create_service(Trigger, "~/step", self._on_step)
+        if values["record"]:
+            try:
+                self._start_recording()
+            except RecordingError as exc:
+                raise StartupError(f"cannot record: {exc}") from exc
+        self._sync_record_param = False
+        self.add_pre_set_parameters_callback(self._coerce_parameters)
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+
+        rec = self.session.current
+        self._log.info(
+            f"mechanism {self.mechanism.name} ({self.mechanism_path}), {time_mode} mode, "
+            f"{loop.rate:g} Hz x {loop.n_steps} engine steps of {dt:g} s, "
+            f"{len(tick_pubs)} topics per tick, recording {rec.path if rec else 'off'}")
+        # Everything built so far lives as long as the node: keep it out of the collector's
+        # full passes, which would otherwise pause the stepping loop for milliseconds.
+        gc.collect()
+        gc.freeze()
+        loop.start(self._stepping_ended, self._stepping_failed)
+
+    @property
+    def time_mode(self) -> str:
+        return self.loop.time_mode
+
+    # ================================================================ parameters
+    def _values(self) -> dict[str, Any]:
+        return {name: self.get_parameter(name).value for name in self._specs}
+
+    @staticmethod
+    def _limits(values: dict[str, Any]) -> DriveLimits:
+        return DriveLimits(float(values["stroke_min"]), float(values["stroke_max"]),
+                           float(values["slew_rate"]))
+
+    def _problem(self, values: dict[str, Any], current: dict[str, Any]) -> Optional[str]:
+        """
+        Why ``values`` are invalid, or None.
+
+        Checked as a whole, per drive, and whether the engine could follow the (changed) stroke
+        ends.
+        """
+        problem = validate(values) or drives_problem(values, [d.name for d in self._named])
+        if problem:
+            return problem
+        for name, drive, unit in stroke_ends(self.mechanism):
+            if values[name] != current[name]:
+                problem = self._probe.end_problem(name, values[name], drive, unit)
+                if problem:
+                    return problem
+        return None
+
+    def _coerce_parameters(self, params: list[Parameter]) -> list[Parameter]:
+        """Pre-set callback: ``ros2 param set ... 1e-6`` or ``2`` sets a double parameter."""
+        out = []
+        for p in params:
+            value = as_declared_type(self._specs.get(p.name), p.value)
+            out.append(p if value is p.value else Parameter(p.name, Parameter.Type.DOUBLE, value))
+        return out
+
+    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        """On-set callback: check the whole resulting set of values; no side effects."""
+        current = self._values()
+        values = dict(current)
+        for p in params:
+            if p.name in values:
+                values[p.name] = p.value
+        problem = self._problem(values, current)
+        return SetParametersResult(successful=problem is None, reason=problem or "")
+
+    def _apply_parameters(self, params: list[Parameter]) -> None:
+        """Post-set callback: hand accepted changes to the stepping thread."""
+        names = {p.name for p in params}
+        values = self._values()
+        loop = self.loop
+        if names & {"stroke_min", "stroke_max", "slew_rate"} and not self._named \
+                and loop.filter is not None:
+            limits = self._limits(values)
+            loop.requests.call(lambda: loop.filter.set_limits(limits))
+        for d in self._named:
+            if names & {parameter_name(d.name, k) for k in LIMIT_KEYS}:
+                one, limits = loop.filter.filter(d.name), drive_limits(values, d.name)
+                loop.requests.call(lambda one=one, limits=limits: one.set_limits(limits))
+        if names & {"publish_rate", "wake_spin", "monitor_rate", "merge_late_ticks"}:
+            rate, spin = float(values["publish_rate"]), float(values["wake_spin"])
+            monitor, merge = float(values["monitor_rate"]), int(values["merge_late_ticks"])
+            loop.requests.call(lambda: loop.set_pacing(rate, spin, monitor, merge))
+        if names & {"publish_rate", "display_rate"}:
+            every = display_every(float(values["publish_rate"]), float(values["display_rate"]))
+            loop.requests.call(lambda: setattr(loop, "display_every", every))
+        if "display_scale" in names:
+            scale = float(values["display_scale"])
+            loop.requests.call(lambda: setattr(loop.display.display.scene, "display_scale", scale))
+        if "record" in names and not self._sync_record_param:
+            ok, message = self._set_recording(bool(values["record"]))
+            (self._log.info if ok else self._log.error)(message)
+        changed = {p.name: itf.value_text(p.value) for p in params}
+        loop.requests.call(lambda: self.session.note(
+            PARAMETER_CHANGE_NAME, {"t": repr(loop.sim.state.t), **changed}))
+
+    # ================================================================ services
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        response.success, response.message = self.loop.requests.run(self._reset)
+        return response
+
+    def _on_record(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
+        ok, message = self._set_recording(bool(request.data))
+        if ok:
+            self._sync_record_param = True
+            try:
+                self.set_parameters([Parameter("record", Parameter.Type.BOOL, bool(request.data))])
+            finally:
+                self._sync_record_param = False
+        response.success, response.message = ok, message
+        return response
+
+    def _on_step(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        if self.time_mode != "lockstep":
+            response.success = False
+            response.message = ("~/step works in lockstep mode only "
+                                f"(time_mode is {self.time_mode})")
+            return response
+        response.success, response.message = self.loop.requests.run(self.loop.step_once)
+        return response
+
+    def _set_recording(self, on: bool) -> tuple[bool, str]:
+        def change() -> tuple[bool, str]:
+            current = self.session.current
+            if on:
+                if current is not None:
+                    return True, f"already recording to {current.path}"
+                return True, f"recording to {self._start_recording()}"
+            if current is None:
+                return True, "not recording"
+            return True, f"closed {self.session.stop()}"
+        return self.loop.requests.run(change)
+
+    # ======================================================= stepping-thread work
+    def _start_recording(self) -> Path:
+        values = self._values()
+        qos = itf.stream_qos()
+        topics = [(name, spec.type_name, qos)
+                  for name, spec in zip(self._tick_names, self.interface.tick_topics)]
+        topics.append((self._diag_topic, self.interface.diagnostics.type_name, qos))
+        for sub, spec in zip(self._command_subs, self.interface.commands):
+            topics.append((sub.topic_name, spec.type_name,
+                           itf.command_qos(values["command_reliability"])))
+        topics += self._display_topics
+        loop = self.loop
+        node = self.get_fully_qualified_name()
+        metadata = run_metadata(values, self.mechanism, self.mechanism_path, self.interface, node,
+                                loop.n_steps, RELINEARIZE_TOL, loop.runs, loop.sim.state.t)
+        return self.session.start(values, self.mechanism.name, node, topics, metadata,
+                                  lossless=self.time_mode != "realtime")
+
+    def _reset(self) -> tuple[bool, str]:
+        closed = self.session.stop()
+        self.loop.reset()
+        message = "simulation reset to t = 0"
+        if closed is not None:
+            message += f"; closed {closed}"
+            if self.get_parameter("record").value:
+                message += f"; recording to {self._start_recording()}"
+        self._log.info(message)
+        return True, message
+
+    # ================================================================ shutdown
+    def _stepping_failed(self, exc: BaseException) -> bool:
+        if not self.context.ok():
+            return False  # shutting down: publishers may already be gone
+        try:
+            self._log.fatal(f"simulation stopped: {type(exc).__name__}: {exc}")
+        finally:
+            self.context.try_shutdown()  # ends main()'s spin loop
+        return True
+
+    def _stepping_ended(self, ok: bool) -> None:
+        try:
+            self.stopped.set_result(ok)  # wakes the executor
+        except Exception:  # noqa: BLE001 - the executor is already gone: nobody to wake
+            pass
+
+    def adopt_middleware_threads(self, tids: set[int]) -> None:
+        """
+        Give the middleware's threads ``tids`` the niceness asked for the stepping thread.
+
+        The stepping thread takes and publishes through the middleware and waits on its locks.
+        A middleware thread holding one at niceness 0 waits behind the other processes for the
+        shared core while the stepping thread waits for it (a priority inversion): next to a
+        controller that blocked a tick for 1.1-1.6 ms every one to three seconds
+        (BENCHMARKS.md). Threads they start later inherit the niceness. ``tids``: the threads
+        ROS started in this process (`stage_node` passes them; in-process nodes do not).
+        """
+        nice = self.loop.nice_request
+        done, refused = set_threads_nice(tids, nice) if tids else (0, "")
+        self.loop.middleware_threads = done
+        if refused:
+            self._log.info(f"middleware threads: {refused}; {len(tids) - done} of {len(tids)} "
+                           "keep their niceness")
+
+    def shutdown(self) -> None:
+        """Stop the stepping thread and finish the recording (idempotent)."""
+        if not self.context.ok():
+            # rosout needs a valid context; log to the console only.
+            self._log = rclpy.logging.get_logger(f"{self.get_logger().name}.shutdown")
+            self.session.log = self._log
+        if self.loop is not None:
+            self.loop.stop(REQUEST_TIMEOUT_S)
+        self.session.close()
+
+    @property
+    def failure(self) -> Optional[BaseException]:
+        return self.loop.failure if self.loop is not None else None

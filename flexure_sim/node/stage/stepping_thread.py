@@ -1,0 +1,352 @@
+"""
+The stage node's stepping thread.
+
+It owns the `Simulation` and the recording, and per publish tick applies the drive commands
+received since the last tick (`commands`), advances the engine by round(1 / (publish_rate *
+sim_step)) steps and publishes the state (`interface`), packing each message to CDR once and
+publishing and recording the same bytes.
+
+Real-time mode paces ticks with absolute deadlines of a steady clock (`pacing.Pacer`; with
+``merge_late_ticks`` a loop that many ticks late merges them into one that steps the engine
+through all their periods and publishes once); fast mode runs flat out; lockstep mode runs
+one tick per ``~/step`` request. Between ticks the thread runs the work services and
+parameter changes queued for it (`requests`). A tick whose engine step fails holds the last
+good state (`engine_guard.EngineHold`): input never stops the thread.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Optional, Sequence
+
+from flexure_sim.engine.actuators.sensor import Sensor
+from flexure_sim.engine.solver.simulation import Simulation, SolverError
+from flexure_sim.node.publish.diagnostics import Diagnostics
+from flexure_sim.node.inputs.command_checks import CommandFilter, WarningThrottle
+from flexure_sim.node.stage.engine_guard import EngineHold, snapshot_finite
+from flexure_sim.node.stage.cpu_latency import request_cpu_latency
+from flexure_sim.node.stage.pacing import Pacer, set_thread_fifo, set_thread_nice
+from flexure_sim.node.stage.qos_watch import GRAPH_CHECK_PERIOD_S
+from flexure_sim.node.params.checks import monitor_every, steps_per_tick
+from flexure_sim.node.stage.requests import RequestQueue
+from flexure_sim.node.record.session import RecordingSession
+
+#: Engine's relinearize_tol: None = its default, re-linearize only when the step's iteration
+#: stops contracting (the answer does not depend on where the Jacobian was taken), which lets
+#: Simulation.step(n) run all n steps in one compiled loop.
+RELINEARIZE_TOL = None
+#: Diagnostics rate (Hz of simulated time), or every tick if the publish rate is lower.
+DIAGNOSTICS_RATE = 10.0
+#: Real time: lateness (s) beyond which the schedule slips (re-anchors), catching up tick by
+#: tick, and merging late ticks (``merge_late_ticks``; then only a stopped process slips).
+SLIP_LAG_S = 0.1
+MERGE_MAX_LAG_S = 1.0
+
+
+def crossed(first: int, count: int, every: int) -> bool:
+    """Whether one of the ticks ``first .. first + count - 1`` is a multiple of ``every``."""
+    return (first + count - 1) // every != (first - 1) // every
+
+
+class SteppingLoop:
+    """Ticks of one simulation. Build, attach `diagnostics` and `intake`, then `start`."""
+
+    def __init__(self, sim: Simulation, drive_filter: Optional[CommandFilter], interface: Any,
+                 publishers: Sequence[Any], session: RecordingSession, log: Any, *,
+                 time_mode: str, rate: float, dt: float, wake_spin: float, nice: int,
+                 monitor_rate: float = 0.0, merge_after: int = 0,
+                 cpu_latency_us: int = -1, priority: int = 0) -> None:
+        self.sim = sim
+        self.filter = drive_filter
+        self.interface = interface
+        self._publishers = list(publishers)
+        self.session = session
+        self._log = log
+        self.time_mode = time_mode
+        self.rate = rate
+        self.dt = dt
+        self.n_steps, _ = steps_per_tick(rate, dt)
+        self.diag_every = max(1, round(rate / DIAGNOSTICS_RATE))
+        self.monitor_rate = monitor_rate
+        #: Ticks per publication of the monitoring topics (``monitor_rate``).
+        self.monitor_every = monitor_every(rate, monitor_rate)
+        self._control_publishers = [self._publishers[i] for i in interface.control_indices]
+        #: The output's sensor (``output/measured``), sampled once per published tick.
+        spec = interface.mechanism.sensor if interface.has_sensor else None
+        self.sensor: Optional[Sensor] = Sensor(spec, 1.0 / rate) if spec is not None else None
+        self.pacer: Optional[Pacer] = (
+            Pacer(1.0 / rate, spin_s=min(wake_spin, 1.0 / rate)) if time_mode == "realtime"
+            else None)
+        self._set_merge(merge_after)
+        #: Niceness asked for the stepping thread (and the middleware's threads, `shell`), and
+        #: the one in effect; middleware threads given it (`StageNode.adopt_middleware_threads`).
+        self.nice_request = nice
+        self.nice = 0
+        self.middleware_threads = 0
+        #: SCHED_FIFO priority asked for the stepping thread in real time (0: none), and the
+        #: one in effect.
+        self._priority_request = priority if time_mode == "realtime" else 0
+        self.priority = 0
+        #: CPU wake-up latency to ask for in real-time mode (`cpu_latency`; -1: none), and
+        #: the one in effect while the loop runs (-1: none held).
+        self._latency_request = cpu_latency_us if time_mode == "realtime" else -1
+        self.cpu_latency_us = -1
+        self.ticks = 0
+        self.runs = 0
+        self.hold = EngineHold()
+        self.throttle = WarningThrottle(1.0)
+        self.intake: Any = None
+        #: A check of the ROS graph (`qos_watch.QosWatch.check_command_publishers`) run
+        #: between ticks every GRAPH_CHECK_PERIOD_S of wall time; None: none.
+        self.graph_check: Any = None
+        self._next_graph_check = 0.0
+        self.diagnostics: Optional[Diagnostics] = None
+        #: The last published snapshot (the diagnostics' hinge stress ratio), None before.
+        self.snapshot: Any = None
+        #: Display output (`display.DisplayOutput`) and publish ticks per display tick
+        #: (0: off); set before `start`.
+        self.display: Any = None
+        self.display_every = 0
+        self.requests = RequestQueue(self.alive)
+        self.run_wall0 = time.perf_counter()
+        self.run_sim0 = sim.state.t
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        #: Why the thread ended, if it failed.
+        self.failure: Optional[BaseException] = None
+
+    # ------------------------------------------------------------------ thread
+    def start(self, on_end: Any, on_failure: Any) -> None:
+        """
+        Run the loop in its own thread.
+
+        ``on_end(ok)`` is called when it ends; ``on_failure(exc)`` first if it raised: it reports
+        and returns whether that is a failure (False: the node was shutting down anyway).
+        """
+        self._on_end, self._on_failure = on_end, on_failure
+        self._thread = threading.Thread(target=self._run, name="stage-stepping", daemon=True)
+        self._thread.start()
+
+    def alive(self) -> bool:
+        thread = self._thread
+        return thread is not None and thread.is_alive()
+
+    def stop(self, timeout: float) -> None:
+        """End the thread (waits up to ``timeout`` s); idempotent."""
+        self._stop.set()
+        self.requests.wake.set()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=timeout)
+
+    def _run(self) -> None:
+        latency = None
+        try:
+            self.nice, refused = set_thread_nice(self.nice_request)
+            if refused:
+                self._log.info(f"stepping thread: {refused}")
+            if self._priority_request:
+                self.priority, refused = set_thread_fifo(self._priority_request)
+                if refused:
+                    self._log.info(f"stepping thread: {refused}")
+            if self._latency_request >= 0:
+                latency, refused = request_cpu_latency(self._latency_request)
+                if latency is None:
+                    self._log.info(f"stepping thread: {refused}")
+                else:
+                    self.cpu_latency_us = latency.latency_us
+            pacer = self.pacer
+            if pacer is not None:
+                pacer.start()
+            self.restart_clocks()
+            requests = self.requests
+            while not self._stop.is_set():
+                if requests and requests.serve() and pacer is not None:
+                    pacer.reanchor()
+                if self.time_mode == "lockstep":
+                    requests.wake.wait(0.1)
+                    requests.wake.clear()
+                    self._check_graph()
+                    continue
+                if pacer is not None:
+                    pacer.wait()
+                self.tick()
+                if pacer is not None:
+                    pacer.done()
+                self._check_graph()
+        except BaseException as exc:  # noqa: BLE001 - reported, then the node shuts down
+            if not self._stop.is_set() and self._on_failure(exc):
+                self.failure = exc
+        finally:
+            if latency is not None:
+                latency.release()
+                self.cpu_latency_us = -1
+            self.requests.fail_all()
+            self._on_end(self.failure is None)
+
+    def _check_graph(self) -> None:
+        """Run `graph_check` if it is due (after a tick's work: it never delays one)."""
+        check = self.graph_check
+        if check is not None:
+            now = time.monotonic()
+            if now >= self._next_graph_check:
+                self._next_graph_check = now + GRAPH_CHECK_PERIOD_S
+                check()
+
+    def restart_clocks(self) -> None:
+        """Start a new run or window now (wall clock and simulated time)."""
+        if self.diagnostics is not None:
+            self.diagnostics.window = self.diagnostics.new_window()
+        self.run_wall0, self.run_sim0 = time.perf_counter(), self.sim.state.t
+
+    # ------------------------------------------------------------------ ticks
+    def step_once(self) -> tuple[bool, str]:
+        """One tick (lockstep ``~/step``)."""
+        if not self.tick():
+            return False, f"{self.hold.last_error}; state held at t = {self.sim.state.t:.9g} s"
+        return True, f"t = {self.sim.state.t:.9g} s"
+
+    def _advance_engine(self) -> None:
+        """Take the tick's engine steps, following the drive filter's ramp."""
+        sim = self.sim
+        filt = self.filter
+        if filt is None:
+            sim.step(self.n_steps)
+            return
+        if filt.begin_tick(self.n_steps * self.dt) and self.intake is not None:
+            self.intake.warn_rate_limited()
+        if filt.settled:
+            if filt.differs(sim.state.command):
+                sim.set_command(filt.applied)
+            sim.step(self.n_steps)
+        else:
+            # Step by step only while the ramp lasts: once the applied target reaches the
+            # command, the rest of the tick is one compiled call (the same states as one step
+            # at a time). A controller's new command every tick is usually within one step's
+            # slew, so a tick is then one set_command and one step(n), not n of each (which
+            # cost ~0.25 ms of Python per tick and made real-time ticks late).
+            dt = self.dt
+            remaining = self.n_steps
+            while remaining:
+                sim.set_command(filt.advance(dt))
+                if filt.settled:
+                    sim.step(remaining)
+                    break
+                sim.step(1)
+                remaining -= 1
+
+    def _merged_periods(self, count: int) -> None:
+        """
+        Step through ``count`` tick periods that are not published (merged ticks, real time).
+
+        The sensor still samples each (its noise sequence and latency count ticks).
+        """
+        sim, sensor = self.sim, self.sensor
+        for _ in range(count):
+            self._advance_engine()
+            if sensor is not None:
+                sensor.sample(float(sim.model.output_displacement(sim.state.z)))
+
+    def tick(self) -> bool:
+        """
+        One publish tick: commands, engine steps, publish + record every topic.
+
+        In real time it may cover several periods (`Pacer.span`): the engine steps through
+        all of them, the state at the end is published. Returns False when the engine failed:
+        the state is then held and only diagnostics go out.
+        """
+        perf = time.perf_counter
+        t0 = perf()
+        sim = self.sim
+        span = self.pacer.span if self.pacer is not None else 1
+        if self.intake is not None:
+            self.intake.apply(round(sim.state.t * 1e9))
+        self.hold.save(sim, self.filter)
+        try:
+            if span > 1:
+                self._merged_periods(span - 1)
+            self._advance_engine()
+            t1 = perf()
+            snap = sim.snapshot()
+            if not snapshot_finite(snap):
+                raise SolverError(f"non-finite result at t = {snap.t:.9g} s")
+        except Exception as exc:  # noqa: BLE001 - any engine failure: hold, report, go on
+            message = self.hold.restore(sim, self.filter, exc)
+            if self.throttle.event("engine") is not None:
+                self._log.error(message + f" ({self.hold.failures} engine failures in all)")
+            self._count_tick(round(sim.state.t * 1e9), span)
+            return False
+        t2 = perf()
+        self.snapshot = snap
+        stamp = round(snap.t * 1e9)
+        measured = self.sensor.sample(float(snap.output)) if self.sensor is not None else 0.0
+        monitor = crossed(self.ticks, span, self.monitor_every)
+        payloads = self.interface.encode(snap, stamp, measured, monitor)
+        if monitor:
+            channels: Sequence[int] = range(len(payloads))
+            publishers = self._publishers
+        else:
+            channels, publishers = self.interface.control_indices, self._control_publishers
+        # Recorded first, so that the file holds every message a subscriber can have seen even
+        # if a shutdown interrupts the publishing. Channels 0..n-1: the tick topics.
+        if self.session.current is not None:
+            self.session.write(list(zip(channels, payloads)), stamp)
+        for pub, payload in zip(publishers, payloads):
+            pub.publish(payload)
+        t3 = perf()
+        if self.diagnostics is not None:
+            self.diagnostics.window.add(t1 - t0, t2 - t1, t3 - t2, t3 - t0)
+        if self.display_every and crossed(self.ticks, span, self.display_every):
+            self.display.publish(snap, stamp)
+        self._count_tick(stamp, span)
+        return True
+
+    def _count_tick(self, stamp: int, span: int = 1) -> None:
+        first = self.ticks + 1
+        self.ticks += span
+        if crossed(first, span, self.diag_every) and self.diagnostics is not None:
+            self.diagnostics.publish(stamp)
+
+    # ------------------------------------------------------------- live changes
+    def _set_merge(self, merge_after: int) -> None:
+        """Merge late ticks from ``merge_after`` ticks of lateness on (0: never)."""
+        pacer = self.pacer
+        if pacer is not None:
+            pacer.merge_after = merge_after
+            pacer.max_lag_s = max(MERGE_MAX_LAG_S if merge_after else SLIP_LAG_S,
+                                  2.0 * pacer.period)
+
+    def set_pacing(self, rate: float, wake_spin: float, monitor_rate: float = 0.0,
+                   merge_after: int = 0) -> None:
+        """Apply a new publish rate, busy-wait, monitoring rate and merging (stepping thread)."""
+        self.monitor_rate = monitor_rate
+        self.monitor_every = monitor_every(rate, monitor_rate)
+        if self.pacer is not None:
+            self.pacer.spin_s = min(wake_spin, 1.0 / rate)
+        if rate == self.rate:
+            self._set_merge(merge_after)
+            return
+        self.rate = rate
+        self.n_steps, _ = steps_per_tick(rate, self.dt)
+        self.diag_every = max(1, round(rate / DIAGNOSTICS_RATE))
+        if self.sensor is not None:
+            self.sensor.set_period(1.0 / rate)
+        if self.pacer is not None:
+            self.pacer.set_period(1.0 / rate)
+        self._set_merge(merge_after)
+        self._log.info(f"publish_rate {rate:g} Hz: {self.n_steps} engine steps per tick")
+
+    def reset(self) -> None:
+        """Back to t = 0 and the initial command (stepping thread); counters are kept."""
+        self.sim.reset()
+        if self.sensor is not None:
+            self.sensor.reset()
+        if self.filter is not None:
+            self.filter.reset()
+            if self.filter.differs(0.0):
+                self.sim.set_command(self.filter.applied)
+        if self.intake is not None:
+            self.intake.discard()  # sent before the reset: discarded
+        self.runs += 1
+        self.ticks = 0
+        self.restart_clocks()

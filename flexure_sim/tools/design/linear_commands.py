@@ -1,0 +1,303 @@
+"""
+``flexure-sim modes | frf | linearize``: the linear analyses (engine/analysis/linear.py).
+
+flexure-sim modes microstage [--input U] [--count N] [--json] [-o DIR]
+flexure-sim frf microstage --from drive --to output [--to hinges.a.force_x] [--fmin F --fmax F
+                --points N] [-o DIR] [--csv]
+flexure-sim linearize microstage --input U -o model.npz|model.mat|model.json
+
+With several drives (config/xy_stage.yaml) ``--input`` takes one value per drive (``x=1e-6,y=0``
+or ``1e-6,0``; default every drive at 0), ``frf --from`` names the drive and the model has one
+input per drive (engine/analysis/linear.py).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from flexure_sim.engine.analysis import linear
+from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism
+from flexure_sim.engine.mechanism.parameters import ParameterError
+from flexure_sim.engine.solver.simulation import Simulation, SolverError
+from flexure_sim.tools.design.linear_plots import input_text, plot_bode, plot_modes, write_frf_csv
+from flexure_sim.tools.options import parse_drive_inputs
+
+EXIT_OK, EXIT_USAGE = 0, 2
+
+
+def _model(args, wrenches: bool = True) -> tuple:
+    mech = load_mechanism(args.mechanism)
+    sim = Simulation(mech)
+    actuated = [sim.model.drive_names[a.drive] for a in sim.model.actuation]
+    if actuated:
+        raise ValueError(f"mechanism {mech.name!r}: drive {', '.join(actuated)} has a piezo "
+                         "actuator block, whose amplifier, hysteresis and creep the linear model "
+                         "does not include; analyse the stage without the actuator: block")
+    value = parse_drive_inputs(args.input)
+    if not sim.model.drives:
+        if value is not None and np.any(np.asarray(list(value.values()) if isinstance(
+                value, dict) else value, dtype=float) != 0):
+            raise ValueError(f"--input: mechanism {mech.name!r} has no drive")
+        value = None
+    elif value is not None:
+        try:
+            value = sim.model.drive_inputs(value)
+        except ValueError as exc:
+            raise ValueError(f"--input {args.input!r}: {exc}") from None
+        value = float(value[0]) if len(value) == 1 else value
+    return mech, linear.linearize(sim, value, wrenches=wrenches)
+
+
+def _u0(model):
+    """Return the model's drive input as JSON: a number (one drive), else {drive: value}."""
+    if np.ndim(model.u0) == 0:
+        return float(model.u0)
+    return {n: float(v) for n, v in zip(model.drive_names, model.u0)}
+
+
+def _guarded(prog: str, work) -> int:
+    try:
+        return work()
+    except (ConfigError, ParameterError, SolverError, ValueError, OSError) as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+# ------------------------------------------------------------------------ modes
+
+
+def modes_summary(mech, model, md, count: int) -> dict:
+    mech_modes = [
+        {
+            "frequency_hz": float(f),
+            "modal_damping_ratio": float(md.modal_damping[k]),
+            "shape": {name: float(v) for name, v in zip(model.state_names, md.shapes[:, k])},
+        }
+        for k, f in enumerate(md.frequencies[:count])
+    ]
+    poles = [
+        {
+            "real": float(p.real),
+            "imag": float(p.imag),
+            "frequency_hz": float(f),
+            "damping_ratio": float(z),
+        }
+        for p, f, z in zip(md.poles, md.pole_frequencies, md.damping_ratios)
+        if p.imag >= 0
+    ]
+    return {
+        "mechanism": mech.name,
+        "input": _u0(model),
+        "undamped_frequencies_hz": md.frequencies.tolist(),
+        "modal_damping_ratios": md.modal_damping.tolist(),
+        "modes": mech_modes,
+        "poles": poles,
+    }
+
+
+def run_modes(args) -> int:
+    def work():
+        if args.count < 0:
+            raise ValueError(f"--count {args.count}: must not be negative")
+        mech, model = _model(args, wrenches=False)
+        md = linear.modes(model)
+        out = modes_summary(mech, model, md, args.count)
+        if args.output:
+            out["plots"] = [
+                str(p) for p in plot_modes(mech, model, md, args.count, Path(args.output))
+            ]
+        if args.json:
+            print(json.dumps(out))
+            return EXIT_OK
+        print(f"mechanism: {mech.name}   linearised at the static equilibrium at "
+              f"{input_text(mech, model.u0)}")
+        print("mode  undamped f [Hz]  modal damping ratio")
+        for k, (f, z) in enumerate(zip(md.frequencies, md.modal_damping), 1):
+            print(f"{k:4d} {f:16.6g} {z:20.4g}")
+        print("poles of the damped system (upper half-plane), by |pole|:")
+        print("   real [1/s]     imag [1/s]   |pole|/2pi [Hz]   damping ratio")
+        for p in out["poles"]:
+            kind = f"{p['damping_ratio']:14.4g}" if p["imag"] else "   (real pole)"
+            print(f"{p['real']:13.6g}  {p['imag']:13.6g}  {p['frequency_hz']:15.6g}  {kind}")
+        for path in out.get("plots", []):
+            print(f"plot: {path}")
+        return EXIT_OK
+
+    return _guarded("flexure-sim modes", work)
+
+
+# -------------------------------------------------------------------------- frf
+
+
+def run_frf(args) -> int:
+    def work():
+        if not (0 < args.fmin < args.fmax) or args.points < 2:
+            raise ValueError("need 0 < --fmin < --fmax and --points >= 2")
+        wanted = args.to or []
+        mech, model = _model(args, wrenches=any(o.startswith("hinges.") for o in wanted))
+        k = _source(mech, model, args.source)
+        outputs = args.to or [o.name for o in mech.all_outputs]
+        if not outputs:
+            raise ValueError(f"mechanism {mech.name!r} has no output: name one with --to "
+                             f"({', '.join(model.output_names[:6])}, ...)")
+        for o in outputs:
+            model.output_index(o)
+        source = model.input_names[k]
+        f = np.logspace(np.log10(args.fmin), np.log10(args.fmax), args.points)
+        G = linear.frf(model, f, outputs, source)
+        out_dir = Path(args.output)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        png = plot_bode(mech, model, f, G, outputs, out_dir / "frf.png", source)
+        written = [png]
+        if args.csv:
+            written.append(write_frf_csv(f, G, outputs, out_dir / "frf.csv"))
+        gains = linear.static_gain(model, outputs, source)
+        if len(model.input_names) > 1:
+            print(f"from drive {source}:")
+        for name, g, g0 in zip(outputs, G[:, 0], gains):
+            print(
+                f"{name}: |G| {abs(g):.6g} at {f[0]:.3g} Hz (static gain {g0:.6g}), "
+                f"|G| {abs(G[outputs.index(name), -1]):.3g} at {f[-1]:.3g} Hz"
+            )
+        for path in written:
+            print(f"wrote {path}")
+        return EXIT_OK
+
+    return _guarded("flexure-sim frf", work)
+
+
+def _source(mech, model, name) -> int:
+    """B's column of ``--from`` (None: the only drive); ValueError listing the drives."""
+    if not model.input_names:
+        raise ValueError(f"mechanism {mech.name!r} has no drive input")
+    drives = ", ".join(model.drive_names)
+    if name is None and len(model.input_names) > 1:
+        raise ValueError(f"--from: mechanism {mech.name!r} has {len(model.input_names)} drives "
+                         f"({drives}): name one")
+    try:
+        return model.input_index(name)
+    except ValueError:
+        has = (f"has drives {drives}" if len(model.input_names) > 1 else
+               f"has one drive, {drives!r}" + (" (input 'drive')" if drives != "drive" else ""))
+        raise ValueError(f"--from {name!r}: no such drive; mechanism {mech.name!r} "
+                         f"{has}") from None
+
+
+# -------------------------------------------------------------------- linearize
+
+
+def export_model(model: linear.LinearModel, path: Path, mechanism: str) -> Path:
+    """
+    Write A, B, C, D with names: .npz (numpy), .mat (MATLAB, scipy.io.savemat), .json.
+
+    One input per drive (``input_names``; ``input_u0``: the drive inputs of the equilibrium, a
+    number for one drive, else one per drive in that order).
+    """
+    u0 = model.u0 if np.ndim(model.u0) == 0 else np.asarray(model.u0, dtype=float)
+    meta = {
+        "mechanism": mechanism,
+        "input_u0": u0,
+        "state_names": model.state_names,
+        "input_names": model.input_names,
+        "output_names": model.output_names,
+        "y0": model.y0.tolist(),
+        "units": "SI; states are deviations of (z_F, v_F, u) from the equilibrium, outputs "
+        "deviations from y0; the inputs are the drive commands (m, rad on theta; a force "
+        "drive's N, N m)",
+    }
+    arrays = {"A": model.A, "B": model.B, "C": model.C, "D": model.D}
+    suffix = path.suffix.lower()
+    if suffix == ".npz":
+        np.savez(path, **arrays, **{k: np.array(v) for k, v in meta.items()})
+    elif suffix == ".mat":
+        import scipy.io
+
+        scipy.io.savemat(
+            path,
+            {
+                **arrays,
+                **{
+                    k: (np.array(v, dtype=object) if isinstance(v, list) else v)
+                    for k, v in meta.items()
+                },
+            },
+        )
+    elif suffix == ".json":
+        meta["input_u0"] = np.asarray(u0).tolist()
+        path.write_text(json.dumps({**{k: v.tolist() for k, v in arrays.items()}, **meta}))
+    else:
+        raise ValueError(f"-o {path}: the file name must end in .npz, .mat or .json")
+    return path
+
+
+def run_linearize(args) -> int:
+    def work():
+        mech, model = _model(args)
+        path = export_model(model, Path(args.output), mech.name)
+        n_in = len(model.input_names)
+        print(
+            f"{mech.name}: {len(model.state_names)} states, {n_in} input"
+            f"{'' if n_in == 1 else 's'} ({', '.join(model.input_names) or 'none'}), "
+            f"{len(model.output_names)} outputs at {input_text(mech, model.u0)} -> {path}"
+        )
+        return EXIT_OK
+
+    return _guarded("flexure-sim linearize", work)
+
+
+# ---------------------------------------------------------------------- parsers
+
+
+def _common(p) -> None:
+    p.add_argument("mechanism", help="built-in name or YAML path")
+    p.add_argument(
+        "--input",
+        default=None,
+        help="drive input (m) of the static equilibrium; with several drives one per drive: "
+        "NAME=VALUE,... or V1,V2,... (default: every drive at 0)",
+    )
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("modes", help="natural frequencies, mode shapes and damped poles")
+    _common(p)
+    p.add_argument("--count", type=int, default=4, help="mode shapes to list and plot (default 4)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("-o", "--output", help="directory for mode-shape plots (mode_<k>.png)")
+    p.set_defaults(handler=run_modes)
+
+    p = subparsers.add_parser(
+        "frf", help="frequency response (Bode plot, CSV) from the exact linearisation"
+    )
+    _common(p)
+    p.add_argument("--from", dest="source", default=None,
+                   help="input: the drive's name (default: the only drive; 'drive' for a "
+                   "single drive)")
+    p.add_argument(
+        "--to",
+        action="append",
+        help="output: output (or each named output), compression, drive_force "
+        "(drive_force.<drive> with several drives), hinges.<h>.moment|force_x|force_y "
+        "(repeatable; default: the mechanism's outputs)",
+    )
+    p.add_argument("--fmin", type=float, default=1.0, help="Hz (default 1)")
+    p.add_argument("--fmax", type=float, default=1e5, help="Hz (default 1e5)")
+    p.add_argument(
+        "--points", type=int, default=1000, help="log-spaced frequencies (default 1000)"
+    )
+    p.add_argument(
+        "-o", "--output", default="frf", help="directory for frf.png / frf.csv (default ./frf)"
+    )
+    p.add_argument("--csv", action="store_true", help="also write frf.csv")
+    p.set_defaults(handler=run_frf)
+
+    p = subparsers.add_parser(
+        "linearize", help="state-space model (A, B, C, D, names) for control design"
+    )
+    _common(p)
+    p.add_argument("-o", "--output", required=True, help="model.npz, model.mat or model.json")
+    p.set_defaults(handler=run_linearize)

@@ -1,0 +1,81 @@
+"""
+``flexure-sim sensitivity MECH --wrt PARAM[,PARAM...] --of OUTPUT[,OUTPUT...]``.
+
+Exact first and second design sensitivities by hyper-dual numbers (engine/analysis/sensitivity.py)
+of gain, compression, first_mode and peak_stress.
+
+PARAM is any numeric key of the mechanism file by path: ``stiffness_models.notch.h``,
+``hinges.a.a.at.0``, ``bodies.body4.mass``; ``hinges.<h>.stiffness.<key>`` varies one hinge's
+copy of a named stiffness model.
+
+With several drives (config/xy_stage.yaml) ``--input`` takes one value per drive
+(``x=1e-6,y=0`` or ``1e-6,0``; default: the top of every drive's stroke) and ``gain`` means
+every ``gain.<output>.<drive>``, the static gain matrix's entries at that equilibrium (each may
+be asked for alone: ``--of gain.y.x``).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from flexure_sim.engine.mechanism.loader import ConfigError
+from flexure_sim.engine.mechanism.parameters import ParameterError, Parameters
+from flexure_sim.engine.analysis.sensitivity import OUTPUTS, sensitivities
+from flexure_sim.engine.solver.simulation import SolverError
+from flexure_sim.tools.design.linear_plots import input_text
+from flexure_sim.tools.options import parse_drive_inputs
+
+
+def run(args) -> int:
+    try:
+        params = Parameters(args.mechanism)
+        wrt = [p for p in args.wrt.split(",") if p]
+        of = [o for o in args.of.split(",") if o]
+        if not wrt:
+            raise ParameterError("--wrt: give at least one parameter path")
+        res = sensitivities(params, wrt, of, parse_drive_inputs(args.input))
+    except (ConfigError, ParameterError, SolverError, ValueError) as exc:
+        print(f"flexure-sim sensitivity: error: {exc}", file=sys.stderr)
+        return 2
+    res["mechanism"] = params.mechanism.name
+    res["parameters"] = {p: params.value(p) for p in wrt}
+    if args.json:
+        print(json.dumps(res))
+        return 0
+    mech = params.mechanism
+    u0 = list(res["input"].values()) if isinstance(res["input"], dict) else res["input"]
+    where = input_text(mech, u0) if mech.drives else "rest"
+    print(f"mechanism: {res['mechanism']}   static equilibrium at {where}")
+    for p, v in res["parameters"].items():
+        print(f"parameter {p} = {v:.6g}")
+    for o in res["values"]:
+        print(f"{o} = {res['values'][o]:.10g}")
+        for p, d in res["gradient"][o].items():
+            print(f"  d/d {p}: {d:.10g}")
+        for pq, d in res["second"][o].items():
+            print(f"  d2/d {pq.replace('|', ' d ')}: {d:.10g}")
+    return 0
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "sensitivity", help="exact design sensitivities (hyper-dual numbers)"
+    )
+    p.add_argument("mechanism", help="built-in name or YAML path")
+    p.add_argument(
+        "--wrt",
+        required=True,
+        help="parameter paths, comma-separated (e.g. stiffness_models.notch.h)",
+    )
+    p.add_argument(
+        "--of", default=",".join(OUTPUTS),
+        help=f"outputs, comma-separated ({', '.join(OUTPUTS)}, gain.<output>.<drive>)"
+    )
+    p.add_argument(
+        "--input", default=None,
+        help="drive input (m); with several drives one per drive: NAME=VALUE,... or V1,V2,... "
+        "(default: the top of each drive's stroke)"
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=run)

@@ -1,0 +1,303 @@
+"""
+What a sweep computes for each design: the output registry and the batch evaluation.
+
+Every output is one small function of a ``Design`` (the mechanism of one sample with its
+simulation and lazily computed, shared results), registered with ``@output``. Adding one
+(first natural frequency, damping ratio, peak stress ratio, ...) is one function here.
+
+With several drives (docs/sweeps.md, "Several drives") an output declared ``per`` drive,
+output or (output, drive) pair gives a column each, ``<name>.<drive>``, ``<name>.<output>``
+or ``<name>.<output>.<drive>`` (``columns``), and its function returns their values in that
+order; with one drive every output is one column, named as the output.
+
+``evaluate_batch`` is the task the runner sends to workers: it needs nothing but the study,
+builds each design's mechanism from the study's parsed base document (only the containers
+along the changed paths are copied) and never raises for a design that fails: the row gets
+status ``failed`` and the error, and the batch goes on.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Optional, Sequence, Union
+
+import numpy as np
+
+from flexure_sim.engine.analysis import linear
+from flexure_sim.engine.mechanism.parts import Mechanism
+from flexure_sim.engine.solver.simulation import Simulation, StaticResult
+from flexure_sim.engine.hinges.stress import peak_ratio, stress_table
+from flexure_sim.engine.analysis.study import Study
+from flexure_sim.tools.run import response_metrics
+from flexure_sim.tools.run.run_channels import gain_unit
+
+#: What an output's function returns: one value, or one per column with several drives.
+Values = Union[Optional[float], Sequence[Optional[float]]]
+
+
+class Design:
+    """
+    One design.
+
+    Its simulation (one model for the static solve and the dynamic run), the drive input of the
+    study, and results computed once and shared by the outputs that need them (the static solve,
+    the step response). The static solve starts from the unstressed pose whatever the state, so the
+    outputs do not depend on their order.
+    """
+
+    def __init__(self, mechanism: Mechanism, study: Study):
+        self.mechanism = mechanism
+        self.study = study
+        self.sim = Simulation(mechanism, dt=study.step["dt"])
+        drives = mechanism.drives
+        if not drives:
+            raise ValueError(f"mechanism {mechanism.name!r} has no drive")
+        #: Several drives: the outputs declared per drive/output give a column each.
+        self.several = len(drives) > 1
+        #: Drive input: the study's, else every drive's full stroke (stroke max); a number
+        #: (m, or the drive's unit) for one drive, {drive name: value} for several.
+        self.input = study.input
+        if self.input is None:
+            self.input = ({d.name: d.stroke[1] for d in drives} if self.several
+                          else drives[0].stroke[1])
+        self._static: Optional[StaticResult] = None
+        self._step = None
+        self._modes: Optional[linear.Modes] = None
+
+    def static(self) -> StaticResult:
+        """Return static equilibrium at the study's drive input."""
+        if self._static is None:
+            self._static = self.sim.static(self.input)
+        return self._static
+
+    def modes(self) -> linear.Modes:
+        """
+        Return the undamped modes and damped poles about the static equilibrium at the input.
+
+        As ``flexure-sim modes --input`` computes them (engine/analysis/linear.py).
+        """
+        if self._modes is None:
+            self._modes = linear.modes(linear.linearize(self.sim, self.input, wrenches=False,
+                                                        static=self.static()))
+        return self._modes
+
+    def step_response(self):
+        """
+        Output response to a step of the command from 0 to the input.
+
+        The step starts from rest and runs over the study's ``step.duration`` at ``step.dt``;
+        metrics as ``flexure-sim analyse``. With several drives every drive steps together,
+        each to its input, and the result is a list: every output's response (mechanism order).
+        """
+        if self._step is None:
+            dt, duration = self.study.step["dt"], self.study.step["duration"]
+            n = int(round(duration / dt))
+            sim = self.sim  # the static solve leaves its state at rest; this run moves it
+            sim.set_command(self.input)
+            y = np.empty((n, len(sim.model.outputs)) if self.several else n)
+            for k in range(n):
+                sim.step()
+                y[k] = (sim.model.output_values(sim.state.z) if self.several
+                        else output_displacement(sim))
+            t = dt * np.arange(1, n + 1)
+            band = self.study.step["band"]
+            self._step = ([response_metrics.step_response(t, yo, 0.0, 0.0, band=band)
+                           for yo in y.T] if self.several
+                          else response_metrics.step_response(t, y, 0.0, 0.0, band=band))
+        return self._step
+
+
+def output_displacement(sim: Simulation) -> float:
+    """
+    Output body's displacement from rest along the output axis (m).
+
+    It is that of the current state (Snapshot.output without the rest of the snapshot, for sampling
+    every step).
+    """
+    mech = sim.mechanism
+    if mech.output is None:
+        raise ValueError(f"mechanism {mech.name!r} names no output body")
+    return float(sim.model.output_displacement(sim.state.z))
+
+
+@dataclass(frozen=True)
+class Output:
+    """
+    A registered output: column ``name``, SI ``unit``, what it is, and its function.
+
+    ``per``: with several drives, a column per ``drive``, ``output`` or ``pair`` (output,
+    drive), or one column (""); ``each_unit``: then the unit of each column, a template of
+    ``{drive}`` (the drive's input unit), ``{force}`` (its force unit), ``{output}`` (the
+    output's unit) and ``{gain}`` (output per unit of the drive's input).
+    """
+
+    name: str
+    unit: str
+    description: str
+    compute: Callable[[Design], Values]
+    per: str = ""
+    each_unit: str = ""
+
+
+@dataclass(frozen=True)
+class Column:
+    """One result column: its name, the output that gives it, and its SI unit."""
+
+    name: str
+    output: str
+    unit: str
+
+
+#: The outputs a study may ask for, by name (docs/sweeps.md lists them).
+OUTPUTS: dict[str, Output] = {}
+
+
+def output(name: str, unit: str, description: str, per: str = "", each_unit: str = ""):
+    """
+    Register a function of a ``Design`` as a sweep output, an ``Output``.
+
+    It returns a float (None: no value, stored as NaN), or with several drives and ``per`` one
+    value per column, in ``columns`` order.
+    """
+    def register(fn: Callable[[Design], Values]):
+        OUTPUTS[name] = Output(name, unit, description, fn, per, each_unit)
+        return fn
+    return register
+
+
+def columns(study: Study) -> tuple[Column, ...]:
+    """
+    Return the output columns of ``study``, in order.
+
+    One per output with one drive; with several, one per drive (``<name>.<drive>``), output
+    (``<name>.<output>``) or pair (``<name>.<output>.<drive>``, outputs major) of an output
+    declared ``per`` them.
+    """
+    ch, out = study.channels, []
+    for name in study.outputs:
+        spec = OUTPUTS[name]
+        if not ch.several or not spec.per:
+            out.append(Column(name, name, spec.unit))
+        elif spec.per == "drive":
+            out += [Column(f"{name}.{d}", name, spec.each_unit.format(drive=u, force=f))
+                    for d, u, f in ch.drives]
+        elif spec.per == "output":
+            out += [Column(f"{name}.{o}", name, spec.each_unit.format(output=u))
+                    for o, u in ch.outputs]
+        else:
+            out += [Column(f"{name}.{o}.{d}", name, spec.each_unit.format(gain=gain_unit(ou, du)))
+                    for o, ou in ch.outputs for d, du, _ in ch.drives]
+    return tuple(out)
+
+
+@output("gain", "", "static output displacement / drive input, at the input; several drives: "
+        "each output per unit input of each drive, exact at rest", per="pair", each_unit="{gain}")
+def _gain(d: Design) -> Values:
+    if d.several:  # the static gain matrix of `flexure-sim simulate --static`, outputs major
+        return d.sim.static_gain().ravel()
+    out = d.static().snapshot.output
+    return None if out is None or d.input == 0.0 else out / d.input
+
+
+@output("output_displacement", "m", "static output displacement at the input", per="output",
+        each_unit="{output}")
+def _output_displacement(d: Design) -> Values:
+    if d.several:
+        outputs = d.static().snapshot.outputs
+        return [outputs[o] for o in d.sim.model.output_names]
+    return d.static().snapshot.output
+
+
+@output("compression", "m", "static compression of the compression hinge at the input")
+def _compression(d: Design) -> Values:
+    return d.static().snapshot.compression
+
+
+@output("drive_force", "N", "static force of the drive at the input (full stroke by default)",
+        per="drive", each_unit="{force}")
+def _drive_force(d: Design) -> Values:
+    if d.several:  # Model.drive_forces, drive order
+        return d.static().snapshot.drive_forces
+    return d.static().snapshot.drive_force
+
+
+@output("first_mode", "Hz", "first undamped natural frequency about the static equilibrium "
+        "at the input")
+def _first_mode(d: Design) -> Values:
+    return float(d.modes().frequencies[0])
+
+
+@output("first_mode_damping", "", "modal damping ratio of the first mode (as flexure-sim modes)")
+def _first_mode_damping(d: Design) -> Values:
+    return float(d.modes().modal_damping[0])
+
+
+@output("peak_stress_ratio", "", "largest hinge stress / yield strength at the input (no "
+        "value if no hinge has sigma_y)")
+def _peak_stress_ratio(d: Design) -> Values:
+    found = peak_ratio(stress_table(d.static().snapshot.wrenches, d.mechanism))
+    return None if found is None else found[1]
+
+
+@output("settling_time", "s", "2 % settling time of the output after a step to the input",
+        per="output", each_unit="s")
+def _settling_time(d: Design) -> Values:
+    if d.several:
+        return [r.settling_time for r in d.step_response()]
+    return d.step_response().settling_time
+
+
+@output("overshoot", "", "overshoot of the output after a step to the input (fraction)",
+        per="output", each_unit="")
+def _overshoot(d: Design) -> Values:
+    if d.several:
+        return [r.overshoot for r in d.step_response()]
+    return d.step_response().overshoot
+
+
+# ------------------------------------------------------------------------------ batches
+#: Status column values.
+OK, FAILED = "ok", "failed"
+
+
+def evaluate_batch(study: Study, start: int, stop: int) -> dict:
+    """
+    Designs ``start``..``stop - 1`` as columns.
+
+    ``sample`` (int64), one float64 column per parameter and per output column (``columns``;
+    NaN where there is no value), ``status`` and ``error``.
+    """
+    n = stop - start
+    table = columns(study)
+    names = [c.name for c in table]
+    spans = []  # the columns of each output, consecutive
+    for name in study.outputs:
+        at = [k for k, c in enumerate(table) if c.output == name]
+        spans.append((name, slice(at[0], at[-1] + 1)))
+    cols: dict = {"sample": np.arange(start, stop, dtype=np.int64)}
+    params = np.empty((n, len(study.parameters)))
+    outs = np.full((n, len(names)), np.nan)
+    status, errors = [OK] * n, [""] * n
+    for r, i in enumerate(range(start, stop)):
+        params[r] = study.sample(i)
+        try:
+            design = Design(study.mechanism(params[r]), study)
+            for name, where in spans:
+                outs[r, where] = _floats(OUTPUTS[name].compute(design), where.stop - where.start)
+        except Exception as exc:  # noqa: BLE001 - a design that fails is recorded, not fatal
+            outs[r] = np.nan
+            status[r], errors[r] = FAILED, f"{type(exc).__name__}: {exc}"
+    for j, p in enumerate(study.parameters):
+        cols[p.name] = params[:, j].copy()
+    for j, name in enumerate(names):
+        cols[name] = outs[:, j].copy()
+    cols["status"], cols["error"] = status, errors
+    return cols
+
+
+def _floats(value: Values, size: int) -> np.ndarray:
+    """Return an output's value(s) as ``size`` floats, None as NaN."""
+    many = value if size > 1 or isinstance(value, (list, tuple, np.ndarray)) else [value]
+    out = np.array([np.nan if v is None else float(v) for v in many], dtype=float)
+    if out.shape != (size,):
+        raise ValueError(f"{len(out)} values for {size} columns")
+    return out
