@@ -41,10 +41,8 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
     linear solve with the e^{hA} already at hand (A - I/tau is regular: A's eigenvalues have
     no positive real part for a damped mechanism; an exponential is the fallback).
     """
-    if model.energy:
-        A, g, damping, load_rows = model.jacobian(y, t, command, damping=True)
-    else:
-        A = model.jacobian(y, t, command)
+    tangent = model.tangent(y, t, command) if model.energy else None
+    A = model.jacobian(y, t, command) if tangent is None else tangent.A
     m, h = A.shape[0], model.dt
     aug = np.zeros((3 * m, 3 * m))
     aug[:m, :m] = h * A
@@ -60,8 +58,8 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
         sines = np.array([[j, c.amplitude, 2.0 * np.pi * c.frequency, c.phase]
                           for j, c in part.timed], dtype=float).reshape(-1, 4).T
         emats = step_energy.energy_matrices(
-            A, phi1, phi2, h, g, damping, part.free, part.prescribed, D, drive_mass, tau,
-            shifted, sines, load_rows[[j for j, _ in part.timed]])
+            A, phi1, phi2, h, tangent.G, tangent.damping, part.free, part.prescribed, D,
+            drive_mass, tau, shifted, sines, tangent.load_rows[[j for j, _ in part.timed]])
     else:
         emats = step_energy.NO_ENERGY
     data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, emats)

@@ -26,7 +26,7 @@ It never changes after construction, so any number of ``Data`` may share it.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
@@ -37,7 +37,8 @@ from flexure_sim.engine.solver.assembly import Assembly
 from flexure_sim.engine.solver.compression import compression_points, point_displacement
 from flexure_sim.engine.mechanism.damping_models import damping_matrix
 from flexure_sim.engine.solver.drives import DriveMixin, stacked
-from flexure_sim.engine.mechanism.parts import COORDINATE_NAMES, Drive, Fixed, Mechanism, SineRate
+from flexure_sim.engine.mechanism.parts import Drive, Mechanism
+from flexure_sim.engine.solver.partition import partition
 
 #: Default fixed step (s): 10 steps per millisecond.
 DEFAULT_STEP = 1e-4
@@ -47,67 +48,28 @@ class SolverError(FlexureSimError, RuntimeError):
     """The solver could not produce a finite answer (names the cause)."""
 
 
-@dataclass
-class Partition:
+@dataclass(frozen=True)
+class Tangent:
     """
-    Free and prescribed coordinate indices.
+    The exact derivatives of one linearization (``Model.tangent``), for y = (z_F, v_F, u).
 
-    Per prescribed coordinate dz_P/du (the drive axis component) of the single displacement
-    drive (zeros with none or several); the sine-rate constraints as (index into prescribed,
-    constraint); ``D``: dz_P/du per displacement drive (columns, ``Model.displacement_index``
-    order).
+    ``A`` = dF/dy; ``G``: rows g_d = dq_d/dy of the displacement drives' loads q_d = D_d^T Q_P;
+    ``damping``: -dQ/dv over all coordinates; ``load_rows``: dQ_P/dy.
     """
 
-    free: np.ndarray
-    prescribed: np.ndarray
-    du: np.ndarray
-    timed: list = field(default_factory=list)
-    D: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    A: np.ndarray
+    G: np.ndarray
+    damping: np.ndarray
+    load_rows: np.ndarray
 
 
-def partition(mech: Mechanism) -> Partition:
-    """Split the 3 n_bodies coordinates of ``mech`` by its constraints."""
-    prescribed: set[int] = set()
-    timed = []
-    columns = []
-    for c in mech.constraints:
-        i = mech.body_index(c.body)
-        if isinstance(c, Fixed):
-            prescribed.update(3 * i + k for k in range(3))
-        elif isinstance(c, Drive) and c.kind == "displacement" and stacked(c):
-            if c.coordinate is None:  # the axis coordinate free (the stack pulls), rest held
-                prescribed.update(3 * i + k for k in range(3) if k != _axis_coordinate(c))
-        elif isinstance(c, Drive) and c.kind == "displacement":
-            if c.coordinate is None:
-                prescribed.update(3 * i + k for k in range(3))  # along the axis, rest held
-            else:
-                prescribed.add(3 * i + COORDINATE_NAMES.index(c.coordinate))
-            columns.append(c.direction(mech))
-        elif isinstance(c, SineRate):
-            prescribed.add(3 * i + COORDINATE_NAMES.index(c.coordinate))
-            timed.append((3 * i + COORDINATE_NAMES.index(c.coordinate), c))
-    P = np.array(sorted(prescribed), dtype=int)
-    F = np.array([k for k in range(3 * len(mech.bodies)) if k not in prescribed], dtype=int)
-    pos = {k: j for j, k in enumerate(P)}
-    D = np.array(columns, dtype=float).reshape(len(columns), -1)[:, P].T if columns else (
-        np.zeros((len(P), 0)))
-    du = D[:, 0].copy() if D.shape[1] == 1 else np.zeros(len(P))
-    return Partition(F, P, du, [(pos[k], c) for k, c in timed], D)
+@dataclass(frozen=True)
+class _Derivatives:
+    """A and the dQ/dz, dQ/dv (all coordinates, stack springs and damping matrix in) it uses."""
 
-
-def _axis_coordinate(drive: Drive) -> int:
-    """
-    Return the coordinate (0: x, 1: y) a stack drive's axis runs along.
-
-    A finite stack frees its body along the axis and holds the other coordinates as the rigid
-    drive does, so the axis must be a coordinate axis (else ValueError naming the drive).
-    """
-    ax = np.abs(np.asarray(drive.axis, dtype=float))
-    for k in (0, 1):
-        if ax[k] == 1.0 and ax[1 - k] == 0.0:
-            return k
-    raise ValueError(f"drive {drive.name!r}: an actuator with a finite stack stiffness needs an "
-                     f"axis along x or y (or a coordinate), got axis {tuple(drive.axis)}")
+    A: np.ndarray
+    Kzz: np.ndarray
+    Kvv: np.ndarray
 
 
 class Model(DriveMixin):
@@ -225,8 +187,7 @@ class Model(DriveMixin):
         damping = self.damping if self.damping is not None else np.zeros((0, 0))
         return (part.free.astype(np.int64), part.prescribed.astype(np.int64), self.mass, zP0, D,
                 tau, sine_index, sine_amp, sine_w, sine_phase, self.force_dir, self.force_z0,
-                self.stack_dir, self.stack_z0, self.stack_k, a._ia, a._ib, a._ca, a._cb,
-                a.phia, a.phib, a._kind, a._W, a._C,
+                self.stack_dir, self.stack_z0, self.stack_k, *a.kernel_arrays(),
                 np.ascontiguousarray(damping))
 
     # ------------------------------------------------------------- coordinates
@@ -318,19 +279,44 @@ class Model(DriveMixin):
                                         part.prescribed, self.mass, self.motion[2],
                                         self.motion[3], aP)
 
-    def jacobian(self, y: np.ndarray, t: float, command, load_gradient: bool = False,
-                 damping: bool = False):
+    def jacobian(self, y: np.ndarray, t: float, command) -> np.ndarray:
         """
-        Exact A = dF/dy for y = (z_F, v_F, u).
+        Return the exact A = dF/dy for y = (z_F, v_F, u).
 
         Rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v), du_d/dt = (command_d - u_d)/tau_d, with z_P,
         v_P depending on each u_d through D_d (the force drives' held forces do not depend on y;
-        the stack springs add -k_s e e^T to dQ/dz);
-        dQ/dv includes -C (``velocity_jacobian``), also through v_P. With ``load_gradient`` also
-        G (rows g_d = dq_d/dy) of the drive loads q_d = D_d^T Q_P: (A, G); with ``damping`` also
-        the damping matrix -dQ/dv over all coordinates (1/2 the Hessian of the dissipated power
-        in the velocities) and dQ_P/dy: (A, G, C, dQ_P/dy).
+        the stack springs add -k_s e e^T to dQ/dz); dQ/dv includes -C (``velocity_jacobian``),
+        also through v_P.
         """
+        return self._derivatives(y, t, command).A
+
+    def tangent(self, y: np.ndarray, t: float, command) -> "Tangent":
+        """
+        Return A (``jacobian``) and the derivatives the step's energy integrals need (``Tangent``).
+
+        G: rows g_d = dq_d/dy of the drive loads q_d = D_d^T Q_P; the damping matrix -dQ/dv
+        over all coordinates (1/2 the Hessian of the dissipated power in the velocities); and
+        dQ_P/dy.
+        """
+        d = self._derivatives(y, t, command)
+        part = self.part
+        nF, m = len(part.free), len(y)
+        G = np.zeros((self.n_actuators, m))
+        PF, PP = np.ix_(part.prescribed, part.free), np.ix_(part.prescribed, part.prescribed)
+        Kzz, Kvv = d.Kzz, d.Kvv
+        for k, dk in enumerate(self.D_rows):
+            G[k, :nF] = dk @ Kzz[PF]
+            G[k, nF:2 * nF] = dk @ Kvv[PF]
+            for j, (dj, tau_j) in enumerate(zip(self.D_rows, self.tau)):
+                G[k, 2 * nF + j] = dk @ (Kzz[PP] @ dj - Kvv[PP] @ dj / tau_j)
+        rows = np.zeros((len(part.prescribed), m))  # dQ_P/dy
+        rows[:, :nF], rows[:, nF:2 * nF] = Kzz[PF], Kvv[PF]
+        for k, (dk, tau) in enumerate(zip(self.D_rows, self.tau)):
+            rows[:, 2 * nF + k] = Kzz[PP] @ dk - Kvv[PP] @ dk / tau
+        return Tangent(d.A, G, -Kvv, rows)
+
+    def _derivatives(self, y: np.ndarray, t: float, command) -> "_Derivatives":
+        """Return A and the exact dQ/dz, dQ/dv (all forces, all coordinates) it is built from."""
         part = self.part
         nF = len(part.free)
         z, v, _ = self.unpack(y, t, command)
@@ -345,23 +331,11 @@ class Model(DriveMixin):
         FF = np.ix_(part.free, part.free)
         A[nF:2 * nF, :nF] = Kzz[FF] / mF[:, None]
         A[nF:2 * nF, nF:2 * nF] = Kvv[FF] / mF[:, None]
-        G = np.zeros((self.n_actuators, m))
         FP = np.ix_(part.free, part.prescribed)
-        PF, PP = np.ix_(part.prescribed, part.free), np.ix_(part.prescribed, part.prescribed)
         for k, (dk, tau) in enumerate(zip(self.D_rows, self.tau)):
             A[nF:2 * nF, 2 * nF + k] = (Kzz[FP] @ dk - Kvv[FP] @ dk / tau) / mF
             A[2 * nF + k, 2 * nF + k] = -1.0 / tau
-            G[k, :nF] = dk @ Kzz[PF]
-            G[k, nF:2 * nF] = dk @ Kvv[PF]
-            for j, (dj, tau_j) in enumerate(zip(self.D_rows, self.tau)):
-                G[k, 2 * nF + j] = dk @ (Kzz[PP] @ dj - Kvv[PP] @ dj / tau_j)
-        if damping:
-            rows = np.zeros((len(part.prescribed), m))  # dQ_P/dy
-            rows[:, :nF], rows[:, nF:2 * nF] = Kzz[PF], Kvv[PF]
-            for k, (dk, tau) in enumerate(zip(self.D_rows, self.tau)):
-                rows[:, 2 * nF + k] = Kzz[PP] @ dk - Kvv[PP] @ dk / tau
-            return A, G, -Kvv, rows
-        return (A, G) if load_gradient else A
+        return _Derivatives(A, Kzz, Kvv)
 
     # --------------------------------------------------------------- measures
     def output_displacement(self, z: np.ndarray) -> Optional[float]:

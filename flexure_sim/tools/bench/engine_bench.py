@@ -161,7 +161,7 @@ def bench_step_cost(dt: float = DEFAULT_STEP, sim_seconds: float = 1.0) -> dict:
     t, cmd = sim.state.t, sim.state.command
     reps = 2000
     force = timeit.timeit(lambda: model.rhs(y, t, cmd), number=reps) / reps
-    jac = timeit.timeit(lambda: model.jacobian(y, t, cmd, load_gradient=True), number=50) / 50
+    jac = timeit.timeit(lambda: model.tangent(y, t, cmd), number=50) / 50
     lin = timeit.timeit(lambda: dynamics.linearize(model, sim.data, y, t, cmd), number=20) / 20
     bare = Simulation(mech, dt=dt, energy=False)
     lin_bare = timeit.timeit(lambda: dynamics.linearize(bare.model, bare.data, y, t, cmd),
