@@ -78,7 +78,7 @@ def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
             "drive_work": snap.drive_work,
         },
     }
-    if sim.model.actuation:
+    if sim.model.drives.actuation:
         out["actuators"] = actuator_figures(sim, snap)
     if len(sim.model.drives) > 1 or len(sim.model.outputs) > 1:
         out["drives"] = {name: {"input": float(snap.drive_inputs[k]),
@@ -97,7 +97,7 @@ def actuator_figures(sim: Simulation, snap: Snapshot) -> dict:
     displacement (m), stack force (N).
     """
     out = {}
-    for a in sim.model.actuation:
+    for a in sim.model.drives.actuation:
         k = a.drive
         out[snap.drive_names[k]] = {
             "command": float(snap.drive_commands[k]),
@@ -112,7 +112,8 @@ def actuator_figures(sim: Simulation, snap: Snapshot) -> dict:
 
 def _single_command(sim: Simulation) -> bool:
     """Tell whether ``--drive step:A`` commands the mechanism's one drive (with an actuator)."""
-    return sim.drive is not None or (len(sim.model.drives) == 1 and bool(sim.model.actuation))
+    drives = sim.model.drives
+    return sim.drive is not None or (len(drives) == 1 and bool(drives.actuation))
 
 
 def run_simulate(args: argparse.Namespace) -> dict:
@@ -127,11 +128,11 @@ def run_simulate(args: argparse.Namespace) -> dict:
     several = len(sim.model.drives) > 1 or len(sim.model.outputs) > 1
     if amplitude and several and len(sim.model.drives) > 1:
         raise UsageError(f"--drive: mechanism {mech.name!r} has {len(sim.model.drives)} drives "
-                         f"({', '.join(sim.model.drive_names)}); --static without --drive "
+                         f"({', '.join(sim.model.drives.names)}); --static without --drive "
                          "reports the gain of every output against every drive")
     if amplitude and sim.drive is None and not sim.model.drives:
         raise UsageError(f"--drive: mechanism {mech.name!r} has no drive")
-    if args.static and len(sim.model.stack_index):
+    if args.static and len(sim.model.drives.stack):
         raise UsageError(f"--static: mechanism {mech.name!r} has a drive with a finite-stiffness "
                          "piezo stack (its input is the actuator's free stroke, a dynamic "
                          "state): simulate without --static to a steady state")
@@ -185,7 +186,7 @@ def gain_matrix(sim: Simulation) -> dict:
     ``Simulation.static_gain``, as JSON (m/m, rad/m, m/N, ... per the pair's units).
     """
     G = sim.static_gain()
-    return {"outputs": list(sim.model.output_names), "drives": list(sim.model.drive_names),
+    return {"outputs": list(sim.model.output_names), "drives": list(sim.model.drives.names),
             "matrix": [[float(g) for g in row] for row in G]}
 
 

@@ -52,7 +52,7 @@ def oscillatory_poles(A: np.ndarray) -> np.ndarray:
 def rest_jacobian(sim: Simulation) -> np.ndarray:
     """Exact A = dF/dy of the engine's dynamics at rest (command 0)."""
     model = sim.model
-    return model.jacobian(model.pack(sim.initial_state()), 0.0, 0.0)
+    return model.jacobian(model.pack(sim.initial_state()), 0.0, np.zeros(1))
 
 
 # ------------------------------------------------------------------ microstage_realistic
@@ -113,14 +113,15 @@ def test_free_decay_has_the_logarithmic_decrement_of_the_configured_ratio(realis
     phi = md.shapes[:, 0]
     z = model.z0.copy()
     z[F] += 1e-6 / abs(model.output_matrix[0, F] @ phi) * phi
-    sim.state = State(0.0, z, np.zeros_like(z))
+    sim.state = State(0.0, z, np.zeros_like(z), np.zeros(1), np.zeros(1))
     energy = [sim.snapshot().kinetic_energy + sim.snapshot().potential_energy]
-    outputs, powers = [sim.snapshot().output], [model.rhs(model.pack(sim.state), 0.0, 0.0)[1]]
+    outputs = [sim.snapshot().output]
+    powers = [model.rhs(model.pack(sim.state), 0.0, np.zeros(1))[1]]
     for _ in range(600):
         sim.step(1)
         s = sim.snapshot()
         outputs.append(s.output)
-        powers.append(model.rhs(model.pack(sim.state), s.t, 0.0)[1])
+        powers.append(model.rhs(model.pack(sim.state), s.t, np.zeros(1))[1])
     y = np.array(outputs)
     peaks = []
     for i in range(1, len(y) - 1):
@@ -210,19 +211,20 @@ def test_the_exact_jacobian_with_damping_matches_finite_differences():
     sim.set_command(1.0e-6)
     sim.step(7)
     y, t = model.pack(sim.state), sim.state.t
-    A = model.jacobian(y, t, 1.0e-6)
+    command = np.array([1.0e-6])
+    A = model.jacobian(y, t, command)
     fd = np.empty_like(A)
     for j in range(len(y)):
         h = 1e-6 * max(abs(y[j]), 1e-9)
         yp, ym = y.copy(), y.copy()
         yp[j] += h
         ym[j] -= h
-        fd[:, j] = (model.rhs_python(yp, t, 1.0e-6)[0] - model.rhs_python(ym, t, 1.0e-6)[0]) / (
+        fd[:, j] = (model.rhs_python(yp, t, command)[0] - model.rhs_python(ym, t, command)[0]) / (
             2 * h)
     np.testing.assert_allclose(A, fd, rtol=0, atol=1e-5 * np.abs(A).max())
     # The compiled kernel and the interpreted path give the same forces and power.
-    F1, aux1 = model.rhs(y, t, 1.0e-6)
-    F2, aux2 = model.rhs_python(y, t, 1.0e-6)
+    F1, aux1 = model.rhs(y, t, command)
+    F2, aux2 = model.rhs_python(y, t, command)
     np.testing.assert_allclose(F1, F2, rtol=1e-12, atol=1e-12 * np.abs(F1).max())
     np.testing.assert_allclose(aux1, aux2, rtol=1e-12)
 

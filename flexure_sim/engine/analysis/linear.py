@@ -8,7 +8,7 @@ About the static equilibrium z* at the drive inputs u* (``Simulation.static``: o
 the engine's first-order system y' = F(y, command), y = (z_F, v_F, u_1 .. u_m) with one
 actuator output u_a per displacement drive (``Model.pack``), has the exact Jacobian
 A = dF/dy (``Model.jacobian``: analytic, no finite differences) and input matrix
-B = dF/dcommand, one column per drive (``Model.drive_names`` order). A displacement drive's
+B = dF/dcommand, one column per drive (``DriveTable.names`` order). A displacement drive's
 command enters through its actuator lag du_a/dt = (command - u_a)/tau_a and the prescribed
 velocities v_P = sum_a D_a (command_a - u_a)/tau_a (D_a = dz_P/du_a, ``Partition.D``); a force
 drive's command is a generalised force e f on the free coordinates (virtual work, held as
@@ -64,7 +64,7 @@ __all__ = ["LinearModel", "Modes", "frf", "gain_matrix", "layout", "linearize", 
 # ------------------------------------------------ the engine's internals, in one place
 
 
-def jacobian_at(sim: Simulation, y: np.ndarray, t: float, command: float) -> np.ndarray:
+def jacobian_at(sim: Simulation, y: np.ndarray, t: float, command: np.ndarray) -> np.ndarray:
     """Exact A = dF/dy of the engine's first-order system at y (`Model.jacobian`)."""
     return sim.model.jacobian(y, t, command)
 
@@ -76,7 +76,8 @@ class Layout:
 
     Free and prescribed coordinate indices, the prescribed coordinates' drive-axis components d_u
     and the actuator time constant of a single displacement drive (zeros and None otherwise:
-    ``Partition.D`` and ``Model.tau`` hold every drive's), masses (3 n_bodies), the rest pose z0.
+    ``Partition.D`` and ``DriveTable.tau`` hold every drive's), masses (3 n_bodies), the rest
+    pose z0.
     """
 
     free: np.ndarray
@@ -179,21 +180,22 @@ def linearize(sim: Simulation, u=None, wrenches: bool = True,
     solved (``sim.static(u)``).
     """
     model = sim.model
-    model.require_rigid("the linear model")
+    drives = model.drives
+    drives.require_rigid("the linear model")
     mech = sim.mechanism
-    names = model.drive_names
-    inputs = model.drive_inputs(np.zeros(len(names)) if u is None else u)
+    names = drives.names
+    inputs = drives.inputs(np.zeros(len(names)) if u is None else u)
     single = len(names) == 1
     u0 = float(inputs[0]) if single else 0.0 if not names else inputs.copy()
     st = static if static is not None else sim.static(u0 if single or not names else inputs)
     z = st.z
     lay = layout(sim)
     F, P = lay.free, lay.prescribed
-    disp, force = model.displacement_index, model.force_index
+    disp, force = drives.displacement, drives.force
     nF, N, na, m = len(F), len(z), len(disp), len(names)
     y = np.concatenate([z[F], np.zeros(nF)] + ([inputs[disp]] if na else []))
     n = len(y)
-    A = jacobian_at(sim, y, 0.0, u0 if single else model.actuator_command(inputs))
+    A = jacobian_at(sim, y, 0.0, drives.kernel_command(inputs))
     dQz, dQv = tangent_at(sim, z)
     mF = lay.mass[F]
     B = np.zeros((n, m))
@@ -201,8 +203,8 @@ def linearize(sim: Simulation, u=None, wrenches: bool = True,
     Zx[F, np.arange(nF)] = 1.0
     Vx[F, nF + np.arange(nF)] = 1.0
     lags = np.full(m, -1, dtype=int)
-    for a, (k, tau) in enumerate(zip(disp, model.tau)):
-        du = model.D_rows[a]
+    for a, (k, tau) in enumerate(zip(disp, drives.tau)):
+        du = drives.lag_rows[a]
         lags[k] = a
         B[nF:2 * nF, k] = dQv[np.ix_(F, P)] @ du / (tau * mF)
         B[2 * nF + a, k] = 1.0 / tau
@@ -210,7 +212,7 @@ def linearize(sim: Simulation, u=None, wrenches: bool = True,
         Vx[P, 2 * nF + a] = -du / tau
         Vc[P, k] = du / tau
     for k in force:
-        B[nF:2 * nF, k] = model.drive_directions[k][F] / mF
+        B[nF:2 * nF, k] = drives.directions[k][F] / mF
     out_names, Cs, Ds, y0 = [], [], [], []
     snap = st.snapshot
 
@@ -230,18 +232,18 @@ def linearize(sim: Simulation, u=None, wrenches: bool = True,
     dQP = dQz[P] @ Zx + dQv[P] @ Vx
     dQPc = dQv[P] @ Vc
     for a, k in enumerate(disp):
-        dk = model.D_rows[a]
+        dk = drives.lag_rows[a]
         row = -(dk @ dQP)
         d = np.array([-(dk @ dQPc[:, j]) for j in range(m)])
-        for b, (j, tau) in enumerate(zip(disp, model.tau)):  # M_P a_P, a_P = D (u - c)/tau^2
-            mkj = dk @ (lay.mass[P] * model.D_rows[b])
+        for b, (j, tau) in enumerate(zip(disp, drives.tau)):  # M_P a_P, a_P = D (u - c)/tau^2
+            mkj = dk @ (lay.mass[P] * drives.lag_rows[b])
             row[2 * nF + b] += mkj / tau**2
             d[j] -= mkj / tau**2
         add("drive_force" if single else f"drive_force.{names[k]}", row, d,
             float(snap.drive_forces[k]))
     for k in force:
         add("drive_position" if single else f"drive_position.{names[k]}",
-            model.drive_directions[k] @ Zx, np.zeros(m), float(snap.drive_positions[k]))
+            drives.directions[k] @ Zx, np.zeros(m), float(snap.drive_positions[k]))
     if wrenches:
         Jz, Jv = wrench_jacobians(mech, z)
         for k, hinge in enumerate(mech.hinges):

@@ -54,7 +54,8 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
         part = model.part
         tau, D = model.motion[0], model.motion[2]
         shifted = [_shifted_phi1(A, E[:m, :m], h, tk) for tk in tau]
-        drive_mass = [float(dk @ (model.mass[part.prescribed] * dk)) for dk in model.D_rows]
+        drive_mass = [float(dk @ (model.mass[part.prescribed] * dk))
+                      for dk in model.drives.lag_rows]
         sines = np.array([[j, c.amplitude, 2.0 * np.pi * c.frequency, c.phase]
                           for j, c in part.timed], dtype=float).reshape(-1, 4).T
         emats = step_energy.energy_matrices(
@@ -104,7 +105,7 @@ def _advance(model: Model, data: Data, n, y, t, rows, held, F0, aux0, ye):
 
 def jump_work(model: Model, s: State, command) -> float:
     """
-    Work of the drives' velocity jumps when the commands change (``command``: actuator order).
+    Work of the drives' velocity jumps when the commands change (``command``: kernel order).
 
     The prescribed velocities jump from those of ``s`` to those of the new command, which takes the
     kinetic energy 1/2 M_P (v_P+^2 - v_P-^2) from the actuator (an impulse M_P dv_P acting at the
@@ -119,10 +120,11 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     """
     Advance ``data`` n fixed steps with the drives' commands held at state.command.
 
-    ``command``: the kernel's command vector (actuator order) to hold instead of the state's
-    (the piezo actuators' free strokes, engine/solver/actuation.py). ``rows``: one such vector per
-    step, shape (n, len(command)), to hold step by step instead (``command`` then is the one
-    held before the first step; each change is the drives' work, ``stepping.switch_work``).
+    ``command``: the kernel's command vector (``DriveTable.kernel_command``) to hold instead of
+    the state's (the piezo actuators' free strokes, engine/solver/actuation.py). ``rows``: one
+    such vector per step, shape (n, len(command)), to hold step by step instead (``command``
+    then is the one held before the first step; each change is the drives' work,
+    ``stepping.switch_work``).
 
     Time is origin + k dt, k the steps taken since the origin (the t of a state this data
     did not step itself), not a running sum: t stays on the step grid however long the
@@ -130,7 +132,7 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     """
     s = data.state
     command = np.ascontiguousarray(
-        model.actuator_command(s.command) if command is None else command, dtype=float)
+        model.drives.kernel_command(s.command) if command is None else command, dtype=float)
     rows = command.reshape(1, -1) if rows is None else np.ascontiguousarray(rows, dtype=float)
     key = command.tobytes()
     clock = data.clock
@@ -180,7 +182,7 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     if not np.all(np.isfinite(y)):
         raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
     z, v, u = model.unpack(y, t, command)
-    data.state = State(t, z, v, model.state_u(u), s.command, dissipated, work)
+    data.state = State(t, z, v, u, s.command, dissipated, work)
     data.clock = (data.state, origin, k)
     # F at the new state seeds the next call while the command is unchanged.
     data.cache = (data.state, command.tobytes(), F0, aux0, ye)

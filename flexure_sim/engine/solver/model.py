@@ -36,7 +36,7 @@ from flexure_sim.engine.solver import step_loop as stepping
 from flexure_sim.engine.solver.assembly import Assembly
 from flexure_sim.engine.solver.compression import compression_points, point_displacement
 from flexure_sim.engine.mechanism.damping_models import damping_matrix
-from flexure_sim.engine.solver.drives import DriveMixin, stacked
+from flexure_sim.engine.solver.drives import DriveTable
 from flexure_sim.engine.mechanism.parts import Drive, Mechanism
 from flexure_sim.engine.solver.partition import partition
 
@@ -72,7 +72,7 @@ class _Derivatives:
     Kvv: np.ndarray
 
 
-class Model(DriveMixin):
+class Model:
     """
     The constants of a mechanism prepared for stepping with fixed step ``dt`` (s).
 
@@ -109,25 +109,6 @@ class Model(DriveMixin):
         self.dt = float(dt)
         self.relinearize_tol = relinearize_tol
         self.energy = bool(energy)
-        #: Every drive (constraint order), their names and directions e (rows; the input
-        #: of drive d is e_d . (z - z0)), the displacement and force drives' indices.
-        self.drives: tuple[Drive, ...] = mechanism.drives
-        self.drive_names = tuple(d.name for d in self.drives)
-        self.drive_directions = np.array([d.direction(mechanism) for d in self.drives]
-                                         ).reshape(len(self.drives), 3 * len(mechanism.bodies))
-        self.displacement_index = np.array(
-            [k for k, d in enumerate(self.drives) if d.kind == "displacement" and not stacked(d)],
-            dtype=int)
-        #: The stack drives (a piezo actuator of finite stiffness k_s: ``drives.stacked``).
-        self.stack_index = np.array([k for k, d in enumerate(self.drives) if stacked(d)],
-                                    dtype=int)
-        self.force_index = np.array(
-            [k for k, d in enumerate(self.drives) if d.kind == "force"], dtype=int)
-        #: The single drive of a mechanism with one displacement drive and no other (the
-        #: scalar interfaces: linear model, stroke limit), else None.
-        self.drive: Optional[Drive] = (
-            self.drives[0] if len(self.drives) == 1 and len(self.displacement_index) == 1
-            else None)
         nb = len(mechanism.bodies)
         self.mass = np.array([[b.mass, b.mass, b.inertia]
                              for b in mechanism.bodies], dtype=float).ravel()
@@ -141,7 +122,13 @@ class Model(DriveMixin):
             rest = self.assembly.forces(self.z0, np.zeros_like(self.z0), jacobian=True)
             self.damping = damping_matrix(mechanism.damping, self.mass, -rest.dQ_dz,
                                           self.part.free)
-        self._drive_constants()
+        #: Every drive, by kind, and the kernel's drive constants (``drives.DriveTable``).
+        self.drives = DriveTable(mechanism, self.part)
+        #: The single drive of a mechanism with one displacement drive and no other (the
+        #: scalar interfaces: linear model, stroke limit), else None.
+        self.drive: Optional[Drive] = (
+            self.drives[0] if len(self.drives) == 1 and len(self.drives.displacement) == 1
+            else None)
         self.motion = self._motion_arrays()
         self.compression = compression_points(mechanism)
         self.length_scale = max(
@@ -165,10 +152,10 @@ class Model(DriveMixin):
         part = self.part
         sines = [c for _, c in part.timed]
         return (
-            self.tau,
+            self.drives.tau,
             self.z0[part.prescribed].copy(),
             np.ascontiguousarray(part.D, dtype=float).reshape(len(part.prescribed),
-                                                              self.n_actuators),
+                                                              self.drives.n_lags),
             np.array([j for j, _ in part.timed], dtype=np.int64),
             np.array([c.amplitude for c in sines], dtype=float),
             np.array([2.0 * np.pi * c.frequency for c in sines], dtype=float),
@@ -178,28 +165,36 @@ class Model(DriveMixin):
     def _iteration_atol(self) -> np.ndarray:
         free = self.part.free
         per_coord = np.where(free % 3 == 2, 1e-12, 1e-12 * self.length_scale)
-        return np.concatenate([per_coord, per_coord / self.dt, 1e-12 * self.stroke_span])
+        return np.concatenate([per_coord, per_coord / self.dt, 1e-12 * self.drives.stroke_span])
 
     def _kernel_args(self) -> tuple:
-        a = self.assembly
+        d = self.drives
         part = self.part
         tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase = self.motion
         damping = self.damping if self.damping is not None else np.zeros((0, 0))
         return (part.free.astype(np.int64), part.prescribed.astype(np.int64), self.mass, zP0, D,
-                tau, sine_index, sine_amp, sine_w, sine_phase, self.force_dir, self.force_z0,
-                self.stack_dir, self.stack_z0, self.stack_k, *a.kernel_arrays(),
+                tau, sine_index, sine_amp, sine_w, sine_phase, d.force_dir, d.force_z0,
+                d.stack_dir, d.stack_z0, d.stack_k, *self.assembly.kernel_arrays(),
                 np.ascontiguousarray(damping))
 
     # ------------------------------------------------------------- coordinates
-    def prescribed(self, t: float, u, command):
+    def prescribed(self, t: float, u: np.ndarray, command: np.ndarray):
         """
         Return z_P, v_P, a_P: prescribed coordinates, their rates and accelerations.
 
-        ``u``: a state's u (``actuator_u``); ``command``: a number or the actuator-order vector
-        (``kernel_command``).
+        ``u``: the actuator outputs (a state's u); ``command``: the kernel's command vector
+        (``DriveTable.kernel_command``).
         """
-        return stepping.prescribed_motion(t, self.actuator_u(u), self.kernel_command(command),
-                                          *self.motion)
+        return stepping.prescribed_motion(t, u, self._checked(command), *self.motion)
+
+    def _checked(self, command) -> np.ndarray:
+        """Return ``command`` if it is a kernel command vector; TypeError naming it otherwise."""
+        width = self.drives.kernel_width
+        if not (isinstance(command, np.ndarray) and command.shape == (width,)
+                and command.dtype == np.float64):
+            raise TypeError(f"command: expected the kernel's command vector, a float array of "
+                            f"{width} (DriveTable.kernel_command), got {command!r}")
+        return command
 
     def full(self, zF, vF, t, u, command):
         """All coordinates z, velocities v (root frame) and a_P from the free ones."""
@@ -214,13 +209,13 @@ class Model(DriveMixin):
     def pack(self, state) -> np.ndarray:
         """Return y = (z_F, v_F, u) of a state (one u per displacement drive)."""
         part = self.part
-        return np.concatenate([state.z[part.free], state.v[part.free],
-                               self.actuator_u(state.u)])
+        self.drives.check_state(state.u, state.command)
+        return np.concatenate([state.z[part.free], state.v[part.free], state.u])
 
-    def unpack(self, y: np.ndarray, t: float, command):
-        """(z, v, u) of y at time t under ``command`` (u: the actuator outputs, a vector)."""
+    def unpack(self, y: np.ndarray, t: float, command: np.ndarray):
+        """(z, v, u) of y at time t under the kernel ``command`` (u: the actuator outputs)."""
         nF = len(self.part.free)
-        u = y[2 * nF:2 * nF + self.n_actuators].copy()
+        u = y[2 * nF:2 * nF + self.drives.n_lags].copy()
         z, v, _ = self.full(y[:nF], y[nF:2 * nF], t, u, command)
         return z, v, u
 
@@ -247,33 +242,31 @@ class Model(DriveMixin):
         """Return dQ/dv of all forces from the hinges' dQ/dv: minus C (``damping``) if given."""
         return dQ_dv if self.damping is None else dQ_dv - self.damping
 
-    def rhs(self, y: np.ndarray, t: float, command):
+    def rhs(self, y: np.ndarray, t: float, command: np.ndarray):
         """
         Return F(y, t) and the energy rates (``stepping.energy_rates``).
 
-        ``command``: a number or the actuator-order vector (``kernel_command``).
+        ``command``: the kernel's command vector (``DriveTable.kernel_command``).
         """
-        command = self.kernel_command(command)
         if self.compiled:
-            return stepping.kernel_rhs(y, t, command, self.kernel_args)
+            return stepping.kernel_rhs(y, t, self._checked(command), self.kernel_args)
         return self.rhs_python(y, t, command)
 
     def rhs_python(self, y: np.ndarray, t: float, command, _args=None):
         """F(y, t) and the energy rates through Assembly (any hinge law)."""
         part = self.part
-        command = self.kernel_command(command)
-        nF, nd = len(part.free), self.n_actuators
+        d = self.drives
+        nF, nd = len(part.free), d.n_lags
         u = y[2 * nF:2 * nF + nd]
         z, v, aP = self.full(y[:nF], y[nF:2 * nF], t, u, command)
         Q, potential, dissipation = self.generalized_forces(z, v)
-        applied, springs = stepping.applied_forces(Q, z, command, nd, self.force_dir,
-                                                   self.force_z0, self.stack_dir, self.stack_z0,
-                                                   self.stack_k)
+        applied, springs = stepping.applied_forces(Q, z, command, nd, d.force_dir, d.force_z0,
+                                                   d.stack_dir, d.stack_z0, d.stack_k)
         potential += springs
         F = np.empty_like(y)
         F[:nF] = y[nF:2 * nF]
         F[nF:2 * nF] = Q[part.free] / self.mass_free
-        F[2 * nF:] = (command[:nd] - u) / self.tau
+        F[2 * nF:] = (command[:nd] - u) / d.tau
         aux = np.empty(stepping.AUX_LOAD + nd)
         return F, stepping.energy_rates(aux, Q, v, potential, dissipation, applied,
                                         part.prescribed, self.mass, self.motion[2],
@@ -301,18 +294,19 @@ class Model(DriveMixin):
         d = self._derivatives(y, t, command)
         part = self.part
         nF, m = len(part.free), len(y)
-        G = np.zeros((self.n_actuators, m))
+        rows_d, tau = self.drives.lag_rows, self.drives.tau
+        G = np.zeros((len(rows_d), m))
         PF, PP = np.ix_(part.prescribed, part.free), np.ix_(part.prescribed, part.prescribed)
         Kzz, Kvv = d.Kzz, d.Kvv
-        for k, dk in enumerate(self.D_rows):
+        for k, dk in enumerate(rows_d):
             G[k, :nF] = dk @ Kzz[PF]
             G[k, nF:2 * nF] = dk @ Kvv[PF]
-            for j, (dj, tau_j) in enumerate(zip(self.D_rows, self.tau)):
+            for j, (dj, tau_j) in enumerate(zip(rows_d, tau)):
                 G[k, 2 * nF + j] = dk @ (Kzz[PP] @ dj - Kvv[PP] @ dj / tau_j)
         rows = np.zeros((len(part.prescribed), m))  # dQ_P/dy
         rows[:, :nF], rows[:, nF:2 * nF] = Kzz[PF], Kvv[PF]
-        for k, (dk, tau) in enumerate(zip(self.D_rows, self.tau)):
-            rows[:, 2 * nF + k] = Kzz[PP] @ dk - Kvv[PP] @ dk / tau
+        for k, (dk, tau_k) in enumerate(zip(rows_d, tau)):
+            rows[:, 2 * nF + k] = Kzz[PP] @ dk - Kvv[PP] @ dk / tau_k
         return Tangent(d.A, G, -Kvv, rows)
 
     def _derivatives(self, y: np.ndarray, t: float, command) -> "_Derivatives":
@@ -326,18 +320,43 @@ class Model(DriveMixin):
         A = np.zeros((m, m))
         A[:nF, nF:2 * nF] = np.eye(nF)
         Kzz, Kvv = hf.dQ_dz, self.velocity_jacobian(hf.dQ_dv)
-        if self.stack_K is not None:  # the stack springs: dQ/dz = -k_s e e^T
-            Kzz = Kzz - self.stack_K
+        if self.drives.stack_K is not None:  # the stack springs: dQ/dz = -k_s e e^T
+            Kzz = Kzz - self.drives.stack_K
         FF = np.ix_(part.free, part.free)
         A[nF:2 * nF, :nF] = Kzz[FF] / mF[:, None]
         A[nF:2 * nF, nF:2 * nF] = Kvv[FF] / mF[:, None]
         FP = np.ix_(part.free, part.prescribed)
-        for k, (dk, tau) in enumerate(zip(self.D_rows, self.tau)):
+        for k, (dk, tau) in enumerate(zip(self.drives.lag_rows, self.drives.tau)):
             A[nF:2 * nF, 2 * nF + k] = (Kzz[FP] @ dk - Kvv[FP] @ dk / tau) / mF
             A[2 * nF + k, 2 * nF + k] = -1.0 / tau
         return _Derivatives(A, Kzz, Kvv)
 
     # --------------------------------------------------------------- measures
+    def constraint_forces(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
+                          Q: Optional[np.ndarray] = None) -> np.ndarray:
+        """
+        Return the constraint forces lambda_P = M_P a_P - Q_P on the prescribed coordinates.
+
+        The Lagrange multipliers of eq. 6.4: what the constraints apply to the bodies (N, N m).
+        ``Q``: the generalized forces at (z, v) (``generalized_forces``; evaluated if None).
+        """
+        if Q is None:
+            Q = self.generalized_forces(z, v)[0]
+        P = self.part.prescribed
+        return self.mass[P] * aP - Q[P]
+
+    def drive_forces(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
+                     Q: Optional[np.ndarray] = None, inputs=None) -> np.ndarray:
+        """
+        Return the force each drive's actuator applies along its direction (``DriveTable.forces``).
+
+        A displacement drive's share D_d^T lambda_P of the constraint forces
+        (``constraint_forces``), a force drive's commanded force (its entry of ``inputs``).
+        """
+        reactions = (self.constraint_forces(z, v, aP, Q) if len(self.drives.displacement)
+                     else np.zeros(len(self.part.prescribed)))
+        return self.drives.forces(self.part.D, reactions, inputs)
+
     def output_displacement(self, z: np.ndarray) -> Optional[float]:
         """Return the (first) output's displacement from rest (m, or rad on theta), or None."""
         if not self.outputs:

@@ -23,7 +23,7 @@ class Partition:
 
     Per prescribed coordinate dz_P/du (the drive axis component) of the single displacement
     drive (zeros with none or several); the sine-rate constraints as (index into prescribed,
-    constraint); ``D``: dz_P/du per displacement drive (columns, ``Model.displacement_index``
+    constraint); ``D``: dz_P/du per displacement drive (columns, ``DriveTable.displacement``
     order).
     """
 
@@ -32,6 +32,7 @@ class Partition:
     du: np.ndarray
     timed: list = field(default_factory=list)
     D: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+
 
 def partition(mech: Mechanism) -> Partition:
     """Split the 3 n_bodies coordinates of ``mech`` by its constraints."""

@@ -56,7 +56,7 @@ class Simulation:
             self.model = source
         else:
             self.model = Model(source, dt, relinearize_tol, True if energy is None else energy)
-        self.data = Data(self.model.z0)
+        self.data = Data(self.model.z0, self.model.drives.n_lags, len(self.model.drives))
 
     # The model's constants, as attributes of the simulation (read-only views).
     mechanism = property(lambda self: self.model.mechanism)
@@ -89,7 +89,7 @@ class Simulation:
 
     def initial_state(self) -> State:
         """All bodies at their unstressed poses, at rest, actuator at zero, t = 0."""
-        return State(0.0, self.model.z0.copy(), np.zeros_like(self.model.z0))
+        return self.data.initial_state()
 
     def reset(self) -> None:
         """Back to the initial state; statistics restart."""
@@ -111,7 +111,7 @@ class Simulation:
         a force drive's its force (N, N m on theta); a drive with a piezo ``actuator:`` block
         takes its actuator's command (V for ``command: voltage``, else the nominal m; the
         engine does not clamp it: ``piezo.command_limits`` gives the stroke in that unit). A
-        number (a single drive), or one value per drive (a sequence in ``model.drive_names``
+        number (a single drive), or one value per drive (a sequence in ``model.drives.names``
         order or a {name: value} mapping); each must be finite (ValueError naming the drive).
         Held until the next call.
         """
@@ -119,8 +119,7 @@ class Simulation:
             raise ValueError(f"drive command must be finite, got {command!r}")
         if not self.model.drives:
             raise ValueError(f"mechanism {self.model.mechanism.name!r} has no drive")
-        values = self.model.drive_inputs(command)
-        self.data.state.command = float(values[0]) if len(values) == 1 else values
+        self.data.state.command = self.model.drives.inputs(command)
 
     def static(self, u, t: float = 0.0, tol: float = 1e-13,
                max_iter: int = 50) -> StaticResult:
@@ -136,7 +135,7 @@ class Simulation:
         Return the exact static gain at rest, outputs against drives.
 
         Exact static gain at rest, outputs (rows) against drives (columns)
-        (``statics.static_gain``; names: ``model.output_names``, ``model.drive_names``).
+        (``statics.static_gain``; names: ``model.output_names``, ``model.drives.names``).
         """
         return statics.static_gain(self.model, t)
 

@@ -26,7 +26,7 @@ class Snapshot:
     compression: of the compression hinge (``Model.hinge_compression``): along the drive
     axis, at its centre of stiffness, its drive side's displacement minus its far side's (m),
     or None.
-    drive_names, drive_inputs, drive_commands, drive_forces: per drive (``Model.drive_names``
+    drive_names, drive_inputs, drive_commands, drive_forces: per drive (``DriveTable.names``
     order) its input (a displacement drive's actuator output, the prescribed displacement; a
     force drive's commanded force), its command and the force its actuator applies
     (``Model.drive_forces``); drive_positions: each driven body's displacement along its drive's
@@ -75,18 +75,20 @@ def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
     """
     Q, deflections, wrenches, energy, _ = model.assembly.report(s.z, s.v)
     Q = model.add_damping(Q, s.v)[0]  # the drive forces see the damping matrix too
-    command = (actuation.kernel_command(model, s) if model.actuation
-               else model.actuator_command(s.command))
+    drives = model.drives
+    drives.check_state(s.u, s.command)
+    command = (actuation.kernel_command(model, s) if drives.actuation
+               else drives.kernel_command(s.command))
     _, _, aP = model.prescribed(s.t, s.u, command)
     if inputs is None:
-        inputs = model.state_inputs(s.u, s.command)
+        inputs = drives.state_inputs(s.u, s.command)
     else:
         aP = np.zeros_like(aP)  # a static state: at rest
     inputs = np.array(inputs, dtype=float)
-    commands = np.broadcast_to(np.asarray(s.command, dtype=float), (len(model.drives),))
+    commands = s.command
     forces = model.drive_forces(s.z, s.v, aP, Q, inputs)
     piezo = actuation.report(model, s, forces, inputs)  # fills the stack drives' entries
-    positions = model.drive_positions(s.z)
+    positions = drives.positions(s.z)
     nb = len(model.mechanism.bodies)
     return Snapshot(
         t=s.t,
@@ -103,7 +105,7 @@ def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
         potential_energy=energy + piezo.pop("stack_energy"),
         dissipated=s.dissipated,
         drive_work=s.drive_work,
-        drive_names=model.drive_names,
+        drive_names=drives.names,
         drive_inputs=np.asarray(inputs, dtype=float).copy(),
         drive_forces=forces,
         drive_positions=positions,

@@ -114,7 +114,7 @@ def kernel_rhs(y, t, command, args):
     F(y, t) and the energy rates (``step_energy.AUX_*``) with the compiled quadratic-law forces.
 
     y = (z_F, v_F, u) with one u per displacement drive; command: the displacement drives'
-    commands, then the force drives' forces (``Model.actuator_command``).
+    commands, then the force drives' forces (``DriveTable.kernel_command``).
     args = (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase,
     force_dir, force_z0, stack_dir, stack_z0, stack_k, ia, ib, ca, cb, phia, phib, kind, W, C,
     damping) -- see
@@ -353,10 +353,10 @@ def _interpreted_rhs(y, t, command, model):
 
 
 def _interpreted_switch_work(y, t, old, new, model):
+    d = model.drives
     return switch_work(y, t, old, new, model.part.free.astype(np.int64),
                        model.part.prescribed.astype(np.int64), model.mass, *model.motion,
-                       model.force_dir.shape[0],
-                       model.stack_dir, model.stack_z0, model.stack_k)
+                       d.force_dir.shape[0], d.stack_dir, d.stack_z0, d.stack_k)
 
 
 #: The same loop as plain Python, calling ``Model.rhs_python`` (any hinge law); pass the

@@ -62,7 +62,7 @@ class StrokeProbe:
                 held = float(nominal_displacement(one.actuator, value))
             inputs: Any = held
             if drive is not None:
-                inputs = {d: (held if d == drive else 0.0) for d in self._sim.model.drive_names}
+                inputs = {d: (held if d == drive else 0.0) for d in self._sim.model.drives.names}
             try:
                 self._sim.static(inputs)
                 self._known[key] = None

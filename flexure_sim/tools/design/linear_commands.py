@@ -32,7 +32,7 @@ EXIT_OK, EXIT_USAGE = 0, 2
 def _model(args, wrenches: bool = True) -> tuple:
     mech = load_mechanism(args.mechanism)
     sim = Simulation(mech)
-    actuated = [sim.model.drive_names[a.drive] for a in sim.model.actuation]
+    actuated = [sim.model.drives.names[a.drive] for a in sim.model.drives.actuation]
     if actuated:
         raise ValueError(f"mechanism {mech.name!r}: drive {', '.join(actuated)} has a piezo "
                          "actuator block, whose amplifier, hysteresis and creep the linear model "
@@ -45,7 +45,7 @@ def _model(args, wrenches: bool = True) -> tuple:
         value = None
     elif value is not None:
         try:
-            value = sim.model.drive_inputs(value)
+            value = sim.model.drives.inputs(value)
         except ValueError as exc:
             raise ValueError(f"--input {args.input!r}: {exc}") from None
         value = float(value[0]) if len(value) == 1 else value
