@@ -80,12 +80,29 @@ def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
     }
     if sim.model.drives.actuation:
         out["actuators"] = actuator_figures(sim, snap)
+    if len(sim.model.drives):
+        out["drives"] = drive_figures(sim, snap)
     if len(sim.model.drives) > 1 or len(sim.model.outputs) > 1:
-        out["drives"] = {name: {"input": float(snap.drive_inputs[k]),
-                                "force": float(snap.drive_forces[k]),
-                                "position": float(snap.drive_positions[k])}
-                         for k, name in enumerate(snap.drive_names)}
         out["outputs"] = dict(snap.outputs)
+    return out
+
+
+def drive_figures(sim: Simulation, snap: Snapshot) -> dict:
+    """
+    Return each drive's figures: input, command, force along its axis, position, full wrench.
+
+    ``wrench``: what the drive applies to its body (``Snapshot.drive_wrenches``), in the body's
+    frame (``frame``), moment about its origin (N m) and force along its x and y axes (N).
+    """
+    out = {}
+    for k, d in enumerate(sim.model.drives):
+        moment, fx, fy = (float(w) for w in snap.drive_wrenches[k])
+        out[d.name] = {"kind": d.kind, "body": d.body, "input": float(snap.drive_inputs[k]),
+                       "command": float(snap.drive_commands[k]),
+                       "force": float(snap.drive_forces[k]),
+                       "position": float(snap.drive_positions[k]),
+                       "wrench": {"frame": d.body, "force_x": fx, "force_y": fy,
+                                  "moment": moment}}
     return out
 
 
@@ -243,6 +260,12 @@ def print_table(out: dict) -> None:
         print(f"actuator {name}: command {command}, amplifier {_fmt(a['voltage'], 'V')}, free "
               f"stroke {_fmt(a['free_stroke'], 'um', 1e6)}, applied "
               f"{_fmt(a['applied'], 'um', 1e6)}, stack force {_fmt(a['stack_force'], 'N')}")
+    for name, d in out.get("drives", {}).items():
+        w = d["wrench"]
+        label = "drive" if name == "drive" else f"drive {name}"
+        print(f"{label} wrench on {w['frame']} (its frame, about its origin): force x "
+              f"{_fmt(w['force_x'], 'N')}, y {_fmt(w['force_y'], 'N')}, moment "
+              f"{_fmt(w['moment'], 'N m')}")
     for t, v in out.get("output_at", {}).items():
         print(f"output at {float(t) * 1e3:g} ms:      {_fmt(v, 'um', 1e6)}")
     print("hinge deflection, frame b in frame a:  rotation [urad]  x [nm]  y [nm]")

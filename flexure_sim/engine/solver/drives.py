@@ -140,6 +140,11 @@ class DriveTable:
         self.actuation = actuated(self)
         self.actuators = Actuators(self.actuation)
         self._z0 = z0
+        #: Per drive, its body's index and the (coordinate 0..2 of the body, index into the
+        #: prescribed coordinates) it holds (``Partition.held``): where its reaction acts.
+        self.bodies = np.array([mechanism.body_index(d.body) for d in drives], dtype=int)
+        place = {int(c): j for j, c in enumerate(part.prescribed)}
+        self._held = tuple(tuple((c % 3, place[c]) for c in coords) for coords in part.held)
 
     def __len__(self) -> int:
         return len(self._drives)
@@ -247,6 +252,36 @@ class DriveTable:
             out[self.displacement] = D.T @ reactions
         if inputs is not None and len(self.force):
             out[self.force] = np.asarray(inputs, dtype=float)[self.force]
+        return out
+
+    def wrenches(self, reactions: np.ndarray, forces: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """
+        Return the full wrench each drive applies to its body: (n_drives, 3), (moment, fx, fy).
+
+        What the drive's constraints and actuator apply to the driven body, in the body's frame
+        at its origin (the moment about the origin, the forces along the body's axes): the
+        constraint forces ``reactions`` = lambda_P (``Model.constraint_forces``, eq. 6.4) on the
+        coordinates the drive prescribes (its axis and the coordinates it holds: the reaction of
+        a held drive tip in force x, y and moment), plus e_k f_k for a force drive's force or a
+        stack drive's spring force f_k (``forces``, ``forces`` order). The body's generalized
+        forces on (x, y, theta) are the force in the root frame and the moment about the body's
+        origin, turned into the body's frame by R(theta)^T. Along the drive's axis it is
+        ``forces`` (a rigid drive's constraint force).
+        """
+        n = len(self)
+        root = np.zeros((n, 3))           # (fx, fy, moment) in the root frame
+        for k, held in enumerate(self._held):
+            for c, j in held:
+                root[k, c] += reactions[j]
+        for k in np.concatenate([self.force, self.stack]).astype(int):
+            i = self.bodies[k]
+            root[k] += self.directions[k, 3 * i:3 * i + 3] * forces[k]
+        theta = z[3 * self.bodies + 2] if n else np.zeros(0)
+        cs, sn = np.cos(theta), np.sin(theta)
+        out = np.empty((n, 3))
+        out[:, 0] = root[:, 2]
+        out[:, 1] = cs * root[:, 0] + sn * root[:, 1]
+        out[:, 2] = -sn * root[:, 0] + cs * root[:, 1]
         return out
 
     def positions(self, z: np.ndarray) -> np.ndarray:

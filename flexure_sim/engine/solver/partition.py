@@ -24,7 +24,8 @@ class Partition:
     Per prescribed coordinate dz_P/du (the drive axis component) of the single displacement
     drive (zeros with none or several); the sine-rate constraints as (index into prescribed,
     constraint); ``D``: dz_P/du per displacement drive (columns, ``DriveTable.displacement``
-    order).
+    order); ``held``: per drive (``Mechanism.drives`` order) the coordinates it prescribes (its
+    body's axis and held coordinates; a stack drive's held ones; none for a force drive).
     """
 
     free: np.ndarray
@@ -32,6 +33,7 @@ class Partition:
     du: np.ndarray
     timed: list = field(default_factory=list)
     D: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    held: tuple = ()
 
 
 def partition(mech: Mechanism) -> Partition:
@@ -39,19 +41,16 @@ def partition(mech: Mechanism) -> Partition:
     prescribed: set[int] = set()
     timed = []
     columns = []
+    held = []
     for c in mech.constraints:
         i = mech.body_index(c.body)
         if isinstance(c, Fixed):
             prescribed.update(3 * i + k for k in range(3))
-        elif isinstance(c, Drive) and c.kind == "displacement" and stacked(c):
-            if c.coordinate is None:  # the axis coordinate free (the stack pulls), rest held
-                prescribed.update(3 * i + k for k in range(3) if k != _axis_coordinate(c))
-        elif isinstance(c, Drive) and c.kind == "displacement":
-            if c.coordinate is None:
-                prescribed.update(3 * i + k for k in range(3))  # along the axis, rest held
-            else:
-                prescribed.add(3 * i + COORDINATE_NAMES.index(c.coordinate))
-            columns.append(c.direction(mech))
+        elif isinstance(c, Drive):
+            held.append(_held(c, i))
+            prescribed.update(held[-1])
+            if c.kind == "displacement" and not stacked(c):
+                columns.append(c.direction(mech))
         elif isinstance(c, SineRate):
             prescribed.add(3 * i + COORDINATE_NAMES.index(c.coordinate))
             timed.append((3 * i + COORDINATE_NAMES.index(c.coordinate), c))
@@ -61,7 +60,24 @@ def partition(mech: Mechanism) -> Partition:
     D = np.array(columns, dtype=float).reshape(len(columns), -1)[:, P].T if columns else (
         np.zeros((len(P), 0)))
     du = D[:, 0].copy() if D.shape[1] == 1 else np.zeros(len(P))
-    return Partition(F, P, du, [(pos[k], c) for k, c in timed], D)
+    return Partition(F, P, du, [(pos[k], c) for k, c in timed], D, tuple(held))
+
+
+def _held(drive: Drive, i: int) -> tuple[int, ...]:
+    """
+    Return the coordinates of body i that ``drive`` prescribes.
+
+    A displacement drive along an axis: all three (along the axis, the rest held); on one
+    coordinate: that one; a stack drive along an axis: all but its axis coordinate (the stack
+    pulls along it), on one coordinate: none; a force drive: none (its body stays free).
+    """
+    if drive.kind == "force" or (stacked(drive) and drive.coordinate is not None):
+        return ()
+    if stacked(drive):
+        return tuple(3 * i + k for k in range(3) if k != _axis_coordinate(drive))
+    if drive.coordinate is not None:
+        return (3 * i + COORDINATE_NAMES.index(drive.coordinate),)
+    return tuple(3 * i + k for k in range(3))
 
 
 def _axis_coordinate(drive: Drive) -> int:

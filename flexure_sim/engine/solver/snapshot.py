@@ -39,6 +39,10 @@ class Snapshot:
     for a finite stack, P7, held x_a; the drive force of a rigid one). Its command is in
     drive_commands (V for ``command: voltage``), its applied displacement x_out in drive_positions
     (also its drive_inputs entry for a finite stack). potential_energy includes the stack springs'.
+    drive_wrenches (n_drives, 3): (moment, fx, fy), the full wrench each drive applies to its
+    body (its constraint's reaction in every coordinate it holds, plus an applied force), in the
+    driven body's frame, moment about its origin (``DriveTable.wrenches``); along the drive's
+    axis it is drive_forces.
     """
 
     t: float
@@ -64,6 +68,7 @@ class Snapshot:
     drive_voltages: np.ndarray = field(default_factory=lambda: np.zeros(0))
     drive_free_strokes: np.ndarray = field(default_factory=lambda: np.zeros(0))
     drive_stack_forces: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    drive_wrenches: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
@@ -86,7 +91,8 @@ def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
         aP = np.zeros_like(aP)  # a static state: at rest
     inputs = np.array(inputs, dtype=float)
     commands = s.command
-    forces = model.drive_forces(s.z, s.v, aP, Q, inputs)
+    reactions = model.constraint_forces(s.z, s.v, aP, Q)
+    forces = drives.forces(model.part.D, reactions, inputs)
     piezo = actuation.report(model, s, forces, inputs)  # fills the stack drives' entries
     positions = drives.positions(s.z)
     nb = len(model.mechanism.bodies)
@@ -111,5 +117,6 @@ def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
         drive_positions=positions,
         outputs=dict(zip(model.output_names, model.output_values(s.z).tolist())),
         drive_commands=commands.copy(),
+        drive_wrenches=drives.wrenches(reactions, forces, s.z),
         **piezo,
     )
