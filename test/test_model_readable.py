@@ -15,7 +15,7 @@ from flexure_sim.engine.mechanism.loader import load_mechanism, mechanism_from_d
 from flexure_sim.engine.solver import model as model_module
 from flexure_sim.engine.solver import step_energy
 from flexure_sim.engine.solver.drives import DriveTable
-from flexure_sim.engine.solver.model import Tangent
+from flexure_sim.engine.solver.derivatives import Tangent
 from flexure_sim.engine.solver.simulation import Simulation
 
 

@@ -5,11 +5,15 @@ A mechanism prepared for stepping (Model) apart from its State; the Simulation f
   operator splitting.
 - ``assembly``: Generalized forces of all hinges on all bodies, with exact Jacobians.
 - ``compression``: Where and how a hinge's compression is measured (README "Conventions").
-- ``drives``: The drives of a ``Model``: their constants, inputs and commands, and what each one
-  does.
+- ``derivatives``: The exact derivatives of a ``Model``'s first-order system (A, the energy
+  integrals' ``Tangent``).
+- ``drives``: The drives of a ``Model`` (its ``DriveTable``): their constants, inputs and
+  commands, and what each one does.
 - ``integrator``: Fixed-step stiff-stable stepping of a ``Model``, updating a ``Data``.
 - ``kernels``: Compiled hot path: generalized hinge forces of quadratic laws, without Jacobians.
 - ``model``: A mechanism prepared for stepping: the constants (as MuJoCo's mjModel), no state.
+- ``partition``: Which coordinates are free and which the constraints prescribe.
+- ``programs``: Drive programs: a drive's input as a function of time.
 - ``simulation``: The simulation facade: a shared ``Model`` (constants) and its own ``Data``
   (state).
 - ``snapshot``: What a simulation reports at one instant, read from a ``Model`` and a ``State``.

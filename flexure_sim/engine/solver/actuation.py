@@ -82,7 +82,7 @@ def kernel_command(model, s: State, strokes=None) -> np.ndarray:
     The state's, with each actuated drive's entry replaced by its free stroke ``strokes``
     (default: the held ones, ``held``).
     """
-    command = model.drives.kernel_command(s.command)
+    command = model.drives.kernel_command(s.command, s.programs, s.t - 0.5 * model.dt)
     strokes = held(model, s) if strokes is None else strokes
     for a, x in zip(model.drives.actuation, strokes):
         command[a.slot] = x
@@ -117,7 +117,9 @@ def step(model, data: Data, n: int = 1) -> None:
         chunk = min(remaining, BLOCK)
         s = data.state
         after, strokes = actuators.run(chunk, states(model, s), volts, model.dt)
-        rows = np.repeat(drives.kernel_command(s.command)[None, :], chunk, axis=0)
+        rows = drives.kernel_rows(s, model.dt, chunk)
+        if rows is None:
+            rows = np.repeat(drives.kernel_command(s.command)[None, :], chunk, axis=0)
         rows[:, slots] = strokes
         dynamics.step(model, data, chunk, kernel_command(model, s), rows)
         data.state.actuator, data.state.held = after, strokes[-1].copy()

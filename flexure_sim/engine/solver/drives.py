@@ -6,6 +6,9 @@ A mechanism has any number of named drives (``mechanism.Drive``), in constraint 
 - a **displacement drive** d prescribes its body's coordinates, z_P = z_P0 + D_d u_d, where
   u_d, the actuator output, follows the drive's command c_d as a first-order lag of its own,
   du_d/dt = (c_d - u_d) / tau_d; the u_d are integrated states (y = (z_F, v_F, u));
+- a **prescribed drive** (a displacement drive with ``response_time: 0``) prescribes its
+  displacement p_d(t) itself, with its rate and acceleration, from a program (``programs``):
+  z_P = z_P0 + D_d p_d(t), no state; a held command c_d is reached by a ramp over one step;
 - a **force drive** j applies the generalized force e_j f_j (virtual work; e_j its direction)
   on coordinates that stay free; the commanded force f_j is held as it is (no lag);
 - a **stack drive** s, a displacement drive whose piezo ``actuator:`` block has a finite stack
@@ -26,13 +29,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Iterator
+from typing import Iterator, Optional
 
 import numpy as np
 
 from flexure_sim.engine.actuators.piezo import PiezoSpec
 from flexure_sim.engine.actuators.piezo_steps import Actuators
 from flexure_sim.engine.mechanism.parts import Drive, Mechanism
+from flexure_sim.engine.solver.programs import PIECE_WIDTH, hold
 
 
 def stacked(drive) -> bool:
@@ -95,12 +99,15 @@ class DriveTable:
     The index arrays (into that order) of each kind:
 
     - ``displacement``: the drives that prescribe their body's displacement (each a column of
-      ``Partition.D``, in this order); each a first-order lag of its command, whose output u is
-      an integrated state (``lagged``: the same drives, in the order of u);
+      ``Partition.D``, in this order); of those ``lagged``: a first-order lag of its command,
+      whose output u is an integrated state (in the order of u), and ``prescribed``
+      (``response_time: 0``): the displacement follows its program exactly (module doc);
     - ``force``: the force drives; ``stack``: the stack drives (a finite piezo stack, ``stacked``).
 
     ``order``: the kernel's command vector holds the lagged drives' commands, then the force
-    drives' forces, then the stack drives' free strokes (``kernel_command``).
+    drives' forces, then the stack drives' free strokes, then per prescribed drive the kernel row
+    of its program's piece (``programs.PIECE_WIDTH`` entries from ``first_program``;
+    ``kernel_command``).
     """
 
     def __init__(self, mechanism: Mechanism, part) -> None:
@@ -112,16 +119,27 @@ class DriveTable:
         self.displacement = np.array(
             [k for k, d in enumerate(drives) if d.kind == "displacement" and not stacked(d)],
             dtype=int)
-        self.lagged = self.displacement
+        self.lagged = np.array([k for k in self.displacement if drives[k].response_time > 0],
+                               dtype=int)
+        self.prescribed = np.array([k for k in self.displacement
+                                    if drives[k].response_time == 0], dtype=int)
         self.force = np.array([k for k, d in enumerate(drives) if d.kind == "force"], dtype=int)
         self.stack = np.array([k for k, d in enumerate(drives) if stacked(d)], dtype=int)
         self.order = np.concatenate([self.lagged, self.force, self.stack]).astype(int)
+        #: Where the prescribed drives' piece rows start in the kernel's command vector.
+        self.first_program = len(self.order)
         lagged = [drives[k] for k in self.lagged]
         #: Time constant (s) and stroke span (m) per lagged drive (the order of u).
         self.tau = np.array([d.response_time for d in lagged], dtype=float)
         self.stroke_span = np.array([d.stroke[1] - d.stroke[0] for d in lagged], dtype=float)
-        #: D^T, rows contiguous: dz_P/du_d per lagged drive.
-        self.lag_rows = np.ascontiguousarray(part.D.T, dtype=float)
+        column = {int(k): j for j, k in enumerate(self.displacement)}
+        #: D^T, rows contiguous: dz_P/du_d per lagged drive; D_p: dz_P/dp_d per prescribed
+        #: drive (columns).
+        self.lag_rows = np.ascontiguousarray(part.D[:, [column[k] for k in self.lagged]].T,
+                                             dtype=float)
+        self.D_prescribed = np.ascontiguousarray(
+            part.D[:, [column[k] for k in self.prescribed]], dtype=float).reshape(
+                len(part.prescribed), len(self.prescribed))
         z0 = np.array([b.pose for b in mechanism.bodies], dtype=float).ravel()
         #: Direction e_j (rows) of each force drive, and e_j . z0.
         self.force_dir = np.ascontiguousarray(self.directions[self.force], dtype=float).reshape(
@@ -161,7 +179,7 @@ class DriveTable:
     @property
     def kernel_width(self) -> int:
         """Return the length of the kernel's command vector (``kernel_command``)."""
-        return len(self.order)
+        return len(self.order) + PIECE_WIDTH * len(self.prescribed)
 
     @property
     def n_lags(self) -> int:
@@ -183,23 +201,76 @@ class DriveTable:
                              f"mechanism has {self.n_lags} displacement drives (one actuator "
                              f"output each) and {len(self)} drives (one command each)")
 
-    def kernel_command(self, command: np.ndarray) -> np.ndarray:
+    def kernel_command(self, command: np.ndarray, programs: tuple = (),
+                       t: float = 0.0) -> np.ndarray:
         """
         Return the kernel's command vector (``order``) from one command per drive.
 
-        ``command``: one value per drive (``names`` order), as a state holds it.
+        ``command``: one value per drive (``names`` order), as a state holds it; ``programs``:
+        a state's programs (one per drive or none, ``State.programs``): a prescribed drive's
+        entry is its program's piece in force at ``t`` (``Program.row``), or, without a program,
+        its command held.
         """
-        return np.ascontiguousarray(np.asarray(command, dtype=float)[self.order], dtype=float)
+        values = np.asarray(command, dtype=float)
+        out = values[self.order]
+        if not len(self.prescribed):
+            return np.ascontiguousarray(out)
+        rows = [programs[k].row(t) if programs and programs[k] is not None
+                else hold(values[k]) for k in self.prescribed]
+        return np.ascontiguousarray(np.concatenate([out] + rows))
 
-    def state_inputs(self, u: np.ndarray, command: np.ndarray) -> np.ndarray:
+    def kernel_rows(self, state, dt: float, n: int) -> Optional[np.ndarray]:
+        """
+        Return the kernel's command vector of each of n steps from ``state`` (None: no program).
+
+        Shape (n, ``kernel_width``): a lagged or force drive with a program holds its value at
+        each step's midpoint, a prescribed drive's the piece in force there; the other drives
+        hold the state's commands.
+        """
+        programs = state.programs
+        if not programs or all(p is None for p in programs):
+            return None
+        mid = state.t + dt * (np.arange(int(n)) + 0.5)
+        rows = np.repeat(self.kernel_command(state.command, programs, mid[0])[None, :], n, axis=0)
+        slot = {int(k): j for j, k in enumerate(self.order)}
+        for k, program in enumerate(programs):
+            if program is None:
+                continue
+            if k in slot:
+                rows[:, slot[k]] = program.values(mid)
+            else:
+                j = self.first_program + PIECE_WIDTH * list(self.prescribed).index(k)
+                rows[:, j:j + PIECE_WIDTH] = program.rows(mid)
+        return rows
+
+    def held_command(self, row: np.ndarray, command: np.ndarray, programs: tuple) -> np.ndarray:
+        """
+        Return a state's ``command`` after a step that held the kernel vector ``row``.
+
+        The lagged and force drives with a program take the value it held; the others keep
+        theirs (a prescribed drive's command is its target, set with the program).
+        """
+        out = np.array(command, dtype=float)
+        for j, k in enumerate(self.order):
+            if programs and programs[k] is not None:
+                out[k] = row[j]
+        return out
+
+    def state_inputs(self, u: np.ndarray, command: np.ndarray, programs: tuple = (),
+                     t: float = 0.0) -> np.ndarray:
         """
         Return each drive's input in a stepped state (``names`` order).
 
-        A displacement drive's actuator output u, a force drive's commanded force.
+        A lagged drive's actuator output u, a prescribed drive's displacement (its program's
+        value at t, or its command without one), a force drive's commanded force.
         """
         out = np.zeros(len(self))
         out[self.lagged] = u
-        out[self.force] = np.asarray(command, dtype=float)[self.force]
+        command = np.asarray(command, dtype=float)
+        out[self.force] = command[self.force]
+        for k in self.prescribed:
+            out[k] = (programs[k].value(t) if programs and programs[k] is not None
+                      else command[k])
         return out
 
     def inputs(self, value) -> np.ndarray:

@@ -28,6 +28,9 @@ from flexure_sim.engine.solver import step_energy, step_loop as stepping
 from flexure_sim.engine.solver.state import Data, Linearization, State
 from flexure_sim.engine.solver.model import Model, SolverError
 
+#: Steps per call when the drives follow programs (bounds the per-step command rows' memory).
+BLOCK = 4096
+
 
 def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> None:
     """
@@ -56,11 +59,24 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
         shifted = [_shifted_phi1(A, E[:m, :m], h, tk) for tk in tau]
         drive_mass = [float(dk @ (model.mass[part.prescribed] * dk))
                       for dk in model.drives.lag_rows]
-        sines = np.array([[j, c.amplitude, 2.0 * np.pi * c.frequency, c.phase]
-                          for j, c in part.timed], dtype=float).reshape(-1, 4).T
+        # The timed coordinates: sine rates, then those the prescribed drives' programs move
+        # (their velocity is entry AUX_LOAD + n_lags + i of the energy rates).
+        first = step_energy.AUX_LOAD + len(tau)
+        sines = np.array([[j, c.amplitude, 2.0 * np.pi * c.frequency, c.phase, -1.0]
+                          for j, c in part.timed]
+                         + [[j, 0.0, 0.0, 0.0, first + i]
+                            for i, j in enumerate(model.program_index)],
+                         dtype=float).reshape(-1, 5).T
+        timed = [j for j, _ in part.timed] + list(model.program_index)
+        # How the program coordinates' displacement and velocity force dv_F/dt.
+        nF, pc = len(part.free), model.program_index
+        forcing = np.zeros((m, 2 * len(pc)))
+        dz, dv = tangent.free_by_prescribed
+        forcing[nF:2 * nF, :len(pc)] = dz[:, pc] / model.mass_free[:, None]
+        forcing[nF:2 * nF, len(pc):] = dv[:, pc] / model.mass_free[:, None]
         emats = step_energy.energy_matrices(
             A, phi1, phi2, h, tangent.G, tangent.damping, part.free, part.prescribed, D,
-            drive_mass, tau, shifted, sines, tangent.load_rows[[j for j, _ in part.timed]])
+            drive_mass, tau, shifted, sines, tangent.load_rows[timed], forcing)
     else:
         emats = step_energy.NO_ENERGY
     data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, emats)
@@ -126,13 +142,28 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     then is the one held before the first step; each change is the drives' work,
     ``stepping.switch_work``).
 
+    Without ``command``, the drives with a program (``State.programs``) follow it, one kernel
+    command row per step (``DriveTable.kernel_rows``; ``BLOCK`` steps per call at most).
+
     Time is origin + k dt, k the steps taken since the origin (the t of a state this data
     did not step itself), not a running sum: t stays on the step grid however long the
     run, so stamps derived from it stay on the tick grid.
+
+    A step whose iteration does not converge even with a fresh Jacobian is retried once with the
+    Jacobian taken where the lagged drives have settled (their rates zero): after a command step
+    a lag far faster than the step gives the prescribed body a huge rate for a tiny part of the
+    step, and the damping's derivative at that rate is no model of the rest of the step (the
+    answer does not depend on where the Jacobian is taken, only the iteration's convergence).
     """
     s = data.state
-    command = np.ascontiguousarray(
-        model.drives.kernel_command(s.command) if command is None else command, dtype=float)
+    if command is None:
+        if s.programs and n > BLOCK:
+            for start in range(0, int(n), BLOCK):
+                step(model, data, min(BLOCK, int(n) - start))
+            return
+        command = model.drives.kernel_command(s.command, s.programs, s.t - 0.5 * model.dt)
+        rows = model.drives.kernel_rows(s, model.dt, n)
+    command = np.ascontiguousarray(command, dtype=float)
     rows = command.reshape(1, -1) if rows is None else np.ascontiguousarray(rows, dtype=float)
     key = command.tobytes()
     clock = data.clock
@@ -152,7 +183,7 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     else:
         dissipated = work = math.nan
     remaining = int(n)
-    fresh = False
+    fresh = settled = False
     while remaining > 0:
         ahead = rows[min(int(n) - remaining, len(rows) - 1):]
         if data.lin is None or (model.relinearize_tol is not None
@@ -171,18 +202,44 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
         data.stats.iterations += iterations
         if status == stepping.NOT_CONTRACTING:
             if steps == 0 and fresh:
-                raise SolverError(
-                    f"step to t = {t + dt:.6g} s did not converge even with a fresh Jacobian; "
-                    f"reduce the step ({dt:g} s)")
+                if settled or not model.drives.n_lags:
+                    raise SolverError(_not_converging(model, t + dt))
+                linearize(model, data, y, t, _settled(model, y, ahead[0]))
+                settled = True
+                continue
             data.lin = None
         elif status == stepping.SLOW:
             data.lin = None
         if steps:
-            fresh = False
+            fresh = settled = False
     if not np.all(np.isfinite(y)):
         raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
     z, v, u = model.unpack(y, t, command)
-    data.state = State(t, z, v, u, s.command, dissipated, work)
+    held = model.drives.held_command(command, s.command, s.programs) if s.programs else s.command
+    data.state = State(t, z, v, u, held, dissipated, work, programs=s.programs)
     data.clock = (data.state, origin, k)
     # F at the new state seeds the next call while the command is unchanged.
     data.cache = (data.state, command.tobytes(), F0, aux0, ye)
+
+
+def _settled(model: Model, y: np.ndarray, command: np.ndarray) -> np.ndarray:
+    """Return ``command`` with each lagged drive's entry at its output u in y (rates zero)."""
+    nF, n = len(model.part.free), model.drives.n_lags
+    out = command.copy()
+    out[:n] = y[2 * nF:2 * nF + n]
+    return out
+
+
+def _not_converging(model: Model, t: float) -> str:
+    """Why a step did not converge, and what to do (naming lags faster than the step)."""
+    dt = model.dt
+    drives = model.drives
+    fast = [f"{drives.names[k]} ({tau:g} s)" for k, tau in zip(drives.lagged, drives.tau)
+            if tau < dt]
+    text = (f"step to t = {t:.6g} s did not converge even with a fresh Jacobian; reduce the "
+            f"step ({dt:g} s)")
+    if fast:
+        text += (f"; drive {', '.join(fast)} lags its command much faster than the step: give "
+                 "it response_time: 0 (its displacement then follows the command, a step rising "
+                 "over one engine step, or a program exactly), or a step near its response time")
+    return text

@@ -14,9 +14,11 @@ where lambda_P are the constraint forces (the Lagrange multipliers of eq. 6.4, s
 force the drive must supply is the drive-axis component of lambda). Unlike the
 dissertation's Baumgarte-stabilised multipliers (6.21-6.23), nothing drifts.
 
-The driven coordinates follow the actuator outputs u, one per displacement drive, each a
+The driven coordinates follow the actuator outputs u, one per lagged displacement drive, each a
 first-order lag of its command (``Drive``); u is part of the integrated state
-y = (z_F, v_F, u). A force drive's held force enters Q on its free coordinates (``drives``).
+y = (z_F, v_F, u). A prescribed drive's (``response_time: 0``) coordinates follow its program,
+a function of time (``programs``). A force drive's held force enters Q on its free coordinates
+(``drives``).
 A ``Model`` holds the partition, masses, the hinge assembly, the mechanism's damping matrix C
 (a ``damping:`` block: Rayleigh or modal, built once at rest by
 ``damping_models.damping_matrix``; Q -= C v on all coordinates, dissipating v^T C v) and the
@@ -26,16 +28,16 @@ It never changes after construction, so any number of ``Data`` may share it.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 
 from flexure_sim.errors import FlexureSimError
-from flexure_sim.engine.solver import step_loop as stepping
+from flexure_sim.engine.solver import derivatives, step_loop as stepping
 from flexure_sim.engine.solver.assembly import Assembly
 from flexure_sim.engine.solver.compression import compression_points, point_displacement
 from flexure_sim.engine.mechanism.damping_models import damping_matrix
+from flexure_sim.engine.solver.derivatives import Tangent
 from flexure_sim.engine.solver.drives import DriveTable
 from flexure_sim.engine.mechanism.parts import Drive, Mechanism
 from flexure_sim.engine.solver.partition import partition
@@ -46,30 +48,6 @@ DEFAULT_STEP = 1e-4
 
 class SolverError(FlexureSimError, RuntimeError):
     """The solver could not produce a finite answer (names the cause)."""
-
-
-@dataclass(frozen=True)
-class Tangent:
-    """
-    The exact derivatives of one linearization (``Model.tangent``), for y = (z_F, v_F, u).
-
-    ``A`` = dF/dy; ``G``: rows g_d = dq_d/dy of the displacement drives' loads q_d = D_d^T Q_P;
-    ``damping``: -dQ/dv over all coordinates; ``load_rows``: dQ_P/dy.
-    """
-
-    A: np.ndarray
-    G: np.ndarray
-    damping: np.ndarray
-    load_rows: np.ndarray
-
-
-@dataclass(frozen=True)
-class _Derivatives:
-    """A and the dQ/dz, dQ/dv (all coordinates, stack springs and damping matrix in) it uses."""
-
-    A: np.ndarray
-    Kzz: np.ndarray
-    Kvv: np.ndarray
 
 
 class Model:
@@ -124,12 +102,17 @@ class Model:
                                           self.part.free)
         #: Every drive, by kind, and the kernel's drive constants (``drives.DriveTable``).
         self.drives = DriveTable(mechanism, self.part)
+        self._check_lags()
         #: The single drive of a mechanism with one displacement drive and no other (the
         #: scalar interfaces: linear model, stroke limit), else None.
         self.drive: Optional[Drive] = (
             self.drives[0] if len(self.drives) == 1 and len(self.drives.displacement) == 1
             else None)
         self.motion = self._motion_arrays()
+        #: The prescribed coordinates (indices into ``part.prescribed``) that the prescribed
+        #: drives' programs move: timed like the sine rates in the energy bookkeeping.
+        self.program_index = np.flatnonzero(np.any(self.drives.D_prescribed != 0.0, axis=1)
+                                            ).astype(np.int64)
         self.compression = compression_points(mechanism)
         self.length_scale = max(
             1e-3, float(np.ptp(self.z0.reshape(nb, 3)[:, :2]))) if nb > 1 else 1.0
@@ -142,6 +125,26 @@ class Model:
         self.output_matrix = np.array([o.direction(mechanism) for o in self.outputs]
                                       ).reshape(len(self.outputs), 3 * nb)
 
+    #: A lag shorter than this fraction of the step is refused (``_check_lags``).
+    shortest_lag = 1e-5
+
+    def _check_lags(self) -> None:
+        """
+        Refuse a lag far shorter than the step, naming the drive and what to give instead.
+
+        Below ``shortest_lag`` dt the lag ends within the step to e^-100000 and the step's
+        matrices (e^{-h/tau}, (A - I/tau)^-1) no longer hold it in floating point; its limit is
+        a prescribed displacement (``response_time: 0``). Longer lags, down to that bound, step
+        at any dt (``integrator.step`` re-linearizes where the lag has settled).
+        """
+        for k, tau in zip(self.drives.lagged, self.drives.tau):
+            if tau < self.shortest_lag * self.dt:
+                raise ValueError(
+                    f"drive {self.drives.names[k]!r}: response_time {tau:g} s is below "
+                    f"{self.shortest_lag:g} of the step ({self.dt:g} s), too short a lag to "
+                    "step; give response_time: 0 (the displacement then follows its command "
+                    "exactly, a step rising over one engine step) or a smaller step")
+
     @property
     def compiled(self) -> bool:
         """Whether stepping runs the compiled kernel (every law quadratic)."""
@@ -151,15 +154,18 @@ class Model:
         """Arguments of stepping.prescribed_motion after (t, u, command)."""
         part = self.part
         sines = [c for _, c in part.timed]
+        d = self.drives
         return (
-            self.drives.tau,
+            d.tau,
             self.z0[part.prescribed].copy(),
-            np.ascontiguousarray(part.D, dtype=float).reshape(len(part.prescribed),
-                                                              self.drives.n_lags),
+            np.ascontiguousarray(d.lag_rows.T, dtype=float).reshape(len(part.prescribed),
+                                                                    d.n_lags),
             np.array([j for j, _ in part.timed], dtype=np.int64),
             np.array([c.amplitude for c in sines], dtype=float),
             np.array([2.0 * np.pi * c.frequency for c in sines], dtype=float),
             np.array([c.phase for c in sines], dtype=float),
+            d.D_prescribed,
+            d.first_program,
         )
 
     def _iteration_atol(self) -> np.ndarray:
@@ -170,12 +176,12 @@ class Model:
     def _kernel_args(self) -> tuple:
         d = self.drives
         part = self.part
-        tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase = self.motion
+        tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase, Dp, first_program = self.motion
         damping = self.damping if self.damping is not None else np.zeros((0, 0))
         return (part.free.astype(np.int64), part.prescribed.astype(np.int64), self.mass, zP0, D,
-                tau, sine_index, sine_amp, sine_w, sine_phase, d.force_dir, d.force_z0,
-                d.stack_dir, d.stack_z0, d.stack_k, *self.assembly.kernel_arrays(),
-                np.ascontiguousarray(damping))
+                tau, sine_index, sine_amp, sine_w, sine_phase, Dp, first_program,
+                self.program_index, d.force_dir, d.force_z0, d.stack_dir, d.stack_z0, d.stack_k,
+                *self.assembly.kernel_arrays(), np.ascontiguousarray(damping))
 
     # ------------------------------------------------------------- coordinates
     def prescribed(self, t: float, u: np.ndarray, command: np.ndarray):
@@ -267,69 +273,26 @@ class Model:
         F[:nF] = y[nF:2 * nF]
         F[nF:2 * nF] = Q[part.free] / self.mass_free
         F[2 * nF:] = (command[:nd] - u) / d.tau
-        aux = np.empty(stepping.AUX_LOAD + nd)
+        aux = np.empty(stepping.AUX_LOAD + nd + 2 * len(self.program_index))
         return F, stepping.energy_rates(aux, Q, v, potential, dissipation, applied,
                                         part.prescribed, self.mass, self.motion[2],
-                                        self.motion[3], aP)
+                                        self.motion[3], self.program_index, aP)
 
     def jacobian(self, y: np.ndarray, t: float, command) -> np.ndarray:
         """
-        Return the exact A = dF/dy for y = (z_F, v_F, u).
+        Return the exact A = dF/dy for y = (z_F, v_F, u) (``derivatives.jacobian_parts``).
 
-        Rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v), du_d/dt = (command_d - u_d)/tau_d, with z_P,
-        v_P depending on each u_d through D_d (the force drives' held forces do not depend on y;
-        the stack springs add -k_s e e^T to dQ/dz); dQ/dv includes -C (``velocity_jacobian``),
-        also through v_P.
+        Rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v), du_d/dt = (command_d - u_d)/tau_d.
         """
-        return self._derivatives(y, t, command).A
+        return derivatives.jacobian_parts(self, y, t, command).A
 
-    def tangent(self, y: np.ndarray, t: float, command) -> "Tangent":
+    def tangent(self, y: np.ndarray, t: float, command) -> Tangent:
         """
-        Return A (``jacobian``) and the derivatives the step's energy integrals need (``Tangent``).
+        Return A (``jacobian``) and the derivatives the step's energy integrals need.
 
-        G: rows g_d = dq_d/dy of the drive loads q_d = D_d^T Q_P; the damping matrix -dQ/dv
-        over all coordinates (1/2 the Hessian of the dissipated power in the velocities); and
-        dQ_P/dy.
+        ``derivatives.Tangent``: the drive loads' gradient, the damping matrix, dQ_P/dy.
         """
-        d = self._derivatives(y, t, command)
-        part = self.part
-        nF, m = len(part.free), len(y)
-        rows_d, tau = self.drives.lag_rows, self.drives.tau
-        G = np.zeros((len(rows_d), m))
-        PF, PP = np.ix_(part.prescribed, part.free), np.ix_(part.prescribed, part.prescribed)
-        Kzz, Kvv = d.Kzz, d.Kvv
-        for k, dk in enumerate(rows_d):
-            G[k, :nF] = dk @ Kzz[PF]
-            G[k, nF:2 * nF] = dk @ Kvv[PF]
-            for j, (dj, tau_j) in enumerate(zip(rows_d, tau)):
-                G[k, 2 * nF + j] = dk @ (Kzz[PP] @ dj - Kvv[PP] @ dj / tau_j)
-        rows = np.zeros((len(part.prescribed), m))  # dQ_P/dy
-        rows[:, :nF], rows[:, nF:2 * nF] = Kzz[PF], Kvv[PF]
-        for k, (dk, tau_k) in enumerate(zip(rows_d, tau)):
-            rows[:, 2 * nF + k] = Kzz[PP] @ dk - Kvv[PP] @ dk / tau_k
-        return Tangent(d.A, G, -Kvv, rows)
-
-    def _derivatives(self, y: np.ndarray, t: float, command) -> "_Derivatives":
-        """Return A and the exact dQ/dz, dQ/dv (all forces, all coordinates) it is built from."""
-        part = self.part
-        nF = len(part.free)
-        z, v, _ = self.unpack(y, t, command)
-        hf = self.assembly.forces(z, v, jacobian=True)
-        mF = self.mass_free
-        m = len(y)
-        A = np.zeros((m, m))
-        A[:nF, nF:2 * nF] = np.eye(nF)
-        Kzz, Kvv = hf.dQ_dz, self.velocity_jacobian(hf.dQ_dv)
-        if self.drives.stack_K is not None:  # the stack springs: dQ/dz = -k_s e e^T
-            Kzz = Kzz - self.drives.stack_K
-        FF = np.ix_(part.free, part.free)
-        A[nF:2 * nF, :nF] = Kzz[FF] / mF[:, None]
-        A[nF:2 * nF, nF:2 * nF] = Kvv[FF] / mF[:, None]
-        FP = np.ix_(part.free, part.prescribed)
-        for k, (dk, tau) in enumerate(zip(self.drives.lag_rows, self.drives.tau)):
-            A[nF:2 * nF, 2 * nF + k] = (Kzz[FP] @ dk - Kvv[FP] @ dk / tau) / mF
-            A[2 * nF + k, 2 * nF + k] = -1.0 / tau
-        return _Derivatives(A, Kzz, Kvv)
+        return derivatives.tangent(self, y, t, command)
 
     # --------------------------------------------------------------- measures
     def constraint_forces(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,

@@ -27,12 +27,13 @@ from flexure_sim.engine.solver.compression import stiffness_centre
 from flexure_sim.engine.solver.state import Data, State, StepStats
 from flexure_sim.engine.mechanism.parts import Mechanism
 from flexure_sim.engine.solver.model import DEFAULT_STEP, Model, SolverError
+from flexure_sim.engine.solver.programs import Program
 from flexure_sim.engine.solver.snapshot import Snapshot, snapshot
 from flexure_sim.engine.solver.statics import StaticResult, StaticSweep
 
 __all__ = [
-    "DEFAULT_STEP", "Model", "Simulation", "Snapshot", "SolverError", "State", "StaticResult",
-    "StaticSweep", "StepStats", "stiffness_centre",
+    "DEFAULT_STEP", "Model", "Program", "Simulation", "Snapshot", "SolverError", "State",
+    "StaticResult", "StaticSweep", "StepStats", "stiffness_centre",
 ]
 
 
@@ -113,13 +114,67 @@ class Simulation:
         engine does not clamp it: ``piezo.command_limits`` gives the stroke in that unit). A
         number (a single drive), or one value per drive (a sequence in ``model.drives.names``
         order or a {name: value} mapping); each must be finite (ValueError naming the drive).
-        Held until the next call.
+        Held until the next call; it replaces a drive's program (``set_programs``). A prescribed
+        drive (``response_time: 0``) moves to its target over the next step, linearly (its
+        displacement cannot jump: ``programs.Program.for_prescribed``).
         """
         if np.ndim(command) == 0 and not isinstance(command, dict) and not np.isfinite(command):
             raise ValueError(f"drive command must be finite, got {command!r}")
-        if not self.model.drives:
+        drives = self.model.drives
+        if not drives:
             raise ValueError(f"mechanism {self.model.mechanism.name!r} has no drive")
-        self.data.state.command = self.model.drives.inputs(command)
+        values = drives.inputs(command)
+        s = self.data.state
+        if not len(drives.prescribed) and not s.programs:
+            s.command = values
+            return
+        now = drives.state_inputs(s.u, s.command, s.programs, s.t)
+        programs = [None] * len(drives)
+        for k in drives.prescribed:
+            if values[k] != now[k]:
+                programs[k] = Program("step", values[k] - now[k], start=s.t,
+                                      initial=now[k]).for_prescribed(self.model.dt)
+        s.command, s.programs = values, tuple(programs) if any(programs) else ()
+
+    def set_programs(self, programs: dict) -> None:
+        """
+        Make drives follow programs of time (``programs.Program``): {drive name: program}.
+
+        A lagged drive's command, or a force drive's force, holds each step the program's value
+        at the step's midpoint; a prescribed drive's displacement follows it exactly (a step
+        rising over one engine step), and must start where the drive is (ValueError otherwise:
+        it cannot jump). None for a drive: it holds its present command. Drives not named keep
+        what they follow. A drive with a piezo actuator takes commands only (ValueError).
+        Times are simulation time (``state.t``).
+        """
+        drives = self.model.drives
+        unknown = sorted(set(programs) - set(drives.names))
+        if unknown:
+            raise ValueError(f"programs: unknown drive {', '.join(unknown)} (drives: "
+                             f"{', '.join(drives.names) or 'none'})")
+        s = self.data.state
+        actuated = {a.drive for a in drives.actuation}
+        now = drives.state_inputs(s.u, s.command, s.programs, s.t)
+        command = np.array(s.command, dtype=float)
+        out = list(s.programs) if s.programs else [None] * len(drives)
+        for name, program in programs.items():
+            k = drives.names.index(name)
+            if program is not None and k in actuated:
+                raise ValueError(f"drive {name!r} has a piezo actuator: give it a command "
+                                 "(set_command); programs drive the other drives")
+            if program is not None and k in drives.prescribed:
+                program = program.for_prescribed(self.model.dt)
+                start = program.value(s.t)
+                if not np.isclose(start, now[k], rtol=1e-12, atol=1e-15):
+                    raise ValueError(
+                        f"drive {name!r} (response_time 0: a prescribed displacement) is at "
+                        f"{now[k]:g} but its program ({program.describe()}) is at {start:g} at "
+                        f"t = {s.t:g} s: a prescribed displacement cannot jump")
+                command[k] = program.final if program.final is not None else program.initial
+            elif program is None:
+                command[k] = now[k] if k in drives.prescribed else command[k]
+            out[k] = program
+        s.command, s.programs = command, tuple(out) if any(p is not None for p in out) else ()
 
     def static(self, u, t: float = 0.0, tol: float = 1e-13,
                max_iter: int = 50) -> StaticResult:

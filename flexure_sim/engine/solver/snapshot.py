@@ -82,11 +82,12 @@ def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
     Q = model.add_damping(Q, s.v)[0]  # the drive forces see the damping matrix too
     drives = model.drives
     drives.check_state(s.u, s.command)
+    # The prescribed motion the state was reached under (its last step's program pieces).
     command = (actuation.kernel_command(model, s) if drives.actuation
-               else drives.kernel_command(s.command))
+               else drives.kernel_command(s.command, s.programs, s.t - 0.5 * model.dt))
     _, _, aP = model.prescribed(s.t, s.u, command)
     if inputs is None:
-        inputs = drives.state_inputs(s.u, s.command)
+        inputs = drives.state_inputs(s.u, s.command, s.programs, s.t)
     else:
         aP = np.zeros_like(aP)  # a static state: at rest
     inputs = np.array(inputs, dtype=float)

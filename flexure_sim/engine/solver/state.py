@@ -26,6 +26,8 @@ class State:
     the last reset: dissipated (J) by hinge damping and drive_work (J) done by the drives and the
     prescribed coordinates. actuator: the piezo actuators' states (engine/solver/actuation.py;
     None: at rest, or no actuator); held: their free strokes x_a (m) held over the last step.
+    programs: per drive its ``programs.Program`` or None (one per drive, or () for none): the
+    inputs that follow a function of time (``Simulation.set_programs``).
     """
 
     t: float
@@ -37,6 +39,7 @@ class State:
     drive_work: float = 0.0
     actuator: Optional[np.ndarray] = None
     held: Optional[np.ndarray] = None
+    programs: tuple = ()
 
     def __post_init__(self) -> None:
         self.u = np.array(self.u, dtype=float, ndmin=1)

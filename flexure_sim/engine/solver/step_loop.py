@@ -32,6 +32,8 @@ from flexure_sim.engine.solver import kernels
 from flexure_sim.engine.solver import step_energy as step_energy_module
 from flexure_sim.engine.jit import njit
 from flexure_sim.engine.solver.kernels import quadratic_forces
+from flexure_sim.engine.solver.programs import PIECE_WIDTH, piece_motion
+from flexure_sim.engine.solver import programs as programs_module
 from flexure_sim.engine.solver.step_energy import (
     AUX_APPLIED, AUX_DISSIPATION, AUX_ENERGY, AUX_LOAD, AUX_TIMED_POWER,
 )
@@ -41,13 +43,16 @@ CONVERGED, NOT_CONTRACTING, SLOW = 0, 1, 2
 
 
 @njit(cache=True)
-def prescribed_motion(t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase):
+def prescribed_motion(t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase,
+                      Dp, first_program):
     """
     z_P, v_P, a_P.
 
-    Held coordinates, the displacement drives (column k of D: dz_P/du_k; u_k a first-order lag
-    of command[k] with time constant tau[k], so v_P = sum_k D_k (command_k - u_k)/tau_k) and
-    prescribed sine rates (omega = a sin(w t + phase)).
+    Held coordinates, the lagged displacement drives (column k of D: dz_P/du_k; u_k a
+    first-order lag of command[k] with time constant tau[k], so v_P = sum_k D_k (command_k -
+    u_k)/tau_k), the prescribed drives (column j of Dp: dz_P/dp_j, p_j(t) the program piece at
+    command[first_program + j PIECE_WIDTH:], ``programs.piece_motion``) and prescribed sine
+    rates (omega = a sin(w t + phase)).
     """
     nP = zP0.shape[0]
     zP = zP0.copy()
@@ -64,6 +69,15 @@ def prescribed_motion(t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, 
             else:
                 vP[i] += D[i, k] * udot
                 aP[i] += D[i, k] * udd
+    for k in range(Dp.shape[1]):
+        o = first_program + k * PIECE_WIDTH
+        p, pd, pdd = piece_motion(command[o:o + PIECE_WIDTH], t)
+        for i in range(nP):
+            c = Dp[i, k]
+            if c != 0.0:
+                zP[i] += c * p
+                vP[i] += c * pd
+                aP[i] += c * pdd
     for i in range(sine_index.shape[0]):
         j = sine_index[i]
         a, w, ph = sine_amp[i], sine_w[i], sine_phase[i]
@@ -113,22 +127,22 @@ def kernel_rhs(y, t, command, args):
     """
     F(y, t) and the energy rates (``step_energy.AUX_*``) with the compiled quadratic-law forces.
 
-    y = (z_F, v_F, u) with one u per displacement drive; command: the displacement drives'
-    commands, then the force drives' forces (``DriveTable.kernel_command``).
-    args = (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase,
-    force_dir, force_z0, stack_dir, stack_z0, stack_k, ia, ib, ca, cb, phia, phib, kind, W, C,
-    damping) -- see
-    Model._kernel_args; ``damping``: the mechanism's damping matrix (0 x 0 without one),
-    Q -= damping v and dissipation += v^T damping v (``Model.add_damping``).
+    y = (z_F, v_F, u) with one u per lagged drive; command: the kernel's command vector
+    (``DriveTable.kernel_command``).
+    args = (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, Dp,
+    first_program, program_index, force_dir, force_z0, stack_dir, stack_z0, stack_k, ia, ib, ca,
+    cb, phia, phib, kind, W, C, damping) -- see Model._kernel_args; ``damping``: the mechanism's
+    damping matrix (0 x 0 without one), Q -= damping v and dissipation += v^T damping v
+    (``Model.add_damping``).
     """
-    (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, force_dir,
-     force_z0, stack_dir, stack_z0, stack_k, ia, ib, ca, cb, phia, phib, kind, W, C,
-     damping) = args
+    (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, Dp,
+     first_program, program_index, force_dir, force_z0, stack_dir, stack_z0, stack_k, ia, ib,
+     ca, cb, phia, phib, kind, W, C, damping) = args
     nF = free.shape[0]
     nd = tau.shape[0]
     u = y[2 * nF:2 * nF + nd]
     zP, vP, aP = prescribed_motion(
-        t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase
+        t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase, Dp, first_program
     )
     N = mass.shape[0]
     z = np.empty(N)
@@ -152,7 +166,7 @@ def kernel_rhs(y, t, command, args):
                                       stack_z0, stack_k)
     potential += springs
     m = y.shape[0]
-    out = np.empty(m + AUX_LOAD + nd)  # F and the energy rates: one allocation
+    out = np.empty(m + AUX_LOAD + nd + 2 * program_index.shape[0])  # F, energy rates
     F = out[:m]
     for i in range(nF):
         F[i] = y[nF + i]
@@ -160,22 +174,25 @@ def kernel_rhs(y, t, command, args):
     for k in range(nd):
         F[2 * nF + k] = (command[k] - u[k]) / tau[k]
     return F, energy_rates(out[m:], Q, v, potential, dissipation, applied, prescribed, mass, D,
-                           sine_index, aP)
+                           sine_index, program_index, aP)
 
 
 @njit(cache=True, inline="always")
 def energy_rates(aux, Q, v, potential, dissipation, applied, prescribed, mass, D, sine_index,
-                 aP):
+                 program_index, aP):
     """
     Fill and return ``aux``: the energy figures the stepping loop integrates.
 
     The figures are indexed by ``step_energy.AUX_*``.
 
-    Power of the timed (sine-rate) constraints sum v_P (M a_P - Q_P), dissipated power,
-    mechanical energy T + U, the held forces' potential (``applied_forces``) and per
-    displacement drive k its load D_k . Q_P.
+    Power of the timed constraints (sine rates, then the coordinates the prescribed drives'
+    programs move: ``program_index``) sum v_P (M a_P - Q_P), dissipated power, mechanical energy
+    T + U, the held forces' potential (``applied_forces``), per lagged drive k its load
+    D_k . Q_P, then the velocity of each program coordinate and then their accelerations (for
+    the step's linear model).
     """
-    for k in range(D.shape[1]):
+    nd = D.shape[1]
+    for k in range(nd):
         load = 0.0
         for i in range(prescribed.shape[0]):
             load += D[i, k] * Q[prescribed[i]]
@@ -184,6 +201,12 @@ def energy_rates(aux, Q, v, potential, dissipation, applied, prescribed, mass, D
     for i in range(sine_index.shape[0]):
         j = prescribed[sine_index[i]]
         timed += (mass[j] * aP[sine_index[i]] - Q[j]) * v[j]
+    q = program_index.shape[0]
+    for i in range(q):
+        j = prescribed[program_index[i]]
+        timed += (mass[j] * aP[program_index[i]] - Q[j]) * v[j]
+        aux[AUX_LOAD + nd + i] = v[j]
+        aux[AUX_LOAD + nd + q + i] = aP[program_index[i]]
     kinetic = 0.0
     for j in range(mass.shape[0]):
         kinetic += 0.5 * mass[j] * v[j] * v[j]
@@ -196,11 +219,12 @@ def energy_rates(aux, Q, v, potential, dissipation, applied, prescribed, mass, D
 
 @njit(cache=True)
 def switch_work(y, t, old, new, free, prescribed, mass, tau, zP0, D, sine_index, sine_amp,
-                sine_w, sine_phase, n_forces, stack_dir, stack_z0, stack_k):
+                sine_w, sine_phase, Dp, first_program, n_forces, stack_dir, stack_z0, stack_k):
     """
     Return the drives' work when the held command changes from ``old`` to ``new`` at (y, t).
 
-    The prescribed velocities jump (``dynamics.jump_work``): 1/2 M_P (v_P+^2 - v_P-^2); the
+    The prescribed velocities jump (``dynamics.jump_work``; a lag's command or a program's piece
+    changes, at a continuous position): 1/2 M_P (v_P+^2 - v_P-^2); the
     stack springs' anchors move at fixed z (solver/actuation.py): sum_s 1/2 k_s
     ((x_s' - p_s)^2 - (x_s - p_s)^2), p_s = e_s . (z - z0). ``n_forces``: the force drives'
     count (the stacks' strokes follow the force drives' forces in the command).
@@ -209,8 +233,9 @@ def switch_work(y, t, old, new, free, prescribed, mass, tau, zP0, D, sine_index,
     nd = tau.shape[0]
     u = y[2 * nF:2 * nF + nd]
     zP, v0, _ = prescribed_motion(t, u, old, tau, zP0, D, sine_index, sine_amp, sine_w,
-                                  sine_phase)
-    v1 = prescribed_motion(t, u, new, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase)[1]
+                                  sine_phase, Dp, first_program)
+    v1 = prescribed_motion(t, u, new, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase, Dp,
+                           first_program)[1]
     work = 0.0
     for i in range(prescribed.shape[0]):
         work += 0.5 * mass[prescribed[i]] * (v1[i] * v1[i] - v0[i] * v0[i])
@@ -233,10 +258,11 @@ def switch_work(y, t, old, new, free, prescribed, mass, tau, zP0, D, sine_index,
 @njit(cache=True)
 def kernel_switch_work(y, t, old, new, args):
     """`switch_work` with the compiled kernel's arguments (``kernel_rhs``)."""
-    (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, force_dir,
-     _, stack_dir, stack_z0, stack_k) = args[:15]
+    (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, Dp,
+     first_program, _, force_dir, _, stack_dir, stack_z0, stack_k) = args[:18]
     return switch_work(y, t, old, new, free, prescribed, mass, tau, zP0, D, sine_index, sine_amp,
-                       sine_w, sine_phase, force_dir.shape[0], stack_dir, stack_z0, stack_k)
+                       sine_w, sine_phase, Dp, first_program, force_dir.shape[0], stack_dir,
+                       stack_z0, stack_k)
 
 
 def _advance(
@@ -304,7 +330,7 @@ def _advance(
             F1, aux1 = rhs(y1, t1, command, args)
             N1 = F1 - F0 - A @ (y1 - y)
             y_next = U + phi2 @ N1
-            change = np.max(np.abs(y_next - y1) / weight)
+            change = np.max(np.abs(y_next - y1) / weight) if y.shape[0] else 0.0
             if not math.isfinite(change):
                 break
             if change <= 1.0:
@@ -344,8 +370,8 @@ switch = kernel_switch_work
 advance = njit(cache=True)(_advance)
 
 # Numba's cache of each kernel is keyed on its own file only (``kernel_cache``).
-kernel_cache.revalidate(kernel_cache.dispatchers_of(kernels, step_energy_module, globals()),
-                        __file__)
+kernel_cache.revalidate(kernel_cache.dispatchers_of(kernels, step_energy_module, programs_module,
+                                                    globals()), __file__)
 
 
 def _interpreted_rhs(y, t, command, model):
