@@ -5,8 +5,12 @@ Offline simulation without ROS (and, from the tools package, analysis of recorde
 
     flexure-sim simulate microstage --drive step:1.35e-6 --duration 0.05 [--json]
     flexure-sim simulate microstage --drive step:1.35e-6 --static [--json]
+    flexure-sim simulate microstage --drive cycloid:1.35e-6:2e-3 --duration 0.01
     flexure-sim simulate config/fourbar_mixed.yaml --duration 0.2
+    flexure-sim simulate xy_stage --drive x=step:1e-5 --drive y=ramp:5e-6:2e-3 [--static]
     flexure-sim simulate xy_stage --static [--json]     # several drives: the gain matrix
+
+``--drive`` takes one program per drive (tools/drive_programs.py).
 """
 from __future__ import annotations
 
@@ -21,6 +25,7 @@ import numpy as np
 from flexure_sim.errors import FlexureSimError
 from flexure_sim.engine.mechanism.loader import load_mechanism, resolve_mechanism_path
 from flexure_sim.engine.solver.simulation import DEFAULT_STEP, Simulation, Snapshot
+from flexure_sim.tools import drive_programs
 
 #: Times (s) at which the step response is reported, as in the acceptance figures.
 REPORT_TIMES = (1e-3, 2e-3, 5e-3)
@@ -30,23 +35,7 @@ class UsageError(FlexureSimError, ValueError):
     """A command-line argument is invalid (the message names it)."""
 
 
-def parse_drive(spec: str) -> float:
-    """``step:AMPLITUDE`` (m) -> AMPLITUDE; ``none`` -> 0."""
-    if spec == "none":
-        return 0.0
-    kind, _, value = spec.partition(":")
-    if kind != "step" or not value:
-        raise UsageError(f"--drive {spec!r}: expected step:AMPLITUDE (metres) or none")
-    try:
-        amplitude = float(value)
-    except ValueError:
-        raise UsageError(f"--drive {spec!r}: {value!r} is not a number") from None
-    if not np.isfinite(amplitude):
-        raise UsageError(f"--drive {spec!r}: amplitude must be finite")
-    return amplitude
-
-
-def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
+def summarize(sim: Simulation, snap: Snapshot, amplitude: float, programs=None) -> dict:
     """Return the figures the command prints, as a JSON-ready dict (SI units)."""
     mech = sim.mechanism
     gain = None
@@ -81,28 +70,11 @@ def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
     if sim.model.drives.actuation:
         out["actuators"] = actuator_figures(sim, snap)
     if len(sim.model.drives):
-        out["drives"] = drive_figures(sim, snap)
-    if len(sim.model.drives) > 1 or len(sim.model.outputs) > 1:
+        out["drives"] = drive_programs.drive_figures(sim, snap, programs or {})
+    if sim.model.outputs:
         out["outputs"] = dict(snap.outputs)
-    return out
-
-
-def drive_figures(sim: Simulation, snap: Snapshot) -> dict:
-    """
-    Return each drive's figures: input, command, force along its axis, position, full wrench.
-
-    ``wrench``: what the drive applies to its body (``Snapshot.drive_wrenches``), in the body's
-    frame (``frame``), moment about its origin (N m) and force along its x and y axes (N).
-    """
-    out = {}
-    for k, d in enumerate(sim.model.drives):
-        moment, fx, fy = (float(w) for w in snap.drive_wrenches[k])
-        out[d.name] = {"kind": d.kind, "body": d.body, "input": float(snap.drive_inputs[k]),
-                       "command": float(snap.drive_commands[k]),
-                       "force": float(snap.drive_forces[k]),
-                       "position": float(snap.drive_positions[k]),
-                       "wrench": {"frame": d.body, "force_x": fx, "force_y": fy,
-                                  "moment": moment}}
+        out["output_units"] = {o.name: "rad" if o.coordinate == "theta" else "m"
+                               for o in sim.model.outputs}
     return out
 
 
@@ -136,19 +108,24 @@ def _single_command(sim: Simulation) -> bool:
 def run_simulate(args: argparse.Namespace) -> dict:
     path = resolve_mechanism_path(args.mechanism)
     mech = load_mechanism(path)
-    amplitude = parse_drive(args.drive)
     if args.duration <= 0 or not np.isfinite(args.duration):
         raise UsageError(f"--duration {args.duration!r}: must be a positive number of seconds")
     if args.dt <= 0 or not np.isfinite(args.dt):
         raise UsageError(f"--dt {args.dt!r}: must be a positive number of seconds")
-    sim = Simulation(mech, dt=args.dt, relinearize_tol=args.relinearize_tol)
-    several = len(sim.model.drives) > 1 or len(sim.model.outputs) > 1
-    if amplitude and several and len(sim.model.drives) > 1:
-        raise UsageError(f"--drive: mechanism {mech.name!r} has {len(sim.model.drives)} drives "
-                         f"({', '.join(sim.model.drives.names)}); --static without --drive "
-                         "reports the gain of every output against every drive")
-    if amplitude and sim.drive is None and not sim.model.drives:
-        raise UsageError(f"--drive: mechanism {mech.name!r} has no drive")
+    try:
+        sim = Simulation(mech, dt=args.dt, relinearize_tol=args.relinearize_tol)
+    except ValueError as exc:
+        raise UsageError(f"{mech.name}: {exc}") from None
+    names = sim.model.drives.names
+    programs = drive_programs.parse_drives(args.drive, names)
+    given = {n: p for n, p in programs.items() if p is not None}
+    several = len(names) > 1 or len(sim.model.outputs) > 1
+    inputs = drive_programs.static_inputs(programs, names) if args.static else None
+    amplitude = 0.0     # a single drive's input, for the gain
+    if len(names) == 1 and inputs is not None:
+        amplitude = float(inputs[0])
+    elif len(names) == 1 and names[0] in given:
+        amplitude = given[names[0]].final or 0.0
     if args.static and len(sim.model.drives.stack):
         raise UsageError(f"--static: mechanism {mech.name!r} has a drive with a finite-stiffness "
                          "piezo stack (its input is the actuator's free stroke, a dynamic "
@@ -156,10 +133,11 @@ def run_simulate(args: argparse.Namespace) -> dict:
     start = time.perf_counter()
     if args.stroke_limit:
         return _stroke_limit(args, sim)
+    if args.static and len(names) > 1 and not given:
+        return _gain_only(sim, path, time.perf_counter() - start)
     if args.static:
-        result = sim.static(amplitude if len(sim.model.drives) <= 1 else
-                            np.zeros(len(sim.model.drives)))
-        out = summarize(sim, result.snapshot, amplitude)
+        result = sim.static(inputs if len(names) else 0.0)
+        out = summarize(sim, result.snapshot, amplitude, programs)
         if several:
             out["gain_matrix"] = gain_matrix(sim)
         wall = time.perf_counter() - start
@@ -167,17 +145,24 @@ def run_simulate(args: argparse.Namespace) -> dict:
                    residual=result.residual, wall_s=wall)
         out["hinge_stress"] = _stress(sim, result.snapshot)
         return out
-    if _single_command(sim):
-        sim.set_command(amplitude)
+    drive_programs.apply(sim, programs)
     n_steps = int(round(args.duration / args.dt))
-    samples = {}
+    samples, outputs_at = {}, {}
     marks = {int(round(t / args.dt)): t for t in REPORT_TIMES if t <= args.duration}
-    for k in range(1, n_steps + 1):
-        sim.step()
-        if k in marks and mech.output is not None:
-            samples[f"{marks[k]:g}"] = sim.snapshot().output
+    done = 0
+    for k in sorted(marks) + [n_steps]:
+        if k > done:
+            sim.step(k - done)
+            done = k
+        if k in marks and sim.model.outputs:
+            snap = sim.snapshot()
+            outputs_at[f"{marks[k]:g}"] = dict(snap.outputs)
+            if mech.output is not None:
+                samples[f"{marks[k]:g}"] = snap.output
     wall = time.perf_counter() - start
-    out = summarize(sim, sim.snapshot(), amplitude)
+    out = summarize(sim, sim.snapshot(), amplitude, programs)
+    if len(sim.model.outputs) > 1:
+        out["outputs_at"] = outputs_at
     if _single_command(sim) and sim.drive is None:  # one actuated drive: the scalar figures
         snap = sim.snapshot()
         out.update(input=amplitude, drive_input=float(snap.drive_positions[0]),
@@ -194,6 +179,20 @@ def run_simulate(args: argparse.Namespace) -> dict:
         linearizations=sim.stats.linearizations,
     )
     return out
+
+
+def _gain_only(sim: Simulation, path, wall: float) -> dict:
+    """
+    Return ``--static`` of several drives without a program: the gain matrix, and what to give.
+
+    At rest there is nothing else to report (hinge deflections and stresses are rounding).
+    """
+    names = sim.model.drives.names
+    example = " ".join(f"--drive {n}=step:A" for n in names)
+    return {"mechanism": sim.mechanism.name, "mechanism_file": str(path), "mode": "gain",
+            "drives": list(names), "gain_matrix": gain_matrix(sim), "wall_s": wall,
+            "hint": f"for the nonlinear static solution at given inputs (its outputs, drive "
+                    f"forces and hinge stresses) give one program per drive: {example}"}
 
 
 def gain_matrix(sim: Simulation) -> dict:
@@ -239,6 +238,12 @@ def print_table(out: dict) -> None:
               f"{out['stroke_limit'] * 1e6:.6g} um at hinge {out['hinge']} "
               f"(actuator stroke {out['actuator_stroke'][1] * 1e6:g} um)")
         return
+    if out["mode"] == "gain":
+        print(f"mechanism: {out['mechanism']}   several drives, no input given")
+        print(f"file:      {out['mechanism_file']}")
+        _print_gain(out["gain_matrix"])
+        print(out["hint"])
+        return
     print(f"mechanism: {out['mechanism']}   mode: {out['mode']}   t = {out['t']:.6g} s")
     print(f"file:      {out['mechanism_file']}")
     volts = any(a["unit"] == "V" for a in out.get("actuators", {}).values())
@@ -250,24 +255,20 @@ def print_table(out: dict) -> None:
         print(f"joint-a compression: {_fmt(out['joint_a_compression'], 'nm', 1e9)}")
         print(f"drive force:         {_fmt(out['drive_force'], 'N')}")
     if out.get("gain_matrix"):
-        g = out["gain_matrix"]
-        print("static gain (output per unit input of each drive, exact linearisation at rest):")
-        print("output   " + "".join(f"{d:>14s}" for d in g["drives"]))
-        for name, row in zip(g["outputs"], g["matrix"]):
-            print(f"{name:8s} " + "".join(f"{v:14.6g}" for v in row))
+        _print_gain(out["gain_matrix"])
     for name, a in out.get("actuators", {}).items():
         command = _fmt(a["command"], "V") if a["unit"] == "V" else _fmt(a["command"], "um", 1e6)
         print(f"actuator {name}: command {command}, amplifier {_fmt(a['voltage'], 'V')}, free "
               f"stroke {_fmt(a['free_stroke'], 'um', 1e6)}, applied "
               f"{_fmt(a['applied'], 'um', 1e6)}, stack force {_fmt(a['stack_force'], 'N')}")
-    for name, d in out.get("drives", {}).items():
-        w = d["wrench"]
-        label = "drive" if name == "drive" else f"drive {name}"
-        print(f"{label} wrench on {w['frame']} (its frame, about its origin): force x "
-              f"{_fmt(w['force_x'], 'N')}, y {_fmt(w['force_y'], 'N')}, moment "
-              f"{_fmt(w['moment'], 'N m')}")
+    drive_programs.print_drives(out, _fmt)
     for t, v in out.get("output_at", {}).items():
         print(f"output at {float(t) * 1e3:g} ms:      {_fmt(v, 'um', 1e6)}")
+    units = out.get("output_units", {})
+    for t, values in out.get("outputs_at", {}).items():
+        shown = ", ".join(f"{name} " + (_fmt(v, "urad", 1e6) if units.get(name) == "rad"
+                                        else _fmt(v, "um", 1e6)) for name, v in values.items())
+        print(f"outputs at {float(t) * 1e3:g} ms: {shown}")
     print("hinge deflection, frame b in frame a:  rotation [urad]  x [nm]  y [nm]")
     for name, h in out["hinges"].items():
         print(f"{name:6s} {h['rotation'] * 1e6:14.6g} {h['x'] * 1e9:11.6g} {h['y'] * 1e9:11.6g}")
@@ -286,6 +287,13 @@ def print_table(out: dict) -> None:
     print(f"wall time: {out['wall_s']:.4g} s{extra}")
 
 
+def _print_gain(g: dict) -> None:
+    print("static gain (output per unit input of each drive, exact linearisation at rest):")
+    print("output   " + "".join(f"{d:>14s}" for d in g["drives"]))
+    for name, row in zip(g["outputs"], g["matrix"]):
+        print(f"{name:8s} " + "".join(f"{v:14.6g}" for v in row))
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="flexure-sim", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -294,8 +302,11 @@ def build_parser() -> argparse.ArgumentParser:
         "mechanism",
         help="built-in name (microstage, fourbar_cantilever, fourbar_mixed) or YAML path",
     )
-    sim.add_argument("--drive", default="none", help="step:AMPLITUDE in metres (volts for a "
-                     "drive whose actuator takes a voltage), or none (default)")
+    sim.add_argument("--drive", action="append", metavar="[NAME=]PROGRAM",
+                     help="a drive's program, once per drive: step:A, ramp:A:T, cycloid:A:T, "
+                     "sine:A:F (A in m, rad, N or V; T in s; F in Hz), each optionally @START "
+                     "(s); NAME= names the drive of a mechanism with several (default: every "
+                     "drive at rest; --static without it reports the gain of several drives)")
     sim.add_argument(
         "--duration", type=float, default=0.05, help="simulated time in seconds (default 0.05)"
     )
