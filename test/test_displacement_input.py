@@ -35,6 +35,7 @@ def _csv(tmp_path, kind: str) -> np.ndarray:
     return np.genfromtxt(out / "frf.csv", delimiter=",", names=True)
 
 
+@pytest.mark.slow
 def test_the_displacement_input_is_the_command_input_without_its_lag(tmp_path):
     """
     ``frf --input-kind displacement`` = ``frf`` x (1 + i w tau), every output, to 1e-9.

@@ -173,6 +173,7 @@ def test_a_program_must_start_where_a_prescribed_drive_is():
     assert sim.snapshot().drive_inputs[0] == pytest.approx(2e-6, rel=1e-15)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["microstage", "xy_stage"])
 def test_a_lag_of_a_microsecond_or_less_steps_at_the_default_step(name):
     """

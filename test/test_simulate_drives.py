@@ -30,6 +30,7 @@ def simulate_json(*args) -> dict:
     return json.loads(simulate(*args, "--json").stdout)
 
 
+@pytest.mark.slow
 def test_a_two_drive_static_run_gives_each_drives_force_and_each_output():
     """
     ``--drive x=step:1e-5 --drive y=ramp:4e-6:2e-3 --static``: the nonlinear equilibrium.
@@ -127,6 +128,7 @@ def test_a_prescribed_drive_follows_its_cycloid_from_the_command_line(tmp_path):
     assert 0 < out["output_at"]["0.001"] < out["output_displacement"]
 
 
+@pytest.mark.slow
 def test_a_lag_of_a_tenth_of_a_microsecond_steps_and_one_far_shorter_says_what_to_give(tmp_path):
     """A 15 um step through a 1e-7 s lag ran into "did not converge"; 1e-12 s names the fix."""
     fast = simulate_json(_stage_file(tmp_path, 1e-7), "--drive", "step:1.5e-5", "--duration",
