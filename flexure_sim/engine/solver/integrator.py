@@ -131,20 +131,30 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     run, so stamps derived from it stay on the tick grid.
     """
     s = data.state
-    command = np.ascontiguousarray(
-        model.actuator_command(s.command) if command is None else command, dtype=float)
+    cache = data.cache
+    if (command is None and cache is not None and cache[0] is s
+            and isinstance(s.command, float) and cache[7] is s.command):
+        command, key = cache[6], cache[1]  # a number held on: its vector is the last one's
+    else:
+        command = np.ascontiguousarray(
+            model.actuator_command(s.command) if command is None else command, dtype=float)
+        key = command.tobytes()
     rows = command.reshape(1, -1) if rows is None else np.ascontiguousarray(rows, dtype=float)
-    key = command.tobytes()
     clock = data.clock
     if clock is None or clock[0] is not s:
         clock = (s, s.t, 0)
     _, origin, k = clock
     dt = model.dt
-    y, t = model.pack(s), s.t
-    cache = data.cache
-    if cache is not None and cache[0] is s and cache[1] == key:
-        F0, aux0, ye = cache[2:5]
+    t = s.t
+    if cache is not None and cache[0] is s:
+        y = cache[5]  # model.pack(s), bit for bit: s was unpacked from it
+        if cache[1] == key:
+            F0, aux0, ye = cache[2:5]
+        else:
+            F0, aux0 = model.rhs(y, t, command)
+            ye = y
     else:
+        y = model.pack(s)
         F0, aux0 = model.rhs(y, t, command)
         ye = y
     if model.energy:
@@ -179,10 +189,18 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
             data.lin = None
         if steps:
             fresh = False
-    if not np.all(np.isfinite(y)):
+    if not np.isfinite(y).all():
         raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
-    z, v, u = model.unpack(y, t, command)
+    if model.compiled:  # Model.unpack, compiled: a few us less per call
+        z, v = stepping.kernel_coordinates(y, t, command, model.kernel_args[:10])
+        nF = len(model.part.free)
+        u = y[2 * nF:2 * nF + model.n_actuators].copy()
+    else:
+        z, v, u = model.unpack(y, t, command)
     data.state = State(t, z, v, model.state_u(u), s.command, dissipated, work)
     data.clock = (data.state, origin, k)
-    # F at the new state seeds the next call while the command is unchanged.
-    data.cache = (data.state, command.tobytes(), F0, aux0, ye)
+    # The cache seeds the next call: (state, command key, F and energy rates while the command
+    # is unchanged, where they were taken, y, the command vector held last, the state's
+    # command it was made from). The vector also serves the tick report
+    # (``tick_report.TickReport.fill_data``).
+    data.cache = (data.state, command.tobytes(), F0, aux0, ye, y, command, s.command)

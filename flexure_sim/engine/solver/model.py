@@ -34,7 +34,7 @@ import numpy as np
 from flexure_sim.errors import FlexureSimError
 from flexure_sim.engine.solver import step_loop as stepping
 from flexure_sim.engine.solver.assembly import Assembly
-from flexure_sim.engine.solver.compression import compression_points, point_displacement
+from flexure_sim.engine.solver.compression import compression_of, compression_points
 from flexure_sim.engine.mechanism.damping_models import damping_matrix
 from flexure_sim.engine.solver.drives import DriveMixin, stacked
 from flexure_sim.engine.mechanism.parts import COORDINATE_NAMES, Drive, Fixed, Mechanism, SineRate
@@ -384,5 +384,4 @@ class Model(DriveMixin):
         if self.compression is None:
             return None
         (i_drive, c_drive), (i_far, c_far), axis = self.compression
-        return float((point_displacement(i_drive, c_drive, z, self.z0)
-                      - point_displacement(i_far, c_far, z, self.z0)) @ axis)
+        return float(compression_of(z, self.z0, i_drive, *c_drive, i_far, *c_far, *axis))

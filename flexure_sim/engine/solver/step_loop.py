@@ -74,6 +74,38 @@ def prescribed_motion(t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, 
 
 
 @njit(cache=True, inline="always")
+def coordinates(y, t, command, free, prescribed, n, tau, zP0, D, sine_index, sine_amp, sine_w,
+                sine_phase):
+    """
+    All n coordinates z, velocities v and a_P from y = (z_F, v_F, u) at t under ``command``.
+
+    The compiled ``Model.full`` (free ones from y, prescribed ones from `prescribed_motion`).
+    """
+    nF = free.shape[0]
+    u = y[2 * nF:2 * nF + tau.shape[0]]
+    zP, vP, aP = prescribed_motion(t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w,
+                                   sine_phase)
+    z = np.empty(n)
+    v = np.empty(n)
+    for i in range(nF):
+        z[free[i]] = y[i]
+        v[free[i]] = y[nF + i]
+    for i in range(prescribed.shape[0]):
+        z[prescribed[i]] = zP[i]
+        v[prescribed[i]] = vP[i]
+    return z, v, aP
+
+
+@njit(cache=True)
+def kernel_coordinates(y, t, command, args):
+    """`coordinates` with the compiled kernel's arguments (``kernel_rhs``): (z, v)."""
+    (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase) = args[:10]
+    z, v, _ = coordinates(y, t, command, free, prescribed, mass.shape[0], tau, zP0, D,
+                          sine_index, sine_amp, sine_w, sine_phase)
+    return z, v
+
+
+@njit(cache=True, inline="always")
 def applied_forces(Q, z, command, n_actuators, force_dir, force_z0, stack_dir, stack_z0,
                    stack_k):
     """
@@ -127,18 +159,9 @@ def kernel_rhs(y, t, command, args):
     nF = free.shape[0]
     nd = tau.shape[0]
     u = y[2 * nF:2 * nF + nd]
-    zP, vP, aP = prescribed_motion(
-        t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase
-    )
     N = mass.shape[0]
-    z = np.empty(N)
-    v = np.empty(N)
-    for i in range(nF):
-        z[free[i]] = y[i]
-        v[free[i]] = y[nF + i]
-    for i in range(prescribed.shape[0]):
-        z[prescribed[i]] = zP[i]
-        v[prescribed[i]] = vP[i]
+    z, v, aP = coordinates(y, t, command, free, prescribed, N, tau, zP0, D, sine_index,
+                           sine_amp, sine_w, sine_phase)
     Q = np.empty(N)
     n = ia.shape[0]
     potential, dissipation = quadratic_forces(
