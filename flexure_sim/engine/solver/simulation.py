@@ -18,6 +18,7 @@ reset); each steps independently and exactly as a simulation built from the mech
 """
 from __future__ import annotations
 
+import math
 from typing import Optional, Union
 
 import numpy as np
@@ -115,6 +116,11 @@ class Simulation:
         order or a {name: value} mapping); each must be finite (ValueError naming the drive).
         Held until the next call.
         """
+        if type(command) is float and len(self.model.drives) == 1:  # the common case, quickly
+            if not math.isfinite(command):
+                raise ValueError(f"drive command must be finite, got {command!r}")
+            self.data.state.command = command
+            return
         if np.ndim(command) == 0 and not isinstance(command, dict) and not np.isfinite(command):
             raise ValueError(f"drive command must be finite, got {command!r}")
         if not self.model.drives:
