@@ -12,6 +12,7 @@ import re
 import signal
 import time
 
+import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 
 from flexure_sim.node.stage.overrun import OverrunWatch
@@ -64,6 +65,7 @@ def test_a_new_period_starts_a_new_window():
     assert line is not None and "2 of 2 ticks" in line and "of the 2000 us period" in line
 
 
+@pytest.mark.slow
 def test_an_overloaded_node_warns_once_naming_its_tick_work_and_the_remedies(tmp_path):
     domain = next_domain_id()
     node = NodeProcess(tmp_path / "node", domain, {

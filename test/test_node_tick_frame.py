@@ -18,6 +18,9 @@ from flexure_sim.node.publish.tick_frame import TickFrame
 from flexure_sim.node.record.process import FRAME_ITEM, FRAME_STAMP
 from test_tick_report import MECHANISMS, commands
 
+#: ROS 2's message packages (the interface's types), though no rclpy import shows it here.
+pytestmark = pytest.mark.ros
+
 
 @pytest.mark.parametrize("mode", ["realtime", "lockstep"])
 @pytest.mark.parametrize("name", sorted(MECHANISMS))
