@@ -371,9 +371,9 @@ def test_ticks_with_new_commands_on_several_drives_reach_the_step_by_step_states
                                for d in xy.drives])
     sim = Simulation(xy, dt=DT, relinearize_tol=RELINEARIZE_TOL)
     itf = StageInterface(xy, "realtime")
-    loop = SteppingLoop(LoopParts(sim, itf, [None] * len(itf.tick_topics),
-                                  RecordingSession(Log()), Log(), filter=bank),
-                        LoopSettings("realtime", RATE, DT))
+    loop = SteppingLoop(LoopParts(LoopSettings("realtime", RATE, DT), sim, itf,
+                                  [None] * len(itf.tick_topics), RecordingSession(Log()), Log(),
+                                  filter=bank))
     commands = [(1e-6, 0.0), (1e-6, 5e-7), (1e-6 + 3e-9, 5e-7), (0.0, 1e-6), (0.0, 1e-6),
                 (2e-6, 0.0), (2e-6, 0.0)]
     for tick in commands:

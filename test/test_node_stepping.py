@@ -36,9 +36,10 @@ def make_loop(mechanism):
     drive = mechanism.drive
     filt = CommandFilter(DriveLimits(drive.stroke[0], drive.stroke[1], drive.slew_rate))
     interface = StageInterface(mechanism, "realtime")
-    parts = LoopParts(sim, interface, [None] * len(interface.tick_topics),
-                      RecordingSession(Log()), Log(), filter=filt)
-    loop = SteppingLoop(parts, LoopSettings("realtime", RATE, DT))
+    parts = LoopParts(LoopSettings("realtime", RATE, DT), sim, interface,
+                      [None] * len(interface.tick_topics), RecordingSession(Log()), Log(),
+                      filter=filt)
+    loop = SteppingLoop(parts)
     return loop, sim, filt
 
 

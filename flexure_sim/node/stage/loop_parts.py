@@ -3,7 +3,7 @@ What a stage node's stepping loop is built from: its parts and its settings (no 
 
 ``shell.StageNode`` builds every part (simulation, topic table, publishers, recording,
 command intake, display, diagnostics port) and reads the settings from its parameters, then
-constructs the ``stepping_thread.SteppingLoop`` from the two in one call.
+constructs the ``stepping_thread.SteppingLoop`` from the one `LoopParts` that holds them all.
 """
 from __future__ import annotations
 
@@ -51,8 +51,8 @@ class LoopParts:
     """
     What a stepping loop works with, all built before it.
 
-    ``sim``: the simulation; ``interface``: its topic table (``publish.interface``);
-    ``publishers``: one per tick topic, in its order; ``session``: the recording; ``log``: a
+    ``settings``: the loop's `LoopSettings`; ``sim``: the simulation; ``interface``: its topic
+    table (``publish.interface``); ``publishers``: one per tick topic, in its order; ``session``: the recording; ``log``: a
     logger; ``filter``: the drives' command filter (None without a drive); ``intake``: the
     command intake (``command_intake``, None without a drive); ``diagnostics``: where the
     diagnostics go (None: none); ``display``: markers and TF (``display.DisplayOutput``, None:
@@ -61,6 +61,7 @@ class LoopParts:
     the intake.
     """
 
+    settings: LoopSettings
     sim: Simulation
     interface: Any
     publishers: Sequence[Any]

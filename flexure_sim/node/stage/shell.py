@@ -123,12 +123,12 @@ class StageNode(LiveParameters, Node):
             for topic in command_topics:
                 watch.check_command_publishers(self, topic)
         parts = LoopParts(
-            sim, self.interface, tick_pubs, self.session, self._log, filter=drive_filter,
-            intake=intake, display=display, throttle=throttle,
+            LoopSettings.from_values(values), sim, self.interface, tick_pubs, self.session,
+            self._log, filter=drive_filter, intake=intake, display=display, throttle=throttle,
             graph_check=check_graph if command_topics else None,
             diagnostics=DiagnosticsPort(diag_pub, len(tick_pubs), self.get_name(),
                                         self.mechanism.name, watch.diagnostics))
-        self.loop = loop = SteppingLoop(parts, LoopSettings.from_values(values))
+        self.loop = loop = SteppingLoop(parts)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/record", self._on_record)
         self.create_service(Trigger, "~/step", self._on_step)

@@ -7,7 +7,7 @@ received since the last tick (`command_intake`), advances the engine by round(1 
 ``tick_report``), packs every message into one recorder frame in another (`tick_frame`), hands
 that frame to the recorder and publishes slices of it: the bytes recorded are the bytes
 published. The loop is built from its parts (`LoopParts`, made by ``shell.StageNode``) and its
-settings (`LoopSettings`, the node's parameters).
+settings (`LoopSettings`, the node's parameters), all in one `LoopParts`.
 
 Real-time mode paces ticks with absolute deadlines of a steady clock (`pacing.Pacer`; with
 ``merge_late_ticks`` a loop that many ticks late merges them into one that steps the engine
@@ -31,7 +31,7 @@ from flexure_sim.node.publish.diagnostics import Diagnostics
 from flexure_sim.node.publish.display import display_every
 from flexure_sim.node.stage.cpu_latency import request_cpu_latency
 from flexure_sim.node.stage.engine_guard import EngineHold
-from flexure_sim.node.stage.loop_parts import LoopParts, LoopSettings
+from flexure_sim.node.stage.loop_parts import LoopParts
 from flexure_sim.node.stage.overrun import OverrunWatch
 from flexure_sim.node.stage.pacing import Pacer, set_thread_fifo, set_thread_nice
 from flexure_sim.node.stage.qos_watch import GRAPH_CHECK_PERIOD_S
@@ -55,9 +55,10 @@ def crossed(first: int, count: int, every: int) -> bool:
 
 
 class SteppingLoop:
-    """Ticks of one simulation, built from its `LoopParts` and `LoopSettings`; then `start`."""
+    """Ticks of one simulation, built from its `LoopParts` (settings included); then `start`."""
 
-    def __init__(self, parts: LoopParts, settings: LoopSettings) -> None:
+    def __init__(self, parts: LoopParts) -> None:
+        settings = parts.settings
         self.sim = sim = parts.sim
         self.filter = parts.filter
         self.interface = interface = parts.interface

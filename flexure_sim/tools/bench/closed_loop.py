@@ -31,6 +31,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
@@ -44,6 +45,8 @@ SENSOR = {"noise_rms": 1.0e-9, "latency": 0, "seed": 1}
 #: Setpoint of the run, m of output (the stage's output for ~0.7 um of drive).
 SETPOINT = 2.0e-5
 RATE = 1000.0
+#: How long the controller may take to start, s.
+START_TIMEOUT_S = 60.0
 #: Engine steps per tick at every rate (the node's default at 1 kHz).
 STEPS_PER_TICK = 10
 #: A CPU-bound process at the lowest priority: it only takes time nobody else wants.
@@ -73,6 +76,14 @@ class ControllerProcess:
         self._log = open(workdir / "controller.stderr", "wb")  # noqa: SIM115
         self.proc = subprocess.Popen(args, cwd=workdir, env=env, stdout=self._log,
                                      stderr=subprocess.STDOUT)
+        # Started once its node exists (it opens the trace then): the warm-up follows.
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while not self.trace.exists():
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                self.stop()
+                raise RuntimeError("pi_controller did not start: "
+                                   + (workdir / "controller.stderr").read_text()[-2000:])
+            time.sleep(0.05)
 
     def stop(self) -> None:
         if self.proc.poll() is None:

@@ -67,7 +67,7 @@ def echo() -> int:
 
 
 def run(rate: float, duration: float, wake_spin: float = DEFAULT_WAKE_SPIN_S,
-        nice: int = DEFAULT_NICE, warmup: float = 1.0,
+        nice: int = DEFAULT_NICE, warmup: float = 2.0,
         domain_id: Optional[int] = None) -> dict[str, Any]:
     """Ping-pong at ``rate`` Hz for ``warmup`` + ``duration`` s; return the figures."""
     import rclpy
