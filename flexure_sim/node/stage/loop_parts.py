@@ -52,8 +52,8 @@ class LoopParts:
     What a stepping loop works with, all built before it.
 
     ``settings``: the loop's `LoopSettings`; ``sim``: the simulation; ``interface``: its topic
-    table (``publish.interface``); ``publishers``: one per tick topic, in its order; ``session``: the recording; ``log``: a
-    logger; ``filter``: the drives' command filter (None without a drive); ``intake``: the
+    table (``publish.interface``); ``publishers``: one per tick topic, in its order;
+    ``session``: the recording; ``log``: a logger; ``filter``: the drives' command filter (None without a drive); ``intake``: the
     command intake (``command_intake``, None without a drive); ``diagnostics``: where the
     diagnostics go (None: none); ``display``: markers and TF (``display.DisplayOutput``, None:
     none); ``graph_check``: a check of the ROS graph run between ticks every
