@@ -53,12 +53,12 @@ class LoopParts:
 
     ``settings``: the loop's `LoopSettings`; ``sim``: the simulation; ``interface``: its topic
     table (``publish.interface``); ``publishers``: one per tick topic, in its order;
-    ``session``: the recording; ``log``: a logger; ``filter``: the drives' command filter (None without a drive); ``intake``: the
-    command intake (``command_intake``, None without a drive); ``diagnostics``: where the
-    diagnostics go (None: none); ``display``: markers and TF (``display.DisplayOutput``, None:
-    none); ``graph_check``: a check of the ROS graph run between ticks every
-    GRAPH_CHECK_PERIOD_S (``qos_watch``); ``throttle``: the warnings' rate limit, shared with
-    the intake.
+    ``session``: the recording; ``log``: a logger; ``filter``: the drives' command filter
+    (None without a drive); ``intake``: the command intake (``command_intake``, None without a
+    drive); ``diagnostics``: where the diagnostics go (None: none); ``display``: markers and
+    TF (``display.DisplayOutput``, None: none); ``graph_check``: a check of the ROS graph run
+    between ticks every GRAPH_CHECK_PERIOD_S (``qos_watch``); ``throttle``: the warnings'
+    rate limit, shared with the intake.
     """
 
     settings: LoopSettings
