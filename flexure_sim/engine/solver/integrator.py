@@ -135,6 +135,9 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     if (command is None and cache is not None and cache[0] is s
             and isinstance(s.command, float) and cache[7] is s.command):
         command, key = cache[6], cache[1]  # a number held on: its vector is the last one's
+    elif command is None and type(s.command) is float and len(model.drives) == 1:
+        command = np.full(1, s.command)  # Model.actuator_command of one drive's number
+        key = command.tobytes()
     else:
         command = np.ascontiguousarray(
             model.actuator_command(s.command) if command is None else command, dtype=float)
