@@ -20,8 +20,8 @@ MAX_SIM_STEP = 1e-2
 COMMAND_RELIABILITIES = ("reliable", "best_effort")
 #: Values of ``record_format``.
 RECORD_FORMATS = ("bag", "mcap")
-#: Default of ``wake_spin``: see its description (measured in BENCHMARKS.md).
-WAKE_SPIN_S = 1e-3
+#: Default of ``wake_spin``: see its description and README "### Time" (BENCHMARKS.md).
+WAKE_SPIN_S = 2e-4
 #: Default of ``stepping_nice``: see its description (measured in BENCHMARKS.md).
 STEPPING_NICE = -10
 #: Default of ``cpu_latency_us``: see its description (measured in BENCHMARKS.md).
@@ -81,9 +81,10 @@ TABLE: tuple[tuple[Any, ...], ...] = (
      "this fast."),
     ("wake_spin", WAKE_SPIN_S, float, "s", False, 0.0, 1.0,
      "Real-time mode: the last part of the wait for each tick that is busy-waited instead of "
-     "slept (at most the publish period: then the stepping thread never sleeps). A sleeping "
-     "core can take milliseconds to wake, above all on virtual machines, and the tick then "
-     "starts late; spinning costs CPU time."),
+     "slept. The default sleeps most of a 1 kHz period and leaves that core to the "
+     "controller, the recorder and the middleware; at 4 kHz it spins the whole period. A "
+     "sleeping core can take long to wake, above all on virtual machines; publish_rate's "
+     "period or more: the stepping thread never sleeps (one busy core)."),
     ("merge_late_ticks", 0, int, "ticks", False, 0, 1000,
      "Real-time mode: a loop late by this many tick periods or more merges the ticks it is "
      "late for into the next one, which steps the engine through all their periods and "

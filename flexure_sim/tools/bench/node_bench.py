@@ -20,13 +20,15 @@ from __future__ import annotations
 
 from typing import Any, Optional
 
+from flexure_sim.node.params.table import WAKE_SPIN_S
 from flexure_sim.node.publish.diagnostics import TICK_PARTS
 
 #: Publish rates of the real-time, closed-loop and floor runs (Hz); 10 engine steps a tick.
 RATES = (1000.0, 2000.0, 4000.0)
 STEPS_PER_TICK = 10
-#: The short busy-wait of the sleeping variant (s): sleep, then spin this long before a tick.
-SHORT_SPIN_S = 2e-4
+#: The short busy-wait of the sleeping variant (s): sleep, then spin this long before a tick
+#: (the node's default).
+SHORT_SPIN_S = WAKE_SPIN_S
 #: Rate of the drive-command flood next to the 1 kHz real-time run.
 FLOOD_HZ = 10000.0
 #: Length of each floor run, s (at most the node runs').

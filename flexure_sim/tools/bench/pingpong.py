@@ -27,13 +27,14 @@ import threading
 import time
 from typing import Any, Optional, Sequence
 
+from flexure_sim.node.params.table import STEPPING_NICE, WAKE_SPIN_S
 from flexure_sim.node.stage.pacing import Pacer, set_thread_nice
 
 #: Topics of the ping-pong (relative: a ROS namespace applies).
 PING, PONG = "flexure_sim_ping", "flexure_sim_pong"
 #: The node's defaults, as the stage side's pacing uses them.
-DEFAULT_WAKE_SPIN_S = 1e-3
-DEFAULT_NICE = -10
+DEFAULT_WAKE_SPIN_S = WAKE_SPIN_S
+DEFAULT_NICE = STEPPING_NICE
 _FLOAT64 = struct.Struct("<4sd")
 _CDR_LE = b"\x00\x01\x00\x00"
 
