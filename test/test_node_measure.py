@@ -7,6 +7,7 @@ recording read back).
 
 import pytest
 
+from flexure_sim.node.publish.diagnostics import TICK_PARTS
 from flexure_sim.tools.bench import measure
 
 from node_harness import next_domain_id
@@ -28,8 +29,25 @@ def test_measure_reports_pacing_cpu_and_a_complete_recording(tmp_path):
     assert r["recording_complete"] and r["recording_dropped"] == 0
     assert r["recorded_messages"] >= 26 * 3.0 * 200  # warm-up + window, 26 topics per tick
     assert (tmp_path / "measure.mcap").is_file()
+    # The tick's parts as the node timed them add up to its whole (each window's means).
+    parts = [r[f"{part}_time_mean_us"] for part in TICK_PARTS]
+    assert all(p >= 0 for p in parts) and r["engine_time_mean_us"] > 0
+    assert sum(parts) == pytest.approx(r["tick_time_mean_us"], rel=1e-6)
 
 
 def test_measure_refuses_a_malformed_param():
     with pytest.raises(SystemExit):
         measure.main(["--param", "wake_spin=0.001"])
+
+
+def test_the_ping_pong_floor_counts_every_paced_tick_and_the_answers_it_takes():
+    """A real echo process: every tick paced and counted, answers taken at later ticks only."""
+    from flexure_sim.tools.bench import pingpong
+
+    r = pingpong.run(500.0, 1.0, warmup=0.5, domain_id=next_domain_id())
+    assert r["paced_ticks"] == 500
+    assert 0 <= r["missed_ticks"] <= r["paced_ticks"]
+    assert 0 < r["answers"] <= r["paced_ticks"]
+    assert r["answers"] + r["unanswered"] == r["paced_ticks"]
+    assert r["late_ticks_max"] >= r["late_ticks_p99"] >= 0  # never before the next tick
+    assert 0 <= r["applied_next_tick_fraction"] <= 1

@@ -128,6 +128,11 @@ class DriveTable:
         self.order = np.concatenate([self.lagged, self.force, self.stack]).astype(int)
         #: Where the prescribed drives' piece rows start in the kernel's command vector.
         self.first_program = len(self.order)
+        #: The kernel's command vector is the commands as they are (no program rows, drive
+        #: order); ``plain``: moreover one drive, so a number is its whole command.
+        self.in_order = (not len(self.prescribed)
+                         and bool(np.array_equal(self.order, np.arange(n))))
+        self.plain = self.in_order and n == 1
         lagged = [drives[k] for k in self.lagged]
         #: Time constant (s) and stroke span (m) per lagged drive (the order of u).
         self.tau = np.array([d.response_time for d in lagged], dtype=float)
@@ -158,11 +163,12 @@ class DriveTable:
         self.actuation = actuated(self)
         self.actuators = Actuators(self.actuation)
         self._z0 = z0
-        #: Per drive, its body's index and the (coordinate 0..2 of the body, index into the
-        #: prescribed coordinates) it holds (``Partition.held``): where its reaction acts.
+        #: Per drive, its body's index (``bodies``) and the (coordinate 0..2 of the body, index
+        #: into the prescribed coordinates) pairs it holds (``holds``, from ``Partition.held``):
+        #: where its reaction acts.
         self.bodies = np.array([mechanism.body_index(d.body) for d in drives], dtype=int)
         place = {int(c): j for j, c in enumerate(part.prescribed)}
-        self._held = tuple(tuple((c % 3, place[c]) for c in coords) for coords in part.held)
+        self.holds = tuple(tuple((c % 3, place[c]) for c in coords) for coords in part.held)
 
     def __len__(self) -> int:
         return len(self._drives)
@@ -211,6 +217,8 @@ class DriveTable:
         entry is its program's piece in force at ``t`` (``Program.row``), or, without a program,
         its command held.
         """
+        if self.in_order:  # a closed loop's tick: ~0.3 us against ~1 us for the general path
+            return np.array(command, dtype=float, ndmin=1)
         values = np.asarray(command, dtype=float)
         out = values[self.order]
         if not len(self.prescribed):
@@ -341,7 +349,7 @@ class DriveTable:
         """
         n = len(self)
         root = np.zeros((n, 3))           # (fx, fy, moment) in the root frame
-        for k, held in enumerate(self._held):
+        for k, held in enumerate(self.holds):
             for c, j in held:
                 root[k, c] += reactions[j]
         for k in np.concatenate([self.force, self.stack]).astype(int):

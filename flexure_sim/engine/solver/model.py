@@ -35,7 +35,7 @@ import numpy as np
 from flexure_sim.errors import FlexureSimError
 from flexure_sim.engine.solver import derivatives, step_loop as stepping
 from flexure_sim.engine.solver.assembly import Assembly
-from flexure_sim.engine.solver.compression import compression_points, point_displacement
+from flexure_sim.engine.solver.compression import compression_of, compression_points
 from flexure_sim.engine.mechanism.damping_models import damping_matrix
 from flexure_sim.engine.solver.derivatives import Tangent
 from flexure_sim.engine.solver.drives import DriveTable
@@ -340,5 +340,4 @@ class Model:
         if self.compression is None:
             return None
         (i_drive, c_drive), (i_far, c_far), axis = self.compression
-        return float((point_displacement(i_drive, c_drive, z, self.z0)
-                      - point_displacement(i_far, c_far, z, self.z0)) @ axis)
+        return float(compression_of(z, self.z0, i_drive, *c_drive, i_far, *c_far, *axis))

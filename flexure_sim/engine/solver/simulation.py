@@ -18,6 +18,7 @@ reset); each steps independently and exactly as a simulation built from the mech
 """
 from __future__ import annotations
 
+import math
 from typing import Optional, Union
 
 import numpy as np
@@ -118,13 +119,20 @@ class Simulation:
         drive (``response_time: 0``) moves to its target over the next step, linearly (its
         displacement cannot jump: ``programs.Program.for_prescribed``).
         """
+        s = self.data.state
+        if type(command) is float and self.model.drives.plain and not s.programs:
+            # The common case, quickly: a number for one lagged or force drive (a stepping
+            # node's tick; ``DriveTable.plain``), as ``DriveTable.inputs`` makes it an array.
+            if not math.isfinite(command):
+                raise ValueError(f"drive command must be finite, got {command!r}")
+            s.command = np.full(1, command)
+            return
         if np.ndim(command) == 0 and not isinstance(command, dict) and not np.isfinite(command):
             raise ValueError(f"drive command must be finite, got {command!r}")
         drives = self.model.drives
         if not drives:
             raise ValueError(f"mechanism {self.model.mechanism.name!r} has no drive")
         values = drives.inputs(command)
-        s = self.data.state
         if not len(drives.prescribed) and not s.programs:
             s.command = values
             return

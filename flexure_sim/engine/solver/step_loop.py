@@ -18,7 +18,8 @@ contract (1) or contracts slowly (2), so the caller can re-linearize. The loop c
 ``rhs(y, t, command, args)`` -> (F, energy rates ``energy_rates``): compiled with the force
 kernel for quadratic laws (``advance``), or as plain Python with ``Model.rhs_python``
 for any law (``advance_interpreted``); one source, two bindings of ``rhs`` (and of
-``switch``, the work of a change of the held command between steps: ``switch_work``).
+``switch``, the work of a change of the held command between steps: ``switch_work``). Where
+the constraints put the prescribed coordinates: ``motion``.
 """
 from __future__ import annotations
 
@@ -32,7 +33,8 @@ from flexure_sim.engine.solver import kernels
 from flexure_sim.engine.solver import step_energy as step_energy_module
 from flexure_sim.engine.jit import njit
 from flexure_sim.engine.solver.kernels import quadratic_forces
-from flexure_sim.engine.solver.programs import PIECE_WIDTH, piece_motion
+from flexure_sim.engine.solver import motion as motion_module
+from flexure_sim.engine.solver.motion import coordinates, prescribed_motion
 from flexure_sim.engine.solver import programs as programs_module
 from flexure_sim.engine.solver.step_energy import (
     AUX_APPLIED, AUX_DISSIPATION, AUX_ENERGY, AUX_LOAD, AUX_TIMED_POWER,
@@ -40,51 +42,6 @@ from flexure_sim.engine.solver.step_energy import (
 from flexure_sim.engine.solver.step_energy import step_energy
 
 CONVERGED, NOT_CONTRACTING, SLOW = 0, 1, 2
-
-
-@njit(cache=True)
-def prescribed_motion(t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase,
-                      Dp, first_program):
-    """
-    z_P, v_P, a_P.
-
-    Held coordinates, the lagged displacement drives (column k of D: dz_P/du_k; u_k a
-    first-order lag of command[k] with time constant tau[k], so v_P = sum_k D_k (command_k -
-    u_k)/tau_k), the prescribed drives (column j of Dp: dz_P/dp_j, p_j(t) the program piece at
-    command[first_program + j PIECE_WIDTH:], ``programs.piece_motion``) and prescribed sine
-    rates (omega = a sin(w t + phase)).
-    """
-    nP = zP0.shape[0]
-    zP = zP0.copy()
-    vP = np.zeros(nP)
-    aP = np.zeros(nP)
-    for k in range(tau.shape[0]):
-        udot = (command[k] - u[k]) / tau[k]
-        udd = -udot / tau[k]
-        for i in range(nP):
-            zP[i] += D[i, k] * u[k]
-            if k == 0:  # assigned, not added to 0: keeps the sign of a zero rate
-                vP[i] = D[i, k] * udot
-                aP[i] = D[i, k] * udd
-            else:
-                vP[i] += D[i, k] * udot
-                aP[i] += D[i, k] * udd
-    for k in range(Dp.shape[1]):
-        o = first_program + k * PIECE_WIDTH
-        p, pd, pdd = piece_motion(command[o:o + PIECE_WIDTH], t)
-        for i in range(nP):
-            c = Dp[i, k]
-            if c != 0.0:
-                zP[i] += c * p
-                vP[i] += c * pd
-                aP[i] += c * pdd
-    for i in range(sine_index.shape[0]):
-        j = sine_index[i]
-        a, w, ph = sine_amp[i], sine_w[i], sine_phase[i]
-        zP[j] += a / w * (math.cos(ph) - math.cos(w * t + ph))
-        vP[j] = a * math.sin(w * t + ph)
-        aP[j] = a * w * math.cos(w * t + ph)
-    return zP, vP, aP
 
 
 @njit(cache=True, inline="always")
@@ -141,18 +98,9 @@ def kernel_rhs(y, t, command, args):
     nF = free.shape[0]
     nd = tau.shape[0]
     u = y[2 * nF:2 * nF + nd]
-    zP, vP, aP = prescribed_motion(
-        t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase, Dp, first_program
-    )
     N = mass.shape[0]
-    z = np.empty(N)
-    v = np.empty(N)
-    for i in range(nF):
-        z[free[i]] = y[i]
-        v[free[i]] = y[nF + i]
-    for i in range(prescribed.shape[0]):
-        z[prescribed[i]] = zP[i]
-        v[prescribed[i]] = vP[i]
+    z, v, aP = coordinates(y, t, command, free, prescribed, N, tau, zP0, D, sine_index,
+                           sine_amp, sine_w, sine_phase, Dp, first_program)
     Q = np.empty(N)
     n = ia.shape[0]
     potential, dissipation = quadratic_forces(
@@ -371,7 +319,7 @@ advance = njit(cache=True)(_advance)
 
 # Numba's cache of each kernel is keyed on its own file only (``kernel_cache``).
 kernel_cache.revalidate(kernel_cache.dispatchers_of(kernels, step_energy_module, programs_module,
-                                                    globals()), __file__)
+                                                    motion_module, globals()), __file__)
 
 
 def _interpreted_rhs(y, t, command, model):
