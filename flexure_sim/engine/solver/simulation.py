@@ -125,7 +125,7 @@ class Simulation:
             # node's tick; ``DriveTable.plain``), as ``DriveTable.inputs`` makes it an array.
             if not math.isfinite(command):
                 raise ValueError(f"drive command must be finite, got {command!r}")
-            s.command = np.full(1, command)
+            s.command = np.array((command,))  # ~0.3 us; np.full ~1 us
             return
         if np.ndim(command) == 0 and not isinstance(command, dict) and not np.isfinite(command):
             raise ValueError(f"drive command must be finite, got {command!r}")
