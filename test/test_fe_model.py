@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 import pytest
 
-from flexure_sim.engine import hyperdual as hd
+from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.hinges.fe import cache, model, solves
 
 GEO = {"D": 3e-3, "h": 0.25e-3, "t": 0.02}

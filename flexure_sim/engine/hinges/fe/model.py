@@ -20,7 +20,7 @@ length (D for a circular notch, 2a for an elliptical one, ``length`` otherwise) 
 stress below. The true three-dimensional stiffness lies between the two; the two differ by up
 to 1/(1 - nu^2) (12 % in bending for nu = 0.33), and ``flexure-sim hinge`` prints both.
 
-Derivatives. Design sensitivities pass hyper-dual numbers (engine/hyperdual.py) for the
+Derivatives. Design sensitivities pass hyper-dual numbers (engine/kinematics/hyperdual.py) for the
 geometry, E and nu. E, t and ell enter through the scaling above, in hyper-dual arithmetic,
 exactly. The dimensionless results F (K^ and s^) are functions of the ratios and nu, which
 the finite-element model gives only pointwise: their first and second derivatives are central
@@ -42,7 +42,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from flexure_sim.engine import hyperdual as hd
+from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.hinges.fe.shapes import ShapeError, profile, shape
 from flexure_sim.engine.hinges.fe.solves import DEFAULT_RESOLUTION, Case, solve
 

@@ -9,11 +9,10 @@ size (``working_box``: alpha_max, and each translation that alone raises that st
 cross-polytope |a| + |x| + |y| <= 1. Points are drawn uniformly in it with a seeded generator
 (uniform in the box, the others rejected). Each point is solved
 with large deflection (large.py) on the model's mesh at resolution n; the rows are what
-``wrench_data.write_wrench_csv`` writes and ``flexure-sim fit`` reads.
-
-``quadratic_law_error`` compares the twistor quadratic law of the linear stiffness (eq. 4.7,
-hinge_laws) with the samples: the question of Ch. 7, how far the quadratic potential is from
-the hinge over the range.
+``fitting.wrench_data.write_wrench_csv`` writes and ``flexure-sim fit`` reads, and what
+``fitting.least_squares.wrench_errors`` compares a law with (``flexure-sim hinge --samples``
+reports the twistor quadratic law of the linear stiffness against them: how far the
+quadratic potential is from the hinge over the range, Ch. 7's question).
 """
 from __future__ import annotations
 
@@ -87,20 +86,3 @@ def wrench_samples(name: str, values: Mapping[str, Any], E: float, nu: float,
         wrench[i] = _to_frame(name, w) * E * t * np.array([ell * ell, ell, ell])
     return r, wrench
 
-
-def quadratic_law_error(K: np.ndarray, r: np.ndarray, wrench: np.ndarray) -> dict:
-    """
-    Return how far the twistor quadratic law of K is from sampled wrenches.
-
-    {"max": largest |law - sample| over all rows and components, relative to each component's
-    largest sampled magnitude, "per_component": the same per (m, f_x, f_y), "rms": relative RMS}.
-    """
-    from flexure_sim.engine.fitting import predict_wrench
-    from flexure_sim.engine.hinge_laws import QuadraticLaw
-
-    law = QuadraticLaw("twistor", np.asarray(K, dtype=float), np.zeros((3, 3)))
-    predicted = predict_wrench(law, r[:, 0], r[:, 1:])
-    scale = np.max(np.abs(wrench), axis=0)
-    diff = np.abs(predicted - wrench) / scale
-    return {"max": float(diff.max()), "per_component": diff.max(axis=0).tolist(),
-            "rms": float(np.sqrt(np.mean(diff ** 2)))}
