@@ -44,7 +44,8 @@ import numpy as np
 from scipy.integrate import quad
 
 from flexure_sim.engine.hinges.fe.shapes import profile, ratios_of, shape
-from flexure_sim.engine.hinges.stiffness import cantilever_stiffness, notch_stiffness, shear_modulus
+from flexure_sim.engine.hinges.stiffness import (cantilever_stiffness, notch_stiffness,
+                                                 shear_modulus)
 
 #: Shear correction of a rectangular section (Timoshenko), as a compliance factor 1/k = 6/5.
 SHEAR_FACTOR = 1.2

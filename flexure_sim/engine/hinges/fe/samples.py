@@ -85,4 +85,3 @@ def wrench_samples(name: str, values: Mapping[str, Any], E: float, nu: float,
         w = solver.wrench(ri[0], ri[1:] / ell)
         wrench[i] = _to_frame(name, w) * E * t * np.array([ell * ell, ell, ell])
     return r, wrench
-
