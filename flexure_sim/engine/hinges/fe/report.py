@@ -104,3 +104,44 @@ def text(report: dict[str, Any]) -> str:
                      f"reported stiffness {max(cv['error']):.2e}, observed orders "
                      + ", ".join(f"{p:.2f}" for p in cv["order"]))
     return "\n".join(lines)
+
+
+#: The notch proportions of docs/hinges.md's table (h / R).
+TABLE_H_OVER_R = (0.02, 0.05, 0.1, 1 / 6, 0.25, 0.5, 1.0)
+
+
+def error_table(plane: str = "stress", nu: float = 0.33,
+                h_over_r=TABLE_H_OVER_R) -> list[dict[str, Any]]:
+    """
+    Return, per h/R of a circular notch, each formula's differences from the FE stiffness.
+
+    Rows {"h_over_r", "fe": diag (E = 1, h = 1, t = 1), formula: [dKo, dKx, dKy] or None}.
+    """
+    rows = []
+    for q in h_over_r:
+        geo = {"D": 2.0 / q, "h": 1.0, "t": 1.0}
+        K = np.diag(model.stiffness("circular", geo, 1.0, nu, plane))
+        row: dict[str, Any] = {"h_over_r": q, "fe": K.tolist()}
+        for formula, Kf in closed_forms.evaluate("circular", geo, 1.0, nu).items():
+            row[formula] = [None if np.isnan(d) else float(d / k - 1)
+                            for d, k in zip(np.diag(Kf), K)]
+        rows.append(row)
+    return rows
+
+
+def markdown_table(rows: list[dict[str, Any]]) -> str:
+    """Return error_table rows as the Markdown table of docs/hinges.md (percent)."""
+    formulas = [f for f in closed_forms.FORMULAS if f in rows[0]]
+    head = "| h/R | " + " | ".join(f"{f} Ko, Kx, Ky" for f in formulas) + " |"
+    lines = [head, "|" + "---|" * (len(formulas) + 1)]
+    for r in rows:
+        cells = [", ".join("-" if d is None else f"{100 * d:+.1f}" for d in r[f])
+                 for f in formulas]
+        lines.append(f"| {r['h_over_r']:.3g} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # python -m flexure_sim.engine.hinges.fe.report: the doc's tables
+    for p in ("stress", "strain"):
+        print(f"\nplane {p}: formula / FE - 1, percent\n")
+        print(markdown_table(error_table(p)))
