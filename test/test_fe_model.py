@@ -6,7 +6,6 @@ against a second load and against damaged entries.
 """
 
 import json
-import time
 import warnings
 
 import numpy as np
@@ -41,10 +40,8 @@ def test_second_load_comes_from_the_cache(fresh_cache):
     case = solves.Case("circular", (12.0,), 0.33, "stress", 8)
     first = solves.solve(case)
     assert first.seconds > 0 and len(list(fresh_cache.glob("*.json"))) == 1
-    start = time.perf_counter()
     again = solves.solve(case)
-    assert again.seconds == 0.0  # read, not solved
-    assert time.perf_counter() - start < 1.0  # (benchmark: ~1 ms; this only rules out a solve)
+    assert again.seconds == 0.0  # read, not solved (its time: flexure-sim bench)
     assert np.array_equal(again.compliance, first.compliance)
     assert np.array_equal(again.peak, first.peak)
 
