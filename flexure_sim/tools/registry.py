@@ -23,6 +23,7 @@ TOOL_MODULES: tuple[str, ...] = (
     "tools.bench.benchmarks",
     "tools.design.sweep",
     "tools.design.piezo_loop",
+    "tools.design.hinge",
 )
 
 

@@ -35,6 +35,15 @@ moment f_x L / 2 at either end, so the largest end moment is |m| + |f_x| L / 2:
     sigma = 6 (|m| + |f_x| L / 2) / (w T^2) + |f_y| / (w T)
 
 (straight beam, no concentration: the fillets at the clamps are not modelled).
+Finite-element hinge (``model: fe``, engine/hinges/fe): the peak von Mises stress per unit
+moment and force, c = (c_m, c_x, c_y), from the same solve as the stiffness
+(fe.model.stress_coefficients); the stress of a wrench is bounded by
+
+    sigma = c_m |m| + c_x |f_x| + c_y |f_y|
+
+(von Mises is a norm of the stress tensor: exact for one component, conservative for
+combinations, like the formulas above). The handbook K_t is for the closed forms only.
+
 Hinges with a ``matrix`` stiffness or a fitted polynomial law have no geometry: no stress.
 
 Each hinge's ``StressGeometry`` (model, dimensions, sigma_y) is part of the loaded mechanism
@@ -112,10 +121,16 @@ def leaf_stress(wrench, length, thickness, width):
     ) + np.abs(fy) / (width * thickness)
 
 
+def fe_stress(wrench, c_m, c_x, c_y):
+    """Peak stress (Pa) of a finite-element hinge under wrench (m, f_x, f_y) (module docstring)."""
+    return (c_m * np.abs(wrench[..., 0]) + c_x * np.abs(wrench[..., 1])
+            + c_y * np.abs(wrench[..., 2]))
+
+
 #: Per stiffness model with a geometry: the keys of its stiffness formula the stress uses, in
 #: the order of the stress function's arguments.
 STRESS_KEYS = {"notch": ("D", "h", "t"), "cantilever": ("length", "thickness", "width")}
-_STRESS_FUNCTIONS = {"notch": notch_stress, "cantilever": leaf_stress}
+_STRESS_FUNCTIONS = {"notch": notch_stress, "cantilever": leaf_stress, "fe": fe_stress}
 
 
 @dataclass(frozen=True)
@@ -123,8 +138,9 @@ class StressGeometry:
     """
     What one hinge's stress needs.
 
-    Its stiffness ``model`` (notch or cantilever), the ``dimensions`` (m) of that model in the
-    order of STRESS_KEYS[model], and the yield strength ``sigma_y`` (Pa) or None. Floats in a
+    Its stiffness ``model`` (notch, cantilever or fe), the ``dimensions`` (m) of that model in
+    the order of STRESS_KEYS[model] -- for ``fe`` the three peak-stress coefficients
+    (Pa/(N m), Pa/N, Pa/N) -- and the yield strength ``sigma_y`` (Pa) or None. Floats in a
     loaded mechanism; HyperDual values where mechanism/parameters.py varies them.
     """
 

@@ -26,6 +26,9 @@ from flexure_sim.engine.mechanism.loader import (
 )
 from flexure_sim.engine.mechanism.parts import Mechanism
 from flexure_sim.engine.hinges.stiffness import MODELS as _MODELS
+from flexure_sim.engine.hinges.fe import model as fe_model
+from flexure_sim.engine.hinges.fe.shapes import SHAPES
+from flexure_sim.engine.hinges.fe.solves import DEFAULT_RESOLUTION
 from flexure_sim.engine.hinges.stress import STRESS_KEYS, StressGeometry
 from flexure_sim.engine.mechanism.yaml_files import read_yaml
 
@@ -136,6 +139,9 @@ class Parameters:
         v = self.value(path)
         keys = path.split(".")
         head = keys[0]
+        if keys[-1] == "resolution":
+            raise ParameterError(f"{path}: the mesh resolution of a model: fe hinge is not a "
+                                 "design parameter")
         if head == "stiffness_models" and len(keys) >= 3:
             return v
         if head == "bodies" and len(keys) == 3 and keys[2] in ("mass", "inertia"):
@@ -245,8 +251,19 @@ def _num(x):
     return float(x)
 
 
+def _fe_arguments(spec: dict) -> tuple:
+    """(shape, geometry, E, nu, plane, resolution) of a ``model: fe`` spec, numbers by _num."""
+    shape = SHAPES[spec["shape"]]
+    geometry = {k: _num(spec.get(k, 0.0)) for k in shape.keys}
+    return (spec["shape"], geometry, _num(spec["E"]), _num(spec["nu"]),
+            spec.get("plane", "auto"), spec.get("resolution", DEFAULT_RESOLUTION))
+
+
 def _stiffness(spec: dict):
     model = spec["model"]
+    if model == "fe":
+        name, geometry, E, nu, plane, n = _fe_arguments(spec)
+        return fe_model.stiffness(name, geometry, E, nu, plane, n)
     if model in _MODELS:
         fn, names = _MODELS[model]
         return fn(*(_num(spec[n]) for n in names))
@@ -272,6 +289,14 @@ def _law_stiffness(hinge) -> np.ndarray:
 
 def _stress_geometry(spec: Optional[dict]) -> Optional[StressGeometry]:
     """Return the StressGeometry of a stiffness specification (mechanism/loader.py's numbers)."""
+    if spec is not None and spec.get("model") == "fe":
+        name, geometry, _, nu, plane, n = _fe_arguments(spec)
+        if name == "leaf" and not float(hd.real(geometry["fillet"])) > 0:
+            return None  # fe_block.py: a sharp leaf has no finite peak stress
+        sigma_y = spec.get("sigma_y")
+        return StressGeometry("fe", tuple(fe_model.stress_coefficients(name, geometry, nu,
+                                                                       plane, n)),
+                              None if sigma_y is None else _num(sigma_y))
     if spec is None or spec.get("model") not in STRESS_KEYS:
         return None
     sigma_y = spec.get("sigma_y")

@@ -3,8 +3,10 @@ Hinge stiffness in a mechanism file, checked: a ``stiffness`` specification and 
 
 Part of the loader (`config.mechanism_from_dict`); messages name the file, key and problem.
 Models: ``notch`` (D, h, t, E, nu), ``cantilever`` (length, thickness, width, E, nu), both
-with an optional yield strength ``sigma_y`` (Pa) for the stress analyses, and ``matrix`` (K:
-3x3, or Ko, Kt: [kx, ky] and optional Kc: [cx, cy]); the formulas are in `stiffness`.
+with an optional yield strength ``sigma_y`` (Pa) for the stress analyses, ``fe`` (a hinge shape
+and its geometry solved by finite elements, fe_block.py; also with ``sigma_y``), and
+``matrix`` (K: 3x3, or Ko, Kt: [kx, ky] and optional Kc: [cx, cy]); the formulas are in
+`stiffness`.
 """
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ from typing import Any, Callable
 import numpy as np
 
 from flexure_sim.engine.hinges import stiffness as stiffness_models
+from flexure_sim.engine.mechanism.fe_block import fe_stiffness
 from flexure_sim.engine.mechanism.values import Ctx as _Ctx
 from flexure_sim.engine.mechanism.values import mapping as _mapping
 from flexure_sim.engine.mechanism.values import no_unknown as _no_unknown
@@ -36,7 +39,8 @@ def stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str, Any]:
     model = _require(ctx, key, spec, "model")
     if not isinstance(model, str):
         raise ctx.fail(f"{key}.model",
-                       f"expected a model name (notch, cantilever, matrix), got {_shown(model)}")
+                       f"expected a model name (notch, cantilever, fe, matrix), got "
+                       f"{_shown(model)}")
     # Material yield strength (Pa) for the hinge stress ratio (engine/hinges/stress.py); optional.
     sigma_y = (_number(ctx, f"{key}.sigma_y", spec["sigma_y"], positive=True)
                if "sigma_y" in spec else None)
@@ -59,10 +63,13 @@ def stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str, Any]:
             raise ctx.fail(key, f"the {model} formula gives a non-finite stiffness for these "
                            f"values ({values}): check the units")
         return K, model, StressGeometry.of(model, dict(zip(names, args)), sigma_y)
+    if model == "fe":
+        K, geometry = fe_stiffness(ctx, key, spec, sigma_y)
+        return K, "fe", geometry
     if model == "matrix":
         if sigma_y is not None:  # would be dropped silently: no geometry, no stress
             raise ctx.fail(f"{key}.sigma_y", "a matrix stiffness has no geometry to compute "
-                           "stress from (sigma_y is for notch and cantilever models)")
+                           "stress from (sigma_y is for notch, cantilever and fe models)")
         _no_unknown(ctx, key, spec, {"model", "K", "Ko", "Kt", "Kc"})
         if "K" in spec:
             rows = spec["K"]
@@ -76,7 +83,7 @@ def stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str, Any]:
             K = np.array([[Ko, kc[0], kc[1]], [kc[0], kt[0], 0.0], [kc[1], 0.0, kt[1]]])
         return K, "matrix", None
     raise ctx.fail(f"{key}.model",
-                   f"unknown stiffness model {_shown(model)} (notch, cantilever, matrix)")
+                   f"unknown stiffness model {_shown(model)} (notch, cantilever, fe, matrix)")
 
 
 def check_spd(ctx: _Ctx, key: str, M: np.ndarray, what: str) -> None:

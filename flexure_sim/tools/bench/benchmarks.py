@@ -14,6 +14,8 @@ Wall times are medians of several runs (7 for flexure_sim, 3 for the baseline).
 - static_sweep: 1000 drive levels from 0 to the stroke.
 - analyses: the stage's exact linearisation + modes + FRF at 1000 frequencies (goal < 0.1 s),
   and hyper-dual sensitivities of 4 outputs to 20 parameters (goal < 1 s).
+- fe_hinge: one finite-element hinge's solve (goal < 5 s) and its cached load, alone and in
+  the stage with model: fe hinges (goal < 10 ms; tools/bench/fe_bench.py).
 - sweep (with --sweep): flexure-sim sweep's scaling on the stage tolerance study: designs
   per second in this process without Dask, on a LocalCluster of 1 and of 2 worker processes,
   the parallel efficiency and the overhead of a batch (a task).
@@ -42,6 +44,7 @@ from flexure_sim.engine.solver.simulation import DEFAULT_STEP
 from flexure_sim.tools.bench.engine_bench import (
     DURATION, bench_static_sweep, bench_stage_step, bench_step_cost,
 )
+from flexure_sim.tools.bench.fe_bench import bench_fe_hinge
 from flexure_sim.tools.bench.study_bench import bench_analyses, bench_sweep
 
 #: wake_spin of the second real-time run: the CPU / punctuality trade-off of a short spin.
@@ -190,6 +193,12 @@ def print_table(res: dict) -> None:
               f"{a['modes_frf_wall_s'] * 1e3:.1f} ms (goal < 100 ms); sensitivities of "
               f"{a['sensitivity_outputs']} outputs to {a['sensitivity_parameters']} parameters "
               f"{a['sensitivity_wall_s'] * 1e3:.0f} ms (goal < 1000 ms)")
+    fe = res.get("fe_hinge")
+    if fe:
+        print(f"\nfinite-element hinge (stage notch, resolution {fe['resolution']}): solve "
+              f"{fe['solve_s']:.2f} s (goal < 5 s); cached stiffness "
+              f"{fe['cached_stiffness_s'] * 1e3:.2f} ms, stage with 7 such hinges loaded "
+              f"{fe['cached_stage_load_s'] * 1e3:.1f} ms (goal < 10 ms)")
     if "sweep" in res:
         sw = res["sweep"]
         print(f"\nsweep, stage tolerance study, {sw['designs']} designs in batches of "
@@ -269,6 +278,7 @@ def run(args: argparse.Namespace) -> dict:
     res["steps_per_s"] = res["step_cost"]["steps_per_s"]
     res["static_sweep"] = bench_static_sweep()
     res["analyses"] = bench_analyses()
+    res["fe_hinge"] = bench_fe_hinge()
     if args.sweep:
         res["sweep"] = bench_sweep(args.sweep_designs)
     if args.node:
