@@ -82,7 +82,8 @@ from flexure_sim.engine.mechanism.values import shown as _shown
 from flexure_sim.engine.mechanism.values import vector as _vector
 from flexure_sim.engine.mechanism.builtins import searched as builtin_search_places
 from flexure_sim.engine.mechanism.yaml_files import read_yaml
-from flexure_sim.engine.laws.quadratic import COORDINATES, QuadraticLaw
+from flexure_sim.engine.laws.coordinates import COORDINATES
+from flexure_sim.engine.laws.quadratic import QuadraticLaw
 from flexure_sim.engine.mechanism.parts import Body, Drive, Frame, Hinge, Mechanism, Output
 from flexure_sim.engine.laws.polynomial import PolynomialLaw
 from flexure_sim.engine.mechanism.polynomial_files import PolynomialFileError
