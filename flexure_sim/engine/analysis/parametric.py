@@ -20,6 +20,7 @@ import numpy as np
 from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.kinematics.scalar import where
 from flexure_sim.engine.laws.hinge_force import quadratic_hinge
+from flexure_sim.engine.laws.quadratic import METRIC_SCALE
 from flexure_sim.engine.mechanism.parameters import Design
 
 
@@ -49,7 +50,7 @@ def forces(
     its own kind's results.
     """
     A, B = 3 * ia, 3 * ib
-    scale = np.where(twistor, 4.0, 1.0)[:, None, None]
+    scale = np.where(twistor, METRIC_SCALE["twistor"], METRIC_SCALE["twist"])[:, None, None]
     W, C = _entries(design.K * scale), _entries(design.B * scale)
     moving = v is not None
     vA = vB = None

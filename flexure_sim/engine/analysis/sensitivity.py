@@ -317,8 +317,13 @@ def sensitivities(
     if "gain" in of and mech.output is None and not (mech.drives and mech.all_outputs):
         raise ParameterError(f"gain: mechanism {mech.name!r} names no output body")
     of = _expand(mech, of)
+    seen = {}
     for p in wrt:
         params.check(p)
+        steps = params.resolve(p)[0]
+        if steps in seen:
+            raise ParameterError(f"--wrt: {seen[steps]} and {p} name the same number")
+        seen[steps] = p
     if u is None:
         u = default_input(mech)
     if "compression" in of and mech.compression_hinge is None:

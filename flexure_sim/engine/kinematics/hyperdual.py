@@ -29,7 +29,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
-__all__ = ["HyperDual", "seed", "parts_of", "real", "stack", "from_objects"]
+__all__ = ["HyperDual", "seed", "parts_of", "real", "stack", "from_objects", "asarray"]
 
 
 def _parts(x):
@@ -313,3 +313,22 @@ def stack(items, axis: int = -1) -> HyperDual:
         shape = np.broadcast_shapes(*(p.shape for p in parts))
         out.append(np.stack([np.broadcast_to(p, shape) for p in parts], axis=axis))
     return HyperDual(*out)
+
+
+def asarray(values):
+    """
+    Return nested sequences of numbers as a float array, or a HyperDual array if any is one.
+
+    Entries may be numbers, HyperDuals (scalars or arrays) and arrays (also object arrays of
+    both, as ``np.diag`` of hyper-dual scalars gives); a HyperDual result has zero derivative
+    parts where the entries are plain numbers.
+    """
+    if isinstance(values, HyperDual):
+        return values
+    if isinstance(values, (list, tuple)) or (isinstance(values, np.ndarray)
+                                             and values.dtype == object):
+        items = [asarray(v) for v in values]
+        if any(isinstance(v, HyperDual) for v in items):
+            return stack(items, axis=0)
+        return np.array(items, dtype=float)
+    return np.asarray(values, dtype=float)

@@ -38,10 +38,15 @@ from typing import Protocol, Sequence
 import numpy as np
 
 from flexure_sim.errors import as_array
+from flexure_sim.engine.kinematics.hyperdual import HyperDual
 from flexure_sim.engine.kinematics.relative import element_wrench
 from flexure_sim.engine.laws.coordinates import COORDINATES, deflections
 
 # ------------------------------------------------------------------------ the laws
+
+#: W = s K and C = s B on the law coordinates of a quadratic law: U = 2 [xi; x]^T K [xi; x]
+#: is 1/2 c^T (4 K) c on the twistor's (xi, x1, x2) (4.7), U = 1/2 d^T K d on the twist (3.4).
+METRIC_SCALE = {"twistor": 4.0, "twist": 1.0}
 
 
 @dataclass(frozen=True)
@@ -123,6 +128,9 @@ class QuadraticLaw(LawPower):
     (xi, x1, x2)) and D = 2 [xi_dot; x_dot]^T B [xi_dot; x_dot] (C = 4 B);
     ``twist`` (c = tau, t1, t2): U = 1/2 d^T K d (3.4) and D = 1/2 d_dot^T B d_dot.
     K, B: 3x3, moment first, forces second, in the hinge frame. Power: `LawPower`.
+    In the law of a design whose numbers carry derivatives (mechanism/parameters.py), K and B
+    are HyperDual arrays: the hyper-dual force chain reads them (analysis/parametric.py), the
+    methods here take floats.
     """
 
     coordinates: str
@@ -133,13 +141,17 @@ class QuadraticLaw(LawPower):
         if self.coordinates not in COORDINATES:
             raise ValueError(f"coordinates: expected one of {', '.join(COORDINATES)}, "
                              f"got {self.coordinates!r}")
-        object.__setattr__(self, "K", as_array("K", self.K, (3, 3)))
-        object.__setattr__(self, "B", as_array("B", self.B, (3, 3)))
+        for name in ("K", "B"):
+            M = getattr(self, name)
+            if not isinstance(M, HyperDual):
+                object.__setattr__(self, name, as_array(name, M, (3, 3)))
+            elif M.shape != (3, 3):
+                raise ValueError(f"{name}: expected shape (3, 3), got {M.shape}")
 
     def _embed(self, M: np.ndarray) -> np.ndarray:
         if self.coordinates == "twistor":
             out = np.zeros((4, 4))
-            out[1:, 1:] = 4.0 * M
+            out[1:, 1:] = METRIC_SCALE["twistor"] * M
             return out
         return np.array(M, dtype=float)
 
