@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
+from flexure_sim.engine import jit as kernel_cache
 from flexure_sim.engine.jit import njit
 from flexure_sim.engine.kinematics import planar
 from flexure_sim.engine.kinematics.relative import relative
@@ -31,24 +32,28 @@ from flexure_sim.engine.mechanism.loader import load_mechanism
 EPS = np.finfo(float).eps
 
 
-@njit
+@njit(cache=True)
 def _compiled_chain(twistor_law, zA, zB, vA, vB, ca, cb, phia, phib, W, C):
     return quadratic_hinge(twistor_law, True, zA, zB, vA, vB, ca, cb, phia, phib, W, C)
 
 
-@njit
+@njit(cache=True)
 def _compiled_twist(alpha, p1, p2):
     return twist(alpha, p1, p2)
 
 
-@njit
+@njit(cache=True)
 def _compiled_twistor(alpha, p1, p2):
     return twistor(alpha, p1, p2)
 
 
-@njit
+@njit(cache=True)
 def _compiled_relative(zA, zB, ca, cb, phia, phib):
     return relative(zA, zB, ca, cb, phia, phib)
+
+
+# Cached like the engine's kernels, and flushed like them when a formula module changes.
+kernel_cache.revalidate(kernel_cache.dispatchers_of(globals()), __file__)
 
 
 def _leaves(x):
@@ -217,6 +222,7 @@ def _agree(paths):
             np.testing.assert_allclose(other, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
 
 
+@pytest.mark.slow
 def test_an_edit_of_each_formula_reaches_every_evaluation_and_the_cached_kernels(tmp_path):
     """
     Edit each single definition in a copy of the package: every evaluation follows it.
