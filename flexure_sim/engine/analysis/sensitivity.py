@@ -2,7 +2,7 @@
 Exact first and second design sensitivities by hyper-dual numbers.
 
 The static equilibrium Q_F(z, p) = 0 at drive input u defines z(p). Seeding parameters p
-(``parametric.Parameters``: any number of the mechanism file by path) as hyper-dual numbers
+(``mechanism.parameters.Parameters``: any number of the mechanism file by path) as hyper-dual numbers
 -- p_i + e1 and p_j + e2, or p_i + e1 + e2 for one parameter -- and running Newton's method
 *in hyper-dual arithmetic* with the real tangent stiffness K = -dQ_F/dz_F,
 
