@@ -2,8 +2,8 @@
 Exact first and second design sensitivities by hyper-dual numbers.
 
 The static equilibrium Q_F(z, p) = 0 at drive input u defines z(p). Seeding parameters p
-(``mechanism.parameters.Parameters``: any number of the mechanism file by path) as hyper-dual numbers
--- p_i + e1 and p_j + e2, or p_i + e1 + e2 for one parameter -- and running Newton's method
+(``mechanism.parameters.Parameters``: any number of the mechanism file by path) as hyper-dual
+numbers -- p_i + e1 and p_j + e2, or p_i + e1 + e2 for one parameter -- and running Newton's method
 *in hyper-dual arithmetic* with the real tangent stiffness K = -dQ_F/dz_F,
 
     z <- z + K^-1 Q_F(z, p),
