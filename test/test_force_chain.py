@@ -25,7 +25,7 @@ from flexure_sim.engine import jit as kernel_cache
 from flexure_sim.engine.jit import njit
 from flexure_sim.engine.kinematics import planar
 from flexure_sim.engine.kinematics.relative import relative
-from flexure_sim.engine.laws.coordinates import twist, twistor
+from flexure_sim.engine.laws.coordinates import twist, twist_second, twistor, twistor_second
 from flexure_sim.engine.laws.hinge_force import quadratic_hinge
 from flexure_sim.engine.mechanism.loader import load_mechanism
 
@@ -37,14 +37,18 @@ def _compiled_chain(twistor_law, zA, zB, vA, vB, ca, cb, phia, phib, W, C):
     return quadratic_hinge(twistor_law, True, zA, zB, vA, vB, ca, cb, phia, phib, W, C)
 
 
-@njit(cache=True)
-def _compiled_twist(alpha, p1, p2):
-    return twist(alpha, p1, p2)
+def _twist_map(alpha, p1, p2):
+    c, dc = twist(alpha, p1, p2)
+    return c, dc, twist_second(alpha, p1, p2, c)
 
 
-@njit(cache=True)
-def _compiled_twistor(alpha, p1, p2):
-    return twistor(alpha, p1, p2)
+def _twistor_map(alpha, p1, p2):
+    c, dc = twistor(alpha, p1, p2)
+    return c, dc, twistor_second(alpha, p1, p2, c)
+
+
+_compiled_twist = njit(cache=True)(_twist_map)
+_compiled_twistor = njit(cache=True)(_twistor_map)
 
 
 @njit(cache=True)
@@ -102,11 +106,12 @@ def test_the_compiled_coordinate_maps_and_half_cotangent_are_the_interpreted_one
     for alpha in np.concatenate([rng.uniform(-3, 3, 30), rng.uniform(-2e-2, 2e-2, 30),
                                  [0.0, planar.HALF_COT_SERIES, -planar.HALF_COT_SERIES]]):
         p1, p2 = rng.normal(size=2) * 1e-3
-        for compiled, generic in ((_compiled_twist, twist), (_compiled_twistor, twistor)):
+        for compiled, generic in ((_compiled_twist, _twist_map),
+                                  (_compiled_twistor, _twistor_map)):
             _same(compiled(alpha, p1, p2), generic(float(alpha), float(p1), float(p2)))
-        # and on arrays: the same numbers, entry by entry
-        c, dc, d2c = twist(np.array([alpha]), np.array([p1]), np.array([p2]))
-        _same((c, dc, d2c), twist(float(alpha), float(p1), float(p2)))
+            # and on arrays: the same numbers, entry by entry
+            _same(generic(np.array([alpha]), np.array([p1]), np.array([p2])),
+                  generic(float(alpha), float(p1), float(p2)))
 
 
 def test_half_cotangent_series_and_closed_form_meet():

@@ -325,10 +325,25 @@ def asarray(values):
     """
     if isinstance(values, HyperDual):
         return values
+    if not _holds_dual(values):
+        return np.asarray(values, dtype=float)
+    if any(np.ndim(v) > 0 and (isinstance(v, HyperDual) or getattr(v, "dtype", object) != object)
+           for v in values):  # arrays, one per item: stacked along a new first axis
+        items = [asarray(v) for v in values]
+        shape = np.broadcast_shapes(*(np.shape(v) if not isinstance(v, HyperDual) else v.shape
+                                      for v in items))
+        parts = [np.zeros((len(items),) + shape) for _ in range(4)]
+        for i, item in enumerate(items):
+            for part, p in zip(parts, _parts(item)):
+                part[i] = p
+        return HyperDual(*parts)
+    return from_objects(values)  # numbers and hyper-dual scalars
+
+
+def _holds_dual(values) -> bool:
+    if isinstance(values, HyperDual):
+        return True
     if isinstance(values, (list, tuple)) or (isinstance(values, np.ndarray)
                                              and values.dtype == object):
-        items = [asarray(v) for v in values]
-        if any(isinstance(v, HyperDual) for v in items):
-            return stack(items, axis=0)
-        return np.array(items, dtype=float)
-    return np.asarray(values, dtype=float)
+        return any(_holds_dual(v) for v in values)
+    return False

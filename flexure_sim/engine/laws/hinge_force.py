@@ -41,10 +41,10 @@ def quadratic_hinge(twistor_law, moving, zA, zB, vA, vB, ca, cb, phia, phib, W, 
     r, dr, _arms = relative(zA, zB, ca, cb, phia, phib)
     alpha, p1, p2 = r
     if twistor_law:
-        c4, dc4, _d2c4 = twistor(alpha, p1, p2)
+        c4, dc4 = twistor(alpha, p1, p2)
         c, dc = (c4[1], c4[2], c4[3]), (dc4[1], dc4[2], dc4[3])
     else:
-        c, dc, _d2c3 = twist(alpha, p1, p2)
+        c, dc = twist(alpha, p1, p2)
     e = (dot(W[0], c), dot(W[1], c), dot(W[2], c))
     energy = 0.5 * dot(c, e)
     dissipation = 0.0
