@@ -87,9 +87,10 @@ def stacked(entries, n: int, shape: tuple) -> np.ndarray:
             todo.extend(reversed(item))
         else:
             leaves.append(item)
-    out = np.empty((n, len(leaves)))
+    out = np.zeros((n, len(leaves)))
     for i, leaf in enumerate(leaves):
-        out[:, i] = leaf
+        if not (isinstance(leaf, float) and leaf == 0.0):  # the formulas' structural zeros
+            out[:, i] = leaf
     return out.reshape((n,) + shape)
 
 
