@@ -15,7 +15,8 @@ with a NumPy/HyperDual implementation for Python and a scalar one for Numba:
 - ``where(cond, x, y)``: x where cond holds, else y (``np.where``, part by part on HyperDuals;
   ``x if cond else y`` on scalars). A formula with a series branch evaluates its exact branch
   at a safe argument where the series is selected, as ``np.where`` evaluates both.
-- ``real(x)``: the real part (of a HyperDual; a float or array is its own).
+- ``real(x)``: the real part (``hyperdual.real``: of a HyperDual, or x as a float array; a
+  scalar in Numba).
 - ``dot(a, x)``: sum_i a_i x_i left to right for tuples a and x. In Python, float entries 0.0
   of ``a`` (and of ``x``) are skipped and +-1.0 taken as signs: the structural zeros and units
   of dr/dz and dc/dr cost four array products each in hyper-dual arithmetic. In Numba every
@@ -27,6 +28,7 @@ import numpy as np
 
 from flexure_sim.engine.jit import HAVE_NUMBA
 from flexure_sim.engine.kinematics import hyperdual as hd
+from flexure_sim.engine.kinematics.hyperdual import real
 
 __all__ = ["formula", "where", "real", "dot", "stacked"]
 
@@ -50,11 +52,6 @@ def where(cond, x, y):
     shape = np.broadcast_shapes(np.shape(cond), xs[0].shape, ys[0].shape)
     return hd.HyperDual(*(np.where(cond, np.broadcast_to(a, shape), np.broadcast_to(b, shape))
                           for a, b in zip(xs, ys)))
-
-
-def real(x):
-    """Return the real part of x (x itself unless it is a HyperDual)."""
-    return x.a if isinstance(x, hd.HyperDual) else x
 
 
 def dot(a, x):
