@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.mechanism.values import Ctx as _Ctx
 from flexure_sim.engine.mechanism.values import mapping as _mapping
 from flexure_sim.engine.mechanism.values import no_unknown as _no_unknown
@@ -38,8 +39,8 @@ def hinge_damping(ctx: _Ctx, key: str, spec: Any, K: np.ndarray) -> np.ndarray:
     _no_unknown(ctx, key, spec, {"t_char", "B"})
     if "t_char" in spec:
         with np.errstate(all="ignore"):
-            B = _number(ctx, f"{key}.t_char", spec["t_char"], nonnegative=True) * K
-        if not np.all(np.isfinite(B)):
+            B = K * _number(ctx, f"{key}.t_char", spec["t_char"], nonnegative=True)
+        if not np.all(np.isfinite(hd.real(B))):
             raise ctx.fail(f"{key}.t_char",
                            "t_char times the stiffness is not finite: check the units")
         return B
@@ -47,9 +48,10 @@ def hinge_damping(ctx: _Ctx, key: str, spec: Any, K: np.ndarray) -> np.ndarray:
         rows = spec["B"]
         if not isinstance(rows, list) or len(rows) != 3:
             raise ctx.fail(f"{key}.B", "expected a 3x3 matrix")
-        B = np.array([_vector(ctx, f"{key}.B[{i}]", r, (3,)) for i, r in enumerate(rows)])
+        B = hd.asarray([_vector(ctx, f"{key}.B[{i}]", r, (3,)) for i, r in enumerate(rows)])
         with np.errstate(all="ignore"):
-            psd = np.allclose(B, B.T) and np.all(np.linalg.eigvalsh(B) >= 0)
+            real = hd.real(B)
+            psd = np.allclose(real, real.T) and np.all(np.linalg.eigvalsh(real) >= 0)
         if not psd:
             raise ctx.fail(f"{key}.B", "damping matrix must be symmetric positive semi-definite")
         return B

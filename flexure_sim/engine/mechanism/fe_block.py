@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from flexure_sim.engine.hinges.fe import model as fe_model
+from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.hinges.fe.mesh import MeshError
 from flexure_sim.engine.hinges.fe.shapes import SHAPES, ShapeError
 from flexure_sim.engine.hinges.fe.solves import DEFAULT_RESOLUTION
@@ -49,7 +50,7 @@ def fe_numbers(ctx: Ctx, key: str, spec: dict) -> dict[str, Any]:
                              positive=k not in s.optional, nonnegative=True)
     E = number(ctx, f"{key}.E", require(ctx, key, spec, "E"), positive=True)
     nu = number(ctx, f"{key}.nu", require(ctx, key, spec, "nu"))
-    if not 0 <= nu < 0.5:
+    if not 0 <= float(hd.real(nu)) < 0.5:  # a design's nu may carry derivative parts
         raise ctx.fail(f"{key}.nu", f"Poisson's ratio must be in [0, 0.5), got {nu}")
     plane = spec.get("plane", "auto")
     if plane not in PLANES:
@@ -67,20 +68,21 @@ def fe_stiffness(ctx: Ctx, key: str, spec: dict, sigma_y) -> tuple[np.ndarray, A
     """Return (K, StressGeometry or None) of a ``model: fe`` spec, solving or from the cache."""
     v = fe_numbers(ctx, key, spec)
     name, geo = v["shape"], v["geometry"]
-    if sigma_y is not None and name == "leaf" and geo["fillet"] == 0:  # checked before solving
+    sharp = name == "leaf" and float(hd.real(geo["fillet"])) == 0
+    if sigma_y is not None and sharp:  # checked before solving
         raise ctx.fail(f"{key}.sigma_y", "a leaf without fillets has a stress singularity at "
                        "its clamped corners: give it a fillet radius > 0 for the stress "
                        "analyses")
-    singular = name == "leaf" and geo["fillet"] == 0  # no finite peak stress: no stress
     try:
         K = fe_model.stiffness(name, geo, v["E"], v["nu"], v["plane"], v["resolution"])
-        coefficients = (None if singular else
+        coefficients = (None if sharp else  # no finite peak stress: no stress
                         fe_model.stress_coefficients(name, geo, v["nu"], v["plane"],
                                                      v["resolution"]))
     except ShapeError as exc:
         raise ctx.fail(key, str(exc)) from None
     except MeshError as exc:
         raise ctx.fail(key, f"the finite-element model failed: {exc}") from None
+    # floats, or HyperDual entries where a design (mechanism/parameters.py) seeds derivatives
     geometry = (None if coefficients is None
-                else StressGeometry("fe", tuple(float(c) for c in coefficients), sigma_y))
-    return np.asarray(K, dtype=float), geometry
+                else StressGeometry("fe", tuple(coefficients), sigma_y))
+    return hd.asarray(K), geometry

@@ -63,6 +63,7 @@ from typing import Any
 
 import numpy as np
 
+from flexure_sim.engine.kinematics.hyperdual import real
 from flexure_sim.engine.mechanism.builtins import builtin_names, find_builtin
 from flexure_sim.engine.mechanism.constraints_block import _constraints, _outputs, _sensor
 from flexure_sim.engine.mechanism.damping_block import hinge_damping, mechanism_damping
@@ -82,7 +83,8 @@ from flexure_sim.engine.mechanism.values import shown as _shown
 from flexure_sim.engine.mechanism.values import vector as _vector
 from flexure_sim.engine.mechanism.builtins import searched as builtin_search_places
 from flexure_sim.engine.mechanism.yaml_files import read_yaml
-from flexure_sim.engine.laws.quadratic import COORDINATES, QuadraticLaw
+from flexure_sim.engine.laws.coordinates import COORDINATES
+from flexure_sim.engine.laws.quadratic import QuadraticLaw
 from flexure_sim.engine.mechanism.parts import Body, Drive, Frame, Hinge, Mechanism, Output
 from flexure_sim.engine.laws.polynomial import PolynomialLaw
 from flexure_sim.engine.mechanism.polynomial_files import PolynomialFileError
@@ -96,8 +98,18 @@ COINCIDENCE_TOLERANCE = 1e-9
 
 def load_mechanism(name_or_path: str | Path) -> Mechanism:
     """Load a built-in mechanism by name (``microstage``) or a YAML file by path."""
+    return mechanism_from_dict(*load_document(name_or_path))
+
+
+def load_document(name_or_path: str | Path) -> tuple[Any, str]:
+    """
+    Return the parsed YAML document of a mechanism (built-in name or path) and its source.
+
+    The source is the file's path: messages name it, and files the mechanism refers to are
+    relative to it. ``mechanism_from_dict(*load_document(x))`` is ``load_mechanism(x)``.
+    """
     path = resolve_mechanism_path(name_or_path)
-    return mechanism_from_dict(read_yaml(path, ConfigError), source=str(path))
+    return read_yaml(path, ConfigError), str(path)
 
 
 def resolve_mechanism_path(name_or_path: str | Path) -> Path:
@@ -243,6 +255,12 @@ def _frame(ctx: _Ctx, key: str, spec: Any, by_name: dict[str, Body]) -> Frame:
     return Frame(body, (at[0], at[1]), at[2] if len(at) == 3 else 0.0)
 
 
+def _real_frame(frame: Frame) -> Frame:
+    """Return the frame with the real parts of hyper-dual numbers (values.py)."""
+    return Frame(frame.body, (float(real(frame.position[0])), float(real(frame.position[1]))),
+                 float(real(frame.angle)))
+
+
 def frame_pose_at_rest(frame: Frame, body: Body) -> tuple[np.ndarray, float]:
     """Position (root frame) and angle of a frame when its body is at its initial pose."""
     x, y, th = body.pose
@@ -270,9 +288,9 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
         fb = _frame(ctx, f"{key}.b", _require(ctx, key, spec, "b"), by_name)
         if fa.body == fb.body:
             raise ctx.fail(f"{key}.b.body", f"hinge joins body {fa.body!r} to itself")
-        with np.errstate(all="ignore"):
-            pa, tha = frame_pose_at_rest(fa, by_name[fa.body])
-            pb, thb = frame_pose_at_rest(fb, by_name[fb.body])
+        with np.errstate(all="ignore"):  # a design's frames: their real parts (values.py)
+            pa, tha = frame_pose_at_rest(_real_frame(fa), by_name[fa.body])
+            pb, thb = frame_pose_at_rest(_real_frame(fb), by_name[fb.body])
             gap = float(np.linalg.norm(pa - pb))
         if not np.all(np.isfinite([*pa, *pb, tha - thb])):
             raise ctx.fail(key, "the frames' poses at rest are not finite (body poses or frame "

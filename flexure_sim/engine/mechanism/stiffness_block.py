@@ -15,6 +15,7 @@ from typing import Any, Callable
 import numpy as np
 
 from flexure_sim.engine.hinges import stiffness as stiffness_models
+from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.mechanism.fe_block import fe_stiffness
 from flexure_sim.engine.mechanism.values import Ctx as _Ctx
 from flexure_sim.engine.mechanism.values import mapping as _mapping
@@ -56,10 +57,11 @@ def stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str, Any]:
             nu = args[-1]
             if not 0 <= nu < 0.5:
                 raise ctx.fail(f"{key}.nu", f"Poisson's ratio must be in [0, 0.5), got {nu}")
-        with np.errstate(all="ignore"):
-            K = fn(*(np.float64(a) for a in args))  # overflow gives inf, checked below
-        if not np.all(np.isfinite(K)):
-            values = ", ".join(f"{n}={a:g}" for n, a in zip(names, args))
+        with np.errstate(all="ignore"):  # overflow gives inf, checked below
+            K = hd.asarray(fn(*(a if isinstance(a, hd.HyperDual) else np.float64(a)
+                                for a in args)))
+        if not np.all(np.isfinite(hd.real(K))):
+            values = ", ".join(f"{n}={float(hd.real(a)):g}" for n, a in zip(names, args))
             raise ctx.fail(key, f"the {model} formula gives a non-finite stiffness for these "
                            f"values ({values}): check the units")
         return K, model, StressGeometry.of(model, dict(zip(names, args)), sigma_y)
@@ -75,12 +77,12 @@ def stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str, Any]:
             rows = spec["K"]
             if not isinstance(rows, list) or len(rows) != 3:
                 raise ctx.fail(f"{key}.K", "expected a 3x3 matrix (three rows of three numbers)")
-            K = np.array([_vector(ctx, f"{key}.K[{i}]", r, (3,)) for i, r in enumerate(rows)])
+            K = hd.asarray([_vector(ctx, f"{key}.K[{i}]", r, (3,)) for i, r in enumerate(rows)])
         else:
             Ko = _number(ctx, f"{key}.Ko", _require(ctx, key, spec, "Ko"))
             kt = _vector(ctx, f"{key}.Kt", _require(ctx, key, spec, "Kt"), (2,))
             kc = _vector(ctx, f"{key}.Kc", spec.get("Kc", [0.0, 0.0]), (2,))
-            K = np.array([[Ko, kc[0], kc[1]], [kc[0], kt[0], 0.0], [kc[1], 0.0, kt[1]]])
+            K = hd.asarray([[Ko, kc[0], kc[1]], [kc[0], kt[0], 0.0], [kc[1], 0.0, kt[1]]])
         return K, "matrix", None
     raise ctx.fail(f"{key}.model",
                    f"unknown stiffness model {_shown(model)} (notch, cantilever, fe, matrix)")
@@ -88,6 +90,7 @@ def stiffness(ctx: _Ctx, key: str, spec: Any) -> tuple[np.ndarray, str, Any]:
 
 def check_spd(ctx: _Ctx, key: str, M: np.ndarray, what: str) -> None:
     """Refuse a ``what`` matrix at ``key`` that is not finite, symmetric, positive definite."""
+    M = hd.real(M)  # a design's derivative parts are not checked (values.py)
     if not np.all(np.isfinite(M)):
         raise ctx.fail(key, f"{what} matrix is not finite: {M.tolist()}")
     if not np.allclose(M, M.T, rtol=1e-12, atol=0.0):

@@ -28,7 +28,6 @@ import types
 import numpy as np
 
 from flexure_sim.engine import jit as kernel_cache
-from flexure_sim.engine.solver import kernels
 from flexure_sim.engine.solver import step_energy as step_energy_module
 from flexure_sim.engine.jit import njit
 from flexure_sim.engine.solver.kernels import quadratic_forces
@@ -344,8 +343,7 @@ switch = kernel_switch_work
 advance = njit(cache=True)(_advance)
 
 # Numba's cache of each kernel is keyed on its own file only (``kernel_cache``).
-kernel_cache.revalidate(kernel_cache.dispatchers_of(kernels, step_energy_module, globals()),
-                        __file__)
+kernel_cache.revalidate(kernel_cache.dispatchers_of(step_energy_module, globals()), __file__)
 
 
 def _interpreted_rhs(y, t, command, model):

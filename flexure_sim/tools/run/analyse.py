@@ -213,18 +213,9 @@ def stress_peaks(run: Run, steps: list[dict]) -> tuple[dict[int, Optional[dict]]
     The hinge with the largest stress ratio sigma / sigma_y over the step's wrench samples,
     {"hinge", "stress" (Pa), "ratio"}, or None; and a note if there is none.
     """
-    import yaml
-
-    from flexure_sim.engine.mechanism.loader import ConfigError, mechanism_from_dict
-
-    text = run.metadata.get("mechanism_yaml", "")
-    if not text:
-        return {}, "no hinge stress: the run has no recorded mechanism YAML"
-    try:
-        mech = mechanism_from_dict(yaml.safe_load(text),
-                                   source=run.mechanism_name or "<recorded YAML>")
-    except (ConfigError, yaml.YAMLError) as exc:
-        return {}, f"no hinge stress: recorded mechanism: {exc}"
+    mech = run.mechanism()
+    if mech is None:
+        return {}, f"no hinge stress: {run.mechanism_problem}"
     wrenches = run.wrenches()
     hinges = [(h.name, h.stress) for h in mech.hinges
               if h.name in wrenches and h.stress is not None and h.stress.sigma_y is not None]
