@@ -25,6 +25,7 @@ from flexure_sim.engine.mechanism.loader import (
     ConfigError, mechanism_from_dict, resolve_mechanism_path,
 )
 from flexure_sim.engine.mechanism.parts import Mechanism
+from flexure_sim.engine.hinges import materials
 from flexure_sim.engine.hinges.stiffness import MODELS as _MODELS
 from flexure_sim.engine.hinges.stress import STRESS_KEYS, StressGeometry
 from flexure_sim.engine.mechanism.yaml_files import read_yaml
@@ -178,6 +179,7 @@ class Parameters:
         for hinge, spec in zip(mech.hinges, data["hinges"]):
             sspec = spec.get("stiffness")
             sspec = models[sspec] if isinstance(sspec, str) else sspec
+            sspec = None if sspec is None else materials.resolve(sspec)  # E, nu, strengths
             K = _stiffness(sspec) if sspec is not None else _law_stiffness(hinge)
             damping = spec.get("damping", defaults.get("damping"))
             B = (
@@ -274,9 +276,8 @@ def _stress_geometry(spec: Optional[dict]) -> Optional[StressGeometry]:
     """Return the StressGeometry of a stiffness specification (mechanism/loader.py's numbers)."""
     if spec is None or spec.get("model") not in STRESS_KEYS:
         return None
-    sigma_y = spec.get("sigma_y")
     return StressGeometry.of(spec["model"], {k: _num(spec[k]) for k in STRESS_KEYS[spec["model"]]},
-                             None if sigma_y is None else _num(sigma_y))
+                             **materials.strengths(spec, lambda _, v: _num(v)))
 
 
 def _array(values):
