@@ -44,7 +44,7 @@ from flexure_sim.errors import FlexureSimError
 from flexure_sim.engine.mechanism.loader import (
     ConfigError, mechanism_from_dict, resolve_mechanism_path,
 )
-from flexure_sim.engine.mechanism.doc_paths import own_stiffness, resolve_path, set_path
+from flexure_sim.engine.mechanism.doc_paths import apply_values, resolve_path
 from flexure_sim.engine.mechanism.parts import Mechanism
 from flexure_sim.engine.analysis.study_checks import (
     Channels, DriveInput, check_outputs, drive_input, number as _number,
@@ -140,18 +140,10 @@ class Study:
 
     def design(self, values: Sequence[float]) -> dict:
         """Return the base document with the parameter values applied (the base is not changed)."""
-        doc = self.base
-        # Shared values first, then each hinge that gets its own stiffness copies the shared
-        # model as changed, then the hinge's own values.
-        for own in (False, True):
-            for p, v in zip(self.parameters, values):
-                for path, base, through in zip(p.paths, p.base, p.through):
-                    if (through is not None) != own:
-                        continue
-                    if through is not None:
-                        doc = own_stiffness(doc, through)
-                    doc = set_path(doc, path, base + float(v) if p.offset else float(v))
-        return doc
+        return apply_values(self.base, [
+            (path, through, base + float(v) if p.offset else float(v))
+            for p, v in zip(self.parameters, values)
+            for path, base, through in zip(p.paths, p.base, p.through)])
 
     def mechanism(self, values: Sequence[float]) -> Mechanism:
         """Build (and validate) the mechanism of one design; ConfigError if it is invalid."""

@@ -24,6 +24,24 @@ def set_path(doc: Any, path: Sequence, value: float) -> Any:
     return _replace(doc, path, value)
 
 
+def apply_values(doc: Any, settings: Sequence[tuple[tuple, Optional[tuple], float]]) -> Any:
+    """
+    Return ``doc`` with numbers set: (steps, through, value) from ``resolve_path``.
+
+    Shared values first, then each hinge that gets its own stiffness copies the shared model as
+    changed, then the hinges' own values (so ``stiffness_models.notch.E`` still reaches a hinge
+    whose ``h`` is set on its own). ``doc`` itself is not changed.
+    """
+    for own in (False, True):
+        for steps, through, value in settings:
+            if (through is not None) != own:
+                continue
+            if through is not None:
+                doc = own_stiffness(doc, through)
+            doc = set_path(doc, steps, value)
+    return doc
+
+
 def resolve_path(doc: dict, text: str, fail) -> tuple[tuple, Optional[tuple], float]:
     """
     Resolve a dotted path against the mechanism document.
