@@ -172,7 +172,7 @@ def test_the_stage_in_7075_t6_has_the_stroke_limit_of_its_yield_strength(tmp_pat
 
 @pytest.mark.slow
 def test_a_pip_install_carries_the_table_as_package_data(tmp_path):
-    """pip install (no checkout beside it): the installed module reads its own table."""
+    """A pip install (no checkout beside it): the installed module reads its own table."""
     target = tmp_path / "site"
     build = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps",
                             "--target", str(target), str(ROOT)], capture_output=True, text=True,

@@ -250,7 +250,7 @@ def test_stage_over_its_seven_necks_writes_a_file_whose_figures_are_the_report(t
 
 def test_an_infeasible_constraint_ends_with_a_message_and_the_least_violating_design(
         tmp_path, capsys):
-    """gain >= 40 is beyond even the rigid levers' 36.4: the best is the highest gain."""
+    """A gain of 40 is beyond even the rigid levers' 36.4: the best is the highest gain."""
     spec = {"name": "too_much", "mechanism": "microstage", "input": 2e-6,
             "variables": STAGE_H[:4], "objective": {"maximize": "first_mode"},
             "constraints": [{"output": "gain", "min": 40.0}]}

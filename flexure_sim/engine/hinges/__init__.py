@@ -5,4 +5,8 @@ Hinges as parts: stiffness and peak stress from a hinge's geometry and material.
   cant_stiff.sci).
 - ``stress``: Peak stress in notch and leaf hinges from their wrench, and the stress ratio sigma /
   sigma_y.
+- ``materials``: Materials by name (the shipped ``materials.yaml``, a source per value) and a
+  hinge's strengths.
+- ``fatigue``: Goodman and Soderberg safety factors of a cyclic load, the critical hinge, the
+  input for infinite life.
 """

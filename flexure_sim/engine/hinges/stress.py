@@ -37,9 +37,12 @@ moment f_x L / 2 at either end, so the largest end moment is |m| + |f_x| L / 2:
 (straight beam, no concentration: the fillets at the clamps are not modelled).
 Hinges with a ``matrix`` stiffness or a fitted polynomial law have no geometry: no stress.
 
-Each hinge's ``StressGeometry`` (model, dimensions, sigma_y) is part of the loaded mechanism
-(``Hinge.stress``, set by mechanism/loader.py from the very numbers the stiffness formula used), so
-any Mechanism -- loaded, swept or recorded -- has its stresses without its YAML file.
+Each hinge's ``StressGeometry`` (model, dimensions, and the strengths of its material:
+sigma_y, and sigma_u, sigma_e for fatigue, engine/hinges/materials.py) is part of the loaded
+mechanism (``Hinge.stress``, set by mechanism/loader.py from the very numbers the stiffness
+formula used), so any Mechanism -- loaded, swept or recorded -- has its stresses without its
+YAML file. ``fibres`` gives the signed stress at the section's critical points from the same
+section terms as the peak stress (the fatigue criteria, engine/hinges/fatigue.py, cycle them).
 """
 
 from __future__ import annotations

@@ -46,8 +46,10 @@ its axis, whose coordinates stay free. Several outputs::
 
 Stiffness models: ``notch`` (D, h, t, E, nu), ``cantilever`` (length, thickness, width, E,
 nu), ``matrix`` (K: 3x3, or Ko, Kt: [kx, ky] and optional Kc: [cx, cy]). A notch or
-cantilever model may give the yield strength ``sigma_y`` (Pa); its hinges get ``Hinge.stress``
-(the dimensions given to the stiffness formula, and sigma_y) for the stress analyses.
+cantilever model may name its ``material`` (engine/hinges/materials.py: E, nu and strengths it
+does not give itself) and give the strengths ``sigma_y``, ``sigma_u``, ``sigma_e`` with
+``fatigue_cycles`` (Pa); its hinges get ``Hinge.stress`` (the dimensions given to the stiffness
+formula, and the strengths) for the stress and fatigue analyses.
 
 ``law: {polynomial: FILE}`` uses a polynomial law fitted by ``flexure-sim fit`` (FILE relative
 to the mechanism file); such a hinge has no ``stiffness`` key: K is the law's Hessian at rest,

@@ -132,7 +132,7 @@ def bench_sweep(designs: int = 1000, batch_size: int = 50, overhead_tasks: int =
 
 def bench_optimize(repeats: int = 3) -> dict:
     """
-    The stage's first mode over its 7 hinge thicknesses (config/studies/stage_first_mode.yaml).
+    Optimise the stage's first mode over its 7 necks (config/studies/stage_first_mode.yaml).
 
     Median wall time of ``repeats`` solves from the study's start (each from scratch, after one
     warm-up), its iterations, evaluations with and without gradients and the time in each.
