@@ -1,5 +1,6 @@
 """Materials by name: the shipped table, its sources, lookup, and no hidden default material."""
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -186,3 +187,51 @@ def test_a_pip_install_carries_the_table_as_package_data(tmp_path):
     assert p.returncode == 0, p.stderr
     where, value = p.stdout.split()
     assert Path(where).is_relative_to(target) and float(value) == 503e6
+
+
+def _plate_doc(**body):
+    doc = _leaf_doc(material="6061-T6")
+    doc["bodies"][1] = {"name": "m", **body}
+    return doc
+
+
+def test_a_body_of_a_material_is_a_plate_cut_to_its_shape():
+    """
+    Mass rho t A and inertia rho t (b^2 + h^2) b h / 12 of a 40 x 10 mm rectangle, by hand.
+
+    7075-T6 (2810 kg/m^3), 10 mm thick: 2810 * 0.01 * 4e-4 = 0.01124 kg;
+    0.01124 * (0.04^2 + 0.01^2) / 12 = 1.59233e-6 kg m^2.
+    """
+    rectangle = {"rectangle": [-0.02, -0.005, 0.02, 0.005]}
+    body = mechanism_from_dict(_plate_doc(material="7075-T6", thickness=0.01,
+                                          shape=rectangle)).bodies[1]
+    assert body.mass == pytest.approx(0.01124, rel=1e-12)
+    assert body.inertia == pytest.approx(0.01124 * (0.04**2 + 0.01**2) / 12, rel=1e-12)
+    # A clockwise polygon, a density instead of a material, and a given mass that wins.
+    square = {"polygon": [[-0.01, -0.01], [-0.01, 0.01], [0.01, 0.01], [0.01, -0.01]]}
+    body = mechanism_from_dict(_plate_doc(density=1000.0, thickness=0.002, shape=square,
+                                          mass=0.5)).bodies[1]
+    assert body.mass == 0.5 and body.inertia == pytest.approx(
+        1000 * 0.002 * 4e-4 * (0.02**2 + 0.02**2) / 12, rel=1e-12)
+    # The sensitivities and the optimiser see the loaded numbers.
+    params = Parameters("p.yaml", data=_plate_doc(material="7075-T6", thickness=0.01,
+                                                  shape=rectangle))
+    assert params.design().mass[3:].tolist() == pytest.approx([0.01124, 0.01124, 1.592333e-6],
+                                                              rel=1e-6)
+
+
+@pytest.mark.parametrize("body, key, problem", [
+    ({"material": "7075-T6", "thickness": 0.01,
+      "shape": {"rectangle": [0.0, 0.0, 0.04, 0.01]}},
+     "bodies[1].shape", r"centroid \(0.02, 0.005\) m is not at the body frame's origin"),
+    ({"material": "7075-T6", "shape": {"rectangle": [-1, -1, 1, 1]}}, "bodies[1].thickness",
+     "missing required key"),
+    ({"thickness": 0.01, "shape": {"rectangle": [-1, -1, 1, 1]}}, "bodies[1].thickness",
+     "give a material or a density"),
+    ({"material": "balsa", "thickness": 0.01, "shape": {"rectangle": [-1, -1, 1, 1]}},
+     "bodies[1].material", "unknown material 'balsa'"),
+    ({"inertia": 1e-6}, "bodies[1].mass", "missing required key"),
+])
+def test_bad_plate_bodies_are_refused_naming_the_key(body, key, problem):
+    with pytest.raises(ConfigError, match=f"<dict>: {re.escape(key)}: .*{problem}"):
+        mechanism_from_dict(_plate_doc(**body))

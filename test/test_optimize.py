@@ -314,6 +314,21 @@ def test_a_bad_study_is_one_line_naming_the_key(tmp_path, capsys, change, messag
     assert not (tmp_path / "out").exists()
 
 
+def test_a_design_that_cannot_be_evaluated_is_one_line_naming_it(tmp_path, capsys):
+    """A neck of zero thickness at the start: the loader refuses it, the command names it."""
+    spec = {"mechanism": "microstage", "variables": [{"name": "h_c",
+                                                      "path": "hinges.c.stiffness.h",
+                                                      "lower": 0.0, "upper": 4e-4,
+                                                      "start": 0.0}],
+            "objective": {"maximize": "first_mode"}}
+    assert main(["optimize", str(_write(tmp_path, spec)), "-o", str(tmp_path / "out")]) == 1
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in captured.err
+    assert "the design h_c = 0 could not be evaluated: " in err[0]
+    assert "hinges[2].stiffness.h: must be positive" in err[0]
+
+
 def test_a_missing_or_binary_study_file_is_one_line(tmp_path, capsys):
     assert main(["optimize", str(tmp_path / "none.yaml")]) == 1
     assert "none.yaml: cannot read" in capsys.readouterr().err

@@ -196,8 +196,10 @@ class Parameters:
             phia.append(a_at[2] if len(a_at) > 2 else 0.0)
             phib.append(b_at[2] if len(b_at) > 2 else 0.0)
         mass = []
-        for body in data["bodies"]:
-            mass += [_num(body["mass"]), _num(body["mass"]), _num(body["inertia"])]
+        for body, loaded in zip(data["bodies"], mech.bodies):
+            # a plate of a material (body_block.py): the loaded numbers, not design parameters
+            m, inertia = (_num(body.get(k, getattr(loaded, k))) for k in ("mass", "inertia"))
+            mass += [m, m, inertia]
         return Design(
             _array(Ks),
             _array(Bs),

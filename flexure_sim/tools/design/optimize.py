@@ -15,7 +15,7 @@ The best feasible result is kept; without one, the least violating.
 
 Exit codes: 0 optimal, 1 a bad study file or a design that cannot be evaluated, 2 a bad
 argument, 3 no feasible design (the least-violating one is written), 4 stopped short of the
-first-order conditions (the last design is written).
+first-order conditions (the last design is written), 130 interrupted (Ctrl-C).
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ import numpy as np
 
 PROG = "flexure-sim optimize"
 EXIT = {"optimal": 0, "infeasible": 3, "not_converged": 4}
-EXIT_BAD_FILE, EXIT_USAGE = 1, 2
+EXIT_BAD_FILE, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
 
 
 def register(subparsers: Any) -> None:
@@ -78,8 +78,10 @@ def handle(args: argparse.Namespace) -> int:
         results = run_starts(study, args.workers, args.scheduler)
     except OptimizeError as exc:
         return _fail(str(exc), EXIT_BAD_FILE)
-    except OSError as exc:
+    except OSError as exc:  # an unreachable scheduler
         return _fail(f"{exc.strerror or exc}", EXIT_BAD_FILE)
+    except KeyboardInterrupt:
+        return _fail("interrupted: nothing written", EXIT_INTERRUPTED)
     best = pick(results, study.sense)
     if len(results) > 1:
         best.extra["starts"] = [{"start": r.start.tolist(), "status": r.status,
