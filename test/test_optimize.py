@@ -353,3 +353,19 @@ def test_several_starts_on_a_local_dask_cluster(tmp_path, capsys):
     assert all(s["status"] == "optimal" for s in starts)
     h_star = scipy.optimize.brentq(lambda h: _gain_at(h) - 27.2, 2.5e-4, 3.5e-4, xtol=1e-16)
     assert report["x"][0] == pytest.approx(h_star, rel=1e-8)
+
+
+def test_outputs_the_mechanism_cannot_give_are_refused(tmp_path, capsys):
+    """A stage without an output body or a compression hinge: gain and compression by name."""
+    text = resolve_mechanism_path("microstage").read_text()
+    assert text.count("\noutput: {body: body4, axis: [1.0, 0.0]}\ncompression_hinge: a") == 1
+    (tmp_path / "bare.yaml").write_text(text.replace(
+        "\noutput: {body: body4, axis: [1.0, 0.0]}\ncompression_hinge: a", ""))
+    for output, problem in (("gain", "'microstage' names no output"),
+                            ("compression", "'microstage' names no compression_hinge")):
+        spec = {"mechanism": "bare.yaml", "variables": STAGE_H[:1],
+                "objective": {"maximize": "first_mode"},
+                "constraints": [{"output": output, "min": 0.0}]}
+        assert main(["optimize", str(_write(tmp_path, spec)), "-o", str(tmp_path / "o")]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"objective/constraints: {output}: {problem}" in err[0], err

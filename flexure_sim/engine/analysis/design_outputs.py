@@ -166,14 +166,18 @@ class Evaluation:
     def compute(self, v: _Variant, name: str) -> dict:
         """Return {column: hyper-dual value, or {hinge: value} for an extreme}."""
         main = self.state("main")
-        if name in ("gain", "compression", "first_mode"):
-            if name == "gain" and self.several:
-                rest = self.state("rest")
-                return rest.sens.outputs(v.design, v.z(rest), gain_keys(self.mech))
+        if name == "gain" and self.several:
+            rest = self.state("rest")
+            return rest.sens.outputs(v.design, v.z(rest), gain_keys(self.mech))
+        if name in ("compression", "first_mode"):
             return main.sens.outputs(v.design, v.z(main), [name])
-        if name == "output_displacement":
+        if name in ("gain", "output_displacement"):
+            # Model.output_displacement / output_values: the outputs' rows times z - z0; one
+            # drive: the first output, the gain per unit of its input (as the sweeps)
             dz = v.z(main) - main.sens.sim.z0
             rows = main.model.output_matrix
+            if name == "gain":
+                return {name: (dz * rows[0]).sum() / float(self.setup.input)}
             cols = columns(self.mech, [name])
             return {c: (dz * row).sum() for c, row in zip(cols, rows)}
         if name == "drive_force":

@@ -177,6 +177,12 @@ def optimize_study_from_dict(data: Any, source: str,
     names = list(dict.fromkeys(c.split(".")[0] for c in used))
     check_outputs(tuple(names), mech, lambda key, problem: fail("objective/constraints",
                                                                 problem))
+    for name in names:
+        if name in ("gain", "output_displacement") and not mech.all_outputs:
+            raise fail("objective/constraints", f"{name}: {mech.name!r} names no output")
+        if name == "compression" and mech.compression_hinge is None:
+            raise fail("objective/constraints", f"compression: {mech.name!r} names no "
+                       "compression_hinge")
     method = data.get("method", "SLSQP")
     if method not in METHODS:
         raise fail("method", f"expected one of {', '.join(METHODS)}, got {method!r}")
