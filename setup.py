@@ -25,7 +25,9 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*"]),
-    package_data={PACKAGE: ["py.typed"]},
+    # The material table is data of the code that reads it (engine/hinges/materials.py):
+    # package data, so every install layout has it next to its module.
+    package_data={PACKAGE: ["py.typed", "engine/hinges/materials.yaml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -19,6 +19,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from flexure_sim.errors import FlexureSimError
+from flexure_sim.engine.hinges.stress import no_yield_advice
 from flexure_sim.engine.mechanism.loader import load_mechanism, resolve_mechanism_path
 from flexure_sim.engine.solver.simulation import DEFAULT_STEP, Simulation, Snapshot
 
@@ -148,6 +149,8 @@ def run_simulate(args: argparse.Namespace) -> dict:
         out.update(mechanism_file=str(path), mode="static", newton_iterations=result.iterations,
                    residual=result.residual, wall_s=wall)
         out["hinge_stress"] = _stress(sim, result.snapshot)
+        out["stress_note"] = no_yield_advice(sim.mechanism)
+        out["fatigue"] = _fatigue(args, sim, amplitude)
         return out
     if _single_command(sim):
         sim.set_command(amplitude)
@@ -196,19 +199,47 @@ def _stress(sim: Simulation, snap: Snapshot) -> dict:
     return stress_table(snap.wrenches, sim.mechanism)
 
 
+def _fatigue(args, sim: Simulation, amplitude: float) -> Optional[dict]:
+    """
+    Return the fatigue of cycling the drive between --cycle-from and the static input.
+
+    engine/hinges/fatigue.py; None without a single drive or a cycle (input equal to
+    --cycle-from).
+    """
+    from flexure_sim.engine.hinges import fatigue
+
+    lower = args.cycle_from
+    if not np.isfinite(lower):
+        raise UsageError(f"--cycle-from {lower!r}: must be a finite drive input")
+    if sim.drive is None or amplitude == lower:
+        return None
+    try:
+        return fatigue.static_report(sim, lower, amplitude)
+    except ValueError as exc:
+        raise UsageError(f"fatigue: {exc}") from None
+
+
 def _stroke_limit(args, sim: Simulation) -> dict:
     """--stroke-limit: the drive input at which the first hinge reaches its yield strength."""
     from flexure_sim.engine.hinges.stress import stroke_limit
 
     if sim.drive is None:
         raise UsageError(f"--stroke-limit: mechanism {sim.mechanism.name!r} has no drive")
+    from flexure_sim.engine.hinges import fatigue
+
     try:
         u, hinge = stroke_limit(sim)
     except ValueError as exc:
         raise UsageError(f"--stroke-limit: {exc}") from None
+    life, note = {}, fatigue.no_fatigue_advice(sim.mechanism)
+    if any(h.stress is not None and h.stress.has_fatigue for h in sim.mechanism.hinges):
+        for criterion in fatigue.CRITERIA:  # cycling from --cycle-from up to the input found
+            point, where = fatigue.infinite_life_input(sim, args.cycle_from, u, criterion)
+            life[criterion] = {"input": point, "hinge": where}
     return {"mechanism": sim.mechanism.name, "mechanism_file": str(resolve_mechanism_path(
                 args.mechanism)), "mode": "stroke_limit", "stroke_limit": u, "hinge": hinge,
-            "actuator_stroke": list(sim.drive.stroke)}
+            "actuator_stroke": list(sim.drive.stroke), "cycle_from": args.cycle_from,
+            "infinite_life": life, "fatigue_note": note}
 
 
 def _fmt(v: Optional[float], unit: str, scale: float = 1.0, digits: int = 6) -> str:
@@ -220,6 +251,12 @@ def print_table(out: dict) -> None:
         print(f"mechanism: {out['mechanism']}   stroke limit (first hinge at yield): "
               f"{out['stroke_limit'] * 1e6:.6g} um at hinge {out['hinge']} "
               f"(actuator stroke {out['actuator_stroke'][1] * 1e6:g} um)")
+        for criterion, v in out["infinite_life"].items():
+            print(f"infinite life ({criterion.capitalize()}, cycling from "
+                  f"{out['cycle_from'] * 1e6:g} um): up to {v['input'] * 1e6:.6g} um, "
+                  f"hinge {v['hinge']} first")
+        if out["fatigue_note"]:
+            print(f"fatigue: {out['fatigue_note']}")
         return
     print(f"mechanism: {out['mechanism']}   mode: {out['mode']}   t = {out['t']:.6g} s")
     print(f"file:      {out['mechanism_file']}")
@@ -253,6 +290,10 @@ def print_table(out: dict) -> None:
             sy = "n/a" if h["sigma_y"] is None else f"{h['sigma_y'] / 1e6:.4g}"
             ratio = "n/a" if h["ratio"] is None else f"{h['ratio']:.4g}"
             print(f"{name:6s} {h['stress'] / 1e6:17.5g} {sy:>14s} {ratio:>6s}")
+        if out.get("stress_note"):
+            print(f"stress: {out['stress_note']}")
+    if out.get("fatigue"):
+        print_fatigue(out["fatigue"])
     e = out["energy"]
     print(f"energy [J]: kinetic {e['kinetic']:.6g}, potential {e['potential']:.6g}, "
           f"dissipated {e['dissipated']:.6g}, drive work {e['drive_work']:.6g}")
@@ -260,6 +301,27 @@ def print_table(out: dict) -> None:
         f", real-time factor {out['real_time_factor']:.3g}" if out.get("real_time_factor") else ""
     )
     print(f"wall time: {out['wall_s']:.4g} s{extra}")
+
+
+def print_fatigue(f: dict) -> None:
+    """Print the fatigue of a static cycle (``fatigue.static_report``)."""
+    lo, hi = f["cycle"]
+    print(f"fatigue, cycling the drive {lo * 1e6:g} -> {hi * 1e6:g} um (Shigley 6-12; stress of "
+          "the hinge's worst fibre):")
+    if f["hinges"]:
+        print("hinge  amplitude [MPa]  mean [MPa]  Goodman n  Soderberg n  S_e [MPa] at cycles")
+    for name, h in f["hinges"].items():
+        n = ["inf" if h[c] is None else f"{h[c]:.4g}" for c in ("goodman", "soderberg")]
+        print(f"{name:6s} {h['amplitude'] / 1e6:15.5g} {h['mean'] / 1e6:11.5g} {n[0]:>10s} "
+              f"{n[1]:>12s} {h['sigma_e'] / 1e6:10.4g} at {h['cycles']:.3g}")
+    for criterion, c in f["critical"].items():
+        life = f["infinite_life"][criterion]
+        if c is not None:
+            print(f"critical hinge ({criterion.capitalize()}): {c['hinge']}, n = "
+                  f"{c['safety']:.4g}; infinite life up to {life['input'] * 1e6:.6g} um of "
+                  f"drive input (hinge {life['hinge']})")
+    if f["note"]:
+        print(f"fatigue: {f['note']}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -294,6 +356,9 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="report the drive input at which the first hinge reaches its yield strength",
     )
+    sim.add_argument("--cycle-from", type=float, default=0.0,
+                     help="fatigue: the drive cycles between this input (m, default 0) and the "
+                     "static input (--static) or the input found (--stroke-limit)")
     sim.add_argument("--json", action="store_true", help="print one JSON object")
     _add_tool_commands(sub)
     return parser

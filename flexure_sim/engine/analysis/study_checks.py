@@ -12,7 +12,9 @@ Outputs a mechanism cannot give are refused at load, rather than failing in ever
 which takes any number of displacement and force drives but no piezo stack (its input would be the
 applied displacement, not the actuator's command); the outputs
 measured per output need the mechanism to name one when it has several drives;
-``peak_stress_ratio`` needs a hinge with a yield strength.
+``peak_stress_ratio`` and ``stroke_limit`` need a hinge with a yield strength, the fatigue
+outputs a hinge with fatigue strengths (engine/hinges/fatigue.py), the strokes a single
+displacement drive.
 """
 from __future__ import annotations
 
@@ -20,6 +22,8 @@ import math
 from dataclasses import dataclass
 from typing import Any, Optional, Union
 
+from flexure_sim.engine.hinges import fatigue
+from flexure_sim.engine.hinges.stress import no_yield_advice
 from flexure_sim.engine.solver.drives import stacked
 from flexure_sim.engine.mechanism.parts import Mechanism, coordinate_unit
 
@@ -29,6 +33,10 @@ DriveInput = Union[float, dict]
 LINEAR_OUTPUTS = ("first_mode", "first_mode_damping")
 #: Outputs measured per output (a column each) with several drives: they need an output.
 PER_OUTPUT = ("gain", "output_displacement", "settling_time", "overshoot")
+#: Outputs that need a yield strength, fatigue strengths, a single displacement drive.
+YIELD_OUTPUTS = ("peak_stress_ratio", "stroke_limit")
+FATIGUE_OUTPUTS = ("fatigue_safety", "fatigue_safety_soderberg", "infinite_life_stroke")
+STROKE_OUTPUTS = ("stroke_limit", "infinite_life_stroke")
 
 
 @dataclass(frozen=True)
@@ -130,7 +138,16 @@ def check_outputs(outputs: tuple[str, ...], mech: Mechanism, fail) -> None:
         if name in PER_OUTPUT and len(drives) > 1 and not mech.all_outputs:
             raise fail("outputs", f"{name}: {mech.name!r} has several drives and no output "
                        "(outputs: in the mechanism file)")
-    if "peak_stress_ratio" in outputs and not any(
+    yielding = [o for o in outputs if o in YIELD_OUTPUTS]
+    if yielding and not any(
             h.stress is not None and h.stress.sigma_y is not None for h in mech.hinges):
-        raise fail("outputs", f"peak_stress_ratio: no hinge of {mech.name!r} has a yield "
-                   "strength (sigma_y in a notch or cantilever stiffness model)")
+        raise fail("outputs", f"{yielding[0]}: no hinge of {mech.name!r} has a yield "
+                   f"strength: {no_yield_advice(mech) or 'no notch or leaf hinge'}")
+    tiring = [o for o in outputs if o in FATIGUE_OUTPUTS]
+    if tiring and not fatigue.with_strengths(mech):
+        raise fail("outputs", f"{tiring[0]}: no hinge of {mech.name!r} has fatigue strengths: "
+                   f"{fatigue.no_fatigue_advice(mech) or 'no notch or leaf hinge'}")
+    strokes = [o for o in outputs if o in STROKE_OUTPUTS]
+    if strokes and (len(drives) != 1 or drives[0].kind != "displacement" or stacked(drives[0])):
+        raise fail("outputs", f"{strokes[0]}: a stroke is the input of one displacement drive "
+                   f"without a piezo stack; {mech.name!r} has {len(drives)} drive(s)")

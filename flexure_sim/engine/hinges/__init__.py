@@ -7,4 +7,8 @@ Hinges as parts: stiffness and peak stress from a hinge's geometry and material.
   sigma_y.
 - ``fe``: finite-element hinges (gmsh meshes, scikit-fem solves): stiffness, peak stress and
   large-deflection wrench data from the hinge's own geometry (``model: fe``).
+- ``materials``: Materials by name (the shipped ``materials.yaml``, a source per value) and a
+  hinge's strengths.
+- ``fatigue``: Goodman and Soderberg safety factors of a cyclic load, the critical hinge, the
+  input for infinite life.
 """

@@ -64,8 +64,13 @@ def fe_numbers(ctx: Ctx, key: str, spec: dict) -> dict[str, Any]:
             "resolution": resolution}
 
 
-def fe_stiffness(ctx: Ctx, key: str, spec: dict, sigma_y) -> tuple[np.ndarray, Any]:
-    """Return (K, StressGeometry or None) of a ``model: fe`` spec, solving or from the cache."""
+def fe_stiffness(ctx: Ctx, key: str, spec: dict, sigma_y,
+                 strengths: dict) -> tuple[np.ndarray, Any]:
+    """
+    Return (K, StressGeometry or None) of a ``model: fe`` spec, solving or from the cache.
+
+    ``strengths``: the other strength fields of the StressGeometry (stiffness_block.py).
+    """
     v = fe_numbers(ctx, key, spec)
     name, geo = v["shape"], v["geometry"]
     sharp = name == "leaf" and float(hd.real(geo["fillet"])) == 0
@@ -84,5 +89,5 @@ def fe_stiffness(ctx: Ctx, key: str, spec: dict, sigma_y) -> tuple[np.ndarray, A
         raise ctx.fail(key, f"the finite-element model failed: {exc}") from None
     # floats, or HyperDual entries where a design (mechanism/parameters.py) seeds derivatives
     geometry = (None if coefficients is None
-                else StressGeometry("fe", tuple(coefficients), sigma_y))
+                else StressGeometry("fe", tuple(coefficients), sigma_y, **strengths))
     return hd.asarray(K), geometry

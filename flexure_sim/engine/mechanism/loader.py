@@ -9,6 +9,8 @@ Format (SI units; see config/microstage.yaml for a complete example)::
       notch: {model: notch, D: 0.003, h: 0.00025, t: 0.02, E: 69.0e9, nu: 0.33}
     bodies:
       - {name: body1, mass: 0.0712, inertia: 8.8e-6, pose: [0, 0, 0]}     # pose: x, y, theta
+      - {name: lever, material: 7075-T6, thickness: 0.01,                 # or a plate: mass and
+         shape: {rectangle: [-0.02, -0.005, 0.02, 0.005]}}               # inertia of the outline
     hinges:
       - name: a
         a: {body: body2, at: [0.007, 0.012]} # frame on body A, body coordinates [x, y(, angle)]
@@ -46,8 +48,10 @@ its axis, whose coordinates stay free. Several outputs::
 
 Stiffness models: ``notch`` (D, h, t, E, nu), ``cantilever`` (length, thickness, width, E,
 nu), ``matrix`` (K: 3x3, or Ko, Kt: [kx, ky] and optional Kc: [cx, cy]). A notch or
-cantilever model may give the yield strength ``sigma_y`` (Pa); its hinges get ``Hinge.stress``
-(the dimensions given to the stiffness formula, and sigma_y) for the stress analyses.
+cantilever model may name its ``material`` (engine/hinges/materials.py: E, nu and strengths it
+does not give itself) and give the strengths ``sigma_y``, ``sigma_u``, ``sigma_e`` with
+``fatigue_cycles`` (Pa); its hinges get ``Hinge.stress`` (the dimensions given to the stiffness
+formula, and the strengths) for the stress and fatigue analyses.
 
 ``law: {polynomial: FILE}`` uses a polynomial law fitted by ``flexure-sim fit`` (FILE relative
 to the mechanism file); such a hinge has no ``stiffness`` key: K is the law's Hessian at rest,
@@ -65,6 +69,7 @@ import numpy as np
 
 from flexure_sim.engine.kinematics.hyperdual import real
 from flexure_sim.engine.mechanism.builtins import builtin_names, find_builtin
+from flexure_sim.engine.mechanism.body_block import mass_and_inertia
 from flexure_sim.engine.mechanism.constraints_block import _constraints, _outputs, _sensor
 from flexure_sim.engine.mechanism.damping_block import hinge_damping, mechanism_damping
 from flexure_sim.engine.mechanism.stiffness_block import check_spd as _check_spd
@@ -77,7 +82,6 @@ from flexure_sim.engine.mechanism.values import key_text as _key_text
 from flexure_sim.engine.mechanism.values import mapping as _mapping
 from flexure_sim.engine.mechanism.values import name as _name
 from flexure_sim.engine.mechanism.values import no_unknown as _no_unknown
-from flexure_sim.engine.mechanism.values import number as _number
 from flexure_sim.engine.mechanism.values import require as _require
 from flexure_sim.engine.mechanism.values import shown as _shown
 from flexure_sim.engine.mechanism.values import vector as _vector
@@ -209,19 +213,18 @@ def _bodies(ctx: _Ctx, raw: Any) -> list[Body]:
     for i, spec in enumerate(raw):
         key = f"bodies[{i}]"
         spec = _mapping(ctx, key, spec)
-        _no_unknown(ctx, key, spec, {"name", "mass", "inertia", "pose", "shape", "description"})
+        _no_unknown(ctx, key, spec, {"name", "mass", "inertia", "pose", "shape", "description",
+                                     "material", "density", "thickness"})
         name = _name(ctx, f"{key}.name", _require(ctx, key, spec, "name"))
         if name in seen:
             raise ctx.fail(f"{key}.name", f"duplicate body name {name!r}")
         seen.add(name)
-        mass = _number(ctx, f"{key}.mass", _require(ctx, key, spec, "mass"), positive=True)
-        inertia = _number(
-            ctx, f"{key}.inertia", _require(ctx, key, spec, "inertia"), positive=True
-        )
         pose = _vector(ctx, f"{key}.pose", spec.get("pose", [0, 0, 0]), (2, 3))
         if len(pose) == 2:
             pose.append(0.0)
         shape = _shape(ctx, f"{key}.shape", spec["shape"]) if "shape" in spec else None
+        # given, or of a plate of a material cut to the shape (body_block.py)
+        mass, inertia = mass_and_inertia(ctx, key, spec, shape)
         bodies.append(Body(name, mass, inertia, (pose[0], pose[1], pose[2]), shape))
     return bodies
 

@@ -16,6 +16,8 @@ Wall times are medians of several runs (7 for flexure_sim, 3 for the baseline).
   and hyper-dual sensitivities of 4 outputs to 20 parameters (goal < 1 s).
 - fe_hinge: one finite-element hinge's solve (goal < 5 s) and its cached load, alone and in
   the stage with model: fe hinges (goal < 10 ms; tools/bench/fe_bench.py).
+- optimize: flexure-sim optimize on the stage over its 7 hinge thicknesses (goal: converged
+  in < 10 s), and its time in exact gradients.
 - sweep (with --sweep): flexure-sim sweep's scaling on the stage tolerance study: designs
   per second in this process without Dask, on a LocalCluster of 1 and of 2 worker processes,
   the parallel efficiency and the overhead of a batch (a task).
@@ -45,7 +47,7 @@ from flexure_sim.tools.bench.engine_bench import (
     DURATION, bench_static_sweep, bench_stage_step, bench_step_cost,
 )
 from flexure_sim.tools.bench.fe_bench import bench_fe_hinge
-from flexure_sim.tools.bench.study_bench import bench_analyses, bench_sweep
+from flexure_sim.tools.bench.study_bench import bench_analyses, bench_optimize, bench_sweep
 
 #: wake_spin of the second real-time run: the CPU / punctuality trade-off of a short spin.
 LOW_WAKE_SPIN_S = 2e-4
@@ -199,6 +201,14 @@ def print_table(res: dict) -> None:
               f"{fe['solve_s']:.2f} s (goal < 5 s); cached stiffness "
               f"{fe['cached_stiffness_s'] * 1e3:.2f} ms, stage with 7 such hinges loaded "
               f"{fe['cached_stage_load_s'] * 1e3:.1f} ms (goal < 10 ms)")
+    o = res.get("optimize")
+    if o:
+        print(f"\noptimize, the stage's first mode over its {o['variables']} hinge thicknesses: "
+              f"{o['status']} in {o['wall_s']:.2f} s (goal < 10 s), {o['iterations']} "
+              f"iterations, {o['evaluations']} evaluations of which {o['gradient_evaluations']} "
+              f"with exact gradients ({o['gradient_s']:.2f} s; values only {o['values_s']:.2f} "
+              f"s); first mode {o['start_objective']:.2f} -> {o['objective']:.2f} Hz, KKT "
+              f"stationarity {o['stationarity']:.1g}")
     if "sweep" in res:
         sw = res["sweep"]
         print(f"\nsweep, stage tolerance study, {sw['designs']} designs in batches of "
@@ -279,6 +289,7 @@ def run(args: argparse.Namespace) -> dict:
     res["static_sweep"] = bench_static_sweep()
     res["analyses"] = bench_analyses()
     res["fe_hinge"] = bench_fe_hinge()
+    res["optimize"] = bench_optimize()
     if args.sweep:
         res["sweep"] = bench_sweep(args.sweep_designs)
     if args.node:

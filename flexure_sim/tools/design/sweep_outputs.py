@@ -25,7 +25,8 @@ import numpy as np
 from flexure_sim.engine.analysis import linear
 from flexure_sim.engine.mechanism.parts import Mechanism
 from flexure_sim.engine.solver.simulation import Simulation, StaticResult
-from flexure_sim.engine.hinges.stress import peak_ratio, stress_table
+from flexure_sim.engine.hinges import fatigue
+from flexure_sim.engine.hinges.stress import peak_ratio, stress_table, stroke_limit
 from flexure_sim.engine.analysis.study import Study
 from flexure_sim.tools.run import response_metrics
 from flexure_sim.tools.run.run_channels import gain_unit
@@ -62,12 +63,28 @@ class Design:
         self._static: Optional[StaticResult] = None
         self._step = None
         self._modes: Optional[linear.Modes] = None
+        self._rest: Optional[StaticResult] = None
+        self._fatigue: Optional[dict] = None
 
     def static(self) -> StaticResult:
         """Return static equilibrium at the study's drive input."""
         if self._static is None:
             self._static = self.sim.static(self.input)
         return self._static
+
+    def rest(self) -> StaticResult:
+        """Return the static equilibrium with every drive at 0: the fatigue cycle's start."""
+        if self._rest is None:
+            zero = ({d.name: 0.0 for d in self.mechanism.drives} if self.several else 0.0)
+            self._rest = self.sim.static(zero)
+        return self._rest
+
+    def fatigue(self) -> dict:
+        """Return the fatigue of cycling every drive between 0 and the input (fatigue.between)."""
+        if self._fatigue is None:
+            self._fatigue = fatigue.between(self.mechanism, self.rest().snapshot.wrenches,
+                                            self.static().snapshot.wrenches)
+        return self._fatigue
 
     def modes(self) -> linear.Modes:
         """
@@ -236,6 +253,32 @@ def _first_mode_damping(d: Design) -> Values:
 def _peak_stress_ratio(d: Design) -> Values:
     found = peak_ratio(stress_table(d.static().snapshot.wrenches, d.mechanism))
     return None if found is None else found[1]
+
+
+@output("stroke_limit", "m", "drive input at which the first hinge reaches its yield strength "
+        "(flexure-sim simulate --stroke-limit)")
+def _stroke_limit(d: Design) -> Values:
+    return stroke_limit(d.sim)[0]
+
+
+@output("fatigue_safety", "", "Goodman safety factor of the critical hinge, the drive cycling "
+        "between 0 and the input (engine/hinges/fatigue.py)")
+def _fatigue_safety(d: Design) -> Values:
+    found = fatigue.critical(d.fatigue(), "goodman")
+    return None if found is None else found[1]
+
+
+@output("fatigue_safety_soderberg", "", "Soderberg safety factor of the critical hinge, the "
+        "drive cycling between 0 and the input")
+def _fatigue_safety_soderberg(d: Design) -> Values:
+    found = fatigue.critical(d.fatigue(), "soderberg")
+    return None if found is None else found[1]
+
+
+@output("infinite_life_stroke", "m", "largest drive input that, cycled from 0, keeps the "
+        "critical hinge's Goodman safety factor at 1 or above")
+def _infinite_life_stroke(d: Design) -> Values:
+    return fatigue.infinite_life_input(d.sim, 0.0, d.input)[0]
 
 
 @output("settling_time", "s", "2 % settling time of the output after a step to the input",
