@@ -18,6 +18,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from flexure_sim.console import quiet_pipe
 from flexure_sim.errors import FlexureSimError
 from flexure_sim.engine.mechanism.loader import load_mechanism, resolve_mechanism_path
 from flexure_sim.engine.solver.simulation import DEFAULT_STEP, Simulation, Snapshot
@@ -306,6 +307,7 @@ def _add_tool_commands(sub) -> None:
     commands.register(sub)
 
 
+@quiet_pipe
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
