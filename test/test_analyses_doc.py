@@ -150,6 +150,7 @@ def test_static_gains_bandwidth_and_phase_crossing(stage_modes):
     agrees(f90, crossing, "-90 deg crossing")
 
 
+@pytest.mark.slow
 def test_the_frf_command_the_page_names_prints_the_quoted_static_gains(tmp_path):
     """The page's `frf` command, run as a user runs it, prints the three gains it quotes."""
     import subprocess

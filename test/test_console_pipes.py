@@ -18,6 +18,9 @@ import pytest
 
 from conftest import ROOT
 
+#: Every test here runs the command line in subprocesses (seconds each).
+pytestmark = pytest.mark.slow
+
 BIN = Path(sys.executable).parent
 SCRIPTS = sorted(ep.name for ep in distribution("flexure_sim").entry_points
                  if ep.group == "console_scripts")

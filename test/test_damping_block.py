@@ -292,6 +292,7 @@ def _modes_with_rayleigh(tmp_path, ratios) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=120)
 
 
+@pytest.mark.slow
 def test_rayleigh_ratios_needing_a_negative_coefficient_are_refused_naming_them(tmp_path):
     """
     With alpha, beta >= 0, zeta at f2 > f1 lies in [zeta1 f1/f2, zeta1 f2/f1] (Chopra 11.4.3).
@@ -309,6 +310,7 @@ def test_rayleigh_ratios_needing_a_negative_coefficient_are_refused_naming_them(
         assert f"gives {low:g} to {high:g} at 3000 Hz" in p.stderr, p.stderr
 
 
+@pytest.mark.slow
 def test_mass_proportional_damping_given_as_two_ratios_is_accepted(tmp_path):
     """
     Accept zeta2 = zeta1 f1 / f2 exactly: beta = 0 (mass-proportional).

@@ -17,6 +17,9 @@ import pytest
 
 from conftest import ROOT
 
+#: Every test here runs the command line in subprocesses (seconds each).
+pytestmark = pytest.mark.slow
+
 
 def _cli(*args: str, cwd) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "flexure_sim.cli", *map(str, args)], cwd=cwd,

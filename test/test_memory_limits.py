@@ -21,6 +21,9 @@ import yaml
 
 from conftest import ROOT
 
+#: Every test here runs the command line in subprocesses (seconds each).
+pytestmark = pytest.mark.slow
+
 LIMIT = 2 << 30
 
 

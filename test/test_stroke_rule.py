@@ -17,6 +17,9 @@ import yaml
 
 from conftest import ROOT
 
+#: Every test here runs the command line in subprocesses (seconds each).
+pytestmark = pytest.mark.slow
+
 REFUSAL = ("1.5e-05 m is outside the drive's stroke [0.0, 2e-06] m: the actuator cannot reach "
            "it (stage_node clamps a command there); to analyse a longer actuator, widen the "
            "drive's stroke in the mechanism file")

@@ -14,9 +14,13 @@ import os
 import subprocess
 import sys
 
+import pytest
 import yaml
 
 from conftest import ROOT
+
+#: Every test here runs the command line in subprocesses (seconds each).
+pytestmark = pytest.mark.slow
 
 H = {"name": "h", "path": "stiffness_models.notch.h", "values": [2.0e-4, 2.5e-4]}
 
