@@ -18,9 +18,11 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from flexure_sim.console import quiet_pipe
 from flexure_sim.errors import FlexureSimError
 from flexure_sim.engine.hinges.stress import no_yield_advice
 from flexure_sim.engine.mechanism.loader import load_mechanism, resolve_mechanism_path
+from flexure_sim.engine.mechanism.stroke import check as check_stroke
 from flexure_sim.engine.solver.simulation import DEFAULT_STEP, Simulation, Snapshot
 
 #: Times (s) at which the step response is reported, as in the acceptance figures.
@@ -136,6 +138,8 @@ def run_simulate(args: argparse.Namespace) -> dict:
         raise UsageError(f"--static: mechanism {mech.name!r} has a drive with a finite-stiffness "
                          "piezo stack (its input is the actuator's free stroke, a dynamic "
                          "state): simulate without --static to a steady state")
+    if amplitude and mech.drives:  # the stroke rule of every analysis (mechanism/stroke.py)
+        check_stroke(mech.drives[:1], [amplitude], f"--drive {args.drive}", command=True)
     start = time.perf_counter()
     if args.stroke_limit:
         return _stroke_limit(args, sim)
@@ -224,7 +228,12 @@ def _stroke_limit(args, sim: Simulation) -> dict:
     from flexure_sim.engine.hinges.stress import stroke_limit
 
     if sim.drive is None:
-        raise UsageError(f"--stroke-limit: mechanism {sim.mechanism.name!r} has no drive")
+        names = sim.model.drive_names
+        has = (f"{len(names)} drives ({', '.join(names)})" if len(names) > 1 else
+               "no drive" if not names else f"the drive {names[0]!r}, not a displacement drive")
+        raise UsageError(f"--stroke-limit: mechanism {sim.mechanism.name!r} has {has}: the "
+                         "stroke limit is the input of a single displacement drive at which "
+                         "the first hinge yields")
     from flexure_sim.engine.hinges import fatigue
 
     try:
@@ -371,6 +380,7 @@ def _add_tool_commands(sub) -> None:
     commands.register(sub)
 
 
+@quiet_pipe
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)

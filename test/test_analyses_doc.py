@@ -150,6 +150,26 @@ def test_static_gains_bandwidth_and_phase_crossing(stage_modes):
     agrees(f90, crossing, "-90 deg crossing")
 
 
+@pytest.mark.slow
+def test_the_frf_command_the_page_names_prints_the_quoted_static_gains(tmp_path):
+    """The page's `frf` command, run as a user runs it, prints the three gains it quotes."""
+    import subprocess
+    import sys
+
+    gains = dict(zip(("output", "compression", "drive_force"), _find(
+        r"Static gain ([\d.]+) \(output / input\), joint-a compression ([\d.]+) m/m, "
+        r"drive force ([\d.e]+) N/m")))
+    (command,) = _find(r"\(`(flexure-sim frf [^`]+)`\s+prints each next to \|G\| at the lowest "
+                       r"frequency")
+    p = subprocess.run([sys.executable, "-m", "flexure_sim.cli", *command.split()[1:], "-o",
+                        str(tmp_path)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    printed = dict(re.findall(r"^(\w+): \|G\| .*\(static gain ([-\d.e+]+)\)", p.stdout, re.M))
+    assert set(printed) == set(gains), p.stdout
+    for name, text in gains.items():
+        agrees(text, float(printed[name]), f"{name} as frf prints it")
+
+
 # ------------------------------------------------------------------------- stress
 
 

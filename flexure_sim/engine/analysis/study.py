@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Iterable, Optional, Sequence
@@ -47,8 +48,9 @@ from flexure_sim.engine.mechanism.loader import (
 from flexure_sim.engine.mechanism.doc_paths import apply, resolve_path
 from flexure_sim.engine.mechanism.parts import Mechanism
 from flexure_sim.engine.analysis.study_checks import (
-    Channels, DriveInput, check_outputs, drive_input, number as _number,
+    Channels, DriveInput, check_defined, check_outputs, drive_input, number as _number,
 )
+from flexure_sim.engine.analysis.study_size import Batches, Range, built, check_fits
 from flexure_sim.engine.mechanism.yaml_files import read_yaml
 
 #: Designs per task unless the study says otherwise.
@@ -117,10 +119,9 @@ class Study:
     def grid_shape(self) -> tuple[int, ...]:
         return tuple(len(p.values) for p in self.parameters)
 
-    def batches(self) -> list[tuple[int, int]]:
-        """(start, stop) sample ranges of the batches, in order."""
-        b = self.batch_size
-        return [(s, min(s + b, self.samples)) for s in range(0, self.samples, b)]
+    def batches(self) -> Batches:
+        """(start, stop) sample ranges of the batches, in order (computed on demand)."""
+        return Batches(self.samples, self.batch_size)
 
     def sample(self, index: int) -> np.ndarray:
         """Parameter values of design ``index`` (column order of ``parameters``)."""
@@ -205,7 +206,7 @@ def study_from_dict(data: Any, source: str, output_names: Iterable[str],
         for key in ("samples", "seed"):
             if key in data:
                 raise fail(key, "only for Monte Carlo studies (a grid has one design per point)")
-        samples, seed = int(np.prod([len(p.values) for p in params])), None
+        samples, seed = math.prod(len(p.values) for p in params), None  # exact: no int64
     batch = _count(data, "batch_size", fail, default=DEFAULT_BATCH_SIZE)
     study = Study(
         name=str(data.get("name", Path(source).stem)), source=source,
@@ -221,8 +222,11 @@ def study_from_dict(data: Any, source: str, output_names: Iterable[str],
         raise fail("mechanism", f"{base_mech.name!r} has no drive constraint: the outputs are "
                    "responses to the drive input")
     check_outputs(outputs, base_mech, fail)
-    return replace(study, input=drive_input(data.get("input"), base_mech, fail),
-                   channels=Channels.of(base_mech))
+    study = replace(study, channels=Channels.of(base_mech))
+    check_fits(study, fail)
+    value = drive_input(data.get("input"), base_mech, fail)
+    check_defined(outputs, base_mech, value, fail)
+    return replace(study, parameters=built(study.parameters), input=value)
 
 
 def _read(path: Path, error: type[Exception]) -> Any:
@@ -346,7 +350,7 @@ def _source(kind: str, raw: Any, key: str, centre: float, fail) -> tuple:
             raise fail(f"{key}.num", f"expected a positive integer, got {num!r}")
         a = _number(need("start"), f"{key}.start", fail)
         b = _number(need("stop"), f"{key}.stop", fail)
-        return "values", tuple(float(x) for x in np.linspace(a, b, num)), 0.0, 0.0
+        return "values", Range(a, b, num), 0.0, 0.0  # built once the study is known to fit
     if kind == "normal":
         mean = _number(raw.get("mean", centre), f"{key}.mean", fail)
         return "normal", (), mean, _number(need("std"), f"{key}.std", fail, positive=True)

@@ -5,7 +5,8 @@ The study's ``input`` (docs/sweeps.md, "Several drives") is the drives' static i
 ``Simulation.static`` takes it (``Model.drive_inputs``): a number for a mechanism with one
 drive, or a mapping drive name -> value naming every drive (also accepted for one drive).
 Each value is in its drive's unit (m, rad on theta; N, N m for a force drive) and must lie
-within that drive's stroke. Omitted: every drive at the top of its stroke.
+within that drive's stroke (the rule of every analysis, engine/mechanism/stroke.py).
+Omitted: every drive at the top of its stroke.
 
 Outputs a mechanism cannot give are refused at load, rather than failing in every design:
 ``first_mode`` and ``first_mode_damping`` come from the linear model (engine/analysis/linear.py),
@@ -14,7 +15,10 @@ applied displacement, not the actuator's command); the outputs
 measured per output need the mechanism to name one when it has several drives;
 ``peak_stress_ratio`` and ``stroke_limit`` need a hinge with a yield strength, the fatigue
 outputs a hinge with fatigue strengths (engine/hinges/fatigue.py), the strokes a single
-displacement drive.
+displacement drive. Outputs that would have no value in any design are refused too
+(``check_defined``): ``compression`` without a ``compression_hinge``, the outputs measured
+at an output of a mechanism without one, and at a zero input the ratio ``gain`` (one
+drive) and the response to a step of size zero (``settling_time``, ``overshoot``).
 """
 from __future__ import annotations
 
@@ -26,6 +30,7 @@ from flexure_sim.engine.hinges import fatigue
 from flexure_sim.engine.hinges.stress import no_yield_advice
 from flexure_sim.engine.solver.drives import stacked
 from flexure_sim.engine.mechanism.parts import Mechanism, coordinate_unit
+from flexure_sim.engine.mechanism.stroke import REASON, outside
 
 #: A study's drive input: one number (one drive), or {drive name: value} (several drives).
 DriveInput = Union[float, dict]
@@ -117,12 +122,10 @@ def drive_input(raw: Any, mech: Mechanism, fail) -> Optional[DriveInput]:
 
 
 def _within(drive, value: float, key: str, fail) -> float:
-    """Return ``value`` if it lies within the drive's stroke, else fail naming both."""
-    lo, hi = drive.stroke
-    if not lo <= value <= hi:
-        unit = coordinate_unit(drive.coordinate, drive.kind == "force")
-        which = "the drive's" if key == "input" else f"drive {drive.name}'s"
-        raise fail(key, f"{value} {unit} is outside {which} stroke [{lo}, {hi}] {unit}")
+    """Return ``value`` if it lies within the drive's stroke, else fail naming both (stroke.py)."""
+    reason = outside(drive, value, alone=key == "input")
+    if reason is not None:
+        raise fail(key, f"{reason}: {REASON}")
     return value
 
 
@@ -151,3 +154,29 @@ def check_outputs(outputs: tuple[str, ...], mech: Mechanism, fail) -> None:
     if strokes and (len(drives) != 1 or drives[0].kind != "displacement" or stacked(drives[0])):
         raise fail("outputs", f"{strokes[0]}: a stroke is the input of one displacement drive "
                    f"without a piezo stack; {mech.name!r} has {len(drives)} drive(s)")
+
+
+def check_defined(outputs: tuple[str, ...], mech: Mechanism, value: Optional[DriveInput],
+                  fail) -> None:
+    """
+    Refuse the outputs that would be NaN in every design (module doc), naming the output.
+
+    ``value``: the study's validated input (None: every drive at the top of its stroke).
+    """
+    if "compression" in outputs and mech.compression_hinge is None:
+        raise fail("outputs", f"compression: {mech.name!r} names no compression_hinge (the "
+                   "hinge whose compression is measured, a key of the mechanism file)")
+    for name in outputs:
+        if name in PER_OUTPUT and not mech.all_outputs:
+            raise fail("outputs", f"{name}: {mech.name!r} has no output (output: or outputs: "
+                       "in the mechanism file)")
+    if value is None:
+        value = {d.name: d.stroke[1] for d in mech.drives}
+    zero = all(v == 0.0 for v in (value.values() if isinstance(value, dict) else [value]))
+    for name in outputs:
+        single_gain = name == "gain" and len(mech.drives) == 1
+        if zero and (single_gain or name in ("settling_time", "overshoot")):
+            what = ("gain = output / input is 0 / 0" if name == "gain"
+                    else "a step from 0 to 0 has no settling time or overshoot")
+            raise fail("input", f"every drive input is 0 and the outputs ask for {name}: {what}; "
+                       "give a non-zero input")

@@ -113,8 +113,19 @@ def _rayleigh_from_ratios(ctx: _Ctx, raw: Any) -> DampingSpec:
     if f1 == f2:
         raise ctx.fail("damping.ratios", f"the two frequencies must differ, got {f1:g} Hz twice")
     alpha, beta = rayleigh_coefficients(z1, 2 * np.pi * f1, z2, 2 * np.pi * f2)
-    if alpha < 0 or beta < 0:
-        raise ctx.fail("damping.ratios", f"these targets need alpha = {alpha:.6g} 1/s, beta = "
-                       f"{beta:.6g} s; a negative one would add energy (choose ratios that "
-                       "zeta = alpha/(2 omega) + beta omega/2 can meet with both >= 0)")
-    return DampingSpec("rayleigh", alpha=alpha, beta=beta)
+    (z1, f1), (z2, f2) = sorted(pairs, key=lambda p: p[1])
+    # With alpha, beta >= 0, zeta = alpha/(2 omega) + beta omega/2 at f2 > f1 lies between
+    # zeta1 f1/f2 (beta = 0) and zeta1 f2/f1 (alpha = 0); at either end the solve may leave
+    # a rounding error of either sign in the coefficient that is zero.
+    low, high = z1 * f1 / f2, z1 * f2 / f1
+    tol = 1e-12 * max(z1, z2)
+    if not low - tol <= z2 <= high + tol:
+        which = "beta" if z2 < low else "alpha"
+        need = beta if z2 < low else alpha
+        raise ctx.fail("damping.ratios", f"zeta {z1:g} at {f1:g} Hz and {z2:g} at {f2:g} Hz "
+                       f"need a negative {which} ({which} = {need:.6g} "
+                       f"{'s' if which == 'beta' else '1/s'}), which would add energy: with "
+                       f"zeta {z1:g} at {f1:g} Hz, Rayleigh damping (zeta = alpha/(2 omega) + "
+                       f"beta omega/2, alpha, beta >= 0) gives {low:.6g} to {high:.6g} at "
+                       f"{f2:g} Hz")
+    return DampingSpec("rayleigh", alpha=max(alpha, 0.0), beta=max(beta, 0.0))

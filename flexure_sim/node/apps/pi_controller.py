@@ -37,6 +37,7 @@ from typing import Any, Optional
 
 from flexure_sim.control.pi_notch import PIConfig, PIController
 from flexure_sim import topics
+from flexure_sim.console import quiet_pipe
 from flexure_sim.errors import FlexureSimError
 
 #: (name, default, description) of every parameter; all can be changed live except the
@@ -192,8 +193,16 @@ def make_node() -> Any:
     return PIControllerNode()
 
 
+@quiet_pipe
 def main(args: Optional[list[str]] = None) -> int:
     """Entry point of ``pi_controller`` / ``ros2 run flexure_sim pi_controller``."""
+    argv = sys.argv if args is None else args
+    if any(a in ("-h", "--help") for a in argv[1:]):
+        print("usage: pi_controller [--ros-args -p NAME:=VALUE ...]\n\nan example PI "
+              "controller closing the loop around stage_node (one command per measurement); "
+              "its parameters and topics: the README, \"Developing a controller against the "
+              "stage\"")
+        return 0
     import rclpy
     from rclpy.executors import ExternalShutdownException
 

@@ -22,6 +22,7 @@ import sys
 import threading
 from typing import Any, Optional
 
+from flexure_sim.console import quiet_pipe
 from flexure_sim.errors import FlexureSimError
 
 #: GIL switch interval: keeps the stepping thread's latency low while callbacks run.
@@ -181,6 +182,7 @@ def _clean_up(run: _Run) -> bool:
     return failed
 
 
+@quiet_pipe
 def main(args: Optional[list[str]] = None) -> int:
     """Entry point of ``stage_node`` / ``ros2 run flexure_sim stage_node``."""
     guard = SignalGuard()

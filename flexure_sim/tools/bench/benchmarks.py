@@ -253,7 +253,8 @@ def print_table(res: dict) -> None:
                     )
                     + (f", merge_late_ticks {r['params']['merge_late_ticks']}"
                        if "merge_late_ticks" in r["params"] else "")
-                    + f": missed {r['missed_ticks']} of {r['paced_ticks']} ticks "
+                    + f": real-time factor {r['real_time_factor']:.3f}, "
+                    f"missed {r['missed_ticks']} of {r['paced_ticks']} ticks "
                     f"({r['missed_fraction']:.3%}; merged {r.get('merged_ticks', 0)}), "
                     f"node CPU {r['node_cpu_cores'] or float('nan'):.2f} cores, "
                     f"worst lateness {r['max_late_us'] / 1e3:.1f} ms"

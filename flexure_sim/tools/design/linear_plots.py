@@ -134,10 +134,11 @@ def plot_bode(mech, model, f, G, outputs, path: Path, source: str = "drive") -> 
     import matplotlib.pyplot as plt
 
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
+    marker = "o" if len(f) <= 20 else None  # a few frequencies (or one) show as points
     for name, row in zip(outputs, G):
         unit_text = unit(mech, model, name, source)
-        ax1.loglog(f, np.abs(row), label=f"{name} [{unit_text}]")
-        ax2.semilogx(f, np.degrees(np.unwrap(np.angle(row))), label=name)
+        ax1.loglog(f, np.abs(row), label=f"{name} [{unit_text}]", marker=marker)
+        ax2.semilogx(f, np.degrees(np.unwrap(np.angle(row))), label=name, marker=marker)
     ax1.set_ylabel("magnitude")
     ax2.set_ylabel("phase [deg]")
     ax2.set_xlabel("frequency [Hz]")

@@ -24,7 +24,8 @@ import sys
 from flexure_sim.engine.mechanism.loader import ConfigError
 from flexure_sim.engine.mechanism.parameters import ParameterError, Parameters
 from flexure_sim.engine.analysis.sensitivity import OUTPUTS, sensitivities
-from flexure_sim.engine.solver.simulation import SolverError
+from flexure_sim.engine.mechanism.stroke import check as check_stroke
+from flexure_sim.engine.solver.simulation import Simulation, SolverError
 from flexure_sim.tools.design.linear_plots import input_text
 from flexure_sim.tools.options import parse_drive_inputs
 from flexure_sim.tools.tables import columns
@@ -37,7 +38,15 @@ def run(args) -> int:
         of = [o for o in args.of.split(",") if o]
         if not wrt:
             raise ParameterError("--wrt: give at least one parameter path")
-        res = sensitivities(params, wrt, of, parse_drive_inputs(args.input), hessian=True)
+        value = parse_drive_inputs(args.input)
+        if value is not None and params.mechanism.drives:  # the stroke rule (stroke.py)
+            try:
+                inputs = Simulation(params.mechanism).model.drive_inputs(value)
+            except ValueError:
+                inputs = None  # sensitivities says what is wrong with it
+            if inputs is not None:
+                check_stroke(params.mechanism.drives, inputs, f"--input {args.input!r}")
+        res = sensitivities(params, wrt, of, value, hessian=True)
     except (ConfigError, ParameterError, SolverError, ValueError) as exc:
         print(f"flexure-sim sensitivity: error: {exc}", file=sys.stderr)
         return 2

@@ -144,7 +144,9 @@ class Output:
     ``per``: with several drives, a column per ``drive``, ``output`` or ``pair`` (output,
     drive), or one column (""); ``each_unit``: then the unit of each column, a template of
     ``{drive}`` (the drive's input unit), ``{force}`` (its force unit), ``{output}`` (the
-    output's unit) and ``{gain}`` (output per unit of the drive's input).
+    output's unit) and ``{gain}`` (output per unit of the drive's input). ``nan_means``: what a
+    NaN (or None) of this output says, if it is one of its values (``settling_time``: not
+    settled); otherwise a design whose output is NaN is recorded as failed, with the reason.
     """
 
     name: str
@@ -153,6 +155,7 @@ class Output:
     compute: Callable[[Design], Values]
     per: str = ""
     each_unit: str = ""
+    nan_means: str = ""
 
 
 @dataclass(frozen=True)
@@ -168,7 +171,8 @@ class Column:
 OUTPUTS: dict[str, Output] = {}
 
 
-def output(name: str, unit: str, description: str, per: str = "", each_unit: str = ""):
+def output(name: str, unit: str, description: str, per: str = "", each_unit: str = "",
+           nan_means: str = ""):
     """
     Register a function of a ``Design`` as a sweep output, an ``Output``.
 
@@ -176,7 +180,7 @@ def output(name: str, unit: str, description: str, per: str = "", each_unit: str
     value per column, in ``columns`` order.
     """
     def register(fn: Callable[[Design], Values]):
-        OUTPUTS[name] = Output(name, unit, description, fn, per, each_unit)
+        OUTPUTS[name] = Output(name, unit, description, fn, per, each_unit, nan_means)
         return fn
     return register
 
@@ -282,7 +286,7 @@ def _infinite_life_stroke(d: Design) -> Values:
 
 
 @output("settling_time", "s", "2 % settling time of the output after a step to the input",
-        per="output", each_unit="s")
+        per="output", each_unit="s", nan_means="not settled within step.duration")
 def _settling_time(d: Design) -> Values:
     if d.several:
         return [r.settling_time for r in d.step_response()]
@@ -326,6 +330,10 @@ def evaluate_batch(study: Study, start: int, stop: int) -> dict:
             design = Design(study.mechanism(params[r]), study)
             for name, where in spans:
                 outs[r, where] = _floats(OUTPUTS[name].compute(design), where.stop - where.start)
+                if not OUTPUTS[name].nan_means and np.isnan(outs[r, where]).any():
+                    bad = [names[k] for k in range(where.start, where.stop)
+                           if np.isnan(outs[r, k])]
+                    raise FloatingPointError(f"{', '.join(bad)}: no value (NaN)")
         except Exception as exc:  # noqa: BLE001 - a design that fails is recorded, not fatal
             outs[r] = np.nan
             status[r], errors[r] = FAILED, f"{type(exc).__name__}: {exc}"
