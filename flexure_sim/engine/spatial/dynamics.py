@@ -1,0 +1,89 @@
+"""
+Fixed-step stiff-stable stepping of a ``SpatialModel``, updating a ``data.Data``.
+
+The planar engine's exponential trapezoidal rule (``engine.dynamics``, ``engine.stepping``):
+y_{n+1} = y_n + h phi_1(hA) F_0 + h phi_2(hA) N(y_{n+1}) with an exact Jacobian A taken at an
+earlier state (``SpatialModel.jacobian``) and re-taken only when the remainder iteration stops
+contracting (or the configuration moved by more than ``relinearize_tol``). The linearization
+(A, h phi_1, h phi_2 from one block exponential) is the planar engine's ``dynamics.linearize``;
+the loop is ``stepping``'s, compiled with the spatial right-hand side (``kernels.advance``).
+Time stays on the step grid, as there.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .. import stepping
+from ..data import Data, State
+from ..dynamics import linearize
+from ..model import SolverError
+from ..step_energy import NO_ENERGY
+from . import kernels
+from .model import SpatialModel
+
+
+def moved_too_far(model: SpatialModel, data: Data, z: np.ndarray) -> bool:
+    """Whether z moved further than ``relinearize_tol`` from the linearization's z."""
+    tol = model.relinearize_tol
+    if tol is None:
+        return False
+    moved = np.abs(z - data.lin.z).reshape(-1, 6)
+    moved[:, :3] /= model.length_scale
+    return bool(np.max(moved) > tol)
+
+
+def step(model: SpatialModel, data: Data, n: int = 1) -> None:
+    """Advance ``data`` n fixed steps with the drives' commands held at state.command."""
+    s = data.state
+    command = np.ascontiguousarray(model.actuator_command(s.command), dtype=float)
+    rows = command.reshape(1, -1)
+    key = command.tobytes()
+    clock = data.clock
+    if clock is None or clock[0] is not s:
+        clock = (s, s.t, 0)
+    _, origin, k = clock
+    dt = model.dt
+    y, t = model.pack(s), s.t
+    cache = data.cache
+    if cache is not None and cache[0] is s and cache[1] == key:
+        F0, aux0, ye = cache[2:5]
+    else:
+        F0, aux0 = model.rhs(y, t, command)
+        ye = y
+    remaining = int(n)
+    fresh = False
+    while remaining > 0:
+        if data.lin is None or (model.relinearize_tol is not None
+                                and moved_too_far(model, data, model.unpack(y, t, command)[0])):
+            linearize(model, data, y, t, command)
+            fresh = True
+        lin = data.lin
+        chunk = 1 if model.relinearize_tol is not None else remaining
+        y, F0, aux0, ye, command, _, _, steps, iterations, status = kernels.advance(
+            chunk, y, t, dt, rows, command, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,
+            model.atol, model.max_iterations, model.relinearize_after, F0, aux0, ye, NO_ENERGY,
+            model.kernel_args)
+        remaining -= steps
+        k += steps
+        t = origin + k * dt
+        data.stats.steps += steps
+        data.stats.iterations += iterations
+        if status == stepping.NOT_CONTRACTING:
+            if steps == 0 and fresh:
+                raise SolverError(
+                    f"step to t = {t + dt:.6g} s did not converge even with a fresh Jacobian; "
+                    f"reduce the step ({dt:g} s)")
+            data.lin = None
+        elif status == stepping.SLOW:
+            data.lin = None
+        if steps:
+            fresh = False
+    z, w, u = model.unpack(y, t, command)
+    if not np.all(np.isfinite(y)):
+        raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
+    model.check_range(z)
+    data.state = State(t, z, w, model.state_u(u), s.command, math.nan, math.nan)
+    data.clock = (data.state, origin, k)
+    data.cache = (data.state, command.tobytes(), F0, aux0, ye)
