@@ -1,12 +1,12 @@
 """
 Exact linearisation of a spatial mechanism about a static equilibrium: modes, FRF, gains.
 
-The planar engine's linear model (``engine.linear``) in 3-D: x = deviations of (z_F, w_F, u)
-with A = dF/dy and B = dF/dcommand from one hyper-dual evaluation of ``chain.terms`` seeded
+The planar engine's linear model (``analysis.linear``) in 3-D: x = deviations of (z_F, w_F, u)
+with A = dF/dy and B = dF/dcommand from one hyper-dual evaluation of ``spatial_chain.terms`` seeded
 along the state and the commands (``SpatialModel.derivatives``), outputs: the named outputs,
 each displacement drive's force f_d = D_d^T (M_P a_P - Q_P) (eq. 6.4), each force drive's body
 position, and the six components of every hinge's wrench on its body B. The result is a
-``engine.linear.LinearModel``, so ``linear_response.frf`` and ``gain_matrix`` apply as they are.
+``analysis.linear.LinearModel``, so ``linear_response.frf`` and ``gain_matrix`` apply as they are.
 
 Undamped modes solve K phi = omega^2 M phi on the free coordinates in quasi-displacements
 (translations and small body rotations): K = -dQ_F/dz_F dz_F/dtheta (dz_F/dtheta = Jr^-1 on the
@@ -20,10 +20,11 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from ..linear import LinearModel
-from ..linear_response import Modes
-from .model import SpatialModel
-from .statics import SpatialStatic, static
+from flexure_sim.engine.analysis.linear import LinearModel
+from flexure_sim.engine.analysis.linear_response import Modes
+from flexure_sim.engine.mechanism.spatial_parts import COORDINATE_NAMES
+from flexure_sim.engine.solver.spatial_model import SpatialModel
+from flexure_sim.engine.solver.spatial_statics import SpatialStatic, static
 
 WRENCH_COMPONENTS = ("moment_x", "moment_y", "moment_z", "force_x", "force_y", "force_z")
 _RATE = {"x": "vx", "y": "vy", "z": "vz", "rx": "wx", "ry": "wy", "rz": "wz"}
@@ -50,7 +51,6 @@ def mass_matrix(model: SpatialModel) -> np.ndarray:
 def linearize(model: SpatialModel, u=None, wrenches: bool = True,
               equilibrium: SpatialStatic = None) -> SpatialLinearModel:
     """Return the exact linear model about the equilibrium at drive inputs u (module doc)."""
-    from .mechanism import COORDINATE_NAMES
     names = model.drive_names
     st = equilibrium or static(model, np.zeros(len(names)) if u is None else u)
     inputs = st.inputs

@@ -1,14 +1,16 @@
 """
 A spatial mechanism prepared for stepping: the constants (as MuJoCo's mjModel), no state.
 
-The planar engine's structure in 3-D (``engine.model``): constraints by exact elimination of
+The planar engine's structure in 3-D (``solver.model``): constraints by exact elimination of
 prescribed coordinates (a fixed body, a drive's body, a prescribed translation coordinate),
 so the state is y = (z_F, w_F, u) with z six coordinates per body and w its quasi-velocities
-(``chain``), u one actuator output per displacement drive (a first-order lag of its command).
+(``solver.spatial_chain``), u one actuator output per displacement drive (a first-order lag of
+its command).
 The mass matrix is constant and block diagonal, so M_F dw_F/dt = Q_F(z, w) exactly.
 
-Exact Jacobians: one hyper-dual evaluation of the same ``chain.terms`` the kernel compiles
-(``generic``), seeded along the state's directions, gives dQ/dy and d(dz/dt)/dy to rounding.
+Exact Jacobians: one hyper-dual evaluation of the same ``spatial_chain.terms`` the kernel compiles
+(``kinematics.generic``), seeded along the state's directions, gives dQ/dy and d(dz/dt)/dy to
+rounding.
 """
 from __future__ import annotations
 
@@ -16,16 +18,20 @@ from typing import Optional
 
 import numpy as np
 
-from ..drives import DriveMixin
-from ..mechanism import Fixed
-from ..model import DEFAULT_STEP, Partition, SolverError
-from . import chain, generic, kernels
-from .mechanism import Drive, Mechanism
+from flexure_sim.engine.kinematics import generic
+from flexure_sim.engine.kinematics.spatial import matrix as quaternion_matrix
+from flexure_sim.engine.mechanism.parts import Fixed
+from flexure_sim.engine.mechanism.spatial_loader import drive_coordinates
+from flexure_sim.engine.mechanism.spatial_parts import Drive, Mechanism
+from flexure_sim.engine.solver import spatial_chain as chain
+from flexure_sim.engine.solver import spatial_kernels as kernels
+from flexure_sim.engine.solver.drives import DriveMixin
+from flexure_sim.engine.solver.model import DEFAULT_STEP, Partition, SolverError
+from flexure_sim.engine.solver.step_loop import prescribed_motion
 
 
 def partition(mech: Mechanism) -> Partition:
-    """Split the 6 n_bodies coordinates by the constraints (``config.drive_coordinates``)."""
-    from .config import drive_coordinates
+    """Split the 6 n_bodies coordinates by the constraints (``drive_coordinates``)."""
     prescribed: set[int] = set()
     columns = []
     for c in mech.constraints:
@@ -46,7 +52,7 @@ class SpatialModel(DriveMixin):
     """
     The constants of a spatial mechanism prepared for stepping with fixed step ``dt`` (s).
 
-    Same facade as ``engine.model.Model``: drives (``DriveMixin``), ``pack``/``unpack``/
+    Same facade as ``solver.model.Model``: drives (``DriveMixin``), ``pack``/``unpack``/
     ``full``, ``rhs``, ``jacobian``, ``output_values``; ``relinearize_tol`` as there. Energy
     bookkeeping of the steps is off in 3-D (``energy`` False: ``dissipated`` and
     ``drive_work`` are NaN); each hinge's energy and power are reported (``snapshot``).
@@ -116,7 +122,6 @@ class SpatialModel(DriveMixin):
     def _constants(self) -> tuple:
         mech = self.mechanism
         hinges = mech.hinges
-        from .rotation import matrix
         idx = {b.name: i for i, b in enumerate(mech.bodies)}
         geometry = (
             np.array([idx[h.a.body] for h in hinges], dtype=np.int64),
@@ -125,8 +130,8 @@ class SpatialModel(DriveMixin):
             np.array([h.b.position for h in hinges], dtype=float).reshape(-1, 3),
             np.array([h.a.quaternion for h in hinges], dtype=float).reshape(-1, 4),
             np.array([h.b.quaternion for h in hinges], dtype=float).reshape(-1, 4),
-            np.array([matrix(h.a.quaternion).ravel() for h in hinges]).reshape(-1, 9),
-            np.array([matrix(h.b.quaternion).ravel() for h in hinges]).reshape(-1, 9),
+            np.array([quaternion_matrix(h.a.quaternion).ravel() for h in hinges]).reshape(-1, 9),
+            np.array([quaternion_matrix(h.b.quaternion).ravel() for h in hinges]).reshape(-1, 9),
             np.array([h.law.kind for h in hinges], dtype=np.int64),
             np.ascontiguousarray([h.law.metric() for h in hinges]).reshape(-1, 6, 6),
             np.ascontiguousarray([h.law.dissipation_matrix() for h in hinges]).reshape(-1, 6, 6),
@@ -149,7 +154,6 @@ class SpatialModel(DriveMixin):
     # ------------------------------------------------------------- coordinates
     def prescribed(self, t: float, u, command):
         """Return z_P, w_P, a_P: the prescribed coordinates, their rates and accelerations."""
-        from ..stepping import prescribed_motion
         return prescribed_motion(t, self.actuator_u(u), self.kernel_command(command),
                                  *self.motion)
 
@@ -176,7 +180,7 @@ class SpatialModel(DriveMixin):
         return z, w, u
 
     def check_range(self, z: np.ndarray) -> None:
-        """Raise SolverError if a body turned beyond |phi| = pi (``rotation``'s working range)."""
+        """Raise SolverError if a body turned beyond |phi| = pi (``kinematics.spatial``)."""
         phi = np.linalg.norm(z.reshape(-1, 6)[:, 3:], axis=1)
         if np.any(phi > np.pi) or not np.all(np.isfinite(z)):
             i = int(np.argmax(np.where(np.isfinite(phi), phi, np.inf)))
@@ -189,7 +193,8 @@ class SpatialModel(DriveMixin):
         """
         Return (Q, dz/dt, deflections, wrenches, powers, potential, dissipation) at (z, w).
 
-        Everything ``chain.terms`` fills, in floats: generalized forces (quasi-velocity space)
+        Everything ``spatial_chain.terms`` fills, in floats: generalized forces (quasi-velocity
+        space)
         and coordinate rates (6 n_bodies), and per hinge its deflection (rotation vector, p),
         the wrench on body B (frame b) and (U, P_c, P_d).
         """
@@ -234,7 +239,7 @@ class SpatialModel(DriveMixin):
         return out.reshape(np.shape(Q))
 
     def rhs(self, y: np.ndarray, t: float, command):
-        """Return F(y, t) and the energy rates (``kernels.spatial_rhs``)."""
+        """Return F(y, t) and the energy rates (``spatial_kernels.spatial_rhs``)."""
         return kernels.spatial_rhs(np.asarray(y, dtype=float), t, self.kernel_command(command),
                                    self.kernel_args)
 
@@ -253,7 +258,7 @@ class SpatialModel(DriveMixin):
         return Zx, Wx
 
     def jacobian(self, y: np.ndarray, t: float, command) -> np.ndarray:
-        """Exact A = dF/dy (hyper-dual evaluation of ``chain.terms``, module docstring)."""
+        """Exact A = dF/dy (hyper-dual evaluation of ``spatial_chain.terms``, module docstring)."""
         part = self.part
         nF = len(part.free)
         z, w, _ = self.unpack(y, t, command)

@@ -2,7 +2,8 @@
 Spatial mechanisms as plain data: bodies, hinges, constraints, drives and outputs in 3-D.
 
 Constants only, as ``engine.mechanism`` (the state lives in ``data.State``). Coordinates per
-body (``rotation``, ``chain``): (x, y, z, rx, ry, rz) = position of the body frame (its mass
+body (``kinematics.spatial``, ``solver.spatial_chain``): (x, y, z, rx, ry, rz) = position of
+the body frame (its mass
 centre) in the root frame ``stage`` (REP-103) and the rotation vector from its rest
 orientation, in body coordinates; velocities (vx, vy, vz) in the root frame and the angular
 velocity (wx, wy, wz) in body coordinates.
@@ -14,8 +15,8 @@ from typing import Optional, Union
 
 import numpy as np
 
-from ..mechanism import Fixed
-from .laws import SpatialLaw
+from flexure_sim.engine.laws.spatial import SpatialLaw
+from flexure_sim.engine.mechanism.parts import Fixed
 
 #: Names of a body's six coordinates; ``theta`` (a planar file's) is ``rz``.
 COORDINATE_NAMES = ("x", "y", "z", "rx", "ry", "rz")
@@ -74,7 +75,7 @@ class Drive:
     ``axis`` (a unit vector in the root frame) with the body's other coordinates held, or
     along one translation ``coordinate`` (x, y, z) with the others free; the actuator output
     follows the command as a first-order lag (``response_time``), within ``stroke`` and
-    ``slew_rate`` (enforced by the node), as the planar ``engine.mechanism.Drive``. A force
+    ``slew_rate`` (enforced by the node), as the planar ``mechanism.parts.Drive``. A force
     drive (``kind`` force) applies the commanded force along ``axis`` or a translation
     coordinate, or a torque about the root axis of a rotation coordinate (rx, ry, rz).
     """

@@ -1,12 +1,13 @@
 """
 Fixed-step stiff-stable stepping of a ``SpatialModel``, updating a ``data.Data``.
 
-The planar engine's exponential trapezoidal rule (``engine.dynamics``, ``engine.stepping``):
+The planar engine's exponential trapezoidal rule (``solver.integrator``, ``solver.step_loop``):
 y_{n+1} = y_n + h phi_1(hA) F_0 + h phi_2(hA) N(y_{n+1}) with an exact Jacobian A taken at an
 earlier state (``SpatialModel.jacobian``) and re-taken only when the remainder iteration stops
 contracting (or the configuration moved by more than ``relinearize_tol``). The linearization
-(A, h phi_1, h phi_2 from one block exponential) is the planar engine's ``dynamics.linearize``;
-the loop is ``stepping``'s, compiled with the spatial right-hand side (``kernels.advance``).
+(A, h phi_1, h phi_2 from one block exponential) is the planar engine's ``integrator.linearize``;
+the loop is ``step_loop``'s, compiled with the spatial right-hand side
+(``spatial_kernels.advance``).
 Time stays on the step grid, as there.
 """
 from __future__ import annotations
@@ -15,13 +16,13 @@ import math
 
 import numpy as np
 
-from .. import stepping
-from ..data import Data, State
-from ..dynamics import linearize
-from ..model import SolverError
-from ..step_energy import NO_ENERGY
-from . import kernels
-from .model import SpatialModel
+from flexure_sim.engine.solver import spatial_kernels as kernels
+from flexure_sim.engine.solver import step_loop as stepping
+from flexure_sim.engine.solver.integrator import linearize
+from flexure_sim.engine.solver.model import SolverError
+from flexure_sim.engine.solver.spatial_model import SpatialModel
+from flexure_sim.engine.solver.state import Data, State
+from flexure_sim.engine.solver.step_energy import NO_ENERGY
 
 
 def moved_too_far(model: SpatialModel, data: Data, z: np.ndarray) -> bool:

@@ -17,7 +17,8 @@ Conventions (used everywhere in flexure_sim.engine.spatial):
 
 Working range of the rotation coordinates: |phi| <= pi, where every orientation has a rotation
 vector and Jr^-1 is regular (it is singular only at |phi| = 2 pi); the engine refuses states
-beyond it (``model.SpatialModel.check_range``). Planar motion about the rest orientation's z
+beyond it (``solver.spatial_model.SpatialModel.check_range``). Planar motion about the rest
+orientation's z
 axis keeps phi = (0, 0, theta - theta0) exactly.
 
 The scalar functions below are ``generic``: compiled for the stepping kernel and evaluated on
@@ -28,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .generic import generic, real_part
+from flexure_sim.engine.kinematics.generic import generic, real_part
 
 #: Below this t^2 the exponential's coefficients come from their series (truncation < 1e-20).
 EXP_SERIES = 1e-2

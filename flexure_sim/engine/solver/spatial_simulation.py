@@ -1,11 +1,12 @@
 """
 The spatial simulation facade: a shared ``SpatialModel`` (constants) and its own ``Data``.
 
-The planar ``solver.Simulation``'s shape, so that the node and the tools can drive either:
-``step``, ``snapshot``, ``set_command``, ``reset``, ``static``, ``static_gain``, ``linearize``,
-``modes`` and the ``state``/``stats`` attributes. A state's z holds six coordinates per body
-(position, rotation vector from rest: ``rotation``) and v the quasi-velocities (root-frame
-velocity, body-frame angular velocity: ``chain``).
+The planar ``solver.simulation.Simulation``'s shape, so that the node and the tools can drive
+either: ``step``, ``snapshot``, ``set_command``, ``reset``, ``static``, ``static_gain`` and the
+``state``/``stats`` attributes; the linear model and modes are ``analysis.spatial_linear``'s.
+A state's z holds six coordinates per body (position, rotation vector from rest:
+``kinematics.spatial``) and v the quasi-velocities (root-frame velocity, body-frame angular
+velocity: ``solver.spatial_chain``).
 """
 from __future__ import annotations
 
@@ -14,12 +15,13 @@ from typing import Optional, Union
 
 import numpy as np
 
-from ..data import Data, State, StepStats
-from ..linear_response import Modes, gain_matrix
-from ..model import DEFAULT_STEP
-from . import dynamics, linear, rotation, statics
-from .mechanism import Mechanism
-from .model import SpatialModel
+from flexure_sim.engine.kinematics import spatial as rotation
+from flexure_sim.engine.mechanism.spatial_parts import Mechanism
+from flexure_sim.engine.solver import spatial_integrator as dynamics
+from flexure_sim.engine.solver import spatial_statics as statics
+from flexure_sim.engine.solver.model import DEFAULT_STEP
+from flexure_sim.engine.solver.spatial_model import SpatialModel
+from flexure_sim.engine.solver.state import Data, State, StepStats
 
 
 @dataclass(frozen=True)
@@ -32,7 +34,8 @@ class SpatialSnapshot:
     angular_velocities (n_bodies, 3) body coordinates. deflections (n_hinges, 6): rotation
     vector and position of frame b relative to frame a, in a; wrenches (n_hinges, 6): the wrench
     each hinge exerts on its body B, in frame b, moment about b's origin, (m_x, m_y, m_z, f_x,
-    f_y, f_z); hinge_power (n_hinges, 3): (U, P_c, P_d) per hinge (``laws``). Drives and outputs
+    f_y, f_z); hinge_power (n_hinges, 3): (U, P_c, P_d) per hinge (``laws.spatial``). Drives
+    and outputs
     as the planar ``Snapshot``.
     """
 
@@ -114,7 +117,7 @@ class SpatialSimulation:
         self.data.reset()
 
     def step(self, n: int = 1) -> None:
-        """Advance n fixed steps with the drives' commands held (``dynamics.step``)."""
+        """Advance n fixed steps with the drives' commands held (``spatial_integrator.step``)."""
         dynamics.step(self.model, self.data, n)
 
     def set_command(self, command) -> None:
@@ -129,7 +132,7 @@ class SpatialSimulation:
         return snapshot(self.model, state or self.data.state)
 
     def static(self, u, tol: float = 1e-13) -> statics.SpatialStatic:
-        """Return the static equilibrium with the drives at u (``statics.static``)."""
+        """Return the static equilibrium with the drives at u (``spatial_statics.static``)."""
         return statics.static(self.model, u, tol)
 
     def static_snapshot(self, u) -> SpatialSnapshot:
@@ -140,15 +143,6 @@ class SpatialSimulation:
                       float(st.inputs[0]) if len(st.inputs) == 1 else st.inputs.copy())
         return snapshot(self.model, state, st.inputs)
 
-    def linearize(self, u=None, wrenches: bool = True) -> linear.SpatialLinearModel:
-        """Return the exact linear model about the equilibrium at u (``linear.linearize``)."""
-        return linear.linearize(self.model, u, wrenches)
-
-    def modes(self, u=None) -> Modes:
-        """Return the undamped modes and damped poles about the equilibrium at u."""
-        return linear.modes(self.linearize(u, wrenches=False))
-
     def static_gain(self) -> np.ndarray:
-        """Return the exact static gain at rest, outputs (rows) against drives (columns)."""
-        lin = self.linearize(wrenches=False)
-        return gain_matrix(lin, list(self.model.output_names))
+        """Return the exact static gain at rest, outputs against drives (``static_gain``)."""
+        return statics.static_gain(self.model)

@@ -1,5 +1,5 @@
 """
-Law coordinates of a spatial hinge: its twistor (unit dual quaternion) or its twist.
+Spatial hinge laws: law coordinates (twistor, twist), potential, wrench, energy and power.
 
 A hinge's deflection is the displacement D = (R, p) of its frame b relative to its frame a
 (R = R_a^T R_b, p = R_a^T (P_b - P_a): p is b's origin in a's coordinates), as the planar
@@ -9,14 +9,25 @@ twistor of dissertation eqs. 2.129-2.135 is its restriction to the plane) is
     q = q_r + eps q_d,    q_r = (sigma, xi),    q_d = 1/2 p q_r = (sigma_0, x),
     sigma_0 = -1/2 p . xi,    x = 1/2 (sigma p + p x xi),
 
-with q_r the quaternion of R. The law coordinates are 6-vectors, rotation first:
+with q_r the quaternion of R. The law coordinates c are 6-vectors, rotation first:
 
 - ``twistor``: c = (xi, x), the dual quaternion's vector part = sin(theta^/2) s^ for the
   dual angle theta^ and screw axis s^ (the planar (xi, x1, x2) of eq. 4.7 are its entries
   z, x, y when the motion is planar);
 - ``twist``: c = (omega, v) = log D, omega = G(q_r) xi the rotation vector
-  (``rotation.angle_factor``) and v = Jl^-1(omega) p = p - omega x p / 2 + c omega x
-  (omega x p) (planar: eqs. 2.106-2.108).
+  (``kinematics.spatial.angle_factor``) and v = Jl^-1(omega) p = p - omega x p / 2
+  + c omega x (omega x p) (planar: eqs. 2.106-2.108).
+
+A law is a potential U(c) and a dissipation D = 1/2 c_dot^T C c_dot (``SpatialLaw``):
+
+- ``twistor``: U = 2 c^T K c (eq. 4.7 in space: W = 4 K) and D = 2 c_dot^T B c_dot;
+- ``twist``: U = 1/2 c^T K c (eq. 3.4) and D = 1/2 c_dot^T B c_dot;
+
+K and B 6x6 in the hinge frame, rotation first. Near rest both are 1/2 d^T K d in the
+deflection d, so K is the hinge's stiffness matrix. Both are frame-independent (a
+conjugation of the deflection maps c by the adjoint, ``hinges.spatial_stiffness.
+transform_stiffness``) and independent of which body is called A (inverting the deflection
+negates c). The twistor law is smooth at every rotation; the twist law holds below 2 pi.
 
 A virtual motion of frame b relative to a, D -> D Exp(delta) with delta = (dw, dv) in b's
 coordinates (the relative twist, moment first), changes the coordinates by dc = Lambda delta:
@@ -27,14 +38,22 @@ coordinates (the relative twist, moment first), changes the coordinates by dc = 
   formula I + 1/2 hat(c) + c(s) hat(c)^2 evaluated on the dual vector omega + eps v:
   Lambda = [[A, 0], [B, A]], A = Jr^-1(omega), B its derivative along v.
 
-The wrench body B exerts on the element (frame b coordinates, moment about b's origin) is then
-m_b = Lambda^T dU/dc (eqs. 3.53, 4.35), and damping in the coordinate rates adds Lambda^T C c_dot.
-All functions are ``generic`` (compiled, and evaluated on hyper-dual numbers for Jacobians).
+The wrench body B exerts on the element (frame b coordinates, moment about b's origin) is
+m_b = Lambda^T (W c + C c_dot) (eqs. 3.53, 4.35, 4.40); the hinge exerts -m_b on B. Energy and
+power as the planar laws report them (``laws.quadratic``): U, the conservative power
+P_c = -dU/dt = -m_elastic . delta_dot (what the elastic wrenches deliver to the bodies) and the
+dissipated power P_d = c_dot^T C c_dot >= 0. The functions on scalars are ``generic``
+(compiled, and evaluated on hyper-dual numbers for Jacobians).
 """
 from __future__ import annotations
 
-from .generic import generic
-from .rotation import angle_factor, cross, jr_coefficient
+from dataclasses import dataclass
+
+import numpy as np
+
+from flexure_sim.engine.kinematics.generic import generic
+from flexure_sim.engine.kinematics.spatial import angle_factor, cross, jr_coefficient
+from flexure_sim.errors import as_array
 
 #: Law coordinate types (the ``law`` of a hinge), as in the planar engine.
 TWISTOR, TWIST = 0, 1
@@ -178,3 +197,69 @@ def _twist_wrench(w, v, cs, dcs, g):
     b = _jr_inverse_dual(w, v, cs, dcs, g2, -1.0)
     e = _jr_inverse_t(w, cs, g2)
     return a[0] + b[0], a[1] + b[1], a[2] + b[2], e[0], e[1], e[2]
+
+
+@dataclass(frozen=True)
+class LawState:
+    """One hinge's law evaluated at a deflection and rate (``SpatialLaw.evaluate``)."""
+
+    coordinates: np.ndarray
+    rates: np.ndarray
+    wrench_on_element: np.ndarray
+    energy: float
+    conservative: float
+    dissipated: float
+
+
+@dataclass(frozen=True)
+class SpatialLaw:
+    """The quadratic twistor or twist law with 6x6 stiffness K and damping B (module doc)."""
+
+    coordinates: str
+    K: np.ndarray
+    B: np.ndarray
+
+    def __post_init__(self) -> None:
+        if self.coordinates not in KINDS:
+            raise ValueError(f"coordinates: expected one of {', '.join(KINDS)}, "
+                             f"got {self.coordinates!r}")
+        object.__setattr__(self, "K", as_array("K", self.K, (6, 6)))
+        object.__setattr__(self, "B", as_array("B", self.B, (6, 6)))
+
+    @property
+    def kind(self) -> int:
+        """Return the law's coordinate type as the kernel's integer code."""
+        return KINDS[self.coordinates]
+
+    def _scale(self) -> float:
+        return 4.0 if self.coordinates == "twistor" else 1.0
+
+    def metric(self) -> np.ndarray:
+        """W (6x6) with U = 1/2 c^T W c."""
+        return self._scale() * self.K
+
+    def dissipation_matrix(self) -> np.ndarray:
+        """C (6x6) with D = 1/2 c_dot^T C c_dot."""
+        return self._scale() * self.B
+
+    def evaluate(self, quaternion, p, rate=(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)) -> LawState:
+        """
+        Evaluate the law at deflection (R(quaternion), p) and relative twist rate ``rate``.
+
+        ``rate`` = (dw, dv): the angular velocity of frame b relative to a and the velocity
+        of b's origin relative to a (as in ``solver.spatial_chain``), both in b's coordinates.
+        """
+        q = as_array("quaternion", quaternion, (4,))
+        p = as_array("p", p, (3,))
+        r = as_array("rate", rate, (6,))
+        W = self.metric()[None]
+        C = self.dissipation_matrix()[None]
+        c, cdot, m, me = law_terms(self.kind, tuple(q), tuple(p), tuple(r[:3]), tuple(r[3:]),
+                                   W, C, 0)
+        c, cdot, me = np.array(c), np.array(cdot), np.array(me)
+        return LawState(c, cdot, np.array(m), float(0.5 * c @ W[0] @ c),
+                        float(-me @ r), float(cdot @ C[0] @ cdot))
+
+    def potential_energy(self, quaternion, p) -> float:
+        """Return U (J) at the deflection (R(quaternion), p)."""
+        return self.evaluate(quaternion, p).energy

@@ -1,7 +1,7 @@
 """
 Generalized forces of a spatial mechanism: hinges, gyroscopic terms, applied forces.
 
-Coordinates, six per body in body order (``rotation``): z = (p, phi), p the body frame's
+Coordinates, six per body in body order (``kinematics.spatial``): z = (p, phi), p the body frame's
 origin (its mass centre) in the root frame, phi its rotation vector from the rest orientation
 R0 (R = R0 Exp(phi)); velocities w = (v, omega), v = dp/dt in the root frame and omega the
 angular velocity in body coordinates (quasi-velocities: the mass matrix is constant,
@@ -12,7 +12,7 @@ A hinge joins frame a (position c_a, orientation q_a in body A) and frame b on b
 coincide at rest. Its deflection D = (R_a^T R_b, R_a^T (P_b - P_a)) and the relative twist rate
 of b in b's coordinates, (dw, dv) = (R_b^T (Omega_B - Omega_A), R_b^T (dP_b/dt - dP_a/dt -
 Omega_A x (P_b - P_a))) (Omega: angular velocities in the root frame), give the law's
-coordinates and wrench m_b (``coordinates``): the wrench body B exerts on the element, in b's
+coordinates and wrench m_b (``laws.spatial``): the wrench body B exerts on the element, in b's
 coordinates about b's origin. In the root frame, F = R_b f_b and M = R_b m_b (couple at P_b):
 the hinge exerts (-F, -M) on B and (F, M) on A at P_b, which as generalized forces (virtual
 work with omega in body coordinates) are
@@ -26,10 +26,11 @@ Jacobians are the hyper-dual evaluations of this same code.
 """
 from __future__ import annotations
 
-from .coordinates import law_terms
-from .generic import buffer, generic, real_part
-from .rotation import cross, matrix_of, phi_rate, qconj_mul, qmul, quaternion_exp, rotate
-from .rotation import rotate_back, rotation_vector
+from flexure_sim.engine.kinematics.generic import buffer, generic, real_part
+from flexure_sim.engine.kinematics.spatial import cross, matrix_of, phi_rate, qconj_mul, qmul
+from flexure_sim.engine.kinematics.spatial import quaternion_exp, rotate, rotate_back
+from flexure_sim.engine.kinematics.spatial import rotation_vector
+from flexure_sim.engine.laws.spatial import law_terms
 
 
 @generic
@@ -75,7 +76,7 @@ def hinge(h, z, w, quat, rot, geometry, Q, deflection, wrench, power):
     """
     Add hinge h's generalized forces to Q; fill its deflection, wrench and power rows.
 
-    ``geometry`` = (ia, ib, ca, cb, qa, qb, Ra, Rb, kind, W, C) (``model.SpatialModel``).
+    ``geometry`` = (ia, ib, ca, cb, qa, qb, Ra, Rb, kind, W, C) (``spatial_model.SpatialModel``).
     deflection[h] = (rotation vector of R, p) of D; wrench[h] = -m_b (the wrench the hinge
     exerts on body B, in frame b, moment about b's origin, moment first); power[h] = (U,
     P_c, P_d): potential energy, the power the elastic wrenches deliver to the bodies

@@ -3,7 +3,7 @@ Hinge stiffness in space: 6x6 matrices from geometry, and how they move with the
 
 Every matrix is in the hinge frame at the hinge's centre of stiffness, rotations first:
 K = diag(k_rx, k_ry, k_rz, k_x, k_y, k_z) for the symmetric hinges below (Pa, N/m, N m/rad).
-The in-plane block (rz, x, y) is the planar engine's 3x3 (``engine.stiffness``) unchanged, so
+The in-plane block (rz, x, y) is the planar engine's 3x3 (``hinges.stiffness``) unchanged, so
 a planar mechanism keeps its in-plane behaviour; the out-of-plane terms (rx, ry, z) are beam
 theory over the hinge's profile (Lobontiu, "Compliant Mechanisms: Design of Flexure Hinges",
 CRC 2002, ch. 2: the compliances are integrals of 1/(E I), 1/(G J) and 1/(kappa G A) along
@@ -39,7 +39,7 @@ from typing import Callable
 
 import numpy as np
 
-from .. import stiffness as planar
+from flexure_sim.engine.hinges import stiffness as planar
 
 #: Gauss-Legendre nodes and weights on [-1, 1] for the notch integrals (module docstring).
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(64)
@@ -101,7 +101,7 @@ def notch_stiffness(D: float, h: float, t: float, E: float, nu: float) -> np.nda
     """
     6x6 stiffness of a circular notch hinge (module docstring; length along x).
 
-    In plane: ``engine.stiffness.notch_stiffness`` (the dissertation's eqs. 5.27-5.33);
+    In plane: ``hinges.stiffness.notch_stiffness`` (the dissertation's eqs. 5.27-5.33);
     out of plane: beam theory over the notch profile, width t.
     """
     k_rz, k_x, k_y = np.diag(planar.notch_stiffness(D, h, t, E, nu))
@@ -114,7 +114,7 @@ def cantilever_stiffness(length: float, thickness: float, width: float, E: float
     """
     6x6 stiffness of a leaf spring at its centre (module docstring; length along y).
 
-    In plane: ``engine.stiffness.cantilever_stiffness`` (eq. 5.8); out of plane: torsion
+    In plane: ``hinges.stiffness.cantilever_stiffness`` (eq. 5.8); out of plane: torsion
     about y, bending about x and translation along z of the uniform profile (two-point
     Gauss-Legendre is exact for it).
     """

@@ -1,15 +1,16 @@
 """
 The spatial engine's compiled stepping: F(y, t) of a spatial mechanism, and the loop that steps it.
 
-F(y, t) for y = (z_F, w_F, u) (``model.SpatialModel``): the prescribed coordinates and their
-rates from the drives (``stepping.prescribed_motion``, the planar engine's), the generalized
-forces and coordinate rates of ``chain.terms``, and
+F(y, t) for y = (z_F, w_F, u) (``spatial_model.SpatialModel``): the prescribed coordinates and
+their
+rates from the drives (``step_loop.prescribed_motion``, the planar engine's), the generalized
+forces and coordinate rates of ``spatial_chain.terms``, and
 
     dz_F/dt = (dz/dt)_F,    dw_F/dt = (M^-1 Q)_F,    du/dt = (command - u) / tau,
 
 with M = diag(m I, I_b) per body (a body's rotations are all free or all held, so M^-1 acts
 body by body). The loop is the planar engine's exponential trapezoidal rule
-(``stepping._advance``), the same code compiled a second time with this right-hand side:
+(``step_loop._advance``), the same code compiled a second time with this right-hand side:
 one definition of the integrator for both engines. Energy bookkeeping of the step (dissipated
 energy, drive work) is not integrated in 3-D: the loop runs with ``step_energy.NO_ENERGY``.
 """
@@ -19,10 +20,14 @@ import types
 
 import numpy as np
 
-from .. import kernel_cache, stepping
-from ..kernels import njit
-from ..step_energy import AUX_DISSIPATION, AUX_ENERGY, AUX_LOAD
-from . import chain, coordinates, generic, rotation
+from flexure_sim.engine import jit
+from flexure_sim.engine.jit import njit
+from flexure_sim.engine.kinematics import generic
+from flexure_sim.engine.kinematics import spatial as rotation
+from flexure_sim.engine.laws import spatial as coordinates
+from flexure_sim.engine.solver import spatial_chain as chain
+from flexure_sim.engine.solver import step_loop as stepping
+from flexure_sim.engine.solver.step_energy import AUX_DISSIPATION, AUX_ENERGY, AUX_LOAD
 
 
 @njit(cache=True)
@@ -32,7 +37,7 @@ def spatial_rhs(y, t, command, args):
 
     ``args`` (``SpatialModel.kernel_args``) = (free, prescribed, zP0, D, tau, sine_index,
     sine_amp, sine_w, sine_phase, first_force, constants, inverse_mass, inverse_inertia,
-    inertia): the partition and the drives as the planar kernel's, ``chain.terms``'s
+    inertia): the partition and the drives as the planar kernel's, ``spatial_chain.terms``'s
     constants, 1/m per body, I_b^-1 and I_b (nb, 9).
     """
     (free, prescribed, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, first_force,
@@ -95,7 +100,7 @@ def no_switch_work(y, t, old, new, args):
 
 
 def _bind():
-    """Return ``stepping._advance`` compiled with ``spatial_rhs``, under a name of its own."""
+    """Return ``step_loop._advance`` compiled with ``spatial_rhs``, under a name of its own."""
     code = stepping._advance.__code__.replace(co_name="_advance_spatial",
                                               co_qualname="_advance_spatial")
     space = dict(vars(stepping))
@@ -107,5 +112,5 @@ def _bind():
 advance = _bind()
 
 # Numba keys a cache on its function's file: flush when any source of these kernels changes.
-kernel_cache.revalidate(
-    kernel_cache.dispatchers_of(globals(), chain, coordinates, rotation, generic), __file__)
+jit.revalidate(
+    jit.dispatchers_of(globals(), chain, coordinates, rotation, generic), __file__)

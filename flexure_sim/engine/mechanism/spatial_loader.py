@@ -22,7 +22,8 @@ A 3-D file (SI units, REP-103 axes; see config/tiptilt_stage.yaml)::
       - {name: tip, body: platform, coordinate: rx}
 
 ``inertia``: [Ixx, Iyy, Izz] (principal, body axes) or a 3x3 tensor, about the mass centre.
-Stiffness models: ``notch``, ``cantilever`` (6x6 from ``stiffness``), any ``stiffness.register``ed
+Stiffness models: ``notch``, ``cantilever`` (6x6 from ``hinges.spatial_stiffness``), any
+``spatial_stiffness.register``-ed
 model (the finite-element hinges: ``model: fe``), and ``matrix`` with ``K`` 6x6. A drive moves
 its body along ``axis`` (its other coordinates held) or along one translation coordinate
 (``axis: z``: the others free); ``type: force`` applies a force along an axis or a translation
@@ -30,7 +31,7 @@ coordinate, or a torque about a root axis (``axis: rx``). Other planar keys (sin
 piezo actuator blocks, the mechanism damping block, a compression hinge) are refused by name.
 
 A planar file opened in 3-D (``load_spatial``) is checked by the planar loader, then each body
-and hinge is placed in the plane z = 0 (``planar``).
+and hinge is placed in the plane z = 0 (``planar_in_space``).
 """
 from __future__ import annotations
 
@@ -39,16 +40,20 @@ from typing import Any
 
 import numpy as np
 
-from ..config import COINCIDENCE_TOLERANCE, resolve_mechanism_path
-from ..config_damping import hinge_damping
-from ..config_stiffness import check_spd
-from ..config_values import ConfigError, Ctx, body_ref, key_text, mapping, name, no_unknown
-from ..config_values import number, require, shown, vector
-from ..mechanism import Fixed
-from ..yaml_files import read_yaml
-from . import rotation, stiffness
-from .laws import SpatialLaw
-from .mechanism import COORDINATE_NAMES, Body, Drive, Frame, Hinge, Mechanism, Output
+from flexure_sim.engine.hinges import spatial_stiffness as stiffness
+from flexure_sim.engine.kinematics import spatial as rotation
+from flexure_sim.engine.laws.spatial import SpatialLaw
+from flexure_sim.engine.mechanism.damping_block import hinge_damping
+from flexure_sim.engine.mechanism.loader import COINCIDENCE_TOLERANCE
+from flexure_sim.engine.mechanism.loader import resolve_mechanism_path
+from flexure_sim.engine.mechanism.parts import Fixed
+from flexure_sim.engine.mechanism.spatial_parts import COORDINATE_NAMES, Body, Drive, Frame
+from flexure_sim.engine.mechanism.spatial_parts import Hinge, Mechanism, Output
+from flexure_sim.engine.mechanism.stiffness_block import check_spd
+from flexure_sim.engine.mechanism.values import ConfigError, Ctx, body_ref, key_text, mapping
+from flexure_sim.engine.mechanism.values import name, no_unknown, number, require, shown
+from flexure_sim.engine.mechanism.values import vector
+from flexure_sim.engine.mechanism.yaml_files import read_yaml
 
 
 def load_spatial(name_or_path: str | Path) -> Mechanism:
@@ -63,7 +68,7 @@ def spatial_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
         if data["space"] != "3d":
             raise Ctx(source).fail("space", f"expected 3d, got {shown(data['space'])}")
         return _spatial(Ctx(source), data)
-    from .planar import opened_in_space
+    from flexure_sim.engine.mechanism.planar_in_space import opened_in_space
     return opened_in_space(data, source)
 
 

@@ -5,7 +5,8 @@ The planar loader checks the document first (its messages, its rules). Then ever
 hinge is placed in the plane z = 0: a body's pose (x, y, theta) becomes position (x, y, 0) and
 the rotation theta about z, a hinge frame (x, y, angle) likewise; drives, force drives and
 outputs keep their axes (in the plane) or coordinates (``theta`` is ``rz``). Each hinge gets
-the 6x6 stiffness of its ``notch`` or ``cantilever`` model (``stiffness``), whose in-plane
+the 6x6 stiffness of its ``notch`` or ``cantilever`` model (``hinges.spatial_stiffness``),
+whose in-plane
 block is the planar 3x3 exactly, and B = t_char K6 for ``damping: {t_char}``.
 
 What the plane does not say, and how it is chosen:
@@ -25,13 +26,15 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..config import mechanism_from_dict
-from ..config_values import Ctx
-from ..mechanism import Drive as PlanarDrive
-from ..mechanism import Fixed, SineRate
-from . import rotation, stiffness
-from .config import hinge_law
-from .mechanism import PLANAR_NAMES, Body, Drive, Frame, Hinge, Mechanism, Output
+from flexure_sim.engine.hinges import spatial_stiffness as stiffness
+from flexure_sim.engine.kinematics import spatial as rotation
+from flexure_sim.engine.mechanism.loader import mechanism_from_dict
+from flexure_sim.engine.mechanism.parts import Drive as PlanarDrive
+from flexure_sim.engine.mechanism.parts import Fixed, SineRate
+from flexure_sim.engine.mechanism.spatial_loader import hinge_law
+from flexure_sim.engine.mechanism.spatial_parts import PLANAR_NAMES, Body, Drive, Frame
+from flexure_sim.engine.mechanism.spatial_parts import Hinge, Mechanism, Output
+from flexure_sim.engine.mechanism.values import Ctx
 
 
 def opened_in_space(data: Any, source: str) -> Mechanism:

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model import SolverError
-from .model import SpatialModel
+from flexure_sim.engine.solver.model import SolverError
+from flexure_sim.engine.solver.spatial_model import SpatialModel
 
 
 @dataclass(frozen=True)
@@ -67,3 +67,32 @@ def static(model: SpatialModel, u, tol: float = 1e-13, max_iter: int = 50) -> Sp
             residual = float(np.max(np.abs(model.terms(z, w, command)[0][part.free])))
             return SpatialStatic(z, inputs, it, residual)
     raise SolverError(f"static solve did not converge in {max_iter} iterations")
+
+
+def static_gain(model: SpatialModel) -> np.ndarray:
+    """
+    Return the exact static gain at rest: d(output k)/d(input d), outputs by drives.
+
+    From the tangent stiffness K = dQ_F/dz_F at the rest pose: a displacement drive moves z_P
+    by D_d and the free coordinates by -K^-1 dQ_F/dz_P D_d; a force drive's command adds
+    dQ_F/df (its direction, a torque's turned into the body: exact through the same
+    hyper-dual evaluation), moving them by -K^-1 dQ_F/df. Output k moves by c_k . dz.
+    """
+    part = model.part
+    F, P = part.free, part.prescribed
+    nF, nd = len(F), len(model.drives)
+    N = model.n_coordinates
+    Zx = np.zeros((N, nF + nd))
+    Zx[F, np.arange(nF)] = 1.0
+    command = model.actuator_command(np.zeros(nd)) if nd else np.zeros(0)
+    Cx = np.zeros((len(command), nF + nd))
+    for a, k in enumerate(model.displacement_index):
+        Zx[P, nF + k] = part.D[:, a]
+    for j, k in enumerate(model.force_index):
+        Cx[model.first_force + j, nF + k] = 1.0
+    w = np.zeros(N)
+    dQ = model.derivatives(model.z0, w, command, Zx, np.zeros_like(Zx), Cx)[0][F]
+    dz = Zx[:, nF:].copy()
+    if nF:
+        dz[F] = -np.linalg.solve(dQ[:, :nF], dQ[:, nF:])
+    return model.output_matrix @ dz

@@ -1,7 +1,8 @@
 """
 Formulas written once on a generic scalar: compiled by Numba, evaluated on hyper-dual numbers.
 
-The spatial engine's force chain (``rotation``, ``chain``) is plain Python on scalars: the
+The spatial engine's force chain (``kinematics.spatial``, ``solver.spatial_chain``) is plain
+Python on scalars: the
 arithmetic operators and NumPy's ufuncs (``np.sin``, ``np.sqrt``, ``np.arctan2``), which Numba
 compiles for floats and which ``hyperdual.HyperDual`` implements for numbers carrying exact
 derivatives (Fike and Alonso, AIAA 2011-886; shared/reference, the hyper-dual twist of a joint).
@@ -21,8 +22,8 @@ import types
 
 import numpy as np
 
-from ..hyperdual import HyperDual
-from ..kernels import njit
+from flexure_sim.engine.jit import njit
+from flexure_sim.engine.kinematics.hyperdual import HyperDual
 
 #: Compiled generic functions, by module name: what ``interpreted`` rebinds.
 _REGISTRY: dict[str, list] = {}
