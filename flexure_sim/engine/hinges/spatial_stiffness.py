@@ -29,7 +29,8 @@ the hinge), with
 ``notch``: circular notch of hole diameter D, neck h, plate thickness t: the length runs
 along the hinge frame's x axis, the neck's thickness h(l) = h + 2 r - 2 sqrt(r^2 - l^2)
 (r = D/2, |l| <= r) along y, the width t along z. ``cantilever`` (leaf): length along y,
-thickness along x, width along z (the planar engine's conventions). ``matrix``: a given
+thickness along x, width along z (the planar engine's conventions). ``rod``: a round wire
+flexure (3-D files only), length along y. ``matrix``: a given
 symmetric positive definite 6x6 (``K``). Further models register in ``MODELS`` (``register``):
 the finite-element hinge models (engine/hinges/fe) give their 6x6 there as ``model: fe``.
 """
@@ -125,10 +126,28 @@ def cantilever_stiffness(length: float, thickness: float, width: float, E: float
     return np.diag([k_rx, k_ry, k_rz, k_x, k_y, k_z])
 
 
+def rod_stiffness(length: float, diameter: float, E: float, nu: float) -> np.ndarray:
+    """
+    6x6 stiffness of a round wire (rod) flexure at its centre, length along y.
+
+    Bending about x and z: E I / L; translation along x and z: 1 / (L^3 / (12 E I) + L /
+    (kappa G A)) with Cowper's kappa = 6 (1 + nu) / (7 + 6 nu) of a circle; torsion about y:
+    G J / L (a circle does not warp); axial: E A / L; I = pi d^4 / 64, J = 2 I, A = pi d^2 / 4.
+    """
+    G = planar.shear_modulus(E, nu)
+    area = np.pi * diameter**2 / 4.0
+    inertia = np.pi * diameter**4 / 64.0
+    kappa = 6.0 * (1.0 + nu) / (7.0 + 6.0 * nu)
+    bend = E * inertia / length
+    shift = 1.0 / (length**3 / (12.0 * E * inertia) + length / (kappa * G * area))
+    return np.diag([bend, 2.0 * G * inertia / length, bend, shift, E * area / length, shift])
+
+
 #: 6x6 stiffness models with a geometry: the formula and its arguments (the file's keys).
 MODELS: dict[str, tuple[Callable[..., np.ndarray], tuple[str, ...]]] = {
     "notch": (notch_stiffness, ("D", "h", "t", "E", "nu")),
     "cantilever": (cantilever_stiffness, ("length", "thickness", "width", "E", "nu")),
+    "rod": (rod_stiffness, ("length", "diameter", "E", "nu")),
 }
 
 

@@ -111,7 +111,9 @@ def seeded(values: np.ndarray, directions: np.ndarray) -> np.ndarray:
     """
     values = np.asarray(values, dtype=float)
     out = np.empty(values.shape, dtype=object)
-    flat_v, flat_d = values.ravel(), directions.reshape(values.size, -1)
+    if values.size == 0:
+        return out
+    flat_v, flat_d = values.ravel(), np.asarray(directions).reshape(values.size, -1)
     flat = out.ravel()
     for i in range(values.size):
         row = flat_d[i]
