@@ -47,25 +47,25 @@ def edit(doc, path, value):
     (["space"], "2d", r"space: expected 3d, got '2d'"),
     (["colour"], "red", r"colour: unknown key"),
     (["bodies", 1, "mass"], float("nan"), r"bodies\[1\]\.mass: must be finite"),
-    (["bodies", 1, "inertia"], [1e-6, -1e-6, 1e-6], r"bodies\[1\]\.inertia: inertia matrix is "
-                                                      "not positive definite"),
-    (["hinges", 0, "b", "at"], [0.0, 0.0101, -0.004], r"hinges\[0\]: frames a and b do not "
-                                                       "coincide"),
-    (["hinges", 3, "b", "rpy"], [0.6, -1.5707963267948966, 0.0], r"hinges\[3\]: frames a and "
-                                                                  "b do not coincide"),
+    (["bodies", 1, "inertia"], [1e-6, -1e-6, 1e-6],
+     r"bodies\[1\]\.inertia: inertia matrix is not positive definite"),
+    (["hinges", 0, "b", "at"], [0.0, 0.0101, -0.004],
+     r"hinges\[0\]: frames a and b do not coincide"),
+    (["hinges", 3, "b", "rpy"], [0.6, -1.5707963267948966, 0.0],
+     r"hinges\[3\]: frames a and b do not coincide"),
     (["stiffness_models", "wire"], {"model": "matrix", "K": np.eye(3).tolist()},
      r"stiffness_models\.wire\.K: expected a 6x6 matrix"),
     (["stiffness_models", "wire"], {"model": "matrix", "K": (-np.eye(6)).tolist()},
      r"stiffness_models\.wire: stiffness matrix is not positive definite"),
-    (["stiffness_models", "wire", "model"], "fe", r"stiffness_models\.wire\.model: unknown "
-                                                  "stiffness model 'fe'"),
-    (["constraints", 1, "axis"], "rx", r"constraints\[1\]\.axis: .* \(a displacement drive on "
-                                       "a rotation coordinate"),
-    (["defaults", "damping"], {"B": np.eye(3).tolist()}, r"defaults\.damping\.B: a 3-D hinge's "
-                                                          r"damping is \{t_char"),
+    (["stiffness_models", "wire", "model"], "fe",
+     r"stiffness_models\.wire\.model: unknown stiffness model 'fe'"),
+    (["constraints", 1, "axis"], "rx",
+     r"constraints\[1\]\.axis: .* \(a displacement drive on a rotation coordinate"),
+    (["defaults", "damping"], {"B": np.eye(3).tolist()},
+     r"defaults\.damping\.B: a 3-D hinge's damping is \{t_char"),
     (["defaults", "law"], {"polynomial": "x.yaml"}, r"defaults\.law: expected twistor or twist"),
-    (["outputs", 0, "coordinate"], "theta", r"outputs\[0\]\.coordinate: expected one of x, y, "
-                                            "z, rx, ry, rz"),
+    (["outputs", 0, "coordinate"], "theta",
+     r"outputs\[0\]\.coordinate: expected one of x, y, z, rx, ry, rz"),
 ])
 def test_a_bad_3d_file_names_the_key(path, value, message):
     with pytest.raises(ConfigError, match=message):
@@ -73,20 +73,20 @@ def test_a_bad_3d_file_names_the_key(path, value, message):
 
 
 @pytest.mark.parametrize("name, path, value, message", [
-    ("microstage", ["stiffness_models", "notch"], {"model": "matrix", "Ko": 2.5,
-                                                  "Kt": [1.6e8, 1.7e7]},
+    ("microstage", ["stiffness_models", "notch"],
+     {"model": "matrix", "Ko": 2.5, "Kt": [1.6e8, 1.7e7]},
      r"stiffness_models\.notch\.model: a matrix stiffness \(3x3\) has no out-of-plane"),
-    ("microstage", ["constraints", 1], {"type": "drive", "body": "body6", "axis": "theta",
-                                        "response_time": 1e-3, "stroke": [0, 1e-3],
-                                        "slew_rate": 1},
+    ("microstage", ["constraints", 1],
+     {"type": "drive", "body": "body6", "axis": "theta", "response_time": 1e-3,
+      "stroke": [0, 1e-3], "slew_rate": 1},
      r"constraints\[1\]\.axis: a displacement drive on theta"),
     ("fourbar_cantilever", [], None, r"constraints\[1\]: a sine_rate constraint"),
     ("microstage_realistic", [], None, r"damping: the mechanism damping block is not supported"),
     ("microstage", ["hinges", 2, "damping"], {"B": np.eye(3).tolist()},
      r"hinges\[2\]\.damping\.B: a 3-D hinge's damping"),
 ])
-def test_a_planar_file_opened_in_3d_refuses_what_has_no_out_of_plane_meaning(name, path,
-                                                                              value, message):
+def test_a_planar_file_opened_in_3d_refuses_what_has_no_out_of_plane_meaning(
+        name, path, value, message):
     doc = planar(name)
     if path:
         edit(doc, path, value)

@@ -82,8 +82,12 @@ def test_phi_rate_is_the_inverse_right_jacobian(phi):
 
 
 def test_interpreted_binding_gives_exact_derivatives_of_the_compiled_formula():
-    """The hyper-dual binding of quaternion_exp: its values are the compiled ones, its
-    derivatives the central differences of the compiled function (to their truncation)."""
+    """
+    The hyper-dual binding of quaternion_exp: exact derivatives of the compiled formula.
+
+    Its values are the compiled ones, its derivatives the central differences of the compiled
+    function (to their truncation).
+    """
     ns = generic.interpreted(rot)
     for phi in vectors()[3:]:
         seeds = generic.seeded(phi, np.eye(3))
@@ -117,9 +121,11 @@ def _tumbler(inertia):
 
 def test_a_tumbling_body_follows_the_quaternion_equations_through_150_degrees():
     """
-    A free asymmetric body (held at its centre by a hinge without rotational stiffness)
-    spinning about an unstable axis, against DOP853 on dq/dt = q (0, omega) / 2 and Euler's
-    equations: the rotation-vector coordinates are singularity-free through large turns.
+    A free body spinning about an unstable axis turns through 150 degrees as DOP853 says.
+
+    The body is held at its centre by a hinge without rotational stiffness; the reference
+    integrates dq/dt = q (0, omega) / 2 and Euler's equations. The rotation-vector coordinates
+    are singularity-free through large turns.
     """
     inertia = np.array([1e-4, 2e-4, 3e-4])
     sim = SpatialSimulation(spatial_from_dict(_tumbler(inertia)), dt=1e-3)

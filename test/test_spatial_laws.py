@@ -28,7 +28,7 @@ def hat(w):
 
 
 def spd(scale_r=2.0, scale_t=3e6):
-    """A full symmetric positive definite 6x6 stiffness with coupling terms."""
+    """Return a full symmetric positive definite 6x6 stiffness with coupling terms."""
     A = RNG.normal(size=(6, 6))
     S = np.diag([scale_r] * 3 + [scale_t] * 3) ** 0.5
     return S @ (A @ A.T + 6 * np.eye(6)) @ S / 6
@@ -69,8 +69,12 @@ def deflections(n=6, angle=np.deg2rad(50), shift=2e-3):
 
 @pytest.mark.parametrize("law", LAWS)
 def test_potential_at_large_rotations_equals_the_independent_formula(law):
-    """Tens of degrees about random axes: U from the engine's quaternion products equals U
-    written through the rotation matrix (twistor) or the matrix logarithm (twist)."""
+    """
+    Tens of degrees about random axes: U equals the independent formula.
+
+    U from the engine's quaternion products equals U written through the rotation matrix
+    (twistor) or the matrix logarithm (twist).
+    """
     K = spd()
     L = SpatialLaw(law, K, np.zeros((6, 6)))
     for H in deflections():
@@ -102,8 +106,12 @@ def test_wrench_is_the_derivative_of_the_potential_under_right_perturbation(law)
 
 @pytest.mark.parametrize("law", LAWS)
 def test_rates_and_damping_wrench_follow_the_coordinate_map(law):
-    """c_dot = Lambda delta_dot with Lambda from differences of the independent coordinates;
-    the damping wrench is Lambda^T C c_dot and dissipates c_dot^T C c_dot."""
+    """
+    Rates, damping wrench and dissipated power follow the coordinate map.
+
+    c_dot = Lambda delta_dot with Lambda from differences of the independent coordinates; the
+    damping wrench is Lambda^T C c_dot and dissipates c_dot^T C c_dot.
+    """
     Bm = spd(1e-3, 1e3)
     L = SpatialLaw(law, np.zeros((6, 6)), Bm)
     coords = twistor_of if law == "twistor" else twist_of
@@ -124,8 +132,12 @@ def test_rates_and_damping_wrench_follow_the_coordinate_map(law):
 
 @pytest.mark.parametrize("law", LAWS)
 def test_planar_deflections_give_the_planar_law(law):
-    """A deflection in the plane: the spatial law's energy and wrench are the planar law's
-    (laws.quadratic) on (rz, x, y); the out-of-plane wrench is exactly zero."""
+    """
+    A deflection in the plane gives the planar law.
+
+    The spatial law's energy and wrench are the planar law's (laws.quadratic) on (rz, x, y);
+    the out-of-plane wrench is exactly zero.
+    """
     K6, B6 = np.diag([5.0, 6.0, 2.5, 1.6e8, 1.7e7, 8e7]), np.zeros((6, 6))
     K6[2, 3] = K6[3, 2] = 1e3
     planar = QuadraticLaw(law, K6[2:5, 2:5], np.zeros((3, 3)))
@@ -167,8 +179,12 @@ def frames(R=np.eye(3), p=np.zeros(3)):
 
 @pytest.mark.parametrize("law", LAWS)
 def test_energy_and_forces_do_not_depend_on_the_hinge_frame_nor_on_which_body_is_a(law):
-    """Frames moved and turned by (R, p) on both bodies with K' = Ad^T K Ad, and A and B
-    swapped: the same energy and generalized forces (to 1e-12) at a state 30 degrees off."""
+    """
+    Frames moved, turned or swapped: the same energy and forces.
+
+    Frames moved and turned by (R, p) on both bodies with K' = Ad^T K Ad, and A and B swapped:
+    the same energy and generalized forces (to 1e-12) at a state 30 degrees off.
+    """
     K = spd()
     R = Rotation.from_rotvec([0.4, -1.1, 0.7]).as_matrix()
     p = np.array([3e-3, -2e-3, 5e-3])
@@ -190,8 +206,12 @@ def test_energy_and_forces_do_not_depend_on_the_hinge_frame_nor_on_which_body_is
 
 @pytest.mark.parametrize("law", LAWS)
 def test_generalized_forces_are_minus_the_gradient_and_power_is_the_energy_rate(law):
-    """Q = -dU/d(p, body rotation) by central differences on the potential; the hinge's
-    conservative power is -dU/dt along the motion, its dissipated power -Q_damping . w."""
+    """
+    Q = -dU/dq, and the hinge powers are the energy rates.
+
+    Q = -dU/d(p, body rotation) by central differences on the potential; the hinge's
+    conservative power is -dU/dt along the motion, its dissipated power -Q_damping . w.
+    """
     K = spd()
     model = two_bodies(law, K, *frames())
     z = model.z0.copy()

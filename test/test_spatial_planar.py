@@ -88,8 +88,11 @@ def test_stepping_the_stage_gives_the_planar_motion_and_no_out_of_plane_motion()
 
 
 def fourbar_with_a_torque(law):
-    """The cantilever four-bar (config/fourbar_cantilever.yaml) with its crank turned by a
-    torque (a force drive on theta) instead of the prescribed rate."""
+    """
+    Return the cantilever four-bar with its crank turned by a torque.
+
+    config/fourbar_cantilever.yaml, with a force drive on theta instead of the prescribed rate.
+    """
     doc = copy.deepcopy(read_yaml(resolve_mechanism_path("fourbar_cantilever"), ConfigError))
     doc["defaults"]["law"] = law
     doc["constraints"][1] = {"type": "force", "name": "torque", "body": "link2",
@@ -100,8 +103,11 @@ def fourbar_with_a_torque(law):
 
 @pytest.mark.parametrize("law", ["twistor", "twist"])
 def test_large_in_plane_rotations_of_a_four_bar_are_the_planar_ones(law):
-    """A torque turning the four-bar's crank by about 20 degrees: large rotations of every
-    link and hinge, the same in both engines, nothing out of the plane."""
+    """
+    A torque turns the crank by 21 degrees: the planar result, nothing out of the plane.
+
+    Large rotations of every link and hinge, the same in both engines.
+    """
     doc = fourbar_with_a_torque(law)
     planar = Simulation(mechanism_from_dict(doc))
     spatial = SpatialSimulation(spatial_from_dict(doc))

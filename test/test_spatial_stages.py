@@ -95,7 +95,7 @@ def test_tiptilt_modes_are_the_six_dof_model():
 
 
 def platform_on_its_hinges():
-    """The stage opened in 3-D, every body but the platform held, a force drive along z."""
+    """Return the stage in 3-D, every body but the platform held, a force drive along z."""
     doc = copy.deepcopy(read_yaml(resolve_mechanism_path("microstage"), ConfigError))
     doc["constraints"] = [{"type": "fixed", "body": b}
                           for b in ("body1", "body2", "body3", "body5", "body6")]
@@ -109,10 +109,12 @@ def platform_on_its_hinges():
 
 def test_microstage_platform_z_stiffness_and_modes_by_hand():
     """
+    The platform on its two hinges: z stiffness and out-of-plane modes by hand.
+
     Hinges e and f at (-+14 mm, 0) from the platform's centre, frames unrotated, 6x6 diagonal
     (notch, t = 20 mm): k_z,platform = 2 k_z; rotation about x (along the line of the two
-    hinges) twists both: 2 k_rx; about y it bends both and moves them along z by -+a theta:
-    2 (k_ry + a^2 k_z). Inertia of the plate rule: I_xx = I_yy = I_zz / 2 + m t^2 / 12.
+    hinges) twists both: 2 k_rx; about y it bends both and moves them along z by -+a theta: 2
+    (k_ry + a^2 k_z). Inertia of the plate rule: I_xx = I_yy = I_zz / 2 + m t^2 / 12.
     """
     K = s6.notch_stiffness(0.003, 0.00025, 0.02, 69.0e9, 0.33)
     k_rx, k_ry, k_z = K[0, 0], K[1, 1], K[5, 5]

@@ -22,7 +22,7 @@ RNG = np.random.default_rng(7)
 
 
 def disturbed(model):
-    """A state a little away from rest: mm-scale and degree-scale offsets, random rates."""
+    """Return a state a little away from rest: mm and degree offsets, random rates."""
     nF = len(model.part.free)
     rot = model.part.free % 6 >= 3
     zF = model.z0[model.part.free] + np.where(rot, 0.02, 2e-5) * RNG.normal(size=nF)

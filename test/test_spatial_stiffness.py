@@ -66,8 +66,12 @@ def test_torsion_constant_is_timoshenko_and_goodiers_table(ratio, beta):
 
 @pytest.mark.parametrize("length", [0.002, 0.005, 0.01, 0.03, 0.1, 0.5])
 def test_leaf_torsion_is_within_the_stated_band_of_the_exact_built_in_strip(length):
-    """Saint-Venant plus restrained warping: <= 11 % below the exact solution of a strip
-    built in at both ends, (G J / L) / (1 - 2 tanh(x/2)/x), x = L sqrt(G J / (E C_w))."""
+    """
+    Leaf torsion is within 11 % below the exact built-in strip.
+
+    Saint-Venant plus restrained warping against the exact solution of a strip built in at both
+    ends, (G J / L) / (1 - 2 tanh(x/2)/x), x = L sqrt(G J / (E C_w)).
+    """
     width, thickness = 0.01, 0.0005
     J = s6.torsion_constant(width, thickness)
     Cw = width**3 * thickness**3 / 144
@@ -120,8 +124,10 @@ def test_a_torsion_leaf_twists_as_beam_theory_and_its_law_say(law):
 
 def timoshenko_element(L, EA, GJ, EIy, EIz, kGAy, kGAz):
     """
-    12x12 stiffness of a 3-D Timoshenko beam along its local x axis (Przemieniecki, Theory of
-    Matrix Structural Analysis, 1968, eq. 5.116), dofs (u, v, w, rx, ry, rz) at each end.
+    Return the 12x12 stiffness of a 3-D Timoshenko beam along its local x axis.
+
+    Przemieniecki, Theory of Matrix Structural Analysis, 1968, eq. 5.116; dofs (u, v, w, rx,
+    ry, rz) at each end.
     """
     K = np.zeros((12, 12))
     K[0, 0] = K[6, 6] = EA / L
@@ -150,10 +156,12 @@ def rigid(r):
 
 def test_spatial_parallelogram_is_the_timoshenko_frame_model():
     """
-    A platform on two parallel leaves (along y, 20 mm apart along x, the second also 6 mm
-    along z): its 6x6 stiffness at the platform's mass centre from the engine's exact
-    linearisation equals the stiffness of the same two leaves as Timoshenko beam elements
-    clamped in the ground and the platform, to 1e-9.
+    A spatial parallelogram is the Timoshenko frame model.
+
+    A platform on two parallel leaves (along y, 20 mm apart along x, the second also 6 mm along
+    z): its 6x6 stiffness at the platform's mass centre from the engine's exact linearisation
+    equals the stiffness of the same two leaves as Timoshenko beam elements clamped in the
+    ground and the platform, to 1e-9.
     """
     L, t, w = 0.02, 0.0005, 0.006
     doc = {
