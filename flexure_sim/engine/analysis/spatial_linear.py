@@ -134,3 +134,15 @@ def modes(lin: SpatialLinearModel) -> Modes:
     omega = np.sqrt(w2)
     modal = np.einsum("ik,ij,jk->k", shapes, lin.damping, shapes) / (2.0 * omega)
     return Modes(omega / (2 * np.pi), shapes, lin.free, poles, mag / (2 * np.pi), zeta, modal)
+
+
+def out_of_plane_shares(lin: SpatialLinearModel, md: Modes) -> np.ndarray:
+    """
+    Return each mode's share of kinetic energy in the out-of-plane coordinates (z, rx, ry).
+
+    phi_O^T (M phi)_O for the M-orthonormal shape phi (the shares of all coordinates sum to 1):
+    1 for a mode of a planar stage that moves only out of its plane, 0 for an in-plane one.
+    """
+    out = np.array([k % 6 in (2, 3, 4) for k in lin.free])
+    weighted = lin.mass_matrix @ md.shapes
+    return np.einsum("ik,ik->k", md.shapes[out], weighted[out])

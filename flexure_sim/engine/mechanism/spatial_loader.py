@@ -62,6 +62,12 @@ def load_spatial(name_or_path: str | Path) -> Mechanism:
     return spatial_from_dict(read_yaml(path, ConfigError), source=str(path))
 
 
+def is_spatial(name_or_path: str | Path) -> bool:
+    """Tell whether a built-in or a file is a 3-D mechanism (``space: 3d``)."""
+    data = read_yaml(resolve_mechanism_path(name_or_path), ConfigError)
+    return isinstance(data, dict) and "space" in data
+
+
 def spatial_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
     """Validate a parsed document (3-D, or planar opened in 3-D) and build the Mechanism."""
     if isinstance(data, dict) and "space" in data:

@@ -158,6 +158,11 @@ class Mechanism:
         raise ValueError(f"unknown hinge {name!r} in mechanism {self.name!r}")
 
     @property
+    def all_outputs(self) -> tuple[Output, ...]:
+        """Return the outputs (as the planar ``Mechanism.all_outputs``)."""
+        return self.outputs
+
+    @property
     def drives(self) -> tuple[Drive, ...]:
         """Every drive, in the order of the constraints."""
         return tuple(c for c in self.constraints if isinstance(c, Drive))

@@ -96,3 +96,34 @@ def static_gain(model: SpatialModel) -> np.ndarray:
     if nF:
         dz[F] = -np.linalg.solve(dQ[:, :nF], dQ[:, nF:])
     return model.output_matrix @ dz
+
+
+def body_stiffness(model: SpatialModel, body: str, u=None) -> np.ndarray:
+    """
+    Return the 6x6 stiffness a load on ``body`` sees at the equilibrium at drive inputs u.
+
+    The wrench (force in the root frame, moment in body coordinates, at the body's mass
+    centre) per unit displacement (translation, small rotation in body coordinates) with every
+    other free coordinate relaxed: the inverse of the body's block of K_FF^-1, K the tangent
+    stiffness -dQ_F/dz_F dz_F/dtheta (symmetrised; at rest dz_F/dtheta = I). The body's six
+    coordinates must be free.
+    """
+    i = model.mechanism.body_index(body)
+    part = model.part
+    F = list(part.free)
+    missing = [k for k in range(6 * i, 6 * i + 6) if k not in F]
+    if missing:
+        raise ValueError(f"body {body!r}: its coordinates are not all free (held by a "
+                         "constraint), so no load on it moves it")
+    st = static(model, np.zeros(len(model.drives)) if u is None else u)
+    command = model.actuator_command(st.inputs) if model.drives else np.zeros(0)
+    nF = len(F)
+    Zx = np.zeros((model.n_coordinates, 2 * nF))
+    Wx = np.zeros_like(Zx)
+    Zx[F, np.arange(nF)] = 1.0
+    Wx[F, nF + np.arange(nF)] = 1.0
+    dQ, dzdot, _ = model.derivatives(st.z, np.zeros(model.n_coordinates), command, Zx, Wx)
+    K = -dQ[F, :nF] @ dzdot[F, nF:]
+    K = 0.5 * (K + K.T)
+    rows = [F.index(k) for k in range(6 * i, 6 * i + 6)]
+    return np.linalg.inv(np.linalg.inv(K)[np.ix_(rows, rows)])
