@@ -94,7 +94,23 @@ def angle_factor(m, sigma):
     if real_part(m) < ANGLE_SERIES and real_part(sigma) > 0.0:
         return 2.0 + m * (1.0 / 3.0 + m * (3.0 / 20.0 + m * (5.0 / 56.0)))
     n = np.sqrt(m)
-    return 2.0 * np.arctan2(n, sigma) / n
+    return 2.0 * half_angle(n, sigma) / n
+
+
+@generic
+def half_angle(n, sigma):
+    """
+    Return atan2(n, sigma) for n >= 0, in [0, pi], through arctan only.
+
+    arctan(n / sigma) where |sigma| >= n (plus pi for sigma < 0), pi/2 - arctan(sigma / n)
+    elsewhere: each branch is analytic, so the complex step and hyper-dual numbers pass it
+    (NumPy's arctan2 takes neither complex numbers nor a branch-free derivative).
+    """
+    if abs(real_part(sigma)) >= real_part(n):
+        if real_part(sigma) > 0.0:
+            return np.arctan(n / sigma)
+        return np.arctan(n / sigma) + np.pi
+    return 0.5 * np.pi - np.arctan(sigma / n)
 
 
 @generic

@@ -62,19 +62,9 @@ def _row3(a, i):
 
 
 @generic
-def _matmul(A, B):
-    """Return A B of 9-tuple matrices."""
-    return (A[0] * B[0] + A[1] * B[3] + A[2] * B[6], A[0] * B[1] + A[1] * B[4] + A[2] * B[7],
-            A[0] * B[2] + A[1] * B[5] + A[2] * B[8], A[3] * B[0] + A[4] * B[3] + A[5] * B[6],
-            A[3] * B[1] + A[4] * B[4] + A[5] * B[7], A[3] * B[2] + A[4] * B[5] + A[5] * B[8],
-            A[6] * B[0] + A[7] * B[3] + A[8] * B[6], A[6] * B[1] + A[7] * B[4] + A[8] * B[7],
-            A[6] * B[2] + A[7] * B[5] + A[8] * B[8])
-
-
-@generic
-def hinge(h, z, w, quat, rot, geometry, Q, deflection, wrench, power):
+def hinge(h, z, w, quat, rot, geometry, Q, deflection, wrench, power, report):
     """
-    Add hinge h's generalized forces to Q; fill its deflection, wrench and power rows.
+    Add hinge h's generalized forces to Q; with ``report`` fill its deflection, wrench, power.
 
     ``geometry`` = (ia, ib, ca, cb, qa, qb, Ra, Rb, kind, W, C) (``spatial_model.SpatialModel``).
     deflection[h] = (rotation vector of R, p) of D; wrench[h] = -m_b (the wrench the hinge
@@ -91,30 +81,33 @@ def hinge(h, z, w, quat, rot, geometry, Q, deflection, wrench, power):
     wb = rotate(RB, _row3(cb, h))
     d = (pB[0] + wb[0] - pA[0] - wa[0], pB[1] + wb[1] - pA[1] - wa[1],
          pB[2] + wb[2] - pA[2] - wa[2])
-    Rfa = _matmul(RA, _row9(Ra, h))
-    Rfb = _matmul(RB, _row9(Rb, h))
+    Rlb = _row9(Rb, h)
     qr = qconj_mul(qmul(_row4(quat, A), _row4(qa, h)), qmul(_row4(quat, B), _row4(qb, h)))
-    p = rotate_back(Rfa, d)
+    p = rotate_back(_row9(Ra, h), rotate_back(RA, d))
     OA = rotate(RA, (w[6 * A + 3], w[6 * A + 4], w[6 * A + 5]))
     OB = rotate(RB, (w[6 * B + 3], w[6 * B + 4], w[6 * B + 5]))
     va, vb, vd = cross(OA, wa), cross(OB, wb), cross(OA, d)
     rel = (w[6 * B] + vb[0] - w[6 * A] - va[0] - vd[0],
            w[6 * B + 1] + vb[1] - w[6 * A + 1] - va[1] - vd[1],
            w[6 * B + 2] + vb[2] - w[6 * A + 2] - va[2] - vd[2])
-    dw = rotate_back(Rfb, (OB[0] - OA[0], OB[1] - OA[1], OB[2] - OA[2]))
-    dv = rotate_back(Rfb, rel)
+    dw = rotate_back(Rlb, rotate_back(RB, (OB[0] - OA[0], OB[1] - OA[1], OB[2] - OA[2])))
+    dv = rotate_back(Rlb, rotate_back(RB, rel))
     c, cdot, m, me = law_terms(kind[h], qr, p, dw, dv, W, C, h)
-    F = rotate(Rfb, (m[3], m[4], m[5]))
-    M = rotate(Rfb, (m[0], m[1], m[2]))
-    lb = cross(wb, F)
+    # m_b in body B's coordinates, then F and the couple in the root frame
+    fb = rotate(Rlb, (m[3], m[4], m[5]))
+    mb = rotate(Rlb, (m[0], m[1], m[2]))
+    lb = cross(_row3(cb, h), fb)
+    F = rotate(RB, fb)
+    M = rotate(RB, mb)
     la = cross((wa[0] + d[0], wa[1] + d[1], wa[2] + d[2]), F)
-    tb = rotate_back(RB, (M[0] + lb[0], M[1] + lb[1], M[2] + lb[2]))
     ta = rotate_back(RA, (M[0] + la[0], M[1] + la[1], M[2] + la[2]))
     for k in range(3):
         Q[6 * A + k] += F[k]
         Q[6 * B + k] -= F[k]
         Q[6 * A + 3 + k] += ta[k]
-        Q[6 * B + 3 + k] -= tb[k]
+        Q[6 * B + 3 + k] -= mb[k] + lb[k]
+    if not report:
+        return
     e = _energy(W, h, c)
     pc = -(me[0] * dw[0] + me[1] * dw[1] + me[2] * dw[2]
            + me[3] * dv[0] + me[4] * dv[1] + me[5] * dv[2])
@@ -149,29 +142,32 @@ def _energy(M, h, c):
 
 
 @generic
-def terms(z, w, command, first_force, constants, Q, zdot, deflection, wrench, power):
+def terms(z, w, command, first_force, constants, Q, zdot, deflection, wrench, power, report):
     """
     Fill Q (6 nb) with every generalized force at (z, w) and zdot with dz/dt.
 
-    Return the hinges' total potential energy and dissipated power. ``constants`` =
+    With ``report`` also each hinge's rows of deflection, wrench and power (``hinge``), and
+    return the hinges' total potential energy and dissipated power (else 0, 0: what stepping
+    needs is Q and zdot only). ``constants`` =
     (q0, inertia, geometry, force_body, force_axis, force_torque): rest quaternions (nb, 4),
     inertia tensors (nb, 9), the hinge geometry (``hinge``), and per force drive j its body,
     root axis e_j and whether it is a torque; its force is command[first_force + j].
     """
     q0, inertia, geometry, force_body, force_axis, force_torque = constants
     nb = q0.shape[0]
-    quat = buffer((nb, 4))
-    rot = buffer((nb, 9))
+    quat = buffer((nb, 4), z)
+    rot = buffer((nb, 9), z)
     bodies(z, q0, quat, rot)
     for k in range(6 * nb):
         Q[k] = 0.0 * z[k]
     for h in range(geometry[0].shape[0]):
-        hinge(h, z, w, quat, rot, geometry, Q, deflection, wrench, power)
+        hinge(h, z, w, quat, rot, geometry, Q, deflection, wrench, power, report)
     energy = 0.0 * z[0]
     dissipation = 0.0 * z[0]
-    for h in range(geometry[0].shape[0]):
-        energy = energy + power[h, 0]
-        dissipation = dissipation + power[h, 2]
+    if report:
+        for h in range(geometry[0].shape[0]):
+            energy = energy + power[h, 0]
+            dissipation = dissipation + power[h, 2]
     for i in range(nb):
         om = (w[6 * i + 3], w[6 * i + 4], w[6 * i + 5])
         J = _row9(inertia, i)

@@ -27,7 +27,7 @@ from flexure_sim.engine.kinematics import spatial as rotation
 from flexure_sim.engine.laws import spatial as coordinates
 from flexure_sim.engine.solver import spatial_chain as chain
 from flexure_sim.engine.solver import step_loop as stepping
-from flexure_sim.engine.solver.step_energy import AUX_DISSIPATION, AUX_ENERGY, AUX_LOAD
+from flexure_sim.engine.solver.step_energy import AUX_LOAD
 
 
 @njit(cache=True)
@@ -35,13 +35,16 @@ def spatial_rhs(y, t, command, args):
     """
     Return F(y, t) and the energy rates (``step_energy.AUX_*``) of a spatial mechanism.
 
+    The energy rates are the drives' loads only: the steps' energies are not integrated in 3-D
+    (``step_energy.NO_ENERGY``), so the chain runs without its reports (``spatial_chain.terms``).
+
     ``args`` (``SpatialModel.kernel_args``) = (free, prescribed, zP0, D, tau, sine_index,
-    sine_amp, sine_w, sine_phase, first_force, constants, inverse_mass, inverse_inertia,
-    inertia): the partition and the drives as the planar kernel's, ``spatial_chain.terms``'s
-    constants, 1/m per body, I_b^-1 and I_b (nb, 9).
+    sine_amp, sine_w, sine_phase, first_force, constants, inverse_mass, inverse_inertia): the
+    partition and the drives as the planar kernel's, ``spatial_chain.terms``'s constants, 1/m
+    per body and I_b^-1 (nb, 9).
     """
     (free, prescribed, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, first_force,
-     constants, inverse_mass, inverse_inertia, inertia) = args
+     constants, inverse_mass, inverse_inertia) = args
     nF = free.shape[0]
     nd = tau.shape[0]
     u = y[2 * nF:2 * nF + nd]
@@ -59,24 +62,17 @@ def spatial_rhs(y, t, command, args):
         w[prescribed[i]] = vP[i]
     Q = np.empty(N)
     zdot = np.empty(N)
-    nh = constants[2][0].shape[0]
-    potential, dissipation = chain.terms(z, w, command, first_force, constants, Q, zdot,
-                                         np.empty((nh, 6)), np.empty((nh, 6)),
-                                         np.empty((nh, 3)))
+    none = np.empty((0, 6))
+    chain.terms(z, w, command, first_force, constants, Q, zdot, none, none, none, False)
     acc = np.empty(N)
-    kinetic = 0.0
     for i in range(nb):
         for k in range(3):
             acc[6 * i + k] = inverse_mass[i] * Q[6 * i + k]
-            kinetic += 0.5 * w[6 * i + k] * w[6 * i + k] / inverse_mass[i]
         for k in range(3):
             s = 0.0
-            h = 0.0
             for j in range(3):
                 s += inverse_inertia[i, 3 * k + j] * Q[6 * i + 3 + j]
-                h += inertia[i, 3 * k + j] * w[6 * i + 3 + j]
             acc[6 * i + 3 + k] = s
-            kinetic += 0.5 * w[6 * i + 3 + k] * h
     m = y.shape[0]
     out = np.zeros(m + AUX_LOAD + nd)
     for i in range(nF):
@@ -88,9 +84,47 @@ def spatial_rhs(y, t, command, args):
         for i in range(prescribed.shape[0]):
             load += D[i, k] * Q[prescribed[i]]
         out[m + AUX_LOAD + k] = load
-    out[m + AUX_DISSIPATION] = dissipation
-    out[m + AUX_ENERGY] = kinetic + potential
     return out[:m], out[m:]
+
+
+#: The complex step (module docstring of ``kinematics.generic``): small enough that its square
+#: is lost against every value (1e-80), large enough that h times any derivative stays far
+#: from underflow.
+COMPLEX_STEP = 1e-40
+
+
+@njit(cache=True)
+def complex_step(z, w, command, Zx, Wx, Cx, first_force, constants, n_hinges):
+    """
+    Return dQ/ds (N, m), d(dz/dt)/ds (N, m) and d(wrenches)/ds (n_hinges, 6, m), exact.
+
+    Along m seeds s with dz/ds = Zx, dw/ds = Wx and d(command)/ds = Cx: per seed one
+    evaluation of ``spatial_chain.terms`` at (z + i h Zx_j, w + i h Wx_j, command + i h Cx_j),
+    whose imaginary parts divided by h are the derivatives (h = ``COMPLEX_STEP``).
+    """
+    N, m = z.shape[0], Zx.shape[1]
+    h = COMPLEX_STEP
+    dQ, dz, dW = np.empty((N, m)), np.empty((N, m)), np.empty((n_hinges, 6, m))
+    zc, wc = np.empty(N, np.complex128), np.empty(N, np.complex128)
+    cc = np.empty(command.shape[0], np.complex128)
+    Q, zdot = np.empty(N, np.complex128), np.empty(N, np.complex128)
+    defl = np.empty((n_hinges, 6), np.complex128)
+    wrench = np.empty((n_hinges, 6), np.complex128)
+    power = np.empty((n_hinges, 3), np.complex128)
+    for j in range(m):
+        for i in range(N):
+            zc[i] = complex(z[i], h * Zx[i, j])
+            wc[i] = complex(w[i], h * Wx[i, j])
+        for i in range(command.shape[0]):
+            cc[i] = complex(command[i], h * Cx[i, j])
+        chain.terms(zc, wc, cc, first_force, constants, Q, zdot, defl, wrench, power, True)
+        for i in range(N):
+            dQ[i, j] = Q[i].imag / h
+            dz[i, j] = zdot[i].imag / h
+        for k in range(n_hinges):
+            for c in range(6):
+                dW[k, c, j] = wrench[k, c].imag / h
+    return dQ, dz, dW
 
 
 @njit(cache=True)

@@ -5,12 +5,13 @@ The planar engine's structure in 3-D (``solver.model``): constraints by exact el
 prescribed coordinates (a fixed body, a drive's body, a prescribed translation coordinate),
 so the state is y = (z_F, w_F, u) with z six coordinates per body and w its quasi-velocities
 (``solver.spatial_chain``), u one actuator output per displacement drive (a first-order lag of
-its command).
-The mass matrix is constant and block diagonal, so M_F dw_F/dt = Q_F(z, w) exactly.
+its command). The mass matrix is constant and block diagonal, so M_F dw_F/dt = Q_F(z, w)
+exactly.
 
-Exact Jacobians: one hyper-dual evaluation of the same ``spatial_chain.terms`` the kernel compiles
-(``kinematics.generic``), seeded along the state's directions, gives dQ/dy and d(dz/dt)/dy to
-rounding.
+Exact Jacobians: the same ``spatial_chain.terms`` the kernel compiles, evaluated on complex
+numbers one seed at a time (the complex step, ``spatial_kernels.complex_step``) or on
+hyper-dual numbers seeded along all the state's directions at once (``kinematics.generic``),
+gives dQ/dy and d(dz/dt)/dy to rounding.
 """
 from __future__ import annotations
 
@@ -102,8 +103,7 @@ class SpatialModel(DriveMixin):
                             self.part.prescribed.astype(np.int64), *self.motion[1:3],
                             self.motion[0], *self.motion[3:], self.first_force,
                             self.constants, 1.0 / masses,
-                            np.linalg.inv(self.inertia).reshape(nb, 9),
-                            self.inertia.reshape(nb, 9).copy())
+                            np.linalg.inv(self.inertia).reshape(nb, 9))
         pos = self.z0.reshape(nb, 6)[:, :3]
         self.length_scale = max(1e-3, float(np.max(np.ptp(pos, axis=0)))) if nb > 1 else 1.0
         self.atol = self._iteration_atol()
@@ -204,15 +204,34 @@ class SpatialModel(DriveMixin):
         Q, zdot = np.empty(N), np.empty(N)
         out = np.empty((nh, 6)), np.empty((nh, 6)), np.empty((nh, 3))
         energy, diss = chain.terms(np.asarray(z, dtype=float), np.asarray(w, dtype=float),
-                                   command, self.first_force, self.constants, Q, zdot, *out)
+                                   command, self.first_force, self.constants, Q, zdot, *out,
+                                   True)
         return (Q, zdot, *out, float(energy), float(diss))
 
     def derivatives(self, z, w, command, Zx: np.ndarray, Wx: np.ndarray,
                     Cx: Optional[np.ndarray] = None):
         """
-        Return dQ/ds, d(dz/dt)/ds and d(wrenches)/ds along seeds s (exact, hyper-dual).
+        Return dQ/ds, d(dz/dt)/ds and d(wrenches)/ds along seeds s (exact, complex step).
 
-        Zx (N, m), Wx (N, m): dz/ds and dw/ds; Cx (n_command, m): d(kernel command)/ds.
+        Zx (N, m), Wx (N, m): dz/ds and dw/ds; Cx (n_command, m): d(kernel command)/ds. The
+        compiled ``spatial_kernels.complex_step`` of ``spatial_chain.terms``;
+        ``derivatives_hyperdual`` gives the same from the interpreted binding.
+        """
+        command = np.asarray(self.kernel_command(0.0 if command is None else command),
+                             dtype=float)
+        Cx = np.zeros((len(command), Zx.shape[1])) if Cx is None else Cx
+        return kernels.complex_step(
+            np.asarray(z, dtype=float), np.asarray(w, dtype=float), command,
+            np.ascontiguousarray(Zx, dtype=float), np.ascontiguousarray(Wx, dtype=float),
+            np.ascontiguousarray(Cx, dtype=float).reshape(len(command), Zx.shape[1]),
+            self.first_force, self.constants, len(self.mechanism.hinges))
+
+    def derivatives_hyperdual(self, z, w, command, Zx: np.ndarray, Wx: np.ndarray,
+                              Cx: Optional[np.ndarray] = None):
+        """
+        Return what ``derivatives`` returns, from hyper-dual numbers (the interpreted binding).
+
+        About 100 times slower than the complex step; the two agree to rounding (a test).
         """
         m = Zx.shape[1]
         ns = generic.interpreted(chain)
@@ -224,7 +243,8 @@ class SpatialModel(DriveMixin):
         Q, zdot = generic.zeros(N), generic.zeros(N)
         wrench = generic.zeros((nh, 6))
         ns.terms(generic.seeded(z, Zx), generic.seeded(w, Wx), cmd, self.first_force,
-                 self.constants, Q, zdot, generic.zeros((nh, 6)), wrench, generic.zeros((nh, 3)))
+                 self.constants, Q, zdot, generic.zeros((nh, 6)), wrench, generic.zeros((nh, 3)),
+                 True)
         return (generic.derivatives_of(Q, m), generic.derivatives_of(zdot, m),
                 generic.derivatives_of(wrench, m))
 
