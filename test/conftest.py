@@ -1,5 +1,15 @@
-"""Shared test fixtures. The repository root is importable so tests run against the source tree."""
+"""
+Shared test fixtures and markers. The repository root is importable: tests run the source tree.
+
+Markers (a fast loop: ``scripts/run_tests.sh -m "not ros and not slow"``):
+- ``ros``: set here on every test of a module that uses ROS 2 (rclpy, a DDS peer, the node or
+  the ros2 tools as processes, colcon): found from the module's imports, so a new test module
+  is marked without a list to keep;
+- ``slow``: set by hand (``@pytest.mark.slow``) on tests that take seconds on a fast machine.
+The whole suite, both included, is what CI runs.
+"""
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -14,6 +24,22 @@ if str(ROOT) not in sys.path:
 #: Read when the first participant is created; node subprocesses do not inherit it (node_env).
 FAST_ACK_PROFILE = str(ROOT / "config" / "fastdds_fast_ack.xml")
 os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", FAST_ACK_PROFILE)
+
+#: A test module that matches uses ROS 2 (see the module docstring).
+_USES_ROS = re.compile(
+    r"^\s*(from|import) (rclpy|node_harness|ros_workspace|multidrive_fixtures|std_srvs"
+    r"|rosgraph_msgs|diagnostic_msgs|geometry_msgs|std_msgs|visualization_msgs)\b", re.M)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark every test of a module that uses ROS 2 with ``ros``."""
+    uses_ros: dict[str, bool] = {}
+    for item in items:
+        path = str(item.fspath)
+        if path not in uses_ros:
+            uses_ros[path] = bool(_USES_ROS.search(Path(path).read_text(encoding="utf-8")))
+        if uses_ros[path]:
+            item.add_marker(pytest.mark.ros)
 
 
 @pytest.fixture

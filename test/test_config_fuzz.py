@@ -343,6 +343,7 @@ def issue_files(tmp_path_factory):
     }
 
 
+@pytest.mark.slow
 def test_simulate_reports_bad_files_in_one_line_with_exit_2(issue_files):
     for name, (path, fragment) in issue_files.items():
         p = subprocess.run(
@@ -367,6 +368,7 @@ def test_simulate_reports_bad_files_in_one_line_with_exit_2(issue_files):
         assert fragment in lines[0], lines[0]
 
 
+@pytest.mark.slow
 def test_stage_node_reports_bad_files_with_exit_1(issue_files, tmp_path):
     """The installed console script, as a user starts it (scripts/venv.sh installs it)."""
     exe = Path(sys.prefix) / "bin" / "stage_node"

@@ -101,6 +101,7 @@ def test_stage_energies_at_the_shipped_step_agree_with_radau():
     assert abs(closure / wrong.drive_work) > 1e-3
 
 
+@pytest.mark.slow
 def test_parallelogram_energies_at_the_shipped_step_agree_with_radau():
     """
     5 um step, 1 ms at 1e-4 s: dissipated energy and work each to 1e-6 of Radau's.

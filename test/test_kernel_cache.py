@@ -13,6 +13,8 @@ import shutil
 import subprocess
 import sys
 
+import pytest
+
 from conftest import ROOT
 
 RUN = (
@@ -35,6 +37,7 @@ def _dissipated(package_root) -> float:
     return float(out.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_a_change_to_a_module_compiled_into_the_loop_reaches_the_cached_loop(tmp_path):
     package = tmp_path / "flexure_sim"
     shutil.copytree(ROOT / "flexure_sim", package,

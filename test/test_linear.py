@@ -240,6 +240,7 @@ def _sine_response(sim, z_static, u0, amp, freq, dt, body, axis):
     return (a + 1j * b) / amp  # y = Im(G e^{i w t}) amp = amp (Re G sin + Im G cos)
 
 
+@pytest.mark.slow
 def test_frf_matches_time_domain_sine_response(stage, stage_model):
     md = linear.modes(stage_model)
     sim = Simulation(stage, dt=2e-6)

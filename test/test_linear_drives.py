@@ -130,6 +130,7 @@ def _sine_response(sim, z, u0, drive, amp, freq, c):
     return (a + 1j * b) / amp
 
 
+@pytest.mark.slow
 def test_cross_coupling_frf_matches_the_time_domain_response(model, xy):
     """
     Drive y -> output x (the cross-coupling, 0.08 % of the direct gain) at 40 Hz and the mode.

@@ -267,6 +267,7 @@ def _claim_many(directory, barrier, results):
                  for _ in range(20)])
 
 
+@pytest.mark.slow
 def test_processes_racing_for_one_name_never_get_the_same(tmp_path):
     ctx = multiprocessing.get_context("spawn")
     barrier, results = ctx.Barrier(4), ctx.Queue()

@@ -18,6 +18,7 @@ def run(*args):
                           cwd=ROOT, capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_loop_width_printed_equals_the_analytic_loop_and_the_png_is_written(tmp_path):
     doc = yaml.safe_load(EXAMPLE.read_text())
     block = doc["constraints"][1]["actuator"]

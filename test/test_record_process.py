@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from flexure_sim.node.record.process import (
     MAX_BACKLOG_ENV,
     RECORDER_NICE,
@@ -71,6 +73,7 @@ def tick(k: int) -> list[tuple[int, bytes]]:
     return [(c, string_cdr(f"{k}:{c}:" + "x" * 120)) for c in range(len(TOPICS))]
 
 
+@pytest.mark.slow
 def test_a_slow_recorder_loses_nothing_when_the_node_may_wait(tmp_path, monkeypatch) -> None:
     """Fast mode (the default of ProcessRecording): back-pressure, never a drop."""
     monkeypatch.setenv(WRITE_DELAY_ENV, DISK_DELAY_S)
@@ -92,6 +95,7 @@ def test_a_slow_recorder_loses_nothing_when_the_node_may_wait(tmp_path, monkeypa
         assert got == [(1_000_000 * k, f"{k}:{c}:" + "x" * 120) for k in range(TICKS)]
 
 
+@pytest.mark.slow
 def test_a_slow_recorder_in_real_time_counts_every_message_it_drops(tmp_path, monkeypatch) -> None:
     """
     Real-time mode.

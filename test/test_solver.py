@@ -176,6 +176,7 @@ def _run_fourbar(name, dt):
     return sim, s, worst, abs(budget) / s.drive_work
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["fourbar_cantilever", "fourbar_mixed"])
 def test_fourbar_runs_follows_its_driver_and_closes_its_energy_budget(name):
     sim, s, worst, rel = _run_fourbar(name, 1e-4)
@@ -188,6 +189,7 @@ def test_fourbar_runs_follows_its_driver_and_closes_its_energy_budget(name):
     assert s.dissipated > 0.5 * s.drive_work
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["fourbar_cantilever", "fourbar_mixed"])
 def test_fourbar_energy_budget_tightens_as_the_step_shrinks(name):
     errors = [_run_fourbar(name, dt)[3] for dt in (2e-4, 1e-4, 5e-5)]
@@ -259,6 +261,7 @@ def test_compiled_report_equals_the_reference_path(name):
     assert wrench == pytest.approx(ref.wrench_b, rel=1e-10, abs=1e-12 * np.abs(ref.wrench_b).max())
 
 
+@pytest.mark.slow
 def test_time_is_the_step_count_times_the_step_not_a_running_sum(stage):
     """
     Simulated time stays on the step grid however long the run.

@@ -108,6 +108,7 @@ def test_outputs_do_not_depend_on_their_order():
         assert a[name].tobytes() == b[name].tobytes()
 
 
+@pytest.mark.slow
 def test_monte_carlo_spread_of_the_gain_agrees_with_the_first_order_prediction(tmp_path):
     """
     2000 designs of the stage study (h +- 5 um on all seven hinges, independent).
@@ -295,6 +296,7 @@ def test_a_bad_study_file_gets_one_line_naming_the_key(tmp_path):
         "input, mechanism, name, outputs, parameters, samples, seed, step)"]
 
 
+@pytest.mark.slow
 def test_ctrl_c_keeps_finished_batches_and_resume_completes_the_study(tmp_path):
     study = _small_stage_study(tmp_path, samples=120, batch_size=10)
     reference = sweep.run_study(load_study(study, OUTPUTS), tmp_path / "ref.parquet", workers=1)
@@ -320,6 +322,7 @@ def test_ctrl_c_keeps_finished_batches_and_resume_completes_the_study(tmp_path):
     assert pq.read_table(out).equals(reference)
 
 
+@pytest.mark.slow
 def test_unreachable_scheduler_and_a_directory_as_output_get_one_line(tmp_path):
     study = _small_stage_study(tmp_path, samples=20, batch_size=10)
     env = {**os.environ, "DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "2s"}
@@ -339,6 +342,7 @@ def test_unreachable_scheduler_and_a_directory_as_output_get_one_line(tmp_path):
                           "(the output is one Parquet file)\n")
 
 
+@pytest.mark.slow
 def test_ctrl_c_at_a_terminal_stops_a_local_cluster_study_cleanly(tmp_path):
     """
     Ctrl-C at a terminal signals the whole foreground process group.
@@ -371,6 +375,7 @@ def test_resume_refuses_the_parts_of_another_study(tmp_path):
         sweep.PartStore(out, other, resume=True)
 
 
+@pytest.mark.slow
 def test_same_seed_gives_bit_identical_parquet_with_one_and_two_workers(tmp_path):
     study = _small_stage_study(tmp_path, samples=200, batch_size=25)
     one = _cli(study, "-o", tmp_path / "one.parquet", "--workers", "1", "--no-plots", cwd=tmp_path)
@@ -394,6 +399,7 @@ def client():
             yield c
 
 
+@pytest.mark.slow
 def test_a_worker_killed_mid_study_loses_and_duplicates_no_rows(tmp_path, client):
     study = load_study(_small_stage_study(tmp_path, samples=200, batch_size=20), OUTPUTS)
     reference = pa.Table.from_pydict(evaluate_batch(study, 0, 200), schema=sweep.schema(study))
@@ -417,6 +423,7 @@ def test_a_worker_killed_mid_study_loses_and_duplicates_no_rows(tmp_path, client
     assert pq.read_table(tmp_path / "out.parquet").equals(reference)
 
 
+@pytest.mark.slow
 def test_an_existing_scheduler_by_address(tmp_path, client):
     study = _small_stage_study(tmp_path, samples=40, batch_size=10)
     res = _cli(study, "-o", tmp_path / "out.parquet", "--scheduler", client.scheduler.address,

@@ -215,6 +215,7 @@ def _cli(*args, cwd: Path) -> subprocess.CompletedProcess:
                           cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_the_command_on_a_small_xy_grid_writes_the_engines_values(tmp_path):
     """
     The shipped XY grid cut to two notch thicknesses: columns, units, values, summary.
