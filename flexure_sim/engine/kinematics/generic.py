@@ -26,6 +26,7 @@ import types
 
 import numpy as np
 
+from flexure_sim.engine import jit
 from flexure_sim.engine.jit import njit
 from flexure_sim.engine.kinematics.hyperdual import HyperDual
 
@@ -145,3 +146,18 @@ def derivatives_of(array: np.ndarray, m: int) -> np.ndarray:
         if isinstance(x, HyperDual):
             out[i] = np.broadcast_to(x.b, (m,))
     return out.reshape(array.shape + (m,))
+
+
+def revalidate(namespace: dict, module_file: str) -> None:
+    """
+    Flush the disk caches of the generic functions a module defines, if any source changed.
+
+    ``jit.revalidate`` over the module's own dispatchers (those of other modules are theirs to
+    check: one digest per function), keyed on every source the module imports.
+    """
+    name = namespace["__name__"]
+    jit.revalidate([d for d in jit.dispatchers_of(namespace) if d.py_func.__module__ == name],
+                   module_file)
+
+
+revalidate(globals(), __file__)

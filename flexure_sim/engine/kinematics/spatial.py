@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexure_sim.engine.kinematics.generic import generic, real_part
+from flexure_sim.engine.kinematics.generic import generic, real_part, revalidate
 
 #: Below this t^2 the exponential's coefficients come from their series (truncation < 1e-20).
 EXP_SERIES = 1e-2
@@ -217,3 +217,7 @@ def vector_of_quaternion(q) -> np.ndarray:
     if q[0] < 0.0:
         q = -q
     return np.array(rotation_vector(tuple(q)))
+
+
+# Numba keys a cache on its function's file only: flush when an imported source changed.
+revalidate(globals(), __file__)

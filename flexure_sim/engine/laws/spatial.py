@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexure_sim.engine.kinematics.generic import generic
+from flexure_sim.engine.kinematics.generic import generic, revalidate
 from flexure_sim.engine.kinematics.spatial import angle_factor, cross, jr_coefficient
 from flexure_sim.errors import as_array
 
@@ -263,3 +263,7 @@ class SpatialLaw:
     def potential_energy(self, quaternion, p) -> float:
         """Return U (J) at the deflection (R(quaternion), p)."""
         return self.evaluate(quaternion, p).energy
+
+
+# Numba keys a cache on its function's file only: flush when an imported source changed.
+revalidate(globals(), __file__)

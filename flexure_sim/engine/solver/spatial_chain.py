@@ -26,7 +26,7 @@ Jacobians are the hyper-dual evaluations of this same code.
 """
 from __future__ import annotations
 
-from flexure_sim.engine.kinematics.generic import buffer, generic, real_part
+from flexure_sim.engine.kinematics.generic import buffer, generic, real_part, revalidate
 from flexure_sim.engine.kinematics.spatial import cross, matrix_of, phi_rate, qconj_mul, qmul
 from flexure_sim.engine.kinematics.spatial import quaternion_exp, rotate, rotate_back
 from flexure_sim.engine.kinematics.spatial import rotation_vector
@@ -189,3 +189,7 @@ def terms(z, w, command, first_force, constants, Q, zdot, deflection, wrench, po
             for k in range(3):
                 Q[6 * i + k] += e[k] * f
     return energy, dissipation
+
+
+# Numba keys a cache on its function's file only: flush when an imported source changed.
+revalidate(globals(), __file__)

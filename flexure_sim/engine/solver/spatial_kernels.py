@@ -22,9 +22,6 @@ import numpy as np
 
 from flexure_sim.engine import jit
 from flexure_sim.engine.jit import njit
-from flexure_sim.engine.kinematics import generic
-from flexure_sim.engine.kinematics import spatial as rotation
-from flexure_sim.engine.laws import spatial as coordinates
 from flexure_sim.engine.solver import spatial_chain as chain
 from flexure_sim.engine.solver import step_loop as stepping
 from flexure_sim.engine.solver.step_energy import AUX_LOAD
@@ -146,5 +143,4 @@ def _bind():
 advance = _bind()
 
 # Numba keys a cache on its function's file: flush when any source of these kernels changes.
-jit.revalidate(
-    jit.dispatchers_of(globals(), chain, coordinates, rotation, generic), __file__)
+jit.revalidate([spatial_rhs, complex_step, no_switch_work, advance], __file__)
