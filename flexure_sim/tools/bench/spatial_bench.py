@@ -20,7 +20,7 @@ import numpy as np
 
 from flexure_sim.engine.mechanism.loader import load_mechanism
 from flexure_sim.engine.mechanism.spatial_loader import load_spatial
-from flexure_sim.engine.solver import integrator
+from flexure_sim.engine.solver import spatial_integrator
 from flexure_sim.engine.solver.simulation import Simulation
 from flexure_sim.engine.solver.spatial_simulation import SpatialSimulation
 from flexure_sim.tools.bench.engine_bench import REPEATS, U_STEP
@@ -95,7 +95,7 @@ def bench_spatial(dt: float) -> dict:
     jac = (time.perf_counter() - start) / 5
     start = time.perf_counter()
     for _ in range(5):
-        integrator.linearize(model, sim.data, y, t, cmd)
+        spatial_integrator.linearize(model, sim.data, y, t, cmd)
     lin = (time.perf_counter() - start) / 5
     return {"dt": dt, "duration": DURATION, "stage_3d": res3, "tiptilt": tt,
             "jacobian_ms": jac * 1e3, "linearization_ms": lin * 1e3,
