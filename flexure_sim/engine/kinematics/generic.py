@@ -1,12 +1,12 @@
 """
 Formulas written once on a generic scalar: compiled by Numba, evaluated on hyper-dual numbers.
 
-The spatial engine's force chain (``kinematics.spatial``, ``solver.spatial_chain``) is plain
-Python on scalars: the
-arithmetic operators and NumPy's ufuncs (``np.sin``, ``np.sqrt``, ``np.arctan2``), which Numba
-compiles for floats and which ``hyperdual.HyperDual`` implements for numbers carrying exact
-derivatives (Fike and Alonso, AIAA 2011-886; shared/reference, the hyper-dual twist of a joint).
-Each such function is decorated with ``generic``: the module keeps the compiled dispatcher
+The spatial engine's force chain (``kinematics.spatial``, ``laws.spatial``,
+``solver.spatial_chain``) is plain Python on scalars: the arithmetic operators and NumPy's
+ufuncs (``np.sin``, ``np.sqrt``, ``np.arctan``), which Numba compiles for floats and complex
+numbers and which ``hyperdual.HyperDual`` implements for numbers carrying exact derivatives
+(Fike and Alonso, AIAA 2011-886; shared/reference, the hyper-dual twist of a joint). Each
+such function is decorated with ``generic``: the module keeps the compiled dispatcher
 (the stepping kernel calls it), and ``interpreted`` rebinds the same code objects in a
 namespace where every generic function calls the others' Python versions, so one evaluation
 with hyper-dual inputs seeded along chosen directions gives the exact Jacobian of the very

@@ -59,11 +59,14 @@ class SpatialModel(DriveMixin):
     ``drive_work`` are NaN); each hinge's energy and power are reported (``snapshot``).
     """
 
+    #: The remainder iteration's tolerance and limits: ``solver.model.Model``'s.
     iteration_rtol = 1e-10
     max_iterations = 8
     relinearize_after = 3
+    #: No energy integrals of the steps, no compression hinge; the kernel is always compiled.
     energy = False
     compression = None
+    compiled = True
 
     def __init__(self, mechanism: Mechanism, dt: float = DEFAULT_STEP,
                  relinearize_tol: Optional[float] = None):
@@ -111,8 +114,6 @@ class SpatialModel(DriveMixin):
         self.output_names = tuple(o.name for o in self.outputs)
         self.output_matrix = np.array([o.direction(mechanism) for o in self.outputs]
                                       ).reshape(len(self.outputs), 6 * nb)
-
-    compiled = True
 
     @property
     def first_force(self) -> int:
