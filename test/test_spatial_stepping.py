@@ -104,3 +104,22 @@ def test_complex_step_and_hyper_dual_derivatives_agree(name):
     for got, ref in zip(model.derivatives(z, w, command, Zx, Wx, Cx),
                         model.derivatives_hyperdual(z, w, command, Zx, Wx, Cx)):
         assert np.allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+
+
+@pytest.mark.slow
+def test_the_benchmarked_3d_stage_steps_at_the_planar_accuracy():
+    """The accuracy claims behind ``flexure-sim bench``'s 3-D figures (speed is printed only).
+
+    The stage in 3-D and the planar stage at the shipped step: the same output error against
+    each engine's own converged reference, nothing out of the plane; the tip-tilt stage's tip
+    within 1e-4 of its reference.
+    """
+    from flexure_sim.tools.bench.spatial_bench import bench_spatial
+
+    res = bench_spatial(1e-4)
+    s, p = res["stage_3d"], res["stage_3d"]["planar"]
+    assert s["max_rel_error"] == pytest.approx(p["max_rel_error"], rel=1e-2)
+    assert s["max_rel_error"] < 1e-6 and s["reference_rel_error_estimate"] < 1e-8
+    assert s["max_out_of_plane"] == 0.0
+    assert res["tiptilt"]["max_rel_error"] < 1e-4
+    assert s["linearizations"] == 1
