@@ -108,7 +108,8 @@ def test_complex_step_and_hyper_dual_derivatives_agree(name):
 
 @pytest.mark.slow
 def test_the_benchmarked_3d_stage_steps_at_the_planar_accuracy():
-    """The accuracy claims behind ``flexure-sim bench``'s 3-D figures (speed is printed only).
+    """
+    The accuracy claims behind ``flexure-sim bench``'s 3-D figures (speed is printed only).
 
     The stage in 3-D and the planar stage at the shipped step: the same output error against
     each engine's own converged reference, nothing out of the plane; the tip-tilt stage's tip
