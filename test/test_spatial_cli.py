@@ -81,8 +81,8 @@ def test_tiptilt_step_response_settles_at_the_static_output():
 @pytest.mark.parametrize("args, message", [
     (("simulate", "tiptilt_stage", "--space", "2d"), "--space 2d: .* is a 3-D mechanism"),
     (("simulate", "tiptilt_stage", "--drive", "step:p1=1e-5"), r"missing \['p2', 'p3'\]"),
-    (("modes", "microstage", "--space", "3d", "-o", "plots"), "-o: mode-shape plots are drawn "
-                                                             "for planar mechanisms only"),
+    (("modes", "microstage", "--space", "3d", "-o", "plots"),
+     "-o: mode-shape plots are drawn for planar mechanisms only"),
     (("simulate", "fourbar_cantilever", "--space", "3d"), r"constraints\[1\]: a sine_rate"),
 ])
 def test_errors_are_one_line(args, message):
