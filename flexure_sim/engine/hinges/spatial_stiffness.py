@@ -23,8 +23,8 @@ the hinge), with
   12 E C_w / L^3 with C_w = w^3 h^3 / 144 (AISC Design Guide 9, 2003, Appendix C), and
   k_sv + k_w is within 11 % below the exact built-in solution (G J / L) / (1 - 2 tanh(x/2)/x),
   x = L sqrt(G J / (E C_w)) (Timoshenko and Gere, "Theory of Elastic Stability", 1961,
-  sec. 5.3) for every x. Without it a notch wider than long would be a thousand times too
-  soft in torsion.
+  sec. 5.3) for every x. Without it a notch much wider than long would be
+  hundreds of times too soft in torsion (the stage's notch: 3.8 against 829 N m/rad).
 
 ``notch``: circular notch of hole diameter D, neck h, plate thickness t: the length runs
 along the hinge frame's x axis, the neck's thickness h(l) = h + 2 r - 2 sqrt(r^2 - l^2)
