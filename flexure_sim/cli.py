@@ -7,6 +7,8 @@ Offline simulation without ROS (and, from the tools package, analysis of recorde
     flexure-sim simulate microstage --drive step:1.35e-6 --static [--json]
     flexure-sim simulate config/fourbar_mixed.yaml --duration 0.2
     flexure-sim simulate xy_stage --static [--json]     # several drives: the gain matrix
+    flexure-sim simulate microstage --space 3d --static # with its out-of-plane freedoms
+    flexure-sim simulate tiptilt_stage --drive step:p1=1e-5,p2=0,p3=0 --duration 0.01
 """
 from __future__ import annotations
 
@@ -120,12 +122,17 @@ def _single_command(sim: Simulation) -> bool:
 
 def run_simulate(args: argparse.Namespace) -> dict:
     path = resolve_mechanism_path(args.mechanism)
-    mech = load_mechanism(path)
-    amplitude = parse_drive(args.drive)
     if args.duration <= 0 or not np.isfinite(args.duration):
         raise UsageError(f"--duration {args.duration!r}: must be a positive number of seconds")
     if args.dt <= 0 or not np.isfinite(args.dt):
         raise UsageError(f"--dt {args.dt!r}: must be a positive number of seconds")
+    if spatial(args, path):
+        from flexure_sim.tools.run import simulate_spatial
+        if args.stroke_limit:
+            raise UsageError("--stroke-limit: not available for 3-D mechanisms yet")
+        return simulate_spatial.run(args, path, UsageError)
+    mech = load_mechanism(path)
+    amplitude = parse_drive(args.drive)
     sim = Simulation(mech, dt=args.dt, relinearize_tol=args.relinearize_tol)
     several = len(sim.model.drives) > 1 or len(sim.model.outputs) > 1
     if amplitude and several and len(sim.model.drives) > 1:
@@ -183,6 +190,15 @@ def run_simulate(args: argparse.Namespace) -> dict:
         linearizations=sim.stats.linearizations,
     )
     return out
+
+
+def spatial(args: argparse.Namespace, path) -> bool:
+    """Tell whether to simulate in 3-D: ``--space 3d``, or a ``space: 3d`` file (auto)."""
+    from flexure_sim.engine.mechanism.spatial_loader import is_spatial
+    three_d = is_spatial(path)
+    if args.space == "2d" and three_d:
+        raise UsageError(f"--space 2d: {path} is a 3-D mechanism (space: 3d)")
+    return args.space == "3d" or three_d
 
 
 def gain_matrix(sim: Simulation) -> dict:
@@ -256,6 +272,10 @@ def _fmt(v: Optional[float], unit: str, scale: float = 1.0, digits: int = 6) -> 
 
 
 def print_table(out: dict) -> None:
+    if out.get("space") == "3d":
+        from flexure_sim.tools.run import simulate_spatial
+        simulate_spatial.print_table(out)
+        return
     if out["mode"] == "stroke_limit":
         print(f"mechanism: {out['mechanism']}   stroke limit (first hinge at yield): "
               f"{out['stroke_limit'] * 1e6:.6g} um at hinge {out['hinge']} "
@@ -360,6 +380,9 @@ def build_parser() -> argparse.ArgumentParser:
         "mechanism size; 0: every step). Default: only when the step's iteration needs it",
     )
     sim.add_argument("--static", action="store_true", help="solve the static equilibrium instead")
+    sim.add_argument("--space", choices=("2d", "3d"), default=None,
+                     help="3d: open a planar file with its out-of-plane freedoms (the spatial "
+                     "engine); default: 3d for a space: 3d file, else 2d")
     sim.add_argument(
         "--stroke-limit",
         action="store_true",

@@ -10,4 +10,6 @@ Hinge laws: potentials in twistor or twist coordinates and what follows from the
   (4.69, 3.67).
 - ``quadratic``: Hinge laws: potential energy, wrench and dissipation of an elastic element (Ch. 3,
   4).
+- ``spatial``: Spatial hinge laws: law coordinates (twistor, twist), potential, wrench, energy and
+  power.
 """

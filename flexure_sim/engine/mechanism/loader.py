@@ -142,6 +142,10 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
     ctx = _Ctx(source)
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: the document must be a mapping, got {type(data).__name__}")
+    if "space" in data:
+        raise ctx.fail("space", "a 3-D mechanism: the planar engine does not load it (the "
+                       "spatial engine does: engine/mechanism/spatial_loader.py; flexure-sim "
+                       "simulate, modes, frf and linearize pick it for such files)")
     _no_unknown(ctx, "", data, {
         "name", "description", "source", "defaults", "stiffness_models", "bodies", "hinges",
         "constraints", "output", "outputs", "compression_hinge", "metadata", "sensor",

@@ -13,6 +13,15 @@ A mechanism prepared for stepping (Model) apart from its State; the Simulation f
 - ``simulation``: The simulation facade: a shared ``Model`` (constants) and its own ``Data``
   (state).
 - ``snapshot``: What a simulation reports at one instant, read from a ``Model`` and a ``State``.
+- ``spatial_chain``: Generalized forces of a spatial mechanism: hinges, gyroscopic terms, applied
+  forces.
+- ``spatial_integrator``: Fixed-step stiff-stable stepping of a ``SpatialModel``.
+- ``spatial_kernels``: The spatial engine's compiled stepping: F(y, t) of a spatial mechanism, and
+  the loop that steps it.
+- ``spatial_model``: A spatial mechanism prepared for stepping: the constants, no state.
+- ``spatial_simulation``: The spatial simulation facade: a shared ``SpatialModel`` and its own
+  ``Data``.
+- ``spatial_statics``: Static equilibrium of a ``SpatialModel`` and its exact static gain.
 - ``state``: The mutable side of a simulation (as MuJoCo's mjData): state, counters, integrator
   caches.
 - ``statics``: Static equilibrium of a ``Model``.

@@ -12,6 +12,9 @@ Wall times are medians of several runs (7 for flexure_sim, 3 for the baseline).
   exact Jacobian, atol 1e-8 of each component's scale of motion) on the same equations.
 - steps_per_s at the node's default step, and the cost of a step's parts.
 - static_sweep: 1000 drive levels from 0 to the stroke.
+- spatial: the stage opened in 3-D and the tip-tilt stage stepped by the spatial engine (wall
+  time, real-time factor, error against a converged reference, next to the planar engine on
+  the same run; tools/bench/spatial_bench.py).
 - analyses: the stage's exact linearisation + modes + FRF at 1000 frequencies (goal < 0.1 s),
   and hyper-dual sensitivities of 4 outputs to 20 parameters (goal < 1 s).
 - fe_hinge: one finite-element hinge's solve (goal < 5 s) and its cached load, alone and in
@@ -43,6 +46,7 @@ import numpy as np
 
 from flexure_sim import topics
 from flexure_sim.engine.solver.simulation import DEFAULT_STEP
+from flexure_sim.tools.bench.spatial_bench import bench_spatial, print_spatial
 from flexure_sim.tools.bench.engine_bench import (
     DURATION, bench_static_sweep, bench_stage_step, bench_step_cost,
 )
@@ -186,6 +190,7 @@ def print_table(res: dict) -> None:
     print(f"  without the energy integrals: per step {c['step_no_energy_us']:.2f} us, per "
           f"linearization {c['linearization_no_energy_us']:.0f} us (with: "
           f"{c['linearization_us']:.0f} us)")
+    print_spatial(res["spatial"])
     w = res["static_sweep"]
     print(f"\nstatic sweep, {w['levels']} levels over the stroke: {w['wall_s'] * 1e3:.1f} ms "
           f"({w['newton_iterations']} Newton iterations)")
@@ -288,6 +293,7 @@ def run(args: argparse.Namespace) -> dict:
     res["step_cost"] = bench_step_cost(args.dt)
     res["steps_per_s"] = res["step_cost"]["steps_per_s"]
     res["static_sweep"] = bench_static_sweep()
+    res["spatial"] = bench_spatial(args.dt)
     res["analyses"] = bench_analyses()
     res["fe_hinge"] = bench_fe_hinge()
     res["optimize"] = bench_optimize()

@@ -1,6 +1,10 @@
 """
 ``flexure-sim modes | frf | linearize``: the linear analyses (engine/analysis/linear.py).
 
+A ``space: 3d`` file, or any file with ``--space 3d``, is analysed by the spatial engine
+(engine/analysis/spatial_linear.py): six coordinates per body, hinge wrenches
+hinges.<h>.moment_x .. force_z.
+
 flexure-sim modes microstage [--input U] [--count N] [--json] [-o DIR]
 flexure-sim frf microstage --from drive --to output [--to hinges.a.force_x] [--fmin F --fmax F
                 --points N | --frequencies F1,F2,...] [-o DIR] [--csv]
@@ -19,12 +23,14 @@ from pathlib import Path
 
 import numpy as np
 
-from flexure_sim.engine.analysis import linear
+from flexure_sim.engine.analysis import linear, spatial_linear
 from flexure_sim.engine.memory import too_large
 from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism
 from flexure_sim.engine.mechanism.parameters import ParameterError
+from flexure_sim.engine.mechanism.spatial_loader import is_spatial, load_spatial
 from flexure_sim.engine.mechanism.stroke import check as check_stroke
 from flexure_sim.engine.solver.simulation import Simulation, SolverError
+from flexure_sim.engine.solver.spatial_model import SpatialModel
 from flexure_sim.tools.design.linear_plots import input_text, plot_bode, plot_modes, write_frf_csv
 from flexure_sim.tools.options import count, parse_drive_inputs
 
@@ -36,6 +42,8 @@ FRF_BYTES, FRF_BYTES_PER_OUTPUT = 100, 400
 
 
 def _model(args, wrenches: bool = True) -> tuple:
+    if _spatial(args):
+        return _spatial_model(args, wrenches)
     mech = load_mechanism(args.mechanism)
     sim = Simulation(mech)
     actuated = [sim.model.drive_names[a.drive] for a in sim.model.actuation]
@@ -57,6 +65,36 @@ def _model(args, wrenches: bool = True) -> tuple:
         check_stroke(mech.drives, value, f"--input {args.input!r}")
         value = float(value[0]) if len(value) == 1 else value
     return mech, linear.linearize(sim, value, wrenches=wrenches)
+
+
+def _spatial(args) -> bool:
+    """Tell whether to analyse in 3-D: ``--space 3d``, or a ``space: 3d`` file (auto)."""
+    three_d = is_spatial(args.mechanism)
+    if args.space == "2d" and three_d:
+        raise ValueError(f"--space 2d: {args.mechanism} is a 3-D mechanism (space: 3d)")
+    return args.space == "3d" or three_d
+
+
+def _spatial_model(args, wrenches: bool) -> tuple:
+    """Return (mechanism, linear model) of the spatial engine (analysis/spatial_linear.py)."""
+    mech = load_spatial(args.mechanism)
+    model = SpatialModel(mech)
+    value = parse_drive_inputs(args.input)
+    if value is not None and not model.drives:
+        raise ValueError(f"--input: mechanism {mech.name!r} has no drive")
+    if value is not None:
+        try:
+            value = model.drive_inputs(value)
+        except ValueError as exc:
+            raise ValueError(f"--input {args.input!r}: {exc}") from None
+    return mech, spatial_linear.linearize(model, value, wrenches=wrenches)
+
+
+def _modes(model):
+    """Return the modes of a planar or a spatial linear model."""
+    if isinstance(model, spatial_linear.SpatialLinearModel):
+        return spatial_linear.modes(model)
+    return linear.modes(model)
 
 
 def _u0(model):
@@ -109,8 +147,14 @@ def modes_summary(mech, model, md, count: int) -> dict:
 def run_modes(args) -> int:
     def work():
         mech, model = _model(args, wrenches=False)
-        md = linear.modes(model)
+        md = _modes(model)
         out = modes_summary(mech, model, md, args.count)
+        spatial = isinstance(model, spatial_linear.SpatialLinearModel)
+        if spatial:
+            out["out_of_plane_shares"] = spatial_linear.out_of_plane_shares(model, md).tolist()
+        if args.output and isinstance(model, spatial_linear.SpatialLinearModel):
+            raise ValueError("-o: mode-shape plots are drawn for planar mechanisms only; "
+                             "--json lists the 3-D mode shapes")
         if args.output:
             out["plots"] = [
                 str(p) for p in plot_modes(mech, model, md, args.count, Path(args.output))
@@ -120,9 +164,12 @@ def run_modes(args) -> int:
             return EXIT_OK
         print(f"mechanism: {mech.name}   linearised at the static equilibrium at "
               f"{input_text(mech, model.u0)}")
-        print("mode  undamped f [Hz]  modal damping ratio")
+        shares = out.get("out_of_plane_shares")
+        print("mode  undamped f [Hz]  modal damping ratio"
+              + ("  out of plane (z, rx, ry)" if shares else ""))
         for k, (f, z) in enumerate(zip(md.frequencies, md.modal_damping), 1):
-            print(f"{k:4d} {f:16.6g} {z:20.4g}")
+            share = f"{shares[k - 1] * 100:20.1f} %" if shares else ""
+            print(f"{k:4d} {f:16.6g} {z:20.4g}{share}")
         print("poles of the damped system (upper half-plane), by |pole|:")
         print("   real [1/s]     imag [1/s]   |pole|/2pi [Hz]   damping ratio")
         for p in out["poles"]:
@@ -304,6 +351,9 @@ def run_linearize(args) -> int:
 
 def _common(p) -> None:
     p.add_argument("mechanism", help="built-in name or YAML path")
+    p.add_argument("--space", choices=("2d", "3d"), default=None,
+                   help="3d: analyse a planar file with its out-of-plane freedoms (the spatial "
+                   "engine); default: 3d for a space: 3d file, else 2d")
     p.add_argument(
         "--input",
         default=None,
