@@ -9,7 +9,8 @@ One layout serves colcon (ament_python) and plain pip:
 Dependencies: package.xml names the same ones by their rosdep keys (the optional "sweep" and
 "fe" extras are pip-only: a ROS install adds them with pip when it needs them). matplotlib is
 only needed by `flexure-sim plot` (extra "plot"); the node and the other tools never import it.
-The extra "test" is how colcon (and a Jazzy ament_python package) learns that `colcon test` runs pytest.
+The extra "test" is how colcon (and a Jazzy ament_python package) learns that `colcon test`
+runs pytest.
 """
 from glob import glob
 
