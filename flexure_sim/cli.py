@@ -9,8 +9,11 @@ Offline simulation without ROS (and, from the tools package, analysis of recorde
     flexure-sim simulate config/fourbar_mixed.yaml --duration 0.2
     flexure-sim simulate xy_stage --drive x=step:1e-5 --drive y=ramp:5e-6:2e-3 [--static]
     flexure-sim simulate xy_stage --static [--json]     # several drives: the gain matrix
+    flexure-sim simulate microstage --space 3d --static # with its out-of-plane freedoms
+    flexure-sim simulate tiptilt_stage --drive step:p1=1e-5,p2=0,p3=0 --duration 0.01
 
-``--drive`` takes one program per drive (tools/drive_programs.py).
+``--drive`` takes one program per drive (tools/drive_programs.py); a 3-D mechanism takes one
+``--drive step:...`` for all its drives (tools/run/simulate_spatial.py).
 """
 from __future__ import annotations
 
@@ -22,10 +25,12 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from flexure_sim.console import quiet_pipe
 from flexure_sim.errors import FlexureSimError
 from flexure_sim.engine.mechanism.loader import load_mechanism, resolve_mechanism_path
 from flexure_sim.engine.solver.simulation import DEFAULT_STEP, Simulation, Snapshot
 from flexure_sim.tools import drive_programs
+from flexure_sim.tools.run import simulate_limits
 
 #: Times (s) at which the step response is reported, as in the acceptance figures.
 REPORT_TIMES = (1e-3, 2e-3, 5e-3)
@@ -107,11 +112,17 @@ def _single_command(sim: Simulation) -> bool:
 
 def run_simulate(args: argparse.Namespace) -> dict:
     path = resolve_mechanism_path(args.mechanism)
-    mech = load_mechanism(path)
     if args.duration <= 0 or not np.isfinite(args.duration):
         raise UsageError(f"--duration {args.duration!r}: must be a positive number of seconds")
     if args.dt <= 0 or not np.isfinite(args.dt):
         raise UsageError(f"--dt {args.dt!r}: must be a positive number of seconds")
+    if spatial(args, path):
+        from flexure_sim.tools.run import simulate_spatial
+        if args.stroke_limit:
+            raise UsageError("--stroke-limit: not available for 3-D mechanisms yet")
+        args.drive = _spatial_drive(args.drive)
+        return simulate_spatial.run(args, path, UsageError)
+    mech = load_mechanism(path)
     try:
         sim = Simulation(mech, dt=args.dt, relinearize_tol=args.relinearize_tol)
     except ValueError as exc:
@@ -130,9 +141,10 @@ def run_simulate(args: argparse.Namespace) -> dict:
         raise UsageError(f"--static: mechanism {mech.name!r} has a drive with a finite-stiffness "
                          "piezo stack (its input is the actuator's free stroke, a dynamic "
                          "state): simulate without --static to a steady state")
+    drive_programs.check_strokes(mech, given)  # the rule of every analysis (mechanism/stroke.py)
     start = time.perf_counter()
     if args.stroke_limit:
-        return _stroke_limit(args, sim)
+        return simulate_limits.stroke_limit(args, sim, UsageError)
     if args.static and len(names) > 1 and not given:
         return _gain_only(sim, path, time.perf_counter() - start)
     if args.static:
@@ -143,7 +155,8 @@ def run_simulate(args: argparse.Namespace) -> dict:
         wall = time.perf_counter() - start
         out.update(mechanism_file=str(path), mode="static", newton_iterations=result.iterations,
                    residual=result.residual, wall_s=wall)
-        out["hinge_stress"] = _stress(sim, result.snapshot)
+        out.update(simulate_limits.static_limits(args, sim, result.snapshot, amplitude,
+                                                 UsageError))
         return out
     drive_programs.apply(sim, programs)
     n_steps = int(round(args.duration / args.dt))
@@ -195,6 +208,26 @@ def _gain_only(sim: Simulation, path, wall: float) -> dict:
                     f"forces and hinge stresses) give one program per drive: {example}"}
 
 
+def spatial(args: argparse.Namespace, path) -> bool:
+    """Tell whether to simulate in 3-D: ``--space 3d``, or a ``space: 3d`` file (auto)."""
+    from flexure_sim.engine.mechanism.spatial_loader import is_spatial
+    three_d = is_spatial(path)
+    if args.space == "2d" and three_d:
+        raise UsageError(f"--space 2d: {path} is a 3-D mechanism (space: 3d)")
+    return args.space == "3d" or three_d
+
+
+def _spatial_drive(specs) -> str:
+    """Return the one ``--drive`` a 3-D run takes (``none`` without), UsageError for several."""
+    if not specs:
+        return "none"
+    if len(specs) > 1:
+        raise UsageError(f"--drive given {len(specs)} times: a 3-D mechanism takes one "
+                         "--drive step:A, step:NAME=VALUE,... or step:V1,V2,... for all its "
+                         "drives")
+    return specs[0]
+
+
 def gain_matrix(sim: Simulation) -> dict:
     """
     Return the exact static gain at rest, each output (rows) against each drive (columns).
@@ -206,37 +239,17 @@ def gain_matrix(sim: Simulation) -> dict:
             "matrix": [[float(g) for g in row] for row in G]}
 
 
-def _stress(sim: Simulation, snap: Snapshot) -> dict:
-    """Peak stress and stress ratio per notch/leaf hinge (engine/hinges/stress.py)."""
-    from flexure_sim.engine.hinges.stress import stress_table
-
-    return stress_table(snap.wrenches, sim.mechanism)
-
-
-def _stroke_limit(args, sim: Simulation) -> dict:
-    """--stroke-limit: the drive input at which the first hinge reaches its yield strength."""
-    from flexure_sim.engine.hinges.stress import stroke_limit
-
-    if sim.drive is None:
-        raise UsageError(f"--stroke-limit: mechanism {sim.mechanism.name!r} has no drive")
-    try:
-        u, hinge = stroke_limit(sim)
-    except ValueError as exc:
-        raise UsageError(f"--stroke-limit: {exc}") from None
-    return {"mechanism": sim.mechanism.name, "mechanism_file": str(resolve_mechanism_path(
-                args.mechanism)), "mode": "stroke_limit", "stroke_limit": u, "hinge": hinge,
-            "actuator_stroke": list(sim.drive.stroke)}
-
-
 def _fmt(v: Optional[float], unit: str, scale: float = 1.0, digits: int = 6) -> str:
     return "n/a" if v is None else f"{v * scale:.{digits}g} {unit}"
 
 
 def print_table(out: dict) -> None:
+    if out.get("space") == "3d":
+        from flexure_sim.tools.run import simulate_spatial
+        simulate_spatial.print_table(out)
+        return
     if out["mode"] == "stroke_limit":
-        print(f"mechanism: {out['mechanism']}   stroke limit (first hinge at yield): "
-              f"{out['stroke_limit'] * 1e6:.6g} um at hinge {out['hinge']} "
-              f"(actuator stroke {out['actuator_stroke'][1] * 1e6:g} um)")
+        simulate_limits.print_stroke_limit(out)
         return
     if out["mode"] == "gain":
         print(f"mechanism: {out['mechanism']}   several drives, no input given")
@@ -272,12 +285,7 @@ def print_table(out: dict) -> None:
     print("hinge deflection, frame b in frame a:  rotation [urad]  x [nm]  y [nm]")
     for name, h in out["hinges"].items():
         print(f"{name:6s} {h['rotation'] * 1e6:14.6g} {h['x'] * 1e9:11.6g} {h['y'] * 1e9:11.6g}")
-    if out.get("hinge_stress"):
-        print("hinge stress:  peak [MPa]  sigma_y [MPa]  ratio")
-        for name, h in out["hinge_stress"].items():
-            sy = "n/a" if h["sigma_y"] is None else f"{h['sigma_y'] / 1e6:.4g}"
-            ratio = "n/a" if h["ratio"] is None else f"{h['ratio']:.4g}"
-            print(f"{name:6s} {h['stress'] / 1e6:17.5g} {sy:>14s} {ratio:>6s}")
+    simulate_limits.print_stress(out)
     e = out["energy"]
     print(f"energy [J]: kinetic {e['kinetic']:.6g}, potential {e['potential']:.6g}, "
           f"dissipated {e['dissipated']:.6g}, drive work {e['drive_work']:.6g}")
@@ -324,11 +332,17 @@ def build_parser() -> argparse.ArgumentParser:
         "mechanism size; 0: every step). Default: only when the step's iteration needs it",
     )
     sim.add_argument("--static", action="store_true", help="solve the static equilibrium instead")
+    sim.add_argument("--space", choices=("2d", "3d"), default=None,
+                     help="3d: open a planar file with its out-of-plane freedoms (the spatial "
+                     "engine); default: 3d for a space: 3d file, else 2d")
     sim.add_argument(
         "--stroke-limit",
         action="store_true",
         help="report the drive input at which the first hinge reaches its yield strength",
     )
+    sim.add_argument("--cycle-from", type=float, default=0.0,
+                     help="fatigue: the drive cycles between this input (m, default 0) and the "
+                     "static input (--static) or the input found (--stroke-limit)")
     sim.add_argument("--json", action="store_true", help="print one JSON object")
     _add_tool_commands(sub)
     return parser
@@ -341,6 +355,7 @@ def _add_tool_commands(sub) -> None:
     commands.register(sub)
 
 
+@quiet_pipe
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)

@@ -150,6 +150,26 @@ def test_static_gains_bandwidth_and_phase_crossing(stage_modes):
     agrees(f90, crossing, "-90 deg crossing")
 
 
+@pytest.mark.slow
+def test_the_frf_command_the_page_names_prints_the_quoted_static_gains(tmp_path):
+    """The page's `frf` command, run as a user runs it, prints the three gains it quotes."""
+    import subprocess
+    import sys
+
+    gains = dict(zip(("output", "compression", "drive_force"), _find(
+        r"Static gain ([\d.]+) \(output / input\), joint-a compression ([\d.]+) m/m, "
+        r"drive force ([\d.e]+) N/m")))
+    (command,) = _find(r"\(`(flexure-sim frf [^`]+)`\s+prints each next to \|G\| at the lowest "
+                       r"frequency")
+    p = subprocess.run([sys.executable, "-m", "flexure_sim.cli", *command.split()[1:], "-o",
+                        str(tmp_path)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    printed = dict(re.findall(r"^(\w+): \|G\| .*\(static gain ([-\d.e+]+)\)", p.stdout, re.M))
+    assert set(printed) == set(gains), p.stdout
+    for name, text in gains.items():
+        agrees(text, float(printed[name]), f"{name} as frf prints it")
+
+
 # ------------------------------------------------------------------------- stress
 
 
@@ -157,7 +177,8 @@ def test_hinge_stress_table_at_full_stroke_and_the_stroke_limit():
     mech = load_mechanism("microstage")
     sim = Simulation(mech)
     table = stress_table(sim.static(U_FULL).snapshot.wrenches, mech)
-    (header,) = [r for r in _table_rows("hinge") if r[1] == "a"]  # not the tolerance table's
+    # the stress table's header (the fatigue table's comes later; not the tolerance table's)
+    header = [r for r in _table_rows("hinge") if r[1] == "a"][0]
     (stress,) = _table_rows(r"peak stress \[MPa\]")
     (ratio,) = _table_rows("σ / σ_y")
     assert header[1:] == sorted(table)
@@ -176,6 +197,55 @@ def test_hinge_stress_table_at_full_stroke_and_the_stroke_limit():
     h, D = (params.value(f"stiffness_models.notch.{k}") for k in ("h", "D"))
     assert h / D == pytest.approx(1 / 12, rel=1e-12)
     agrees(kt, notch_concentration(h, D), "K_t")
+
+
+def test_material_table_is_the_shipped_table():
+    """The page's material table quotes engine/hinges/materials.yaml (E GPa, strengths MPa)."""
+    from flexure_sim.engine.hinges.materials import table
+
+    rows = {r[0].split()[0].strip("`"): r for r in _table_rows(r"`[^`]+`.*")}
+    assert set(rows) == set(table())
+    for name, m in table().items():
+        _, E, nu, rho, sy, su, se, _ = rows[name]
+        agrees(E, m["E"] / 1e9, f"{name} E")
+        agrees(nu, m["nu"], f"{name} nu")
+        agrees(rho, m["density"], f"{name} density")
+        agrees(sy, m["sigma_y"] / 1e6, f"{name} sigma_y")
+        agrees(su, m["sigma_u"] / 1e6, f"{name} sigma_u")
+        strength, _, cycles = se.split()[:3]
+        agrees(strength, m["sigma_e"] / 1e6, f"{name} sigma_e")
+        assert float(cycles) == m.cycles, name
+
+
+def test_fatigue_table_and_the_infinite_life_input():
+    from flexure_sim.engine.hinges import fatigue
+
+    mech = load_mechanism("microstage")
+    report = fatigue.static_report(Simulation(mech), 0.0, U_FULL)
+    header = [r for r in _table_rows("hinge") if r[1] == "a"][1]
+    rows = {name: _table_rows(name)[0] for name in (r"amplitude \[MPa\]", "Goodman n",
+                                                    "Soderberg n")}
+    assert header[1:] == sorted(report["hinges"])
+    for k, name in enumerate(header[1:], start=1):
+        h = report["hinges"][name]
+        agrees(rows[r"amplitude \[MPa\]"][k], h["amplitude"] / 1e6, f"hinge {name} amplitude")
+        agrees(rows["Goodman n"][k], h["goodman"], f"hinge {name} Goodman")
+        agrees(rows["Soderberg n"][k], h["soderberg"], f"hinge {name} Soderberg")
+    hinge, goodman, soderberg = _find(r"The critical hinge is (\w); cycled from 0 it has infinite "
+                                      r"life .* up to ([\d.]+) µm of drive input by Goodman "
+                                      r"\(([\d.]+) µm by Soderberg\)")
+    assert hinge == report["critical"]["goodman"]["hinge"]
+    agrees(goodman, report["infinite_life"]["goodman"]["input"] * 1e6, "Goodman life")
+    agrees(soderberg, report["infinite_life"]["soderberg"]["input"] * 1e6, "Soderberg life")
+    (limit,) = _find(r"The same stage in 7075-T6 \(503 MPa\) reaches yield at ([\d.]+) µm")
+    text = (ROOT / "config" / "microstage.yaml").read_text().replace("material: 6061-T6}",
+                                                                     "material: 7075-T6}")
+    import yaml
+
+    from flexure_sim.engine.mechanism.loader import mechanism_from_dict
+
+    agrees(limit, stroke_limit(Simulation(mechanism_from_dict(yaml.safe_load(text))))[0] * 1e6,
+           "7075-T6 stroke limit")
 
 
 # ---------------------------------------------------------------- tolerance table

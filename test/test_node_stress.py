@@ -20,14 +20,14 @@ FULL_STROKE = 2.0e-6
 
 def _weak_stage(tmp_path: Path) -> Path:
     """
-    microstage.yaml with a yield strength of 20 MPa instead of 276 MPa.
+    microstage.yaml with a yield strength of 20 MPa instead of 6061-T6's 276 MPa.
 
     Full stroke (about 33 MPa in the most loaded hinge) is beyond it.
     """
     text = resolve_mechanism_path("microstage").read_text()
-    assert text.count("sigma_y: 276.0e6") == 1
-    path = tmp_path / "weak_stage.yaml"
-    path.write_text(text.replace("sigma_y: 276.0e6", "sigma_y: 20.0e6"))
+    assert text.count("material: 6061-T6}") == 1
+    path = tmp_path / "weak_stage.yaml"  # the file's own sigma_y overrides the material's
+    path.write_text(text.replace("material: 6061-T6}", "material: 6061-T6, sigma_y: 20.0e6}"))
     return path
 
 

@@ -5,6 +5,7 @@ The stage's static and dynamic answers, the four-bars' energy budget, exact Jaco
 invariance of the whole stage (Sections 3.3, 4.6).
 """
 import dataclasses
+import functools
 
 import numpy as np
 import pytest
@@ -162,6 +163,7 @@ def test_whole_stage_is_body_and_frame_independent(stage, law):
     assert abs(ctrl.snapshot.output - base.snapshot.output) / base.snapshot.output > 1e-3
 
 
+@functools.lru_cache(maxsize=None)  # the 1e-4 s run serves both tests below
 def _run_fourbar(name, dt):
     mech = load_mechanism(name)
     sim = Simulation(mech, dt=dt)
@@ -192,8 +194,14 @@ def test_fourbar_runs_follows_its_driver_and_closes_its_energy_budget(name):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["fourbar_cantilever", "fourbar_mixed"])
 def test_fourbar_energy_budget_tightens_as_the_step_shrinks(name):
-    errors = [_run_fourbar(name, dt)[3] for dt in (2e-4, 1e-4, 5e-5)]
-    assert errors[0] > 2 * errors[1] > 4 * errors[2]
+    """
+    Second order: each halving of the step divides the budget's error by about 4.
+
+    Measured 3.6 and 3.8 from 4e-4 to 1e-4 s (3.8 and 3.9 from 2e-4 to 5e-5 s, at twice the
+    cost): asserted above 3.
+    """
+    errors = [_run_fourbar(name, dt)[3] for dt in (4e-4, 2e-4, 1e-4)]
+    assert errors[0] > 3 * errors[1] > 9 * errors[2]
 
 
 @pytest.mark.parametrize(

@@ -193,7 +193,7 @@ def test_stress_geometry_is_part_of_the_loaded_mechanism_with_the_stiffness_numb
     table = stress.stress_table(w, mech)
     assert set(table) == {"n", "leaf"}
     assert table["leaf"] == {"stress": pytest.approx(25e6, rel=1e-12), "sigma_y": None,
-                             "ratio": None}
+                             "ratio": None, "material": None}
     kt = stress.notch_concentration(3.0e-4, 0.002)
     s_n = kt * (6 * 0.02 / (0.01 * 9e-8) + 3.0 / (0.01 * 3e-4))
     assert table["n"]["stress"] == pytest.approx(s_n, rel=1e-12)

@@ -407,3 +407,30 @@ def test_export_signals_of_a_single_drive_run_uses_its_topics(capsys, tmp_path):
     with (tmp_path / "csv" / "output.displacement.csv").open() as f:
         outputs = [r["data"] for r in csv.DictReader(f)]
     assert [r["output/displacement"] for r in rows] == outputs
+
+
+@pytest.mark.slow
+def test_analyse_shows_an_input_that_decayed_to_a_denormal_as_zero(tmp_path):
+    """
+    A step back to 0 held 0.95 s: the lag's output decays as exp(-t / 1 ms) into denormals.
+
+    `flexure-sim analyse` (a subprocess, as a user runs it) reads both ends of the step in the
+    unit of the larger and to 6 digits of it: the command's own values, 10 um and 0.
+    """
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+    from flexure_sim.recording import read_log
+
+    path = tmp_path / "down.mcap"
+    record_drives_run(path, "xy_stage", [(0.01, "x", 10 * U), (0.05, "x", 0.0)], 1.0,
+                      publish_rate=200.0, sim_step=5e-4)
+    last = read_log(path).messages_on("/drive/x/input")[-1].message.data
+    assert 0.0 < last < 1e-300  # what was recorded: a denormal
+    p = subprocess.run([sys.executable, "-m", "flexure_sim.cli", "analyse", str(path)],
+                       cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    rows = [line.split() for line in p.stdout.splitlines()
+            if line.split()[:2] in (["1", "x"], ["2", "x"])]
+    assert [r[3:7] for r in rows] == [["0", "um", "->", "10"], ["10", "um", "->", "0"]], rows

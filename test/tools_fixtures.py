@@ -53,6 +53,7 @@ def record_stage_run(
     chunk_size: int = 1 << 20,
     metadata: bool = True,
     wall_clock: Optional[tuple[int, float]] = None,
+    mechanism_yaml: bool = True,
 ) -> dict:
     """
     Record a stage run: at rest for ``rest`` s, then each level for ``dwell`` s.
@@ -61,6 +62,8 @@ def record_stage_run(
     command, for comparing with the analysis. ``wall_clock`` = (offset ns, real-time factor)
     writes log times as ``ros2 bag record`` without ``--use-sim-time`` would: the wall-clock
     time of reception (offset + sim time / factor, 1 us apart within a tick), not sim time.
+    ``mechanism_yaml=False`` leaves the mechanism's YAML text out of the metadata (its name
+    and path stay).
     """
     mech = load_mechanism(mechanism)
     sim = Simulation(mech, dt=sim_step, relinearize_tol=1e-4)
@@ -100,7 +103,7 @@ def record_stage_run(
         "record_path": str(path),
         "mechanism_name": mech.name,
         "mechanism_path": str(mech_path),
-        "mechanism_yaml": mech_path.read_text(),
+        "mechanism_yaml": mech_path.read_text() if mechanism_yaml else "",
         "node": f"{ns}/stage_node",
         "flexure_sim_version": "0.1.0",
         "steps_per_tick": str(n_steps),

@@ -1,5 +1,5 @@
 """
-The engine: planar flexure mechanics with the twistor-based potential energy method.
+The engine: flexure mechanics with the twistor-based potential energy method, planar and spatial.
 
 No ROS here. Sub-packages, each importing only the ones listed before it:
 
@@ -13,4 +13,9 @@ No ROS here. Sub-packages, each importing only the ones listed before it:
 - ``fitting``: wrench data and polynomial laws fitted to them (Chapter 7).
 
 ``jit`` holds Numba's ``njit`` and the kernel cache every compiled module uses.
+
+The spatial engine (bodies with six coordinates, hinges with 6x6 stiffness) lives beside the
+planar one in the same layers, its modules named ``spatial*``: ``kinematics.spatial``,
+``laws.spatial``, ``hinges.spatial_stiffness``, ``mechanism.spatial_loader``,
+``solver.spatial_simulation`` (the facade), ``analysis.spatial_linear``.
 """

@@ -5,8 +5,9 @@ Without Numba, ``njit`` returns the function unchanged (the engine stays importa
 Numba keys a cached function on its own source file's time stamp and size only, not on the
 files of the functions it compiles in (a documented limitation: numba issue #1833, "Caching
 issue: functions in different modules"). ``step_loop.advance`` compiles in ``step_energy``,
-``kernels`` and ``kinematics.planar``: after a change to ``step_energy.py`` alone it loaded its
-old machine code, which then failed on the new arguments. ``revalidate`` keeps a SHA-256 of
+``kernels`` and the hinge force chain's formula modules (``laws.hinge_force`` and what it
+calls): after a change to ``step_energy.py`` alone it loaded its old machine code, which then
+failed on the new arguments. ``revalidate`` keeps a SHA-256 of
 every source a kernel module imports from the package, transitively, next to each kernel's
 cache, and flushes the cache when the digest differs. Hand-written because Numba offers no such key
 (its issue #9304 asks for one).
@@ -64,12 +65,19 @@ def sources_digest(files: Iterable[Path]) -> str:
 
 
 def dispatchers_of(*namespaces) -> list:
-    """Return the Numba dispatchers (``njit`` functions) among modules' or dicts' values."""
+    """
+    Return the Numba dispatchers (``njit`` functions) defined in modules or module globals.
+
+    Dispatchers a namespace imports from another module are left to that module: each
+    dispatcher's digest stamp has one owner (two digests for one stamp would flush it on
+    every import).
+    """
     found = {}
     for space in namespaces:
-        values = space.values() if isinstance(space, dict) else vars(space).values()
-        for value in values:
-            if hasattr(value, "py_func") and hasattr(value, "_cache"):
+        names = space if isinstance(space, dict) else vars(space)
+        for value in names.values():
+            if (hasattr(value, "py_func") and hasattr(value, "_cache")
+                    and value.py_func.__module__ == names.get("__name__")):
                 found[id(value)] = value
     return list(found.values())
 

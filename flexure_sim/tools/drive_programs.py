@@ -24,6 +24,7 @@ from typing import Optional
 import numpy as np
 
 from flexure_sim.errors import FlexureSimError
+from flexure_sim.engine.mechanism import stroke
 from flexure_sim.engine.solver.programs import Program
 from flexure_sim.engine.solver.simulation import Simulation, Snapshot
 
@@ -112,6 +113,27 @@ def static_inputs(programs: dict, names: tuple) -> np.ndarray:
                                  "give --static a step, ramp or cycloid")
         out[names.index(name)] = program.final
     return out
+
+
+def check_strokes(mechanism, programs: dict) -> None:
+    """
+    Refuse a program that takes its drive outside the stroke (``mechanism.stroke``'s rule).
+
+    The values checked: a step's, ramp's or cycloid's final value, a sine's extremes (the
+    program's commands; a piezo actuator taking volts is checked against its voltage range).
+    """
+    alone = len(mechanism.drives) == 1
+    for drive in mechanism.drives:
+        program = programs.get(drive.name)
+        if program is None:
+            continue
+        values = ([program.final] if program.final is not None else
+                  [program.initial - program.amplitude, program.initial + program.amplitude])
+        for value in values:
+            reason = stroke.outside(drive, value, alone, command=True)
+            if reason is not None:
+                option = f"--drive {'' if alone else drive.name + '='}{program.describe()}"
+                raise stroke.StrokeError(f"{option}: {reason}: {stroke.REASON}")
 
 
 def apply(sim: Simulation, programs: dict) -> None:

@@ -1,6 +1,8 @@
 """The command-line options the tools share: file tools' RUN options, drive inputs."""
 from __future__ import annotations
 
+import argparse
+import math
 from typing import Any, Optional
 
 
@@ -28,7 +30,7 @@ def parse_drive_inputs(text: Optional[str], option: str = "--input"):
 
     ``NAME=VALUE,...`` (a mapping; every drive named), ``V1,V2,...`` (one value per drive, in
     the mechanism's drive order) or one number (a single drive); None stays None. ValueError
-    naming ``option`` for anything that is not a number.
+    naming ``option`` for anything that is not a number, and for a drive named twice.
     """
     if text is None:
         return None
@@ -40,6 +42,8 @@ def parse_drive_inputs(text: Optional[str], option: str = "--input"):
             if not eq or not name.strip():
                 raise ValueError(f"{option} {text!r}: expected NAME=VALUE for every drive "
                                  f"(e.g. x=1e-6,y=0), got {p!r}")
+            if name.strip() in out:
+                raise ValueError(f"{option} {text!r}: drive {name.strip()} is given twice")
             out[name.strip()] = _float(value, option, text)
         return out
     values = [_float(p, option, text) for p in parts]
@@ -51,3 +55,22 @@ def _float(value: str, option: str, text: str) -> float:
         return float(value)
     except ValueError:
         raise ValueError(f"{option} {text!r}: {value.strip()!r} is not a number") from None
+
+
+def count(text: str) -> int:
+    """
+    Return a count of things given on the command line (an argparse type): a positive integer.
+
+    Written as an integer or as a number with an integral value (``1e8``).
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        try:
+            number = float(text)
+        except ValueError:
+            number = float("nan")
+        value = int(number) if math.isfinite(number) and number == int(number) else 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a positive integer")
+    return value

@@ -22,7 +22,9 @@ TOOL_MODULES: tuple[str, ...] = (
     "tools.design.sensitivity_command",
     "tools.bench.benchmarks",
     "tools.design.sweep",
+    "tools.design.optimize",
     "tools.design.piezo_loop",
+    "tools.design.hinge",
 )
 
 

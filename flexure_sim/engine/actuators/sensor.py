@@ -17,7 +17,8 @@ The chain, per tick k of period T (the true output x_k is the value at the end o
 3. resolution: quantised to the nearest multiple of ``resolution`` q (mid-tread rounding, the
    error within +-q/2); 0: not quantised.
 4. latency: the reading of tick k is published at tick k + L (``latency`` L ticks); before
-   tick L the first reading is repeated.
+   tick L the first reading is repeated. The delay line holds the readings not yet published,
+   at most L + 1 (it grows with the ticks run, not with L), and L is at most ``MAX_LATENCY``.
 
 Pure NumPy, no ROS: the node calls `Sensor.sample` once per tick.
 """
@@ -29,6 +30,9 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
+
+#: Longest latency (ticks): 1000 s at 1 kHz; its delay line holds ~32 MB of readings.
+MAX_LATENCY = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -91,7 +95,7 @@ class Sensor:
         if spec.resolution > 0.0:
             y = spec.resolution * round(y / spec.resolution)
         delay = self._delay
-        if not delay:
-            delay.extend([y] * spec.latency)
         delay.append(y)
-        return delay.popleft()
+        if len(delay) > spec.latency:
+            return delay.popleft()
+        return delay[0]  # before tick L: the first reading

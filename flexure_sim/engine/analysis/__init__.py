@@ -6,6 +6,8 @@ The designer's analyses: linearisation, modes, FRF, sensitivities, sweeps.
   FRF, static gain.
 - ``parametric``: The mechanism's hinge forces as a function of its coordinates *and* its design
   parameters.
+- ``spatial_linear``: Exact linearisation of a spatial mechanism about a static equilibrium:
+  modes, FRF, gains.
 - ``sensitivity``: Exact first and second design sensitivities by hyper-dual numbers.
 - ``study``: Study files: design sweeps (a grid) and Monte Carlo tolerance studies of one
   mechanism.

@@ -77,11 +77,25 @@ def frf(
     v = s z, (s^2 I - s A_vv - A_vz) z = A_vu u + (B_v,d + s B1_v,d) input -- an (n_F x n_F)
     system per frequency instead of (2 n_F + m), with the same exact result. A force drive's
     input has no lag (B_v,d = M_F^-1 e_F, u = 0), nor has a displacement input (its rate and
-    acceleration in B1, D1, D2: ``LinearModel``).
+    acceleration in B1, D1, D2: ``LinearModel``). The frequencies are solved ``FRF_CHUNK`` at
+    a time, so the work arrays stay bounded (the result is n_outputs x n_frequencies).
     """
     k = model.input_index(source)
     rows = _rows(model, outputs)
-    s = 2j * np.pi * np.asarray(frequencies, dtype=float)
+    f = np.asarray(frequencies, dtype=float).ravel()
+    out = np.empty((len(rows), len(f)), dtype=complex)
+    for start in range(0, len(f), FRF_CHUNK):
+        out[:, start:start + FRF_CHUNK] = _frf_chunk(model, f[start:start + FRF_CHUNK], rows, k)
+    return out
+
+
+#: Frequencies per solve of ``frf`` (its (chunk, n_F, n_F) work array: ~10 MB for the stage).
+FRF_CHUNK = 4096
+
+
+def _frf_chunk(model: LinearModel, f: np.ndarray, rows: list, k: int) -> np.ndarray:
+    """``frf`` at the frequencies ``f`` (Hz) for the outputs ``rows`` and input column ``k``."""
+    s = 2j * np.pi * f
     A, nF = model.A, len(model.free)
     na = A.shape[0] - 2 * nF
     Avz, Avv = A[nF:2 * nF, :nF], A[nF:2 * nF, nF:2 * nF]

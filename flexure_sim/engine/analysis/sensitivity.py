@@ -2,8 +2,8 @@
 Exact first and second design sensitivities by hyper-dual numbers.
 
 The static equilibrium Q_F(z, p) = 0 at drive input u defines z(p). Seeding parameters p
-(``parametric.Parameters``: any number of the mechanism file by path) as hyper-dual numbers
--- p_i + e1 and p_j + e2, or p_i + e1 + e2 for one parameter -- and running Newton's method
+(``mechanism.parameters.Parameters``: any number of the mechanism file by path) as hyper-dual
+numbers -- p_i + e1 and p_j + e2, or p_i + e1 + e2 for one parameter -- and running Newton's method
 *in hyper-dual arithmetic* with the real tangent stiffness K = -dQ_F/dz_F,
 
     z <- z + K^-1 Q_F(z, p),
@@ -298,7 +298,8 @@ def default_input(mech):
 
 
 def sensitivities(
-    params: Parameters, wrt: Sequence[str], of: Sequence[str] = OUTPUTS, u=None
+    params: Parameters, wrt: Sequence[str], of: Sequence[str] = OUTPUTS, u=None,
+    hessian: bool = False,
 ) -> dict:
     """
     Values.
@@ -311,14 +312,22 @@ def sensitivities(
 
     Returns {"input", "values": {out: v}, "gradient": {out: {p: d}}, "second": {out:
     {"p|q": d}}}: with one parameter per evaluation d2/dp2 (seeds p + e1 + e2); with exactly
-    two parameters also the mixed d2/dp dq (seeds p + e1, q + e2).
+    two parameters, or with ``hessian``, the mixed d2/dp dq of every pair p before q in ``wrt``,
+    each from one evaluation (seeds p + e1, q + e2). With ``hessian`` also {"hessian": {out:
+    H}}: the full Hessian, H[i][j] = d2 out / d wrt[i] d wrt[j] (symmetric, one evaluation per
+    entry on and above the diagonal).
     """
     mech = params.mechanism
     if "gain" in of and mech.output is None and not (mech.drives and mech.all_outputs):
         raise ParameterError(f"gain: mechanism {mech.name!r} names no output body")
     of = _expand(mech, of)
+    seen = {}
     for p in wrt:
         params.check(p)
+        steps = params.resolve(p)[0]
+        if steps in seen:
+            raise ParameterError(f"--wrt: {seen[steps]} and {p} name the same number")
+        seen[steps] = p
     if u is None:
         u = default_input(mech)
     if "compression" in of and mech.compression_hinge is None:
@@ -343,8 +352,8 @@ def sensitivities(
         for o, v in res.items():
             gradient[o][p] = float(v.b)
             second[o][f"{p}|{p}"] = float(v.d)
-    if len(wrt) == 2:
-        p, q = wrt
+    pairs = [(p, q) for i, p in enumerate(wrt) for q in wrt[i + 1:]]
+    for p, q in pairs if hessian or len(wrt) == 2 else ():
         design = params.design(
             {
                 p: hd.HyperDual(params.value(p), 1.0, 0.0, 0.0),
@@ -354,4 +363,9 @@ def sensitivities(
         for o, v in sens.outputs(design, sens.equilibrium(design), of).items():
             second[o][f"{p}|{q}"] = float(v.d)
     u0 = sens.u if np.ndim(sens.u) == 0 else dict(zip(model.drives.names, sens.u.tolist()))
-    return {"input": u0, "values": values, "gradient": gradient, "second": second}
+    result = {"input": u0, "values": values, "gradient": gradient, "second": second}
+    if hessian:
+        result["hessian"] = {o: [[second[o][f"{p}|{q}" if i <= j else f"{q}|{p}"]
+                                  for j, q in enumerate(wrt)] for i, p in enumerate(wrt)]
+                             for o in of}
+    return result

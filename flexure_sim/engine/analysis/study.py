@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Iterable, Optional, Sequence
@@ -44,11 +45,13 @@ from flexure_sim.errors import FlexureSimError
 from flexure_sim.engine.mechanism.loader import (
     ConfigError, mechanism_from_dict, resolve_mechanism_path,
 )
-from flexure_sim.engine.mechanism.doc_paths import own_stiffness, resolve_path, set_path
+from flexure_sim.engine.mechanism.doc_paths import apply
 from flexure_sim.engine.mechanism.parts import Mechanism
 from flexure_sim.engine.analysis.study_checks import (
-    Channels, DriveInput, check_outputs, drive_input, number as _number,
+    Channels, DriveInput, check_defined, check_outputs, drive_input, number as _number,
+    spec_paths,
 )
+from flexure_sim.engine.analysis.study_size import Batches, Range, built, check_fits
 from flexure_sim.engine.mechanism.yaml_files import read_yaml
 
 #: Designs per task unless the study says otherwise.
@@ -117,10 +120,9 @@ class Study:
     def grid_shape(self) -> tuple[int, ...]:
         return tuple(len(p.values) for p in self.parameters)
 
-    def batches(self) -> list[tuple[int, int]]:
-        """(start, stop) sample ranges of the batches, in order."""
-        b = self.batch_size
-        return [(s, min(s + b, self.samples)) for s in range(0, self.samples, b)]
+    def batches(self) -> Batches:
+        """(start, stop) sample ranges of the batches, in order (computed on demand)."""
+        return Batches(self.samples, self.batch_size)
 
     def sample(self, index: int) -> np.ndarray:
         """Parameter values of design ``index`` (column order of ``parameters``)."""
@@ -140,18 +142,10 @@ class Study:
 
     def design(self, values: Sequence[float]) -> dict:
         """Return the base document with the parameter values applied (the base is not changed)."""
-        doc = self.base
-        # Shared values first, then each hinge that gets its own stiffness copies the shared
-        # model as changed, then the hinge's own values.
-        for own in (False, True):
-            for p, v in zip(self.parameters, values):
-                for path, base, through in zip(p.paths, p.base, p.through):
-                    if (through is not None) != own:
-                        continue
-                    if through is not None:
-                        doc = own_stiffness(doc, through)
-                    doc = set_path(doc, path, base + float(v) if p.offset else float(v))
-        return doc
+        return apply(self.base, [
+            (path, through, base + float(v) if p.offset else float(v))
+            for p, v in zip(self.parameters, values)
+            for path, base, through in zip(p.paths, p.base, p.through)])
 
     def mechanism(self, values: Sequence[float]) -> Mechanism:
         """Build (and validate) the mechanism of one design; ConfigError if it is invalid."""
@@ -213,7 +207,7 @@ def study_from_dict(data: Any, source: str, output_names: Iterable[str],
         for key in ("samples", "seed"):
             if key in data:
                 raise fail(key, "only for Monte Carlo studies (a grid has one design per point)")
-        samples, seed = int(np.prod([len(p.values) for p in params])), None
+        samples, seed = math.prod(len(p.values) for p in params), None  # exact: no int64
     batch = _count(data, "batch_size", fail, default=DEFAULT_BATCH_SIZE)
     study = Study(
         name=str(data.get("name", Path(source).stem)), source=source,
@@ -229,8 +223,11 @@ def study_from_dict(data: Any, source: str, output_names: Iterable[str],
         raise fail("mechanism", f"{base_mech.name!r} has no drive constraint: the outputs are "
                    "responses to the drive input")
     check_outputs(outputs, base_mech, fail)
-    return replace(study, input=drive_input(data.get("input"), base_mech, fail),
-                   channels=Channels.of(base_mech))
+    study = replace(study, channels=Channels.of(base_mech))
+    check_fits(study, fail)
+    value = drive_input(data.get("input"), base_mech, fail)
+    check_defined(outputs, base_mech, value, fail)
+    return replace(study, parameters=built(study.parameters), input=value)
 
 
 def _read(path: Path, error: type[Exception]) -> Any:
@@ -296,26 +293,8 @@ def _step(raw: Any, fail) -> dict:
 
 
 def _parameter(spec: Any, key: str, doc: dict, fail) -> Parameter:
-    if not isinstance(spec, dict):
-        raise fail(key, f"expected a mapping (path and values/range/normal/uniform), got {spec!r}")
-    unknown = sorted(set(spec) - _PARAM_KEYS)
-    if unknown:
-        raise fail(f"{key}.{unknown[0]}",
-                   f"unknown key (allowed: {', '.join(sorted(_PARAM_KEYS))})")
-    if ("path" in spec) == ("paths" in spec):
-        raise fail(key, "give either path or paths")
-    texts = [spec["path"]] if "path" in spec else spec["paths"]
-    pkey = f"{key}.path" if "path" in spec else f"{key}.paths"
-    if not isinstance(texts, list) or not texts:
-        raise fail(pkey, f"expected a non-empty list of paths, got {texts!r}")
-    resolved = []
-    for j, text in enumerate(texts):
-        k = pkey if "path" in spec else f"{pkey}[{j}]"
-        resolved.append(resolve_path(doc, text, lambda problem, k=k: fail(k, problem)))
-    paths, through, bases = zip(*resolved)
-    offset = spec.get("offset", False)
-    if not isinstance(offset, bool):
-        raise fail(f"{key}.offset", f"expected true or false, got {offset!r}")
+    texts, paths, through, bases, offset = spec_paths(
+        spec, key, doc, _PARAM_KEYS, "path and values/range/normal/uniform", fail)
     sources = [s for s in _SOURCES if s in spec]
     if len(sources) != 1:
         raise fail(key, f"give exactly one of {', '.join(_SOURCES)} (got {sources or 'none'})")
@@ -354,7 +333,7 @@ def _source(kind: str, raw: Any, key: str, centre: float, fail) -> tuple:
             raise fail(f"{key}.num", f"expected a positive integer, got {num!r}")
         a = _number(need("start"), f"{key}.start", fail)
         b = _number(need("stop"), f"{key}.stop", fail)
-        return "values", tuple(float(x) for x in np.linspace(a, b, num)), 0.0, 0.0
+        return "values", Range(a, b, num), 0.0, 0.0  # built once the study is known to fit
     if kind == "normal":
         mean = _number(raw.get("mean", centre), f"{key}.mean", fail)
         return "normal", (), mean, _number(need("std"), f"{key}.std", fail, positive=True)

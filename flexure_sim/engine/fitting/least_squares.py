@@ -42,7 +42,8 @@ from typing import Any, Optional
 import numpy as np
 
 from flexure_sim.errors import FlexureSimError
-from flexure_sim.engine.laws.quadratic import COORDINATES, wrench_on_element
+from flexure_sim.engine.laws.coordinates import COORDINATES
+from flexure_sim.engine.laws.quadratic import wrench_on_element
 from flexure_sim.engine.kinematics.planar import rot
 from flexure_sim.engine.laws.monomials import (
     describe_monomial, monomial_exponents, monomial_gradients,

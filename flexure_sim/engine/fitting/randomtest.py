@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from flexure_sim.engine.fitting.least_squares import FitError, fit_polynomial
-from flexure_sim.engine.laws.quadratic import twistor_coordinates
+from flexure_sim.engine.laws.coordinates import twistor_coordinates
 from flexure_sim.engine.kinematics.planar import rot
 from flexure_sim.engine.laws.monomials import monomial_exponents, monomial_gradients
 from flexure_sim.engine.fitting.wrench_data import WrenchData

@@ -35,16 +35,28 @@ moment f_x L / 2 at either end, so the largest end moment is |m| + |f_x| L / 2:
     sigma = 6 (|m| + |f_x| L / 2) / (w T^2) + |f_y| / (w T)
 
 (straight beam, no concentration: the fillets at the clamps are not modelled).
+Finite-element hinge (``model: fe``, engine/hinges/fe): the peak von Mises stress per unit
+moment and force, c = (c_m, c_x, c_y), from the same solve as the stiffness
+(fe.model.stress_coefficients); the stress of a wrench is bounded by
+
+    sigma = c_m |m| + c_x |f_x| + c_y |f_y|
+
+(von Mises is a norm of the stress tensor: exact for one component, conservative for
+combinations, like the formulas above). The handbook K_t is for the closed forms only.
+
 Hinges with a ``matrix`` stiffness or a fitted polynomial law have no geometry: no stress.
 
-Each hinge's ``StressGeometry`` (model, dimensions, sigma_y) is part of the loaded mechanism
-(``Hinge.stress``, set by mechanism/loader.py from the very numbers the stiffness formula used), so
-any Mechanism -- loaded, swept or recorded -- has its stresses without its YAML file.
+Each hinge's ``StressGeometry`` (model, dimensions, and the strengths of its material:
+sigma_y, and sigma_u, sigma_e for fatigue, engine/hinges/materials.py) is part of the loaded
+mechanism (``Hinge.stress``, set by mechanism/loader.py from the very numbers the stiffness
+formula used), so any Mechanism -- loaded, swept or recorded -- has its stresses without its
+YAML file. ``fibres`` gives the signed stress at the section's critical points from the same
+section terms as the peak stress (the fatigue criteria, engine/hinges/fatigue.py, cycle them).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Mapping, Optional
 
 import numpy as np
@@ -98,52 +110,132 @@ def notch_concentration(h, D):
     return u_notch_bending_factor(0.5 * D, 0.5 * D, h + D)
 
 
+def _notch_terms(wrench, D, h, t):
+    """(K_t, signed bending stress 6 m / (t h^2), signed axial stress f_x / (t h)) at the neck."""
+    m, fx = wrench[..., 0], wrench[..., 1]
+    return notch_concentration(h, D), 6.0 * m / (t * h * h), fx / (t * h)
+
+
 def notch_stress(wrench, D, h, t):
     """Peak stress (Pa) of a circular notch hinge under wrench (m, f_x, f_y)."""
-    m, fx = wrench[..., 0], wrench[..., 1]
-    return notch_concentration(h, D) * (6.0 * np.abs(m) / (t * h * h) + np.abs(fx) / (t * h))
+    kt, bending, axial = _notch_terms(wrench, D, h, t)
+    return kt * (np.abs(bending) + np.abs(axial))
+
+
+def notch_fibres(wrench, D, h, t):
+    """
+    Signed stress (Pa) at the two notch roots, (..., 2): K_t (+-6 m / (t h^2) + f_x / (t h)).
+
+    The peak stress is the larger magnitude of the two (|a + b| or |a - b| is |a| + |b|).
+    """
+    kt, bending, axial = _notch_terms(wrench, D, h, t)
+    return _stack_last([kt * (bending + axial), kt * (axial - bending)])
+
+
+def _leaf_terms(wrench, length, thickness, width):
+    """Return (m, the shear force's moment f_x L / 2 at either end, f_y)."""
+    m, fx, fy = wrench[..., 0], wrench[..., 1], wrench[..., 2]
+    return m, 0.5 * length * fx, fy
 
 
 def leaf_stress(wrench, length, thickness, width):
     """Peak stress (Pa) of a leaf hinge under wrench (m, f_x, f_y) at its centroid."""
-    m, fx, fy = wrench[..., 0], wrench[..., 1], wrench[..., 2]
-    return 6.0 * (np.abs(m) + 0.5 * length * np.abs(fx)) / (
+    m, arm, fy = _leaf_terms(wrench, length, thickness, width)
+    return 6.0 * (np.abs(m) + np.abs(arm)) / (
         width * thickness * thickness
     ) + np.abs(fy) / (width * thickness)
+
+
+def fe_stress(wrench, c_m, c_x, c_y):
+    """Peak stress (Pa) of a finite-element hinge under wrench (m, f_x, f_y) (module docstring)."""
+    return (c_m * np.abs(wrench[..., 0]) + c_x * np.abs(wrench[..., 1])
+            + c_y * np.abs(wrench[..., 2]))
+
+
+def leaf_fibres(wrench, length, thickness, width):
+    """
+    Signed stress (Pa) at the two faces of both clamped ends, (..., 4).
+
+    End moments m +- f_x L / 2, faces +-: +-6 (m +- f_x L / 2) / (w T^2) + f_y / (w T); the peak
+    stress is the largest magnitude.
+    """
+    m, arm, fy = _leaf_terms(wrench, length, thickness, width)
+    axial = fy / (width * thickness)
+    ends = [6.0 * (m + arm) / (width * thickness * thickness),
+            6.0 * (m - arm) / (width * thickness * thickness)]
+    return _stack_last([axial + ends[0], axial - ends[0], axial + ends[1], axial - ends[1]])
+
+
+def _stack_last(items):
+    """Stack floats or HyperDual values along a new last axis."""
+    if any(isinstance(x, hd.HyperDual) for x in items):
+        return hd.stack(items, axis=-1)
+    return np.stack(np.broadcast_arrays(*items), axis=-1)
 
 
 #: Per stiffness model with a geometry: the keys of its stiffness formula the stress uses, in
 #: the order of the stress function's arguments.
 STRESS_KEYS = {"notch": ("D", "h", "t"), "cantilever": ("length", "thickness", "width")}
-_STRESS_FUNCTIONS = {"notch": notch_stress, "cantilever": leaf_stress}
+_STRESS_FUNCTIONS = {"notch": notch_stress, "cantilever": leaf_stress, "fe": fe_stress}
+#: Signed stress at the critical points of the section (fatigue: engine/hinges/fatigue.py);
+#: an fe hinge's stress is a bound of magnitudes (von Mises), with no sign to cycle.
+_FIBRE_FUNCTIONS = {"notch": notch_fibres, "cantilever": leaf_fibres}
 
 
 @dataclass(frozen=True)
 class StressGeometry:
     """
-    What one hinge's stress needs.
+    What one hinge's stress needs, and the strengths its stress is compared with.
 
-    Its stiffness ``model`` (notch or cantilever), the ``dimensions`` (m) of that model in the
-    order of STRESS_KEYS[model], and the yield strength ``sigma_y`` (Pa) or None. Floats in a
-    loaded mechanism; HyperDual values where mechanism/parameters.py varies them.
+    Its stiffness ``model`` (notch, cantilever or fe), the ``dimensions`` (m) of that model in
+    the order of STRESS_KEYS[model] -- for ``fe`` the three peak-stress coefficients
+    (Pa/(N m), Pa/N, Pa/N) --, the yield strength ``sigma_y`` (Pa) or None, and for fatigue
+    (engine/hinges/fatigue.py) the ultimate strength ``sigma_u`` and the fully reversed fatigue
+    strength ``sigma_e`` (Pa) at ``cycles`` cycles, or None; the ``material`` they come from
+    (engine/hinges/materials.py) or None for numbers given in the file; ``key``: the stiffness
+    specification's key in the mechanism file, for messages. Floats in a loaded mechanism;
+    HyperDual values where mechanism/parameters.py varies them.
     """
 
     model: str
     dimensions: tuple
     sigma_y: Optional[Any] = None
+    sigma_u: Optional[Any] = None
+    sigma_e: Optional[Any] = None
+    cycles: Optional[float] = None
+    material: Optional[str] = None
+    key: str = field(default="", compare=False)
 
     @classmethod
-    def of(cls, model: str, values: Mapping[str, Any],
-           sigma_y: Optional[Any] = None) -> Optional["StressGeometry"]:
-        """From a stiffness model's numbers by key; None for a model without a geometry."""
+    def of(cls, model: str, values: Mapping[str, Any], sigma_y: Optional[Any] = None,
+           **strengths: Any) -> Optional["StressGeometry"]:
+        """
+        From a stiffness model's numbers by key; None for a model without a geometry.
+
+        ``strengths``: the other fields (materials.strengths gives them with sigma_y).
+        """
         keys = STRESS_KEYS.get(model)
         if keys is None:
             return None
-        return cls(model, tuple(values[k] for k in keys), sigma_y)
+        return cls(model, tuple(values[k] for k in keys), sigma_y, **strengths)
 
     def stress(self, wrench):
         """Return the peak stress, Pa, under one wrench or an array (..., 3) (module docstring)."""
         return _STRESS_FUNCTIONS[self.model](wrench, *self.dimensions)
+
+    def fibres(self, wrench):
+        """
+        Return the signed stress (Pa) at the section's critical points, (..., k).
+
+        None for a model whose stress is a bound of magnitudes only (no sign to cycle).
+        """
+        fn = _FIBRE_FUNCTIONS.get(self.model)
+        return None if fn is None else fn(wrench, *self.dimensions)
+
+    @property
+    def has_fatigue(self) -> bool:
+        """Tell whether the fatigue criteria have their strengths (sigma_e, sigma_u, sigma_y)."""
+        return None not in (self.sigma_e, self.sigma_u, self.sigma_y)
 
     def ratio_coefficients(self) -> np.ndarray:
         """
@@ -176,8 +268,26 @@ def stress_table(wrenches, mechanism: "Mechanism") -> dict:
             continue
         s = float(g.stress(w))
         sy = None if g.sigma_y is None else float(g.sigma_y)
-        out[hinge.name] = {"stress": s, "sigma_y": sy, "ratio": s / sy if sy else None}
+        out[hinge.name] = {"stress": s, "sigma_y": sy, "ratio": s / sy if sy else None,
+                           "material": g.material}
     return out
+
+
+def no_yield_advice(mechanism: "Mechanism") -> Optional[str]:
+    """
+    Return what to add for the notch/leaf hinges without a yield strength, or None if none lacks.
+
+    One line naming the stiffness specifications (materials.missing_strength).
+    """
+    from flexure_sim.engine.hinges.materials import missing_strength
+
+    lacking = [h for h in mechanism.hinges if h.stress is not None and h.stress.sigma_y is None]
+    if not lacking:
+        return None
+    keys = list(dict.fromkeys(h.stress.key for h in lacking))
+    names = ", ".join(h.name for h in lacking)
+    return f"hinge{'s' if len(lacking) > 1 else ''} {names}: " + missing_strength(
+        "yield strength", " and ".join(k for k in keys if k))
 
 
 def ratio_map(mechanism: "Mechanism") -> tuple[list[str], np.ndarray, np.ndarray]:
@@ -211,7 +321,8 @@ def stroke_limit(sim, tol: float = 1e-9, max_iter: int = 30) -> tuple[float, str
         snap = sim.static(u).snapshot
         found = peak_ratio(stress_table(snap.wrenches, sim.mechanism))
         if found is None:
-            raise ValueError("no hinge has a yield strength (sigma_y in its stiffness model)")
+            raise ValueError(no_yield_advice(sim.mechanism) or "no hinge has a notch or leaf "
+                             "geometry to compute stress from")
         return found[1] - 1.0, found[0]
 
     u0 = sim.drive.stroke[1] if sim.drive.stroke[1] > 0 else -sim.drive.stroke[0]

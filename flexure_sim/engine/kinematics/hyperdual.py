@@ -29,7 +29,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
-__all__ = ["HyperDual", "seed", "parts_of", "real", "stack", "from_objects"]
+__all__ = ["HyperDual", "seed", "parts_of", "real", "stack", "from_objects", "asarray"]
 
 
 def _parts(x):
@@ -313,3 +313,37 @@ def stack(items, axis: int = -1) -> HyperDual:
         shape = np.broadcast_shapes(*(p.shape for p in parts))
         out.append(np.stack([np.broadcast_to(p, shape) for p in parts], axis=axis))
     return HyperDual(*out)
+
+
+def asarray(values):
+    """
+    Return nested sequences of numbers as a float array, or a HyperDual array if any is one.
+
+    Entries may be numbers, HyperDuals (scalars or arrays) and arrays (also object arrays of
+    both, as ``np.diag`` of hyper-dual scalars gives); a HyperDual result has zero derivative
+    parts where the entries are plain numbers.
+    """
+    if isinstance(values, HyperDual):
+        return values
+    if not _holds_dual(values):
+        return np.asarray(values, dtype=float)
+    if any(np.ndim(v) > 0 and (isinstance(v, HyperDual) or getattr(v, "dtype", object) != object)
+           for v in values):  # arrays, one per item: stacked along a new first axis
+        items = [asarray(v) for v in values]
+        shape = np.broadcast_shapes(*(np.shape(v) if not isinstance(v, HyperDual) else v.shape
+                                      for v in items))
+        parts = [np.zeros((len(items),) + shape) for _ in range(4)]
+        for i, item in enumerate(items):
+            for part, p in zip(parts, _parts(item)):
+                part[i] = p
+        return HyperDual(*parts)
+    return from_objects(values)  # numbers and hyper-dual scalars
+
+
+def _holds_dual(values) -> bool:
+    if isinstance(values, HyperDual):
+        return True
+    if isinstance(values, (list, tuple)) or (isinstance(values, np.ndarray)
+                                             and values.dtype == object):
+        return any(_holds_dual(v) for v in values)
+    return False

@@ -16,12 +16,12 @@ of shape (n,) (with vectors of shape (n, 2)) to act on many hinges at once.
 """
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
 
 from flexure_sim.errors import as_array
+from flexure_sim.engine.kinematics.scalar import formula, real, where
 
 #: sk(1), the 2x2 generator of planar rotations (eq. 2.93): J @ [x, y] = [-y, x].
 J = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -89,43 +89,33 @@ def displacement_from_twist(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return rot(alpha), exp_translation_matrix(alpha) @ d[1:]
 
 
-def half_cot_scalar(a: float) -> tuple[float, float, float]:
+@formula
+def half_cot(a):
     """
-    f(a) = (a/2) cot(a/2) (f(0) = 1), f'(a) and f''(a) at one angle: the one definition.
+    f(a) = (a/2) cot(a/2) (f(0) = 1), f'(a) and f''(a): the one definition, on any scalar.
 
     f' = cot(a/2)/2 - a / (4 sin^2(a/2)), f'' = -1/(2 sin^2(a/2)) + a cos(a/2) / (4 sin^3(a/2));
     below ``HALF_COT_SERIES`` the series f = 1 - a^2/12 - a^4/720 - a^6/30240 and its
-    derivatives. Plain Python on floats, so Numba compiles this same function for the
-    force kernel (solver/kernels.py) and ``half_cot_derivatives`` maps it over arrays.
+    derivatives, with the closed form evaluated at a safe angle (kinematics/scalar.py). Floats in
+    the compiled force kernel, arrays of angles, HyperDual arrays (kinematics/scalar.py).
     """
-    if abs(a) < HALF_COT_SERIES:
-        a2 = a * a
-        a4 = a2 * a2
-        return (1.0 - a2 / 12.0 - a4 / 720.0 - a4 * a2 / 30240.0,
-                -a * (1.0 / 6.0 + a2 / 180.0 + a4 / 5040.0),
-                -1.0 / 6.0 - a2 / 60.0 - a4 / 1008.0)
-    s, c = math.sin(0.5 * a), math.cos(0.5 * a)
+    small = np.abs(real(a)) < HALF_COT_SERIES
+    safe = where(small, 1.0, a)
+    s, c = np.sin(0.5 * safe), np.cos(0.5 * safe)
     s2 = s * s
-    return 0.5 * a * c / s, 0.5 * c / s - 0.25 * a / s2, -0.5 / s2 + 0.25 * a * c / (s2 * s)
-
-
-def half_cot_derivatives(alpha):
-    """``half_cot_scalar`` over an array of angles: (f, f', f''), each of alpha's shape."""
-    alpha = np.asarray(alpha, dtype=float)
-    values = [half_cot_scalar(x) for x in alpha.ravel().tolist()]
-    out = np.array(values, dtype=float).reshape(alpha.shape + (3,))
-    return out[..., 0], out[..., 1], out[..., 2]
-
-
-def half_cot(alpha):
-    """f(alpha) = (alpha/2) cot(alpha/2), with its series near 0 (f(0) = 1)."""
-    return half_cot_derivatives(alpha)[0]
+    a2 = a * a
+    a4 = a2 * a2
+    return (where(small, 1.0 - a2 / 12.0 - a4 / 720.0 - a4 * a2 / 30240.0, 0.5 * safe * c / s),
+            where(small, -a * (1.0 / 6.0 + a2 / 180.0 + a4 / 5040.0),
+                  0.5 * c / s - 0.25 * safe / s2),
+            where(small, -1.0 / 6.0 - a2 / 60.0 - a4 / 1008.0,
+                  -0.5 / s2 + 0.25 * safe * c / (s2 * s)))
 
 
 def log_translation_matrix(alpha) -> np.ndarray:
     """V^-1(alpha) with t = V^-1 p: (alpha/2) cot(alpha/2) I - (alpha/2) J (eq. 2.106)."""
     alpha = np.asarray(alpha, dtype=float)
-    f = half_cot(alpha)
+    f = half_cot(alpha)[0]
     return f[..., None, None] * np.eye(2) - 0.5 * alpha[..., None, None] * J
 
 

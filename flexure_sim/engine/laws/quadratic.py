@@ -5,8 +5,8 @@ A hinge joins frame a (on body A) and frame b (on body B) that coincide when uns
 Its state is the relative displacement of b in a, written r = (alpha, p1, p2): alpha the
 rotation of b relative to a, p the origin of b in a's coordinates.
 
-A law is a potential U(c) in *law coordinates* c(r), plus a dissipation function
-D = 1/2 c_dot^T C c_dot in the rates of the same coordinates:
+A law is a potential U(c) in *law coordinates* c(r) (engine/laws/coordinates.py), plus a
+dissipation function D = 1/2 c_dot^T C c_dot in the rates of the same coordinates:
 - ``twistor``: c = (sigma, xi, x1, x2) (eqs. 2.132-2.135); the quadratic potential is
   U = 2 [xi; x]^T K [xi; x] (eq. 4.7) and the damping wrench 2 Lambda^T B dx (4.40-4.42)
   is the gradient of D = 2 [xi_dot; x_dot]^T B [xi_dot; x_dot].
@@ -38,110 +38,15 @@ from typing import Protocol, Sequence
 import numpy as np
 
 from flexure_sim.errors import as_array
-from flexure_sim.engine.kinematics.planar import J, half_cot_derivatives, rot
-
-# ------------------------------------------------------------------ law coordinates
-
-
-def deflections(alpha, p, rdot=None):
-    """
-    Return alpha (n,), p (n, 2) (and rdot (n, 3)) as float arrays, checked.
-
-    A ValueError names the argument of a wrong shape.
-    """
-    alpha = as_array("alpha", alpha, (None,))
-    p = as_array("p", p, (alpha.shape[0], 2))
-    if rdot is None:
-        return alpha, p
-    return alpha, p, as_array("rdot", rdot, (alpha.shape[0], 3))
-
-
-@dataclass(frozen=True)
-class CoordinateMap:
-    """
-    Law coordinates c(r) with first and second derivatives with respect to r.
-
-    c: (n, k); dc: (n, k, 3) = dc/dr; d2c: (n, k, 3, 3) = d2c/dr2.
-    """
-
-    c: np.ndarray
-    dc: np.ndarray
-    d2c: np.ndarray
-
-
-def twistor_coordinates(alpha: np.ndarray, p: np.ndarray, second: bool = True) -> CoordinateMap:
-    """
-    Twistor parameters (sigma, xi, x1, x2) of r = (alpha, p) and their derivatives.
-
-    sigma = cos(alpha/2), xi = sin(alpha/2), x = 1/2 R(-alpha/2) p (eq. 2.178), with
-    R(-alpha/2) = [[sigma, xi], [-xi, sigma]]. From d/dalpha R(-alpha/2) = -1/2 J R(-alpha/2):
-    dx/dalpha = -1/2 J x, dx/dp = 1/2 R(-alpha/2) -- the virtual displacement map of eq.
-    4.27 written in r. ``second=False`` skips the second derivatives (d2c is then None).
-    """
-    alpha, p = deflections(alpha, p)
-    n = alpha.shape[0]
-    sigma, xi = np.cos(0.5 * alpha), np.sin(0.5 * alpha)
-    p1, p2 = p[:, 0], p[:, 1]
-    x1 = 0.5 * (sigma * p1 + xi * p2)
-    x2 = 0.5 * (-xi * p1 + sigma * p2)
-    c = np.empty((n, 4))
-    c[:, 0], c[:, 1], c[:, 2], c[:, 3] = sigma, xi, x1, x2
-    dc = np.zeros((n, 4, 3))
-    dc[:, 0, 0] = -0.5 * xi
-    dc[:, 1, 0] = 0.5 * sigma
-    dc[:, 2, 0] = 0.5 * x2          # -1/2 (J x)_1 = +1/2 x2
-    dc[:, 3, 0] = -0.5 * x1         # -1/2 (J x)_2 = -1/2 x1
-    dc[:, 2, 1] = dc[:, 3, 2] = 0.5 * sigma
-    dc[:, 2, 2] = 0.5 * xi
-    dc[:, 3, 1] = -0.5 * xi
-    if not second:
-        return CoordinateMap(c, dc, None)
-    d2c = np.zeros((n, 4, 3, 3))
-    d2c[:, 0, 0, 0] = -0.25 * sigma
-    d2c[:, 1, 0, 0] = -0.25 * xi
-    d2c[:, 2, 0, 0] = -0.25 * x1
-    d2c[:, 3, 0, 0] = -0.25 * x2
-    # d2x/dalpha dp = -1/4 J R(-alpha/2) = -1/4 [[xi, -sigma], [sigma, xi]]
-    for i, j, val in (
-        (2, 1, -0.25 * xi),
-        (2, 2, 0.25 * sigma),
-        (3, 1, -0.25 * sigma),
-        (3, 2, -0.25 * xi),
-    ):
-        d2c[:, i, 0, j] = val
-        d2c[:, i, j, 0] = val
-    return CoordinateMap(c, dc, d2c)
-
-
-def twist_coordinates(alpha: np.ndarray, p: np.ndarray, second: bool = True) -> CoordinateMap:
-    """
-    Twist (tau, t1, t2) of r = (alpha, p) and its derivatives (eqs. 2.106-2.108).
-
-    tau = alpha, t = f(alpha) p - (alpha/2) J p with f = (alpha/2) cot(alpha/2).
-    """
-    alpha, p = deflections(alpha, p)
-    n = alpha.shape[0]
-    f, f1, f2 = half_cot_derivatives(alpha)
-    Jp = p @ J.T
-    t = f[:, None] * p - 0.5 * alpha[:, None] * Jp
-    c = np.column_stack([alpha, t])
-    dc = np.zeros((n, 3, 3))
-    dc[:, 0, 0] = 1.0
-    dc[:, 1:, 0] = f1[:, None] * p - 0.5 * Jp
-    dc[:, 1:, 1:] = f[:, None, None] * np.eye(2) - 0.5 * alpha[:, None, None] * J
-    if not second:
-        return CoordinateMap(c, dc, None)
-    d2c = np.zeros((n, 3, 3, 3))
-    d2c[:, 1:, 0, 0] = f2[:, None] * p
-    mixed = f1[:, None, None] * np.eye(2) - 0.5 * J
-    d2c[:, 1:, 0, 1:] = mixed
-    d2c[:, 1:, 1:, 0] = mixed
-    return CoordinateMap(c, dc, d2c)
-
-
-COORDINATES = {"twistor": twistor_coordinates, "twist": twist_coordinates}
+from flexure_sim.engine.kinematics.hyperdual import HyperDual
+from flexure_sim.engine.kinematics.relative import element_wrench
+from flexure_sim.engine.laws.coordinates import COORDINATES, deflections
 
 # ------------------------------------------------------------------------ the laws
+
+#: W = s K and C = s B on the law coordinates of a quadratic law: U = 2 [xi; x]^T K [xi; x]
+#: is 1/2 c^T (4 K) c on the twistor's (xi, x1, x2) (4.7), U = 1/2 d^T K d on the twist (3.4).
+METRIC_SCALE = {"twistor": 4.0, "twist": 1.0}
 
 
 @dataclass(frozen=True)
@@ -223,6 +128,9 @@ class QuadraticLaw(LawPower):
     (xi, x1, x2)) and D = 2 [xi_dot; x_dot]^T B [xi_dot; x_dot] (C = 4 B);
     ``twist`` (c = tau, t1, t2): U = 1/2 d^T K d (3.4) and D = 1/2 d_dot^T B d_dot.
     K, B: 3x3, moment first, forces second, in the hinge frame. Power: `LawPower`.
+    In the law of a design whose numbers carry derivatives (mechanism/parameters.py), K and B
+    are HyperDual arrays: the hyper-dual force chain reads them (analysis/parametric.py), the
+    methods here take floats.
     """
 
     coordinates: str
@@ -233,13 +141,17 @@ class QuadraticLaw(LawPower):
         if self.coordinates not in COORDINATES:
             raise ValueError(f"coordinates: expected one of {', '.join(COORDINATES)}, "
                              f"got {self.coordinates!r}")
-        object.__setattr__(self, "K", as_array("K", self.K, (3, 3)))
-        object.__setattr__(self, "B", as_array("B", self.B, (3, 3)))
+        for name in ("K", "B"):
+            M = getattr(self, name)
+            if not isinstance(M, HyperDual):
+                object.__setattr__(self, name, as_array(name, M, (3, 3)))
+            elif M.shape != (3, 3):
+                raise ValueError(f"{name}: expected shape (3, 3), got {M.shape}")
 
     def _embed(self, M: np.ndarray) -> np.ndarray:
         if self.coordinates == "twistor":
             out = np.zeros((4, 4))
-            out[1:, 1:] = 4.0 * M
+            out[1:, 1:] = METRIC_SCALE["twistor"] * M
             return out
         return np.array(M, dtype=float)
 
@@ -353,8 +265,4 @@ def wrench_on_element(alpha: np.ndarray, grad_r: np.ndarray) -> np.ndarray:
     """
     alpha = as_array("alpha", alpha, (None,))
     grad_r = as_array("grad_r", grad_r, (alpha.shape[0], 3))
-    R = rot(alpha)
-    m = np.empty_like(grad_r)
-    m[:, 0] = grad_r[:, 0]
-    m[:, 1:] = np.einsum("nji,nj->ni", R, grad_r[:, 1:])
-    return m
+    return np.column_stack(element_wrench(alpha, grad_r[:, 0], grad_r[:, 1], grad_r[:, 2]))

@@ -16,7 +16,13 @@ Mechanisms as data: bodies, hinges, drives; their YAML files loaded and checked.
 - ``parameters``: Design parameters of a mechanism file by path, and the Design they build.
 - ``parts``: Mechanisms as plain data: bodies, hinges, constraints, drive (the MjModel of
   flexure_sim).
+- ``planar_in_space``: A planar mechanism file opened in 3-D: the same mechanism with its
+  out-of-plane freedoms.
 - ``polynomial_files``: Polynomial hinge files.
+- ``spatial_loader``: Loading spatial mechanisms: ``space: 3d`` files, and planar files opened in
+  3-D.
+- ``spatial_parts``: Spatial mechanisms as plain data: bodies, hinges, constraints, drives and
+  outputs in 3-D.
 - ``stiffness_block``: Hinge stiffness in a mechanism file, checked: a ``stiffness`` specification
   and K's validity.
 - ``values``: Checked reading of values from a mechanism file, with messages that name the file and

@@ -21,7 +21,8 @@ from flexure_sim.engine.mechanism.values import vector as _vector
 from flexure_sim.engine.mechanism.parts import (
     COORDINATE_NAMES, Body, Drive, Fixed, Output, SineRate,
 )
-from flexure_sim.engine.actuators.sensor import SensorSpec
+from flexure_sim.engine.actuators.sensor import MAX_LATENCY, SensorSpec
+from flexure_sim.engine.memory import human
 
 
 def _sensor(ctx: _Ctx, raw: Any, output: Any) -> SensorSpec:
@@ -37,6 +38,10 @@ def _sensor(ctx: _Ctx, raw: Any, output: Any) -> SensorSpec:
             v = spec[k]
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ctx.fail(f"sensor.{k}", f"expected an integer >= 0, got {_shown(v)}")
+            if k == "latency" and v > MAX_LATENCY:
+                raise ctx.fail("sensor.latency", f"{v} ticks: the delay line would hold {v} "
+                               f"readings (~{human(32 * v)}); at most {MAX_LATENCY} ticks "
+                               "(1000 s at 1 kHz)")
             values[k] = v
     return SensorSpec(**values)
 

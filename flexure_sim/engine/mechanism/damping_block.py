@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.mechanism.values import Ctx as _Ctx
 from flexure_sim.engine.mechanism.values import mapping as _mapping
 from flexure_sim.engine.mechanism.values import no_unknown as _no_unknown
@@ -38,8 +39,8 @@ def hinge_damping(ctx: _Ctx, key: str, spec: Any, K: np.ndarray) -> np.ndarray:
     _no_unknown(ctx, key, spec, {"t_char", "B"})
     if "t_char" in spec:
         with np.errstate(all="ignore"):
-            B = _number(ctx, f"{key}.t_char", spec["t_char"], nonnegative=True) * K
-        if not np.all(np.isfinite(B)):
+            B = K * _number(ctx, f"{key}.t_char", spec["t_char"], nonnegative=True)
+        if not np.all(np.isfinite(hd.real(B))):
             raise ctx.fail(f"{key}.t_char",
                            "t_char times the stiffness is not finite: check the units")
         return B
@@ -47,9 +48,10 @@ def hinge_damping(ctx: _Ctx, key: str, spec: Any, K: np.ndarray) -> np.ndarray:
         rows = spec["B"]
         if not isinstance(rows, list) or len(rows) != 3:
             raise ctx.fail(f"{key}.B", "expected a 3x3 matrix")
-        B = np.array([_vector(ctx, f"{key}.B[{i}]", r, (3,)) for i, r in enumerate(rows)])
+        B = hd.asarray([_vector(ctx, f"{key}.B[{i}]", r, (3,)) for i, r in enumerate(rows)])
         with np.errstate(all="ignore"):
-            psd = np.allclose(B, B.T) and np.all(np.linalg.eigvalsh(B) >= 0)
+            real = hd.real(B)
+            psd = np.allclose(real, real.T) and np.all(np.linalg.eigvalsh(real) >= 0)
         if not psd:
             raise ctx.fail(f"{key}.B", "damping matrix must be symmetric positive semi-definite")
         return B
@@ -111,8 +113,19 @@ def _rayleigh_from_ratios(ctx: _Ctx, raw: Any) -> DampingSpec:
     if f1 == f2:
         raise ctx.fail("damping.ratios", f"the two frequencies must differ, got {f1:g} Hz twice")
     alpha, beta = rayleigh_coefficients(z1, 2 * np.pi * f1, z2, 2 * np.pi * f2)
-    if alpha < 0 or beta < 0:
-        raise ctx.fail("damping.ratios", f"these targets need alpha = {alpha:.6g} 1/s, beta = "
-                       f"{beta:.6g} s; a negative one would add energy (choose ratios that "
-                       "zeta = alpha/(2 omega) + beta omega/2 can meet with both >= 0)")
-    return DampingSpec("rayleigh", alpha=alpha, beta=beta)
+    (z1, f1), (z2, f2) = sorted(pairs, key=lambda p: p[1])
+    # With alpha, beta >= 0, zeta = alpha/(2 omega) + beta omega/2 at f2 > f1 lies between
+    # zeta1 f1/f2 (beta = 0) and zeta1 f2/f1 (alpha = 0); at either end the solve may leave
+    # a rounding error of either sign in the coefficient that is zero.
+    low, high = z1 * f1 / f2, z1 * f2 / f1
+    tol = 1e-12 * max(z1, z2)
+    if not low - tol <= z2 <= high + tol:
+        which = "beta" if z2 < low else "alpha"
+        need = beta if z2 < low else alpha
+        raise ctx.fail("damping.ratios", f"zeta {z1:g} at {f1:g} Hz and {z2:g} at {f2:g} Hz "
+                       f"need a negative {which} ({which} = {need:.6g} "
+                       f"{'s' if which == 'beta' else '1/s'}), which would add energy: with "
+                       f"zeta {z1:g} at {f1:g} Hz, Rayleigh damping (zeta = alpha/(2 omega) + "
+                       f"beta omega/2, alpha, beta >= 0) gives {low:.6g} to {high:.6g} at "
+                       f"{f2:g} Hz")
+    return DampingSpec("rayleigh", alpha=max(alpha, 0.0), beta=max(beta, 0.0))

@@ -88,7 +88,8 @@ def natural_modes(stiffness: np.ndarray, mass: np.ndarray) -> tuple[np.ndarray, 
     if np.any(w2 <= 0):
         raise ValueError(
             "the tangent stiffness is not positive definite at this equilibrium "
-            f"(smallest eigenvalue {w2.min():.3g})"
+            f"(smallest eigenvalue {w2.min():.3g}): the equilibrium at this input is not "
+            "stable, or the mechanism can move without deforming a hinge"
         )
     return w2, shapes
 

@@ -12,7 +12,7 @@ the model: ``own_stiffness`` makes the copy, from the shared model as the docume
 from __future__ import annotations
 
 import math
-from typing import Any, Optional, Sequence
+from typing import Any, Iterable, Optional, Sequence
 
 
 def set_path(doc: Any, path: Sequence, value: float) -> Any:
@@ -74,6 +74,25 @@ def _list_index(node: list, part: str, where: str, fail) -> int:
     if part not in names:
         raise fail(f"{where} has no element named {part!r} (names: {', '.join(map(str, names))})")
     return names.index(part)
+
+
+def apply(doc: dict, changes: Iterable[tuple[tuple, Optional[tuple], Any]]) -> dict:
+    """
+    Return a copy of ``doc`` with each (steps, through, value) of ``resolve_path`` set.
+
+    Shared values first, then each hinge that gets its own stiffness copies the shared model
+    as changed (``own_stiffness``), then that hinge's own values: the result does not depend
+    on the order of ``changes``. Values may be any numbers, HyperDual too (values.py).
+    """
+    changes = list(changes)
+    for own in (False, True):
+        for steps, through, value in changes:
+            if (through is not None) != own:
+                continue
+            if through is not None:
+                doc = own_stiffness(doc, through)
+            doc = set_path(doc, steps, value)
+    return doc
 
 
 def own_stiffness(doc: dict, through: tuple) -> dict:

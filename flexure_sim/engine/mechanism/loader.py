@@ -9,6 +9,8 @@ Format (SI units; see config/microstage.yaml for a complete example)::
       notch: {model: notch, D: 0.003, h: 0.00025, t: 0.02, E: 69.0e9, nu: 0.33}
     bodies:
       - {name: body1, mass: 0.0712, inertia: 8.8e-6, pose: [0, 0, 0]}     # pose: x, y, theta
+      - {name: lever, material: 7075-T6, thickness: 0.01,                 # or a plate: mass and
+         shape: {rectangle: [-0.02, -0.005, 0.02, 0.005]}}               # inertia of the outline
     hinges:
       - name: a
         a: {body: body2, at: [0.007, 0.012]} # frame on body A, body coordinates [x, y(, angle)]
@@ -46,8 +48,10 @@ its axis, whose coordinates stay free. Several outputs::
 
 Stiffness models: ``notch`` (D, h, t, E, nu), ``cantilever`` (length, thickness, width, E,
 nu), ``matrix`` (K: 3x3, or Ko, Kt: [kx, ky] and optional Kc: [cx, cy]). A notch or
-cantilever model may give the yield strength ``sigma_y`` (Pa); its hinges get ``Hinge.stress``
-(the dimensions given to the stiffness formula, and sigma_y) for the stress analyses.
+cantilever model may name its ``material`` (engine/hinges/materials.py: E, nu and strengths it
+does not give itself) and give the strengths ``sigma_y``, ``sigma_u``, ``sigma_e`` with
+``fatigue_cycles`` (Pa); its hinges get ``Hinge.stress`` (the dimensions given to the stiffness
+formula, and the strengths) for the stress and fatigue analyses.
 
 ``law: {polynomial: FILE}`` uses a polynomial law fitted by ``flexure-sim fit`` (FILE relative
 to the mechanism file); such a hinge has no ``stiffness`` key: K is the law's Hessian at rest,
@@ -63,7 +67,9 @@ from typing import Any
 
 import numpy as np
 
+from flexure_sim.engine.kinematics.hyperdual import real
 from flexure_sim.engine.mechanism.builtins import builtin_names, find_builtin
+from flexure_sim.engine.mechanism.body_block import mass_and_inertia
 from flexure_sim.engine.mechanism.constraints_block import _constraints, _outputs, _sensor
 from flexure_sim.engine.mechanism.damping_block import hinge_damping, mechanism_damping
 from flexure_sim.engine.mechanism.stiffness_block import check_spd as _check_spd
@@ -76,13 +82,13 @@ from flexure_sim.engine.mechanism.values import key_text as _key_text
 from flexure_sim.engine.mechanism.values import mapping as _mapping
 from flexure_sim.engine.mechanism.values import name as _name
 from flexure_sim.engine.mechanism.values import no_unknown as _no_unknown
-from flexure_sim.engine.mechanism.values import number as _number
 from flexure_sim.engine.mechanism.values import require as _require
 from flexure_sim.engine.mechanism.values import shown as _shown
 from flexure_sim.engine.mechanism.values import vector as _vector
 from flexure_sim.engine.mechanism.builtins import searched as builtin_search_places
 from flexure_sim.engine.mechanism.yaml_files import read_yaml
-from flexure_sim.engine.laws.quadratic import COORDINATES, QuadraticLaw
+from flexure_sim.engine.laws.coordinates import COORDINATES
+from flexure_sim.engine.laws.quadratic import QuadraticLaw
 from flexure_sim.engine.mechanism.parts import Body, Drive, Frame, Hinge, Mechanism, Output
 from flexure_sim.engine.laws.polynomial import PolynomialLaw
 from flexure_sim.engine.mechanism.polynomial_files import PolynomialFileError
@@ -96,8 +102,18 @@ COINCIDENCE_TOLERANCE = 1e-9
 
 def load_mechanism(name_or_path: str | Path) -> Mechanism:
     """Load a built-in mechanism by name (``microstage``) or a YAML file by path."""
+    return mechanism_from_dict(*load_document(name_or_path))
+
+
+def load_document(name_or_path: str | Path) -> tuple[Any, str]:
+    """
+    Return the parsed YAML document of a mechanism (built-in name or path) and its source.
+
+    The source is the file's path: messages name it, and files the mechanism refers to are
+    relative to it. ``mechanism_from_dict(*load_document(x))`` is ``load_mechanism(x)``.
+    """
     path = resolve_mechanism_path(name_or_path)
-    return mechanism_from_dict(read_yaml(path, ConfigError), source=str(path))
+    return read_yaml(path, ConfigError), str(path)
 
 
 def resolve_mechanism_path(name_or_path: str | Path) -> Path:
@@ -126,6 +142,10 @@ def mechanism_from_dict(data: Any, source: str = "<dict>") -> Mechanism:
     ctx = _Ctx(source)
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: the document must be a mapping, got {type(data).__name__}")
+    if "space" in data:
+        raise ctx.fail("space", "a 3-D mechanism: the planar engine does not load it (the "
+                       "spatial engine does: engine/mechanism/spatial_loader.py; flexure-sim "
+                       "simulate, modes, frf and linearize pick it for such files)")
     _no_unknown(ctx, "", data, {
         "name", "description", "source", "defaults", "stiffness_models", "bodies", "hinges",
         "constraints", "output", "outputs", "compression_hinge", "metadata", "sensor",
@@ -197,19 +217,18 @@ def _bodies(ctx: _Ctx, raw: Any) -> list[Body]:
     for i, spec in enumerate(raw):
         key = f"bodies[{i}]"
         spec = _mapping(ctx, key, spec)
-        _no_unknown(ctx, key, spec, {"name", "mass", "inertia", "pose", "shape", "description"})
+        _no_unknown(ctx, key, spec, {"name", "mass", "inertia", "pose", "shape", "description",
+                                     "material", "density", "thickness"})
         name = _name(ctx, f"{key}.name", _require(ctx, key, spec, "name"))
         if name in seen:
             raise ctx.fail(f"{key}.name", f"duplicate body name {name!r}")
         seen.add(name)
-        mass = _number(ctx, f"{key}.mass", _require(ctx, key, spec, "mass"), positive=True)
-        inertia = _number(
-            ctx, f"{key}.inertia", _require(ctx, key, spec, "inertia"), positive=True
-        )
         pose = _vector(ctx, f"{key}.pose", spec.get("pose", [0, 0, 0]), (2, 3))
         if len(pose) == 2:
             pose.append(0.0)
         shape = _shape(ctx, f"{key}.shape", spec["shape"]) if "shape" in spec else None
+        # given, or of a plate of a material cut to the shape (body_block.py)
+        mass, inertia = mass_and_inertia(ctx, key, spec, shape)
         bodies.append(Body(name, mass, inertia, (pose[0], pose[1], pose[2]), shape))
     return bodies
 
@@ -243,6 +262,12 @@ def _frame(ctx: _Ctx, key: str, spec: Any, by_name: dict[str, Body]) -> Frame:
     return Frame(body, (at[0], at[1]), at[2] if len(at) == 3 else 0.0)
 
 
+def _real_frame(frame: Frame) -> Frame:
+    """Return the frame with the real parts of hyper-dual numbers (values.py)."""
+    return Frame(frame.body, (float(real(frame.position[0])), float(real(frame.position[1]))),
+                 float(real(frame.angle)))
+
+
 def frame_pose_at_rest(frame: Frame, body: Body) -> tuple[np.ndarray, float]:
     """Position (root frame) and angle of a frame when its body is at its initial pose."""
     x, y, th = body.pose
@@ -270,9 +295,9 @@ def _hinges(ctx, raw, by_name, named_stiffness, defaults) -> list[Hinge]:
         fb = _frame(ctx, f"{key}.b", _require(ctx, key, spec, "b"), by_name)
         if fa.body == fb.body:
             raise ctx.fail(f"{key}.b.body", f"hinge joins body {fa.body!r} to itself")
-        with np.errstate(all="ignore"):
-            pa, tha = frame_pose_at_rest(fa, by_name[fa.body])
-            pb, thb = frame_pose_at_rest(fb, by_name[fb.body])
+        with np.errstate(all="ignore"):  # a design's frames: their real parts (values.py)
+            pa, tha = frame_pose_at_rest(_real_frame(fa), by_name[fa.body])
+            pb, thb = frame_pose_at_rest(_real_frame(fb), by_name[fb.body])
             gap = float(np.linalg.norm(pa - pb))
         if not np.all(np.isfinite([*pa, *pb, tha - thb])):
             raise ctx.fail(key, "the frames' poses at rest are not finite (body poses or frame "

@@ -4,6 +4,11 @@ Checked reading of values from a mechanism file, with messages that name the fil
 `Ctx.fail` builds the one-line ``file: key: problem`` message of every `ConfigError`; the
 primitive checks (numbers, vectors, mappings, required and unknown keys, names) are shared by
 the mechanism loader (`config`) and other readers of YAML documents.
+
+A number may be a HyperDual (kinematics/hyperdual.py): a design parameter set into the
+document by mechanism/parameters.py, seeded for its derivatives. It is checked by its real part
+and passed on unchanged, so the loader builds the mechanism of a design -- stiffness, damping,
+frames, masses -- with derivative parts, by the same code that builds it from a file.
 """
 from __future__ import annotations
 
@@ -13,6 +18,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from flexure_sim.errors import FlexureSimError
+from flexure_sim.engine.kinematics.hyperdual import HyperDual
 
 
 class ConfigError(FlexureSimError, ValueError):
@@ -30,6 +36,9 @@ class Ctx:
 
 
 def number(ctx: Ctx, key: str, value: Any, *, positive=False, nonnegative=False) -> float:
+    if isinstance(value, HyperDual) and value.shape == ():  # module docstring
+        number(ctx, key, float(value.a.real), positive=positive, nonnegative=nonnegative)
+        return value
     if isinstance(value, str):
         # PyYAML (YAML 1.1) reads 69.0e9 (no exponent sign) as a string: accept it.
         try:

@@ -2,17 +2,13 @@
 Generalized forces of all hinges on all bodies, with exact Jacobians.
 
 Body coordinates z = (x, y, theta) per body, velocities v = dz/dt (root frame), stacked as
-vectors of length 3 * n_bodies in body order. For a hinge joining frame a (body A, offset
-c_a, angle phi_a) and frame b (body B), its relative displacement r = (alpha, p) is
-
-    alpha = theta_B + phi_b - theta_A - phi_a,
-    p     = R(theta_A + phi_a)^T (P_B + R(theta_B) c_b - P_A - R(theta_A) c_a),
-
-(eq. 2.81 with the poses of eq. 6.1). With U(r) and D = 1/2 r_dot^T C_r r_dot from the
-hinge law, the generalized force is Q = -dr/dz^T (dU/dr + C_r r_dot): the virtual-work
-form of eqs. 4.34-4.39 (dynam.sci applies the same wrench, transformed to the root frame,
-to both bodies). Jacobians dQ/dz and dQ/dv are exact (second derivatives of r(z) and of
-the law coordinates, no finite differences).
+vectors of length 3 * n_bodies in body order. Each hinge's relative displacement r = (alpha, p)
+of frame b in frame a and its derivatives in z are ``kinematics.relative`` (eq. 2.81 with the
+poses of eq. 6.1), evaluated here on the arrays of all hinges. With U(r) and
+D = 1/2 r_dot^T C_r r_dot from the hinge law, the generalized force is
+Q = -dr/dz^T (dU/dr + C_r r_dot): the virtual-work form of eqs. 4.34-4.39 (dynam.sci applies
+the same wrench, transformed to the root frame, to both bodies). Jacobians dQ/dz and dQ/dv are
+exact (second derivatives of r(z) and of the law coordinates, no finite differences).
 """
 from __future__ import annotations
 
@@ -22,7 +18,8 @@ import numpy as np
 
 from flexure_sim.engine.solver import kernels
 from flexure_sim.engine.laws.quadratic import LawBatch, QuadraticLaw, wrench_on_element
-from flexure_sim.engine.kinematics.planar import J
+from flexure_sim.engine.kinematics.relative import relative, relative_second
+from flexure_sim.engine.kinematics.scalar import stacked
 from flexure_sim.engine.mechanism.parts import Mechanism
 
 
@@ -115,70 +112,19 @@ class Assembly:
         """
         Return r (n, 3), dr/dzz (n, 3, 6) and, if asked, d2r/dzz2 (n, 3, 6, 6).
 
-        zz are the six coordinates (x_A, y_A, theta_A, x_B, y_B, theta_B) of each hinge's bodies.
-
-        With beta = theta_A + phi_a, w_a = R(theta_A) c_a, w_b = R(theta_B) c_b and
-        Delta = P_B + w_b - P_A - w_a: p = R(beta)^T Delta, so
-        dp/dP_B = -dp/dP_A = R(beta)^T, dp/dtheta_A = -J p - R(beta)^T J w_a,
-        dp/dtheta_B = R(beta)^T J w_b.
+        zz are the six coordinates (x_A, y_A, theta_A, x_B, y_B, theta_B) of each hinge's bodies:
+        ``kinematics.relative`` on the arrays of all hinges.
         """
         Z = np.asarray(z, dtype=float).reshape(self.n_bodies, 3)
         A, B = Z[self.ia], Z[self.ib]
-        ca, sa = np.cos(A[:, 2]), np.sin(A[:, 2])
-        cb, sb = np.cos(B[:, 2]), np.sin(B[:, 2])
-        beta = A[:, 2] + self.phia
-        cbe, sbe = np.cos(beta), np.sin(beta)
-        wa1 = ca * self.ca[:, 0] - sa * self.ca[:, 1]
-        wa2 = sa * self.ca[:, 0] + ca * self.ca[:, 1]
-        wb1 = cb * self.cb[:, 0] - sb * self.cb[:, 1]
-        wb2 = sb * self.cb[:, 0] + cb * self.cb[:, 1]
-        d1 = B[:, 0] + wb1 - A[:, 0] - wa1
-        d2 = B[:, 1] + wb2 - A[:, 1] - wa2
-        # p = R(beta)^T Delta; R(beta)^T = [[c, s], [-s, c]]
-        p1 = cbe * d1 + sbe * d2
-        p2 = -sbe * d1 + cbe * d2
-        alpha = B[:, 2] + self.phib - beta
+        (alpha, p1, p2), rows, arms = relative(
+            (A[:, 0], A[:, 1], A[:, 2]), (B[:, 0], B[:, 1], B[:, 2]),
+            (self.ca[:, 0], self.ca[:, 1]), (self.cb[:, 0], self.cb[:, 1]), self.phia, self.phib)
         n = len(alpha)
         r = np.empty((n, 3))
         r[:, 0], r[:, 1], r[:, 2] = alpha, p1, p2
-        # R(beta)^T J w = R(beta)^T (-w2, w1)
-        ta1 = -cbe * wa2 + sbe * wa1
-        ta2 = sbe * wa2 + cbe * wa1
-        tb1 = -cbe * wb2 + sbe * wb1
-        tb2 = sbe * wb2 + cbe * wb1
-        dr = np.zeros((n, 3, 6))
-        dr[:, 0, 2], dr[:, 0, 5] = -1.0, 1.0
-        dr[:, 1, 0], dr[:, 1, 1] = -cbe, -sbe
-        dr[:, 2, 0], dr[:, 2, 1] = sbe, -cbe
-        dr[:, 1, 3], dr[:, 1, 4] = cbe, sbe
-        dr[:, 2, 3], dr[:, 2, 4] = -sbe, cbe
-        dr[:, 1, 2] = p2 - ta1          # -J p = (p2, -p1)
-        dr[:, 2, 2] = -p1 - ta2
-        dr[:, 1, 5] = tb1
-        dr[:, 2, 5] = tb2
-        if not second:
-            return r, dr, None
-        RbT = np.empty((n, 2, 2))
-        RbT[:, 0, 0], RbT[:, 0, 1], RbT[:, 1, 0], RbT[:, 1, 1] = cbe, sbe, -sbe, cbe
-        wa = np.column_stack([wa1, wa2])
-        wb = np.column_stack([wb1, wb2])
-        RbT_Jwa = np.column_stack([ta1, ta2])
-        RbT_Jwb = np.column_stack([tb1, tb2])
-        dp_dthA = dr[:, 1:, 2]
-        d2 = np.zeros((n, 3, 6, 6))
-        J_RbT = np.einsum("ij,njk->nik", J, RbT)
-        d2[:, 1:, 2, 2] = (
-            -dp_dthA @ J.T + np.einsum("ij,nj->ni", J, RbT_Jwa) + np.einsum("nij,nj->ni", RbT, wa)
-        )
-        d2[:, 1:, 2, 0:2] = J_RbT
-        d2[:, 1:, 0:2, 2] = J_RbT
-        d2[:, 1:, 2, 3:5] = -J_RbT
-        d2[:, 1:, 3:5, 2] = -J_RbT
-        cross = -np.einsum("ij,nj->ni", J, RbT_Jwb)
-        d2[:, 1:, 2, 5] = cross
-        d2[:, 1:, 5, 2] = cross
-        d2[:, 1:, 5, 5] = -np.einsum("nij,nj->ni", RbT, wb)
-        return r, dr, d2
+        dr = stacked(rows, n, (3, 6))
+        return r, dr, relative_second(dr, arms) if second else None
 
     # -------------------------------------------------------------------- forces
     def _assemble(self, local: np.ndarray) -> np.ndarray:

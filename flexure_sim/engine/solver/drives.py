@@ -110,10 +110,14 @@ class DriveTable:
     ``kernel_command``).
     """
 
-    def __init__(self, mechanism: Mechanism, part) -> None:
+    def __init__(self, mechanism: Mechanism, part, z0: Optional[np.ndarray] = None) -> None:
         self._drives: tuple[Drive, ...] = tuple(mechanism.drives)
         drives = self._drives
-        n, N = len(drives), 3 * len(mechanism.bodies)
+        # ``z0``: the rest coordinates (default: a planar mechanism's poses; the spatial
+        # engine's 6 per body: ``spatial_model``).
+        if z0 is None:
+            z0 = np.array([b.pose for b in mechanism.bodies], dtype=float).ravel()
+        n, N = len(drives), len(z0)
         self.names: tuple[str, ...] = tuple(d.name for d in drives)
         self.directions = np.array([d.direction(mechanism) for d in drives]).reshape(n, N)
         self.displacement = np.array(
@@ -145,7 +149,6 @@ class DriveTable:
         self.D_prescribed = np.ascontiguousarray(
             part.D[:, [column[k] for k in self.prescribed]], dtype=float).reshape(
                 len(part.prescribed), len(self.prescribed))
-        z0 = np.array([b.pose for b in mechanism.bodies], dtype=float).ravel()
         #: Direction e_j (rows) of each force drive, and e_j . z0.
         self.force_dir = np.ascontiguousarray(self.directions[self.force], dtype=float).reshape(
             len(self.force), N)

@@ -48,16 +48,11 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
     tangent = model.tangent(y, t, command) if model.energy else None
     A = model.jacobian(y, t, command) if tangent is None else tangent.A
     m, h = A.shape[0], model.dt
-    aug = np.zeros((3 * m, 3 * m))
-    aug[:m, :m] = h * A
-    aug[:m, m:2 * m] = np.eye(m)
-    aug[m:2 * m, 2 * m:] = np.eye(m)
-    E = scipy.linalg.expm(aug)
-    phi1, phi2 = h * E[:m, m:2 * m], h * E[:m, 2 * m:]
+    expA, phi1, phi2 = phi_matrices(A, h)
     if model.energy:
         part = model.part
         tau, D = model.motion[0], model.motion[2]
-        shifted = [_shifted_phi1(A, E[:m, :m], h, tk) for tk in tau]
+        shifted = [_shifted_phi1(A, expA, h, tk) for tk in tau]
         drive_mass = [float(dk @ (model.mass[part.prescribed] * dk))
                       for dk in model.drives.lag_rows]
         # The timed coordinates: sine rates, then those the prescribed drives' programs move
@@ -82,6 +77,22 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
         emats = step_energy.NO_ENERGY
     data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, emats)
     data.stats.linearizations += 1
+
+
+def phi_matrices(A: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Return e^{hA}, h phi_1(hA) and h phi_2(hA) from one exponential (``linearize``).
+
+    The exponential of [[hA, I, 0], [0, 0, I], [0, 0, 0]] has the first block row
+    [e^{hA}, phi_1(hA), phi_2(hA)].
+    """
+    m = A.shape[0]
+    aug = np.zeros((3 * m, 3 * m))
+    aug[:m, :m] = h * A
+    aug[:m, m:2 * m] = np.eye(m)
+    aug[m:2 * m, 2 * m:] = np.eye(m)
+    E = scipy.linalg.expm(aug)
+    return E[:m, :m], h * E[:m, m:2 * m], h * E[:m, 2 * m:]
 
 
 def _shifted_phi1(A: np.ndarray, expA: np.ndarray, h: float, tau: float) -> np.ndarray:

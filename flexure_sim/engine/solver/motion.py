@@ -14,7 +14,6 @@ import numpy as np
 
 from flexure_sim.engine import jit as kernel_cache
 from flexure_sim.engine.jit import njit
-from flexure_sim.engine.solver import programs as programs_module
 from flexure_sim.engine.solver.programs import PIECE_WIDTH, piece_motion
 
 
@@ -97,4 +96,4 @@ def kernel_coordinates(y, t, command, args):
 
 
 # Numba's cache of each kernel is keyed on its own file only (``kernel_cache``).
-kernel_cache.revalidate(kernel_cache.dispatchers_of(programs_module, globals()), __file__)
+kernel_cache.revalidate(kernel_cache.dispatchers_of(globals()), __file__)

@@ -30,6 +30,7 @@ from typing import Optional
 
 import numpy as np
 
+from flexure_sim.engine import jit as kernel_cache
 from flexure_sim.engine.jit import njit
 
 #: The kinds of program (``Program.kind``).
@@ -178,3 +179,7 @@ def _row(code: float, t0: float = 0.0, T: float = 0.0, p0: float = 0.0, A: float
 def hold(value: float) -> np.ndarray:
     """Return the kernel row of a constant ``value`` (a prescribed drive held at its command)."""
     return _row(CONST, p0=float(value))
+
+
+# Numba's cache of each kernel is keyed on its own file only (``kernel_cache``).
+kernel_cache.revalidate(kernel_cache.dispatchers_of(globals()), __file__)

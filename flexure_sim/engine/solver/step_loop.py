@@ -29,13 +29,10 @@ import types
 import numpy as np
 
 from flexure_sim.engine import jit as kernel_cache
-from flexure_sim.engine.solver import kernels
 from flexure_sim.engine.solver import step_energy as step_energy_module
 from flexure_sim.engine.jit import njit
 from flexure_sim.engine.solver.kernels import quadratic_forces
-from flexure_sim.engine.solver import motion as motion_module
 from flexure_sim.engine.solver.motion import coordinates, prescribed_motion
-from flexure_sim.engine.solver import programs as programs_module
 from flexure_sim.engine.solver.step_energy import (
     AUX_APPLIED, AUX_DISSIPATION, AUX_ENERGY, AUX_LOAD, AUX_TIMED_POWER,
 )
@@ -318,8 +315,7 @@ switch = kernel_switch_work
 advance = njit(cache=True)(_advance)
 
 # Numba's cache of each kernel is keyed on its own file only (``kernel_cache``).
-kernel_cache.revalidate(kernel_cache.dispatchers_of(kernels, step_energy_module, programs_module,
-                                                    motion_module, globals()), __file__)
+kernel_cache.revalidate(kernel_cache.dispatchers_of(step_energy_module, globals()), __file__)
 
 
 def _interpreted_rhs(y, t, command, model):

@@ -39,8 +39,6 @@ import numpy as np
 from flexure_sim.engine import jit as kernel_cache
 from flexure_sim.engine.hinges.stress import ratio_map
 from flexure_sim.engine.jit import njit
-from flexure_sim.engine.solver import compression as compression_module
-from flexure_sim.engine.solver import motion as motion_module
 from flexure_sim.engine.solver.compression import compression_of
 from flexure_sim.engine.solver.kernels import quadratic_forces
 from flexure_sim.engine.solver.model import Model
@@ -236,8 +234,8 @@ def report_kernel(out, z, v, t, u, command, ints, floats):
     return finite  # NaN stress ratios and a NaN compression mark "none", not failures
 
 
-kernel_cache.revalidate(kernel_cache.dispatchers_of(globals(), compression_module, motion_module),
-                        __file__)
+# ``_compression`` compiles compression.py's function here: this module owns its stamp.
+kernel_cache.revalidate([*kernel_cache.dispatchers_of(globals()), _compression], __file__)
 
 
 @dataclass(frozen=True)

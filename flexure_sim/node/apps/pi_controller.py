@@ -9,7 +9,7 @@ measurement (``output/measured``, or ``output/displacement``), keeps the latest 
 value) and answers every measurement received with exactly one command on
 ``drive/displacement`` (std_msgs/Float64, m). Nothing is timed by a clock: one command per
 measurement, so in the stage's lockstep mode the run is a deterministic function of the
-measurements (README "Developing a controller against the stage"). The measurement
+measurements (docs/controller_guide.md). The measurement
 subscription keeps only the newest reading (reliable, keep last 1): in real time a
 controller that fell behind skips stale readings rather than answering them ever later.
 
@@ -43,6 +43,7 @@ from std_msgs.msg import Float64, UInt64
 from std_srvs.srv import Trigger
 
 from flexure_sim import topics
+from flexure_sim.console import quiet_pipe
 from flexure_sim.control.pi_notch import PIConfig, PIController
 from flexure_sim.errors import FlexureSimError
 
@@ -190,8 +191,15 @@ class PIControllerNode(Node):
             self.trace = None
 
 
+@quiet_pipe
 def main(args: Optional[list[str]] = None) -> int:
     """Entry point of ``pi_controller`` / ``ros2 run flexure_sim pi_controller``."""
+    argv = sys.argv if args is None else args
+    if any(a in ("-h", "--help") for a in argv[1:]):
+        print("usage: pi_controller [--ros-args -p NAME:=VALUE ...]\n\nan example PI "
+              "controller closing the loop around stage_node (one command per measurement); "
+              "its parameters and topics: docs/controller_guide.md")
+        return 0
     import rclpy
     from rclpy.executors import ExternalShutdownException
 

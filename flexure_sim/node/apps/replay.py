@@ -28,6 +28,7 @@ import sys
 import time
 from typing import Any, Iterator, Optional, Sequence
 
+from flexure_sim.console import quiet_pipe
 from flexure_sim.recording.command_line import check_path, report_reading, tool_errors, warn
 from flexure_sim.recording.ordered import OrderedLog
 from flexure_sim.recording.exceptions import EXIT_OK, EXIT_USAGE, RunError
@@ -109,6 +110,7 @@ def run(args: argparse.Namespace) -> int:
     return tool_errors(PROG, lambda: play(args), can_recover=not args.recover)
 
 
+@quiet_pipe
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Entry point of the ``replay`` console script and of ``ros2 run flexure_sim replay``."""
     argv = list(sys.argv if argv is None else argv)

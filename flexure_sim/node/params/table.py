@@ -20,7 +20,7 @@ MAX_SIM_STEP = 1e-2
 COMMAND_RELIABILITIES = ("reliable", "best_effort")
 #: Values of ``record_format``.
 RECORD_FORMATS = ("bag", "mcap")
-#: Default of ``wake_spin``: see its description and README "### Time" (BENCHMARKS.md).
+#: Default of ``wake_spin``: see its description and docs/node.md, "Time" (BENCHMARKS.md).
 WAKE_SPIN_S = 2e-4
 #: Default of ``stepping_nice``: see its description (measured in BENCHMARKS.md).
 STEPPING_NICE = -10
@@ -54,7 +54,7 @@ DRIVE_MIN, DRIVE_MAX, DRIVE_SLEW = "drive stroke_min", "drive stroke_max", "driv
 _DRIVE = (DRIVE_MIN, DRIVE_MAX, DRIVE_SLEW)
 
 #: Every parameter, in declaration order: the fields of `ParamSpec` (name, default, type,
-#: unit, read-only, low, high, description). README "### Parameters" is this table for users.
+#: unit, read-only, low, high, description). docs/node.md, "Parameters", is this table for users.
 TABLE: tuple[tuple[Any, ...], ...] = (
     ("mechanism", "microstage", str, "", True, None, None,
      "Built-in mechanism name (microstage, fourbar_cantilever, fourbar_mixed) or path of a "

@@ -19,7 +19,7 @@ from flexure_sim.node.record.session import RecordingSession
 @dataclass(frozen=True)
 class LoopSettings:
     """
-    The stepping loop's settings, from the node's parameters (README "### Parameters").
+    The stepping loop's settings, from the node's parameters (docs/node.md, "Parameters").
 
     ``merge_after``: ``merge_late_ticks``; ``nice``, ``priority``: ``stepping_nice``,
     ``stepping_priority``; the others are the parameters of the same name.

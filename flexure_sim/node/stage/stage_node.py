@@ -5,9 +5,9 @@
 
 `main` follows the ros2 demos' idiom (``rclpy.init``, the node, spin, ``destroy_node`` and
 ``try_shutdown``); `Run` holds what it started and how it ends, with one-line endings
-(README "## stage_node"): exit 0 after SIGINT or SIGTERM (the recording finished), 1 when
-the node cannot start or the simulation stopped, 2 for bad command-line arguments; never a
-traceback, whenever a signal lands.
+(docs/node.md): exit 0 after SIGINT or SIGTERM (the recording finished), 1 when the node
+cannot start or the simulation stopped, 2 for bad command-line arguments; never a traceback,
+whenever a signal lands.
 
 Signals (`SignalGuard`): the handler is installed before anything heavy is imported. During
 start-up the first SIGINT/SIGTERM aborts it (an exception from the handler); while the node
@@ -23,6 +23,7 @@ import sys
 import threading
 from typing import Any, Optional
 
+from flexure_sim.console import quiet_pipe
 from flexure_sim.errors import FlexureSimError
 
 #: GIL switch interval: keeps the stepping thread's latency low while callbacks run.
@@ -32,7 +33,7 @@ SIGNALS = (signal.SIGINT, signal.SIGTERM)
 USAGE = """usage: stage_node [--ros-args -p NAME:=VALUE ...]
 
 Simulates a planar flexure mechanism (default: the built-in micropositioning stage) and
-publishes its state; see README.md "## stage_node" for topics, frames and QoS.
+publishes its state; see docs/node.md for topics, frames and QoS.
 
 parameters:
 """
@@ -240,6 +241,7 @@ def _clean_up(run: Run) -> bool:
     return failed
 
 
+@quiet_pipe
 def main(args: Optional[list[str]] = None) -> int:
     """Entry point of ``stage_node`` / ``ros2 run flexure_sim stage_node``."""
     run = Run()  # before anything heavy is imported: signals from here on

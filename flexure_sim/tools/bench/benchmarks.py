@@ -12,8 +12,15 @@ Wall times are medians of several runs (7 for flexure_sim, 3 for the baseline).
   exact Jacobian, atol 1e-8 of each component's scale of motion) on the same equations.
 - steps_per_s at the node's default step, and the cost of a step's parts.
 - static_sweep: 1000 drive levels from 0 to the stroke.
+- spatial: the stage opened in 3-D and the tip-tilt stage stepped by the spatial engine (wall
+  time, real-time factor, error against a converged reference, next to the planar engine on
+  the same run; tools/bench/spatial_bench.py).
 - analyses: the stage's exact linearisation + modes + FRF at 1000 frequencies (goal < 0.1 s),
   and hyper-dual sensitivities of 4 outputs to 20 parameters (goal < 1 s).
+- fe_hinge: one finite-element hinge's solve (goal < 5 s) and its cached load, alone and in
+  the stage with model: fe hinges (goal < 10 ms; tools/bench/fe_bench.py).
+- optimize: flexure-sim optimize on the stage over its 7 hinge thicknesses (goal: converged
+  in < 10 s), and its time in exact gradients.
 - sweep (with --sweep): flexure-sim sweep's scaling on the stage tolerance study: designs
   per second in this process without Dask, on a LocalCluster of 1 and of 2 worker processes,
   the parallel efficiency and the overhead of a batch (a task).
@@ -37,10 +44,12 @@ from typing import Optional, Sequence
 import numpy as np
 
 from flexure_sim.engine.solver.simulation import DEFAULT_STEP
+from flexure_sim.tools.bench.spatial_bench import bench_spatial, print_spatial
 from flexure_sim.tools.bench.engine_bench import (
     bench_static_sweep, bench_stage_step, bench_step_cost,
 )
-from flexure_sim.tools.bench.study_bench import bench_analyses, bench_sweep
+from flexure_sim.tools.bench.fe_bench import bench_fe_hinge
+from flexure_sim.tools.bench.study_bench import bench_analyses, bench_optimize, bench_sweep
 
 
 def machine() -> dict:
@@ -91,6 +100,7 @@ def print_table(res: dict) -> None:
     print(f"  without the energy integrals: per step {c['step_no_energy_us']:.2f} us, per "
           f"linearization {c['linearization_no_energy_us']:.0f} us (with: "
           f"{c['linearization_us']:.0f} us)")
+    print_spatial(res["spatial"])
     w = res["static_sweep"]
     print(f"\nstatic sweep, {w['levels']} levels over the stroke: {w['wall_s'] * 1e3:.1f} ms "
           f"({w['newton_iterations']} Newton iterations)")
@@ -100,6 +110,20 @@ def print_table(res: dict) -> None:
               f"{a['modes_frf_wall_s'] * 1e3:.1f} ms (goal < 100 ms); sensitivities of "
               f"{a['sensitivity_outputs']} outputs to {a['sensitivity_parameters']} parameters "
               f"{a['sensitivity_wall_s'] * 1e3:.0f} ms (goal < 1000 ms)")
+    fe = res.get("fe_hinge")
+    if fe:
+        print(f"\nfinite-element hinge (stage notch, resolution {fe['resolution']}): solve "
+              f"{fe['solve_s']:.2f} s (goal < 5 s); cached stiffness "
+              f"{fe['cached_stiffness_s'] * 1e3:.2f} ms, stage with 7 such hinges loaded "
+              f"{fe['cached_stage_load_s'] * 1e3:.1f} ms (goal < 10 ms)")
+    o = res.get("optimize")
+    if o:
+        print(f"\noptimize, the stage's first mode over its {o['variables']} hinge thicknesses: "
+              f"{o['status']} in {o['wall_s']:.2f} s (goal < 10 s), {o['iterations']} "
+              f"iterations, {o['evaluations']} evaluations of which {o['gradient_evaluations']} "
+              f"with exact gradients ({o['gradient_s']:.2f} s; values only {o['values_s']:.2f} "
+              f"s); first mode {o['start_objective']:.2f} -> {o['objective']:.2f} Hz, KKT "
+              f"stationarity {o['stationarity']:.1g}")
     if "sweep" in res:
         sw = res["sweep"]
         print(f"\nsweep, stage tolerance study, {sw['designs']} designs in batches of "
@@ -124,7 +148,10 @@ def run(args: argparse.Namespace) -> dict:
     res["step_cost"] = bench_step_cost(args.dt)
     res["steps_per_s"] = res["step_cost"]["steps_per_s"]
     res["static_sweep"] = bench_static_sweep()
+    res["spatial"] = bench_spatial(args.dt)
     res["analyses"] = bench_analyses()
+    res["fe_hinge"] = bench_fe_hinge()
+    res["optimize"] = bench_optimize()
     if args.sweep:
         res["sweep"] = bench_sweep(args.sweep_designs)
     if args.node:

@@ -5,6 +5,9 @@ Analysis and sweep benchmarks of ``flexure-sim bench``: linearisation, sensitivi
   sensitivities of 4 outputs to 20 parameters.
 - sweep: flexure-sim sweep's scaling on the stage tolerance study, without Dask and on a
   LocalCluster of 1 and 2 worker processes, and the overhead of a batch.
+- optimize: flexure-sim optimize on the stage over its 7 hinge thicknesses
+  (config/studies/stage_first_mode.yaml; goal: converged in < 10 s), and the share of the time
+  spent in exact gradients.
 """
 from __future__ import annotations
 
@@ -125,3 +128,26 @@ def bench_sweep(designs: int = 1000, batch_size: int = 50, overhead_tasks: int =
     res["parallel_efficiency_2_workers"] = (res["designs_per_s_2_workers"]
                                             / (2 * res["designs_per_s_1_workers"]))
     return res
+
+
+def bench_optimize(repeats: int = 3) -> dict:
+    """
+    Optimise the stage's first mode over its 7 necks (config/studies/stage_first_mode.yaml).
+
+    Median wall time of ``repeats`` solves from the study's start (each from scratch, after one
+    warm-up), its iterations, evaluations with and without gradients and the time in each.
+    """
+    from flexure_sim.engine.analysis.optimize import solve
+    from flexure_sim.engine.analysis.optimize_study import load_optimize_study
+    from flexure_sim.engine.mechanism.builtins import builtin_dir
+
+    study = load_optimize_study(Path(builtin_dir()) / "studies" / "stage_first_mode.yaml")
+    solve(study)  # warm-up (compiled kernels)
+    runs = sorted((solve(study) for _ in range(repeats)), key=lambda r: r.wall_s)
+    r = runs[len(runs) // 2]
+    return {"study": study.source, "variables": len(study.variables), "status": r.status,
+            "wall_s": r.wall_s, "iterations": r.iterations, "evaluations": r.evaluations,
+            "gradient_evaluations": r.gradients, "gradient_s": r.extra["seconds"]["gradients"],
+            "values_s": r.extra["seconds"]["values"], "objective": r.objective,
+            "start_objective": r.history[0]["objective"],
+            "stationarity": r.kkt.get("stationarity_relative")}

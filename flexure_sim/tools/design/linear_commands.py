@@ -1,9 +1,13 @@
 """
 ``flexure-sim modes | frf | linearize``: the linear analyses (engine/analysis/linear.py).
 
+A ``space: 3d`` file, or any file with ``--space 3d``, is analysed by the spatial engine
+(engine/analysis/spatial_linear.py): six coordinates per body, hinge wrenches
+hinges.<h>.moment_x .. force_z.
+
 flexure-sim modes microstage [--input U] [--count N] [--json] [-o DIR]
 flexure-sim frf microstage --from drive --to output [--to hinges.a.force_x] [--fmin F --fmax F
-                --points N] [-o DIR] [--csv]
+                --points N | --frequencies F1,F2,...] [-o DIR] [--csv]
 flexure-sim linearize microstage --input U -o model.npz|model.mat|model.json
 flexure-sim frf microstage --input-kind displacement ...   # the drive's displacement as input
 
@@ -20,17 +24,27 @@ from pathlib import Path
 
 import numpy as np
 
-from flexure_sim.engine.analysis import linear
+from flexure_sim.engine.analysis import linear, spatial_linear
+from flexure_sim.engine.memory import too_large
 from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism
 from flexure_sim.engine.mechanism.parameters import ParameterError
+from flexure_sim.engine.mechanism.spatial_loader import is_spatial, load_spatial
+from flexure_sim.engine.mechanism.stroke import check as check_stroke
 from flexure_sim.engine.solver.simulation import Simulation, SolverError
+from flexure_sim.engine.solver.spatial_model import SpatialModel
 from flexure_sim.tools.design.linear_plots import input_text, plot_bode, plot_modes, write_frf_csv
-from flexure_sim.tools.options import parse_drive_inputs
+from flexure_sim.tools.options import count, parse_drive_inputs
 
 EXIT_OK, EXIT_USAGE = 0, 2
+#: Memory per frequency of ``frf`` (bytes): the frequency, and per output its response, its
+#: plot's lines and its CSV columns, with a margin of two (measured with --csv: 1e6
+#: frequencies add 205 MB to the peak with one output, 814 MB with four).
+FRF_BYTES, FRF_BYTES_PER_OUTPUT = 100, 400
 
 
 def _model(args, wrenches: bool = True) -> tuple:
+    if _spatial(args):
+        return _spatial_model(args, wrenches)
     mech = load_mechanism(args.mechanism)
     sim = Simulation(mech)
     actuated = [sim.model.drives.names[a.drive] for a in sim.model.drives.actuation]
@@ -49,8 +63,39 @@ def _model(args, wrenches: bool = True) -> tuple:
             value = sim.model.drives.inputs(value)
         except ValueError as exc:
             raise ValueError(f"--input {args.input!r}: {exc}") from None
+        check_stroke(mech.drives, value, f"--input {args.input!r}")
         value = float(value[0]) if len(value) == 1 else value
     return mech, linear.linearize(sim, value, wrenches=wrenches, input_kind=args.input_kind)
+
+
+def _spatial(args) -> bool:
+    """Tell whether to analyse in 3-D: ``--space 3d``, or a ``space: 3d`` file (auto)."""
+    three_d = is_spatial(args.mechanism)
+    if args.space == "2d" and three_d:
+        raise ValueError(f"--space 2d: {args.mechanism} is a 3-D mechanism (space: 3d)")
+    return args.space == "3d" or three_d
+
+
+def _spatial_model(args, wrenches: bool) -> tuple:
+    """Return (mechanism, linear model) of the spatial engine (analysis/spatial_linear.py)."""
+    mech = load_spatial(args.mechanism)
+    model = SpatialModel(mech)
+    value = parse_drive_inputs(args.input)
+    if value is not None and not model.drives:
+        raise ValueError(f"--input: mechanism {mech.name!r} has no drive")
+    if value is not None:
+        try:
+            value = model.drive_inputs(value)
+        except ValueError as exc:
+            raise ValueError(f"--input {args.input!r}: {exc}") from None
+    return mech, spatial_linear.linearize(model, value, wrenches=wrenches)
+
+
+def _modes(model):
+    """Return the modes of a planar or a spatial linear model."""
+    if isinstance(model, spatial_linear.SpatialLinearModel):
+        return spatial_linear.modes(model)
+    return linear.modes(model)
 
 
 def _u0(model):
@@ -102,11 +147,15 @@ def modes_summary(mech, model, md, count: int) -> dict:
 
 def run_modes(args) -> int:
     def work():
-        if args.count < 0:
-            raise ValueError(f"--count {args.count}: must not be negative")
         mech, model = _model(args, wrenches=False)
-        md = linear.modes(model)
+        md = _modes(model)
         out = modes_summary(mech, model, md, args.count)
+        spatial = isinstance(model, spatial_linear.SpatialLinearModel)
+        if spatial:
+            out["out_of_plane_shares"] = spatial_linear.out_of_plane_shares(model, md).tolist()
+        if args.output and isinstance(model, spatial_linear.SpatialLinearModel):
+            raise ValueError("-o: mode-shape plots are drawn for planar mechanisms only; "
+                             "--json lists the 3-D mode shapes")
         if args.output:
             out["plots"] = [
                 str(p) for p in plot_modes(mech, model, md, args.count, Path(args.output))
@@ -116,9 +165,12 @@ def run_modes(args) -> int:
             return EXIT_OK
         print(f"mechanism: {mech.name}   linearised at the static equilibrium at "
               f"{input_text(mech, model.u0)}")
-        print("mode  undamped f [Hz]  modal damping ratio")
+        shares = out.get("out_of_plane_shares")
+        print("mode  undamped f [Hz]  modal damping ratio"
+              + ("  out of plane (z, rx, ry)" if shares else ""))
         for k, (f, z) in enumerate(zip(md.frequencies, md.modal_damping), 1):
-            print(f"{k:4d} {f:16.6g} {z:20.4g}")
+            share = f"{shares[k - 1] * 100:20.1f} %" if shares else ""
+            print(f"{k:4d} {f:16.6g} {z:20.4g}{share}")
         print("poles of the damped system (upper half-plane), by |pole|:")
         print("   real [1/s]     imag [1/s]   |pole|/2pi [Hz]   damping ratio")
         for p in out["poles"]:
@@ -136,8 +188,7 @@ def run_modes(args) -> int:
 
 def run_frf(args) -> int:
     def work():
-        if not (0 < args.fmin < args.fmax) or args.points < 2:
-            raise ValueError("need 0 < --fmin < --fmax and --points >= 2")
+        f = frequencies(args)
         wanted = args.to or []
         mech, model = _model(args, wrenches=any(o.startswith("hinges.") for o in wanted))
         k = _source(mech, model, args.source)
@@ -147,8 +198,11 @@ def run_frf(args) -> int:
                              f"({', '.join(model.output_names[:6])}, ...)")
         for o in outputs:
             model.output_index(o)
+        reason = too_large(len(f) * (FRF_BYTES + FRF_BYTES_PER_OUTPUT * len(outputs)))
+        if reason is not None:
+            raise ValueError(f"{len(f)} frequencies of {len(outputs)} output(s): the response, "
+                             f"its plot and CSV would need {reason}; ask for fewer frequencies")
         source = model.input_names[k]
-        f = np.logspace(np.log10(args.fmin), np.log10(args.fmax), args.points)
         G = linear.frf(model, f, outputs, source)
         out_dir = Path(args.output)
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -159,16 +213,59 @@ def run_frf(args) -> int:
         gains = linear.static_gain(model, outputs, source)
         if len(model.input_names) > 1:
             print(f"from drive {source}:")
-        for name, g, g0 in zip(outputs, G[:, 0], gains):
-            print(
-                f"{name}: |G| {abs(g):.6g} at {f[0]:.3g} Hz (static gain {g0:.6g}), "
-                f"|G| {abs(G[outputs.index(name), -1]):.3g} at {f[-1]:.3g} Hz"
-            )
+        listed = args.frequencies is not None or len(f) == 1
+        for name, row, g0 in zip(outputs, G, gains):
+            if listed:  # every frequency asked for
+                print(f"{name}: static gain {g0:.6g}")
+                for fk, g in zip(f, row):
+                    print(f"  {fk:.6g} Hz: |G| {abs(g):.6g}, phase {np.degrees(np.angle(g)):.4g} "
+                          "deg")
+            else:
+                print(f"{name}: |G| {abs(row[0]):.6g} at {f[0]:.3g} Hz (static gain {g0:.6g}), "
+                      f"|G| {abs(row[-1]):.3g} at {f[-1]:.3g} Hz")
         for path in written:
             print(f"wrote {path}")
         return EXIT_OK
 
     return _guarded("flexure-sim frf", work)
+
+
+def frequencies(args) -> np.ndarray:
+    """
+    Return the FRF's frequencies in Hz, as the command line gives them.
+
+    ``--frequencies F1,F2,...`` (ascending, each once), or ``--points`` log-spaced from
+    ``--fmin`` to ``--fmax``, both included: one frequency when they are equal and ``--points``
+    is 1. ValueError naming the option for anything else (not positive, not finite, ...).
+    """
+    if args.frequencies is not None:
+        if any(v is not None for v in (args.fmin, args.fmax, args.points)):
+            raise ValueError("--frequencies lists the frequencies: give it without --fmin, "
+                             "--fmax and --points")
+        values = []
+        for text in args.frequencies.split(","):
+            try:
+                values.append(float(text))
+            except ValueError:
+                raise ValueError(f"--frequencies {args.frequencies!r}: {text.strip()!r} is not "
+                                 "a number") from None
+            if not (np.isfinite(values[-1]) and values[-1] > 0):
+                raise ValueError(f"--frequencies {args.frequencies!r}: {text.strip()!r} is not "
+                                 "a positive, finite frequency (Hz)")
+        return np.unique(values)
+    fmin = 1.0 if args.fmin is None else args.fmin
+    fmax = 1e5 if args.fmax is None else args.fmax
+    points = 1000 if args.points is None else args.points
+    for option, v in (("--fmin", fmin), ("--fmax", fmax)):
+        if not (np.isfinite(v) and v > 0):
+            raise ValueError(f"{option} {v!r}: must be a positive, finite frequency (Hz)")
+    if fmin > fmax:
+        raise ValueError(f"--fmin {fmin:g} Hz is above --fmax {fmax:g} Hz")
+    if (fmin == fmax) != (points == 1):
+        raise ValueError(f"--fmin {fmin:g}, --fmax {fmax:g}, --points {points}: one frequency "
+                         "is --fmin F --fmax F --points 1 (or --frequencies F); a range needs "
+                         "--fmin below --fmax and --points 2 or more")
+    return np.logspace(np.log10(fmin), np.log10(fmax), points)
 
 
 def _source(mech, model, name) -> int:
@@ -265,6 +362,9 @@ def run_linearize(args) -> int:
 
 def _common(p) -> None:
     p.add_argument("mechanism", help="built-in name or YAML path")
+    p.add_argument("--space", choices=("2d", "3d"), default=None,
+                   help="3d: analyse a planar file with its out-of-plane freedoms (the spatial "
+                   "engine); default: 3d for a space: 3d file, else 2d")
     p.add_argument(
         "--input",
         default=None,
@@ -281,7 +381,8 @@ def _common(p) -> None:
 def register(subparsers) -> None:
     p = subparsers.add_parser("modes", help="natural frequencies, mode shapes and damped poles")
     _common(p)
-    p.add_argument("--count", type=int, default=4, help="mode shapes to list and plot (default 4)")
+    p.add_argument("--count", type=count, default=4,
+                   help="mode shapes to list and plot, 1 or more (default 4)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("-o", "--output", help="directory for mode-shape plots (mode_<k>.png)")
     p.set_defaults(handler=run_modes)
@@ -300,11 +401,14 @@ def register(subparsers) -> None:
         "(drive_force.<drive> with several drives), hinges.<h>.moment|force_x|force_y "
         "(repeatable; default: the mechanism's outputs)",
     )
-    p.add_argument("--fmin", type=float, default=1.0, help="Hz (default 1)")
-    p.add_argument("--fmax", type=float, default=1e5, help="Hz (default 1e5)")
-    p.add_argument(
-        "--points", type=int, default=1000, help="log-spaced frequencies (default 1000)"
-    )
+    p.add_argument("--fmin", type=float, default=None, help="Hz (default 1)")
+    p.add_argument("--fmax", type=float, default=None, help="Hz (default 1e5)")
+    p.add_argument("--points", type=count, default=None,
+                   help="log-spaced frequencies from --fmin to --fmax, both included (default "
+                   "1000; 1 with --fmin equal to --fmax)")
+    p.add_argument("--frequencies", default=None, metavar="F1,F2,...",
+                   help="the frequencies (Hz), comma-separated, instead of --fmin, --fmax and "
+                   "--points")
     p.add_argument(
         "-o", "--output", default="frf", help="directory for frf.png / frf.csv (default ./frf)"
     )

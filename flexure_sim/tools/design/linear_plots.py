@@ -11,6 +11,10 @@ from pathlib import Path
 import numpy as np
 
 
+#: Coordinate names of rotations: the planar ``theta`` and the spatial ``rx``, ``ry``, ``rz``.
+ROTATIONS = ("theta", "rx", "ry", "rz")
+
+
 def input_text(mech, u0) -> str:
     """
     Where a model was linearised or a derivative taken: each drive's input with its unit.
@@ -22,10 +26,11 @@ def input_text(mech, u0) -> str:
     values = np.atleast_1d(np.asarray(u0, dtype=float))
     parts = []
     for d, v in zip(mech.drives, values):
+        turn = d.coordinate in ROTATIONS
         if d.kind == "force":
-            text = f"{v:.6g} {'N m' if d.coordinate == 'theta' else 'N'}"
+            text = f"{v:.6g} {'N m' if turn else 'N'}"
         else:
-            text = f"{v:.6g} rad" if d.coordinate == "theta" else f"{v * 1e6:.6g} um"
+            text = f"{v:.6g} rad" if turn else f"{v * 1e6:.6g} um"
         parts.append(text if len(values) == 1 else f"{d.name} {text}")
     return ("drive input " if len(values) == 1 else "drive inputs ") + ", ".join(parts)
 
@@ -103,15 +108,15 @@ def _mode_points(mech, points, z, dz):
 def unit(mech, model, name: str, source: str) -> str:
     """Return the unit of the FRF from input ``source`` to output ``name`` (SI)."""
     drive = mech.drives[model.input_index(source)]
-    turn = drive.coordinate == "theta"
+    turn = drive.coordinate in ROTATIONS
     den = ("N m" if turn else "N") if drive.kind == "force" else ("rad" if turn else "m")
     outs = {o.name: o for o in mech.all_outputs}
     if name in outs:
-        num = "rad" if outs[name].coordinate == "theta" else "m"
+        num = "rad" if outs[name].coordinate in ROTATIONS else "m"
     elif name == "compression" or name.startswith("drive_position"):
         num = "m"
     else:
-        num = "N m" if name.endswith(".moment") else "N"
+        num = "N m" if ".moment" in name else "N"
     return f"{num}/{den}"
 
 
@@ -134,10 +139,11 @@ def plot_bode(mech, model, f, G, outputs, path: Path, source: str = "drive") -> 
     import matplotlib.pyplot as plt
 
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
+    marker = "o" if len(f) <= 20 else None  # a few frequencies (or one) show as points
     for name, row in zip(outputs, G):
         unit_text = unit(mech, model, name, source)
-        ax1.loglog(f, np.abs(row), label=f"{name} [{unit_text}]")
-        ax2.semilogx(f, np.degrees(np.unwrap(np.angle(row))), label=name)
+        ax1.loglog(f, np.abs(row), label=f"{name} [{unit_text}]", marker=marker)
+        ax2.semilogx(f, np.degrees(np.unwrap(np.angle(row))), label=name, marker=marker)
     ax1.set_ylabel("magnitude")
     ax2.set_ylabel("phase [deg]")
     ax2.set_xlabel("frequency [Hz]")

@@ -2,7 +2,9 @@
 ``flexure-sim sensitivity MECH --wrt PARAM[,PARAM...] --of OUTPUT[,OUTPUT...]``.
 
 Exact first and second design sensitivities by hyper-dual numbers (engine/analysis/sensitivity.py)
-of gain, compression, first_mode and peak_stress.
+of gain, compression, first_mode and peak_stress: each output's value, its gradient and its full
+Hessian in the parameters (every entry exact, from one hyper-dual evaluation; JSON ``hessian``:
+{output: rows in the order of --wrt}, and ``second``: {output: {"P|Q": d2/dP dQ}}).
 
 PARAM is any numeric key of the mechanism file by path: ``stiffness_models.notch.h``,
 ``hinges.a.a.at.0``, ``bodies.body4.mass``; ``hinges.<h>.stiffness.<key>`` varies one hinge's
@@ -22,9 +24,11 @@ import sys
 from flexure_sim.engine.mechanism.loader import ConfigError
 from flexure_sim.engine.mechanism.parameters import ParameterError, Parameters
 from flexure_sim.engine.analysis.sensitivity import OUTPUTS, sensitivities
-from flexure_sim.engine.solver.simulation import SolverError
+from flexure_sim.engine.mechanism.stroke import check as check_stroke
+from flexure_sim.engine.solver.simulation import Simulation, SolverError
 from flexure_sim.tools.design.linear_plots import input_text
 from flexure_sim.tools.options import parse_drive_inputs
+from flexure_sim.tools.tables import columns
 
 
 def run(args) -> int:
@@ -34,7 +38,15 @@ def run(args) -> int:
         of = [o for o in args.of.split(",") if o]
         if not wrt:
             raise ParameterError("--wrt: give at least one parameter path")
-        res = sensitivities(params, wrt, of, parse_drive_inputs(args.input))
+        value = parse_drive_inputs(args.input)
+        if value is not None and params.mechanism.drives:  # the stroke rule (stroke.py)
+            try:
+                inputs = Simulation(params.mechanism).model.drive_inputs(value)
+            except ValueError:
+                inputs = None  # sensitivities says what is wrong with it
+            if inputs is not None:
+                check_stroke(params.mechanism.drives, inputs, f"--input {args.input!r}")
+        res = sensitivities(params, wrt, of, value, hessian=True)
     except (ConfigError, ParameterError, SolverError, ValueError) as exc:
         print(f"flexure-sim sensitivity: error: {exc}", file=sys.stderr)
         return 2
@@ -47,15 +59,21 @@ def run(args) -> int:
     u0 = list(res["input"].values()) if isinstance(res["input"], dict) else res["input"]
     where = input_text(mech, u0) if mech.drives else "rest"
     print(f"mechanism: {res['mechanism']}   static equilibrium at {where}")
-    for p, v in res["parameters"].items():
-        print(f"parameter {p} = {v:.6g}")
+    for k, (p, v) in enumerate(res["parameters"].items(), 1):
+        print(f"parameter {k}: {p} = {v:.6g}")
     for o in res["values"]:
         print(f"{o} = {res['values'][o]:.10g}")
         for p, d in res["gradient"][o].items():
             print(f"  d/d {p}: {d:.10g}")
-        for pq, d in res["second"][o].items():
-            print(f"  d2/d {pq.replace('|', ' d ')}: {d:.10g}")
+        print(hessian_table(res["hessian"][o]))
     return 0
+
+
+def hessian_table(H) -> str:
+    """Return the Hessian H[i][j] = d2/dP_i dP_j as an indented table, parameters by number."""
+    header = ["d2/dPi dPj"] + [f"j={j}" for j in range(1, len(H) + 1)]
+    rows = [[f"i={i}"] + [f"{d:.10g}" for d in row] for i, row in enumerate(H, 1)]
+    return "\n".join("  " + line for line in columns(rows, header).splitlines())
 
 
 def register(subparsers) -> None:

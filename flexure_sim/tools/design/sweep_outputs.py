@@ -25,7 +25,8 @@ import numpy as np
 from flexure_sim.engine.analysis import linear
 from flexure_sim.engine.mechanism.parts import Mechanism
 from flexure_sim.engine.solver.simulation import Simulation, StaticResult
-from flexure_sim.engine.hinges.stress import peak_ratio, stress_table
+from flexure_sim.engine.hinges import fatigue
+from flexure_sim.engine.hinges.stress import peak_ratio, stress_table, stroke_limit
 from flexure_sim.engine.analysis.study import Study
 from flexure_sim.tools.run import response_metrics
 from flexure_sim.tools.run.run_channels import gain_unit
@@ -62,12 +63,28 @@ class Design:
         self._static: Optional[StaticResult] = None
         self._step = None
         self._modes: Optional[linear.Modes] = None
+        self._rest: Optional[StaticResult] = None
+        self._fatigue: Optional[dict] = None
 
     def static(self) -> StaticResult:
         """Return static equilibrium at the study's drive input."""
         if self._static is None:
             self._static = self.sim.static(self.input)
         return self._static
+
+    def rest(self) -> StaticResult:
+        """Return the static equilibrium with every drive at 0: the fatigue cycle's start."""
+        if self._rest is None:
+            zero = ({d.name: 0.0 for d in self.mechanism.drives} if self.several else 0.0)
+            self._rest = self.sim.static(zero)
+        return self._rest
+
+    def fatigue(self) -> dict:
+        """Return the fatigue of cycling every drive between 0 and the input (fatigue.between)."""
+        if self._fatigue is None:
+            self._fatigue = fatigue.between(self.mechanism, self.rest().snapshot.wrenches,
+                                            self.static().snapshot.wrenches)
+        return self._fatigue
 
     def modes(self) -> linear.Modes:
         """
@@ -127,7 +144,9 @@ class Output:
     ``per``: with several drives, a column per ``drive``, ``output`` or ``pair`` (output,
     drive), or one column (""); ``each_unit``: then the unit of each column, a template of
     ``{drive}`` (the drive's input unit), ``{force}`` (its force unit), ``{output}`` (the
-    output's unit) and ``{gain}`` (output per unit of the drive's input).
+    output's unit) and ``{gain}`` (output per unit of the drive's input). ``nan_means``: what a
+    NaN (or None) of this output says, if it is one of its values (``settling_time``: not
+    settled); otherwise a design whose output is NaN is recorded as failed, with the reason.
     """
 
     name: str
@@ -136,6 +155,7 @@ class Output:
     compute: Callable[[Design], Values]
     per: str = ""
     each_unit: str = ""
+    nan_means: str = ""
 
 
 @dataclass(frozen=True)
@@ -151,7 +171,8 @@ class Column:
 OUTPUTS: dict[str, Output] = {}
 
 
-def output(name: str, unit: str, description: str, per: str = "", each_unit: str = ""):
+def output(name: str, unit: str, description: str, per: str = "", each_unit: str = "",
+           nan_means: str = ""):
     """
     Register a function of a ``Design`` as a sweep output, an ``Output``.
 
@@ -159,7 +180,7 @@ def output(name: str, unit: str, description: str, per: str = "", each_unit: str
     value per column, in ``columns`` order.
     """
     def register(fn: Callable[[Design], Values]):
-        OUTPUTS[name] = Output(name, unit, description, fn, per, each_unit)
+        OUTPUTS[name] = Output(name, unit, description, fn, per, each_unit, nan_means)
         return fn
     return register
 
@@ -238,8 +259,34 @@ def _peak_stress_ratio(d: Design) -> Values:
     return None if found is None else found[1]
 
 
+@output("stroke_limit", "m", "drive input at which the first hinge reaches its yield strength "
+        "(flexure-sim simulate --stroke-limit)")
+def _stroke_limit(d: Design) -> Values:
+    return stroke_limit(d.sim)[0]
+
+
+@output("fatigue_safety", "", "Goodman safety factor of the critical hinge, the drive cycling "
+        "between 0 and the input (engine/hinges/fatigue.py)")
+def _fatigue_safety(d: Design) -> Values:
+    found = fatigue.critical(d.fatigue(), "goodman")
+    return None if found is None else found[1]
+
+
+@output("fatigue_safety_soderberg", "", "Soderberg safety factor of the critical hinge, the "
+        "drive cycling between 0 and the input")
+def _fatigue_safety_soderberg(d: Design) -> Values:
+    found = fatigue.critical(d.fatigue(), "soderberg")
+    return None if found is None else found[1]
+
+
+@output("infinite_life_stroke", "m", "largest drive input that, cycled from 0, keeps the "
+        "critical hinge's Goodman safety factor at 1 or above")
+def _infinite_life_stroke(d: Design) -> Values:
+    return fatigue.infinite_life_input(d.sim, 0.0, d.input)[0]
+
+
 @output("settling_time", "s", "2 % settling time of the output after a step to the input",
-        per="output", each_unit="s")
+        per="output", each_unit="s", nan_means="not settled within step.duration")
 def _settling_time(d: Design) -> Values:
     if d.several:
         return [r.settling_time for r in d.step_response()]
@@ -283,6 +330,10 @@ def evaluate_batch(study: Study, start: int, stop: int) -> dict:
             design = Design(study.mechanism(params[r]), study)
             for name, where in spans:
                 outs[r, where] = _floats(OUTPUTS[name].compute(design), where.stop - where.start)
+                if not OUTPUTS[name].nan_means and np.isnan(outs[r, where]).any():
+                    bad = [names[k] for k in range(where.start, where.stop)
+                           if np.isnan(outs[r, k])]
+                    raise FloatingPointError(f"{', '.join(bad)}: no value (NaN)")
         except Exception as exc:  # noqa: BLE001 - a design that fails is recorded, not fatal
             outs[r] = np.nan
             status[r], errors[r] = FAILED, f"{type(exc).__name__}: {exc}"

@@ -12,6 +12,11 @@ temporary name and renamed), so a batch is stored once however often Dask re-run
 lost worker's tasks are re-run elsewhere), and an interrupted study keeps what finished:
 ``resume`` runs only the missing batches. At the end the parts are merged, in sample order,
 into the output file and removed.
+
+Memory stays bounded whatever the number of batches: a bounded number of tasks is in flight
+(``IN_FLIGHT`` per worker thread), and the merge streams the parts, one at a time, into row
+groups of up to ``ROW_GROUP`` rows. (The results themselves are read back for the summary:
+a study too large for that is refused at load, engine/analysis/study_size.py.)
 """
 from __future__ import annotations
 
@@ -34,6 +39,10 @@ from flexure_sim.errors import FlexureSimError
 from flexure_sim.tools.design.sweep_outputs import FAILED, columns, evaluate_batch
 
 MANIFEST = "study.json"
+#: Tasks in flight per worker thread of a cluster (the rest are submitted as these finish).
+IN_FLIGHT = 4
+#: Rows per row group of the merged results file.
+ROW_GROUP = 65536
 
 
 class SweepError(FlexureSimError):
@@ -124,23 +133,35 @@ class PartStore:
         os.replace(tmp, self.path(batch))
 
     def merge(self, output: Path) -> pa.Table:
-        """All parts in batch order, checked complete, written to ``output``; parts removed."""
-        n = len(self.study.batches())
-        missing = sorted(set(range(n)) - self.done())
+        """
+        All parts in batch order, checked complete, written to ``output``; parts removed.
+
+        The parts are streamed one at a time into row groups (module doc); returns the results.
+        """
+        batches = self.study.batches()
+        n = len(batches)
+        done = self.done()
+        missing = [k for k in range(n) if k not in done][:10]
         if missing:
-            raise SweepError(f"batches {missing[:10]} are missing from {self.dir}")
-        table = pa.concat_tables(
-            [pq.read_table(self.path(k), schema=self.schema) for k in range(n)])
-        samples = table.column("sample").to_numpy()
-        if len(samples) != self.study.samples or (samples != range(self.study.samples)).any():
-            raise SweepError(f"{self.dir}: the parts do not hold samples "
-                             f"0..{self.study.samples - 1} once each")
+            raise SweepError(f"batches {missing} are missing from {self.dir}")
         tmp = output.with_name(output.name + ".tmp")
         try:
-            pq.write_table(table, tmp)
+            with pq.ParquetWriter(tmp, self.schema) as writer:
+                pending: list[pa.Table] = []
+                for k, (start, stop) in enumerate(batches):
+                    part = pq.read_table(self.path(k), schema=self.schema)
+                    samples = part.column("sample").to_numpy()
+                    if len(samples) != stop - start or (samples != range(start, stop)).any():
+                        raise SweepError(f"{self.dir}: the parts do not hold samples "
+                                         f"0..{self.study.samples - 1} once each")
+                    pending.append(part)
+                    if sum(len(p) for p in pending) >= ROW_GROUP or k == n - 1:
+                        writer.write_table(pa.concat_tables(pending), row_group_size=ROW_GROUP)
+                        pending = []
             os.replace(tmp, output)
         finally:
             tmp.unlink(missing_ok=True)
+        table = pq.read_table(output)
         for k in range(n):
             self.path(k).unlink()
         (self.dir / MANIFEST).unlink()
@@ -173,6 +194,33 @@ def run_study(study: Study, output: Path, workers: Optional[int] = None,
     a LocalCluster of ``workers`` processes (default: one per core), or with ``workers == 1``
     Dask's synchronous scheduler in this process. ``on_batch`` is called after each stored batch.
     """
+    own = None
+    if client is None and scheduler is not None:  # before anything is written
+        client = own = connect(scheduler)
+    try:
+        return _run(study, output, workers, resume, client, on_batch)
+    finally:
+        if own is not None:
+            own.close()
+
+
+def connect(address: str) -> Any:
+    """
+    Return a ``distributed.Client`` of the scheduler at ``address``.
+
+    SweepError naming the option for an address that is not one (``not a url``); an
+    unreachable one raises the OSError that the command reports.
+    """
+    from distributed import Client
+
+    try:
+        return Client(address)
+    except (ValueError, TypeError) as exc:
+        raise SweepError(f"--scheduler {address!r}: not a scheduler address ({exc}); expected "
+                         "e.g. tcp://HOST:8786") from None
+
+
+def _run(study, output, workers, resume, client, on_batch) -> pa.Table:
     store = PartStore(output, study, resume)
     batches = study.batches()
     done = store.done()
@@ -191,14 +239,14 @@ def run_study(study: Study, output: Path, workers: Optional[int] = None,
         if on_batch is not None:
             on_batch(prog)
 
-    if client is None and scheduler is None and workers == 1:
+    if client is None and workers == 1:
         import dask
 
         for k in todo:
             task = dask.delayed(evaluate_batch)(study, *batches[k])
             stored(k, task.compute(scheduler="synchronous"))
     else:
-        _run_distributed(study, todo, batches, stored, prog, client, scheduler, workers)
+        _run_distributed(study, todo, batches, stored, prog, client, workers)
     if prog.lost_batches:
         raise SweepError(f"{len(prog.lost_batches)} batches failed on the cluster (first: "
                          f"{prog.lost_batches[0]}); the finished ones are kept: run again "
@@ -206,34 +254,45 @@ def run_study(study: Study, output: Path, workers: Optional[int] = None,
     return store.merge(output)
 
 
-def _run_distributed(study, todo, batches, stored, prog, client, scheduler, workers) -> None:
+def _run_distributed(study, todo, batches, stored, prog, client, workers) -> None:
     from distributed import Client, LocalCluster, as_completed
 
     own = []
     try:
         if client is None:
-            if scheduler is not None:
-                client = Client(scheduler)
-            else:
-                # Dask's own logs stay quiet (a worker busy in a batch when the study stops
-                # misses heartbeats and would log tracebacks): what matters reaches the user
-                # as a failed design or batch.
-                with _sigint_ignored():  # inherited by the worker processes spawned now
-                    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
-                                           threads_per_worker=1, processes=True,
-                                           dashboard_address=None,
-                                           silence_logs=logging.CRITICAL)
-                own.append(cluster)
-                client = Client(cluster)
-                client.register_plugin(IgnoreSigint(), name="flexure-sweep-ignore-sigint")
+            # Dask's own logs stay quiet (a worker busy in a batch when the study stops
+            # misses heartbeats and would log tracebacks): what matters reaches the user
+            # as a failed design or batch.
+            with _sigint_ignored():  # inherited by the worker processes spawned now
+                cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
+                                       threads_per_worker=1, processes=True,
+                                       dashboard_address=None,
+                                       silence_logs=logging.CRITICAL)
+            own.append(cluster)
+            client = Client(cluster)
+            client.register_plugin(IgnoreSigint(), name="flexure-sweep-ignore-sigint")
             own.insert(0, client)
         shared = client.scatter(study, broadcast=True)
         tag = study.fingerprint()[:16]
-        futures = [client.submit(evaluate_batch, shared, *batches[k],
-                                 key=f"flexure-sweep-{tag}-{k}") for k in todo]
-        index = {f.key: k for f, k in zip(futures, todo)}
-        for fut in as_completed(futures):
-            k = index[fut.key]
+        waiting = iter(todo)
+        index = {}
+
+        def submit() -> Any:
+            k = next(waiting, None)
+            if k is None:
+                return None
+            fut = client.submit(evaluate_batch, shared, *batches[k],
+                                key=f"flexure-sweep-{tag}-{k}")
+            index[fut.key] = k
+            return fut
+
+        window = IN_FLIGHT * max(1, sum(client.nthreads().values()))
+        running = as_completed([f for f in (submit() for _ in range(window)) if f is not None])
+        for fut in running:
+            k = index.pop(fut.key)
+            nxt = submit()  # keep the window full while this batch is stored
+            if nxt is not None:
+                running.add(nxt)
             if fut.status != "finished":
                 prog.lost_batches.append(f"batch {k}: {fut.exception()!r}")
                 continue

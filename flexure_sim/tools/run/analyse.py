@@ -197,39 +197,69 @@ def analyse_run(run: Run, band: float = DEFAULT_BAND, static: bool = True) -> di
         d = m.as_dict()
         d["static_gain"] = gains.get(m.index)
         out.append(d)
-    peaks, problem = stress_peaks(run, out)
+    mech = run.mechanism()
+    peaks, problem = (stress_peaks(run, out, mech) if mech is not None
+                      else ({}, f"no hinge stress: {run.mechanism_problem}"))
+    if problem and out:
+        notes.append(problem)
+    lives, whole, problem = (fatigue_of_steps(run, out, mech) if mech is not None
+                             else ({}, None, ""))
     if problem and out:
         notes.append(problem)
     for d in out:
         d["peak_stress"] = peaks.get(d["index"])
+        d["fatigue"] = lives.get(d["index"])
     return {"steps": out, "source": source, "notes": notes, "band": band,
-            "duration": (run.end_ns - run.start_ns) / 1e9}
+            "duration": (run.end_ns - run.start_ns) / 1e9, "fatigue": whole}
 
 
-def stress_peaks(run: Run, steps: list[dict]) -> tuple[dict[int, Optional[dict]], str]:
+def fatigue_of_steps(run: Run, steps: list[dict], mech) -> tuple[dict, Optional[dict], str]:
+    """
+    Return the fatigue of each step and of the whole run, and a note if there is none.
+
+    Each point of a hinge's section cycles between its extreme stresses over the step's wrench
+    samples (over all samples for the run: its largest cycle), engine/hinges/fatigue.py. Per
+    step index and for the run: the critical hinge's {"hinge", "goodman", "soderberg",
+    "amplitude", "mean"}, or None.
+    """
+    from flexure_sim.engine.hinges import fatigue
+
+    wrenches = run.wrenches()
+    recorded = [h for _, h in fatigue.with_strengths(mech) if h.name in wrenches]
+    advice = fatigue.no_fatigue_advice(mech)
+
+    def worst(inside) -> Optional[dict]:
+        entries = []
+        for h in recorded:
+            series = wrenches[h.name]
+            values = series.values[inside(series)]
+            if len(values):
+                entries.append((h.name, h.stress, fatigue.envelope(h.stress, values)))
+        table = fatigue.table(entries)
+        found = fatigue.critical(table)
+        return None if found is None else {"hinge": found[0], **table[found[0]]}
+
+    per_step = {s["index"]: worst(lambda series, s=s: (series.t > s["t"])
+                                  & (series.t <= s["t"] + s["duration"])) for s in steps}
+    whole = worst(lambda series: np.ones(len(series.t), dtype=bool))
+    note = f"no fatigue: {advice}" if whole is None and advice else ""
+    return per_step, whole, note
+
+
+def stress_peaks(run: Run, steps: list[dict], mech) -> tuple[dict[int, Optional[dict]], str]:
     """
     Per step index.
 
     The hinge with the largest stress ratio sigma / sigma_y over the step's wrench samples,
     {"hinge", "stress" (Pa), "ratio"}, or None; and a note if there is none.
     """
-    import yaml
+    from flexure_sim.engine.hinges.stress import no_yield_advice
 
-    from flexure_sim.engine.mechanism.loader import ConfigError, mechanism_from_dict
-
-    text = run.metadata.get("mechanism_yaml", "")
-    if not text:
-        return {}, "no hinge stress: the run has no recorded mechanism YAML"
-    try:
-        mech = mechanism_from_dict(yaml.safe_load(text),
-                                   source=run.mechanism_name or "<recorded YAML>")
-    except (ConfigError, yaml.YAMLError) as exc:
-        return {}, f"no hinge stress: recorded mechanism: {exc}"
     wrenches = run.wrenches()
     hinges = [(h.name, h.stress) for h in mech.hinges
               if h.name in wrenches and h.stress is not None and h.stress.sigma_y is not None]
     if not hinges:
-        return {}, "no hinge stress: no recorded notch or leaf hinge has a yield strength sigma_y"
+        return {}, f"no hinge stress: {no_yield_advice(mech) or 'no recorded notch or leaf hinge'}"
     out: dict[int, Optional[dict]] = {}
     for s in steps:
         t0, t1 = s["t"], s["t"] + s["duration"]
@@ -249,6 +279,10 @@ def stress_peaks(run: Run, steps: list[dict]) -> tuple[dict[int, Optional[dict]]
 
 def _stress_cell(peak: Optional[dict]) -> str:
     return "-" if not peak else f"{peak['ratio']:.4f} ({peak['hinge']})"
+
+
+def _fatigue_cell(life: Optional[dict]) -> str:
+    return "-" if not life else f"{life['goodman']:.4g} ({life['hinge']})"
 
 
 def _fixed(v: Optional[float], scale: float, decimals: int) -> str:
@@ -283,6 +317,7 @@ def format_result(run: Run, result: dict) -> str:
         "drive force [N]",
         "peak drive force [N]",
         "peak stress/yield",
+        "fatigue n",
     ]
     rows = []
     for s in steps:
@@ -299,6 +334,7 @@ def format_result(run: Run, result: dict) -> str:
             _fixed(s["drive_force"], 1.0, 4),
             _fixed(s["peak_drive_force"], 1.0, 4),
             _stress_cell(s.get("peak_stress")),
+            _fatigue_cell(s.get("fatigue")),
         ])
     lines.append(columns(rows, header))
     hinges = sorted({h for s in steps for h in s["peak_wrench"]},
@@ -325,6 +361,16 @@ def format_result(run: Run, result: dict) -> str:
         f"gain = output change / applied input change between settled values; settling "
         f"time to within {result['band'] * 100:g} % of the output change, from the command; "
         "static gain: the engine's static solve at the same inputs; peak stress/yield: "
-        "the largest hinge stress ratio sigma/sigma_y during the step (hinge)."
+        "the largest hinge stress ratio sigma/sigma_y during the step (hinge); fatigue n: the "
+        "Goodman safety factor of the step's largest stress cycle, critical hinge "
+        "(engine/hinges/fatigue.py)."
     )
+    life = result.get("fatigue")
+    if life:
+        lines.append(
+            f"fatigue over the whole run (each fibre between its extreme stresses): critical "
+            f"hinge {life['hinge']}, Goodman n = {life['goodman']:.4g}, Soderberg n = "
+            f"{life['soderberg']:.4g} (amplitude {life['amplitude'] / 1e6:.4g} MPa, mean "
+            f"{life['mean'] / 1e6:.4g} MPa; S_e {life['sigma_e'] / 1e6:.4g} MPa at "
+            f"{life['cycles']:.3g} cycles, {life['material'] or 'sigma_e of the file'})")
     return "\n".join(lines)

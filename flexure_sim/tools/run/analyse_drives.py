@@ -154,16 +154,32 @@ def _ms(v: Optional[float]) -> str:
     return "-" if v is None or not math.isfinite(v) else f"{v * 1e3:.3f}"
 
 
-def _si(v: Optional[float], unit: str) -> str:
-    """Format a value with a readable prefix (um, urad, mN...)."""
+def _si(v: Optional[float], unit: str, ref: Optional[float] = None) -> str:
+    """
+    Format a value with a readable prefix (um, urad, mN...).
+
+    The prefix is chosen by |v|, or with ``ref`` by the larger of |v| and |ref|, and the value
+    rounded to 6 digits of that size: both ends of a step read in one unit and to one
+    resolution, so an input that decayed to a denormal reads 0 (``10 um -> 0 um``).
+    """
     if v is None or not math.isfinite(v):
         return "-"
+    size = abs(v) if ref is None or not math.isfinite(ref) else max(abs(v), abs(ref))
     base = unit.split()[0] if unit else ""
+    rest = unit[len(base):]
     for prefix, scale in (("", 1.0), ("m", 1e3), ("u", 1e6), ("n", 1e9)):
-        if abs(v) * scale >= 1.0 or prefix == "n":
-            rest = unit[len(base):]
-            return f"{v * scale:.6g} {prefix}{base}{rest}"
-    return f"{v:g} {unit}"
+        if size * scale >= 1.0 or prefix == "n":
+            break
+    x = v * scale
+    if ref is not None and size > 0.0:
+        quantum = 10.0 ** (math.floor(math.log10(size * scale)) - 5)
+        x = round(x / quantum) * quantum + 0.0  # + 0.0: no "-0"
+    return f"{x:.6g} {prefix}{base}{rest}"
+
+
+def _step_inputs(before: Optional[float], after: Optional[float], unit: str) -> str:
+    """Return ``before -> after`` of a step's applied input, in one unit (``_si``)."""
+    return f"{_si(before, unit, after)} -> {_si(after, unit, before)}"
 
 
 def format_drives(run: Run, result: dict) -> str:
@@ -216,8 +232,8 @@ def format_drives(run: Run, result: dict) -> str:
                 (str(s["index"]) + ("" if s["clean"] else "!")) if k == 0 else "",
                 s["drive"] if k == 0 else "",
                 _ms(s["t"]) if k == 0 else "",
-                (f"{_si(s['applied_input_before'], units[s['drive']])} -> "
-                 f"{_si(s['applied_input'], units[s['drive']])}") if k == 0 else "",
+                _step_inputs(s["applied_input_before"], s["applied_input"],
+                             units[s["drive"]]) if k == 0 else "",
                 o, _si(r["change"], ounits[o]),
                 _num(r["gain"]) + ("" if r["settled"] else "*"), _num(r.get("static_gain")),
                 _ms(r["settling_time"]),

@@ -1,0 +1,1 @@
+"""Finite-element hinges: gmsh meshes, scikit-fem solves (see the modules)."""

@@ -1,0 +1,162 @@
+"""
+Linear elasticity of a hinge between two rigid bodies: compliance, stiffness and peak stress.
+
+The hinge outline (shapes.py, lengths in units of the reference length ell) is meshed with
+six-node triangles (mesh.py) and solved with scikit-fem's isoparametric P2 elements
+(``MeshTri2``, ``ElementVector(ElementTriP2())``, ``skfem.models.elasticity``) in plane stress
+or plane strain, with E = 1 and a unit plate thickness; model.py scales the results to SI.
+
+Boundary conditions (the hinge's ends clamped to rigid bodies):
+
+* body A: every node on the clamp line x = -l is fixed, u = 0;
+* body B: the nodes on x = +l move with B's small rigid motion q = (theta, u, v) of the hinge
+  frame's origin (the centre), u_x = u - theta y, u_y = v + theta x. These dofs are eliminated
+  by the 3-column map G (u_S = G q): the system is T^T K T for T = [[1, 0], [0, G]] on
+  (interior dofs, q), a multipoint constraint by elimination, so no penalty or multiplier.
+
+The load on q is the work-conjugate of B's motion at the centre, the wrench (m, f_x, f_y) on
+body B at the hinge frame: solving with the three unit wrenches as right-hand sides gives the
+columns of the compliance C (3x3, moment first, forces second, as ``stiffness.py``), symmetric
+by construction; the stiffness is K = C^-1.
+
+Stress: each unit-wrench solution's von Mises stress at the vertices of every element (where
+the linear P2 stress takes its extremes in an element), unaveraged; the peak over the mesh and
+where it is. Plane strain adds sigma_zz = nu (sigma_xx + sigma_yy).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from flexure_sim.engine.hinges.fe.mesh import HingeMesh
+
+PLANES = ("stress", "strain")
+
+
+@dataclass(frozen=True)
+class Solution:
+    """
+    One linear solve, dimensionless (E = 1, unit plate thickness, lengths in ell).
+
+    ``compliance`` (3, 3); ``peak`` (3,): the largest von Mises stress under each unit wrench
+    (m, f_x, f_y); ``peak_at`` (3, 2): where; ``dofs``: the number of unknowns;
+    ``displacements`` (3, N, 2): the nodal displacement of each unit-wrench solution (kept for
+    pictures; N nodes of the mesh); ``von_mises`` (3, M, 3) at each element's vertices.
+    """
+
+    compliance: np.ndarray
+    peak: np.ndarray
+    peak_at: np.ndarray
+    dofs: int
+    displacements: np.ndarray
+    von_mises: np.ndarray
+
+
+def lame(nu: float, plane: str) -> tuple[float, float]:
+    """
+    Lamé parameters (lambda, mu) for E = 1 in plane strain, or the plane-stress lambda*.
+
+    lambda* = 2 lambda mu / (lambda + 2 mu) (sigma_zz = 0 eliminated).
+    """
+    if plane not in PLANES:
+        raise ValueError(f"plane: expected one of {PLANES}, got {plane!r}")
+    lam = nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    mu = 0.5 / (1.0 + nu)
+    if plane == "stress":
+        lam = 2.0 * lam * mu / (lam + 2.0 * mu)
+    return lam, mu
+
+
+def _skfem_mesh(m: HingeMesh):
+    from skfem import MeshTri2
+
+    return MeshTri2(m.nodes.T.copy(), m.triangles.T.copy())
+
+
+def _clamp_dofs(basis, nodes_x: float, half: float, tol: float):
+    """Return the (x-component, y-component) dof indices of the clamp line x = nodes_x."""
+    facets = basis.mesh.facets_satisfying(lambda x: np.abs(x[0] - nodes_x) < tol * half,
+                                          boundaries_only=True)
+    dofs = basis.get_dofs(facets)
+    ux = np.concatenate([dofs.nodal.get("u^1", []), dofs.facet.get("u^1", [])]).astype(int)
+    uy = np.concatenate([dofs.nodal.get("u^2", []), dofs.facet.get("u^2", [])]).astype(int)
+    return np.unique(ux), np.unique(uy)
+
+
+def solve(m: HingeMesh, half: float, nu: float, plane: str) -> Solution:
+    """Compliance and peak stresses of the meshed hinge ``m`` (clamps at x = -half, +half)."""
+    from skfem import Basis, ElementTriP2, ElementVector, asm
+    from skfem.models.elasticity import linear_elasticity
+
+    mesh = _skfem_mesh(m)
+    element = ElementVector(ElementTriP2())
+    basis = Basis(mesh, element, intorder=4)
+    lam, mu = lame(nu, plane)
+    K = asm(linear_elasticity(lam, mu), basis).tocsr()
+    n = K.shape[0]
+    fixed = np.concatenate(_clamp_dofs(basis, -half, half, 1e-9))
+    sx, sy = _clamp_dofs(basis, half, half, 1e-9)
+    tied = np.concatenate([sx, sy])
+    loc = basis.doflocs
+    # G: u_S = G q, q = (theta, u, v) at the centre.
+    G = np.zeros((len(tied), 3))
+    G[:len(sx), 0] = -loc[1, sx]
+    G[:len(sx), 1] = 1.0
+    G[len(sx):, 0] = loc[0, sy]
+    G[len(sx):, 2] = 1.0
+    interior = np.setdiff1d(np.arange(n), np.concatenate([fixed, tied]))
+    ni = len(interior)
+    rows = np.concatenate([interior, np.repeat(tied, 3)])
+    cols = np.concatenate([np.arange(ni), ni + np.tile(np.arange(3), len(tied))])
+    vals = np.concatenate([np.ones(ni), G.ravel()])
+    T = sp.csr_matrix((vals, (rows, cols)), shape=(n, ni + 3))
+    A = (T.T @ K @ T).tocsc()
+    rhs = np.zeros((ni + 3, 3))
+    rhs[ni:, :] = np.eye(3)
+    lu = spla.splu(A)
+    x = lu.solve(rhs)
+    C = x[ni:, :]
+    C = 0.5 * (C + C.T)
+    u = T @ x  # (n, 3): full displacement of each unit-wrench case
+    peak, peak_at, vm = _von_mises(mesh, element, u, lam, mu, nu, plane)
+    return Solution(C, peak, peak_at, ni + 3, _to_mesh_nodes(m, basis, u), vm)
+
+
+def _to_mesh_nodes(m: HingeMesh, basis, u: np.ndarray) -> np.ndarray:
+    """Return the displacement (3, N, 2) at the mesh's own nodes (matched by position)."""
+    from scipy.spatial import cKDTree
+
+    loc = basis.doflocs
+    xdofs = np.concatenate([basis.nodal_dofs[0], basis.facet_dofs[0]])
+    ydofs = np.concatenate([basis.nodal_dofs[1], basis.facet_dofs[1]])
+    _, idx = cKDTree(loc[:, xdofs].T).query(m.nodes)
+    return np.stack([u[xdofs[idx], :].T, u[ydofs[idx], :].T], axis=-1)
+
+
+def _von_mises(mesh, element, u, lam, mu, nu, plane):
+    """Peak von Mises stress of each load case, where, and the values at element vertices."""
+    from skfem import Basis
+
+    vertices = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    vb = Basis(mesh, element, quadrature=(vertices, np.full(3, 1.0 / 6.0)))
+    xy = vb.mapping.F(vertices)  # (2, elements, 3)
+    peaks, where, fields = [], [], []
+    for k in range(u.shape[1]):
+        grad = vb.interpolate(u[:, k]).grad  # (2, 2, elements, 3)
+        exx, eyy = grad[0, 0], grad[1, 1]
+        exy = 0.5 * (grad[0, 1] + grad[1, 0])
+        tr = exx + eyy
+        sxx = 2 * mu * exx + lam * tr
+        syy = 2 * mu * eyy + lam * tr
+        sxy = 2 * mu * exy
+        szz = nu * (sxx + syy) if plane == "strain" else 0.0 * sxx
+        vm = np.sqrt(0.5 * ((sxx - syy) ** 2 + (syy - szz) ** 2 + (szz - sxx) ** 2)
+                     + 3.0 * sxy ** 2)
+        i = np.unravel_index(np.argmax(vm), vm.shape)
+        peaks.append(vm[i])
+        where.append(xy[:, i[0], i[1]])
+        fields.append(vm)
+    return np.array(peaks), np.array(where), np.array(fields)
