@@ -153,6 +153,22 @@ def test_goodman_of_an_fe_hinge_by_hand():
     assert good == soder == pytest.approx(2 * s_e / (c_m * m + c_x * F), rel=3e-3)
 
 
+def test_a_recorded_fe_hinge_cycles_each_point_between_its_extremes():
+    """
+    ``analyse``'s envelope: each point between its smallest and largest stress of the record.
+
+    By hand: sigma_p(t) = a_p . w(t) summed term by term, for a record of 50 wrenches.
+    """
+    mech = load_mechanism(STAGE)
+    g = mech.hinges[mech.hinge_index("c")].stress
+    rows = model.fibre_coefficients("circular", GEO, 0.33, "strain")
+    w = np.random.default_rng(5).normal(size=(50, 3)) * [2e-3, 50.0, 50.0]
+    sigma = np.array([[sum(a[j] * wt[j] for j in range(3)) for a in rows] for wt in w])
+    amplitude, mean = fatigue.envelope(g, w)
+    np.testing.assert_allclose(amplitude, (sigma.max(0) - sigma.min(0)) / 2, rtol=1e-12)
+    np.testing.assert_allclose(mean, (sigma.max(0) + sigma.min(0)) / 2, rtol=1e-12, atol=1e-3)
+
+
 @pytest.mark.slow
 def test_simulate_static_and_stroke_limit_report_fe_fatigue(capsys):
     """The FE stage gets its fatigue; the infinite-life input, solved again, has n = 1."""
