@@ -107,6 +107,7 @@ def test_a_drive_program_that_is_not_one_is_a_one_line_error(args, message):
 def _stage_file(tmp_path, response_time) -> str:
     doc = yaml.safe_load((ROOT / "config" / "microstage.yaml").read_text())
     doc["constraints"][1]["response_time"] = response_time
+    doc["constraints"][1]["stroke"] = [0.0, 2.0e-5]  # the 15 um steps below: within the stroke
     path = tmp_path / f"stage_{response_time:g}.yaml"
     path.write_text(yaml.safe_dump(doc))
     return str(path)
