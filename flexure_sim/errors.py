@@ -18,7 +18,7 @@ nothing from the package, so any layer (the engine included) may import it.
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -38,7 +38,7 @@ def as_array(name: str, value, shape: Sequence[int | None], dtype=float) -> np.n
     try:
         array = np.asarray(value, dtype=dtype)
     except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected {want}, got {_shown(value)}") from None
+        raise ValueError(f"{name}: expected {want}, got {shown(value)}") from None
     if array.ndim != len(shape) or any(
         n is not None and have != n for have, n in zip(array.shape, shape)
     ):
@@ -53,6 +53,7 @@ def _shape_text(shape: Sequence[int | None]) -> str:
     return "shape (" + ", ".join(dims) + ("," if len(dims) == 1 else "") + ")"
 
 
-def _shown(value, limit: int = 60) -> str:
+def shown(value: Any, limit: int = 60) -> str:
+    """Return the repr of a value a user gave, shortened so that a message stays one line."""
     text = repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -239,7 +239,7 @@ GOOD_HEADER = "alpha,px,py,m,fx,fy\n"
     (GOOD_HEADER + "0.1,1e-6,0,1e-3,one,2\n", ["line 2", "'fx'", "'one' is not a number"]),
     (GOOD_HEADER + "0.1,1e-6,0,1e-3,1\n", ["line 2", "expected 6 fields, got 5"]),
     (GOOD_HEADER + "0.1,1e-6,0,1e-3,1,\n", ["line 2", "'fy'", "'' is not a number"]),
-    (GOOD_HEADER + "3.5,1e-6,0,1e-3,1,2\n", ["line 2", "'alpha'", "outside (-pi, pi)"]),
+    (GOOD_HEADER + "3.5,1e-6,0,1e-3,1,2\n", ["line 2", "'alpha': 3.5 rad", "outside (-pi, pi)"]),
     (GOOD_HEADER, ["no data rows"]),
     ("# only a comment\n", ["no header"]),
     ("alpha,px,py,m,fx,fy,m\n", ["'m' appears more than once"]),

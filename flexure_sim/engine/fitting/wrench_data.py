@@ -116,8 +116,9 @@ def read_wrench_csv(path: str | Path) -> WrenchData:
             values[r, c] = _cell(path, lineno, name, row[col].strip())
     bad = np.nonzero(np.abs(values[:, 0]) >= math.pi)[0]
     if len(bad):
+        alpha = float(values[bad[0], 0])  # a float: np.float64's repr differs in NumPy 2
         raise DataError(
-            f"{path}: line {lines[1 + bad[0]][0]}, column 'alpha': {values[bad[0], 0]!r} rad is "
+            f"{path}: line {lines[1 + bad[0]][0]}, column 'alpha': {alpha!r} rad is "
             "outside (-pi, pi)"
         )
     return WrenchData(values[:, 0], values[:, 1:3], values[:, 3:6], str(path))

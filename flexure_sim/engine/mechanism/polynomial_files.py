@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from flexure_sim.errors import FlexureSimError
+from flexure_sim.errors import FlexureSimError, shown
 from flexure_sim.engine.laws.polynomial import MAX_ORDER, REST, VARIABLES, PolynomialLaw
 from flexure_sim.engine.mechanism.yaml_files import read_yaml
 
@@ -74,25 +74,25 @@ def law_from_dict(doc: Any, source: str = "<dict>") -> PolynomialLaw:
             f"{source}: the document must be a mapping, got {type(doc).__name__}")
     if doc.get("format") != FILE_FORMAT:
         raise fail("format", f"expected {FILE_FORMAT!r} (a file written by flexure-sim fit), "
-                   f"got {_shown(doc.get('format'))}")
+                   f"got {shown(doc.get('format'))}")
     if doc.get("version") != FILE_VERSION:
-        raise fail("version", f"unsupported version {_shown(doc.get('version'))} "
+        raise fail("version", f"unsupported version {shown(doc.get('version'))} "
                    f"(this flexure_sim reads {FILE_VERSION})")
     coords = doc.get("coordinates")
     if not isinstance(coords, str) or coords not in VARIABLES:
-        raise fail("coordinates", f"expected one of {', '.join(VARIABLES)}, got {_shown(coords)}")
+        raise fail("coordinates", f"expected one of {', '.join(VARIABLES)}, got {shown(coords)}")
     names = VARIABLES[coords]
     k = len(names)
     if "variables" in doc and doc["variables"] != list(names):
         raise fail("variables", f"expected {list(names)} for {coords} coordinates, "
-                   f"got {_shown(doc['variables'])}")
+                   f"got {shown(doc['variables'])}")
     order = doc.get("order")
     if isinstance(order, bool) or not isinstance(order, int) or not 1 <= order <= MAX_ORDER:
-        raise fail("order", f"expected an integer in 1..{MAX_ORDER}, got {_shown(order)}")
+        raise fail("order", f"expected an integer in 1..{MAX_ORDER}, got {shown(order)}")
 
     def numbers(key: str, value: Any, n: int) -> list[float]:
         if not isinstance(value, list) or len(value) != n:
-            raise fail(key, f"expected a list of {n} numbers, got {_shown(value)}")
+            raise fail(key, f"expected a list of {n} numbers, got {shown(value)}")
         out = []
         for i, v in enumerate(value):
             out.append(_finite(fail, f"{key}[{i}]", v))
@@ -116,13 +116,13 @@ def law_from_dict(doc: Any, source: str = "<dict>") -> PolynomialLaw:
         key = f"terms[{i}]"
         if not isinstance(term, dict) or set(term) != {"exponents", "coefficient"}:
             raise fail(key, "expected a mapping with keys exponents and coefficient, "
-                       f"got {_shown(term)}")
+                       f"got {shown(term)}")
         e = term["exponents"]
         naturals = isinstance(e, list) and all(
             isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in e)
         if not naturals or len(e) != k:
             raise fail(f"{key}.exponents",
-                       f"expected {k} non-negative integers ({', '.join(names)}), got {_shown(e)}")
+                       f"expected {k} non-negative integers ({', '.join(names)}), got {shown(e)}")
         if sum(e) > order:
             raise fail(f"{key}.exponents", f"total degree {sum(e)} exceeds the order {order}")
         exps.append(e)
@@ -141,20 +141,14 @@ def _finite(fail, key: str, value: Any) -> float:
         except ValueError:
             pass
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise fail(key, f"expected a finite number, got {_shown(value)}")
+        raise fail(key, f"expected a finite number, got {shown(value)}")
     try:
         number = float(value)
     except OverflowError:  # an integer beyond the double range
         number = math.inf
     if not math.isfinite(number):
-        raise fail(key, f"expected a finite number, got {_shown(value)}")
+        raise fail(key, f"expected a finite number, got {shown(value)}")
     return number
-
-
-def _shown(value: Any, limit: int = 60) -> str:
-    """Return the repr of a value from the file, shortened so that a message stays one line."""
-    text = repr(value)
-    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def load_law(path: str | Path) -> PolynomialLaw:

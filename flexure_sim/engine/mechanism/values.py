@@ -17,7 +17,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from flexure_sim.errors import FlexureSimError
+from flexure_sim.errors import FlexureSimError, shown
 from flexure_sim.engine.kinematics.hyperdual import HyperDual
 
 
@@ -84,12 +84,6 @@ def no_unknown(ctx: Ctx, key: str, data: dict, allowed: set[str]) -> None:
     if unknown:
         where = f"{key}.{key_text(unknown[0])}" if key else key_text(unknown[0])
         raise ctx.fail(where, f"unknown key (allowed: {', '.join(sorted(allowed))})")
-
-
-def shown(value: Any, limit: int = 60) -> str:
-    """Return the repr of a file's value, shortened so that a message stays one readable line."""
-    text = repr(value)
-    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def key_text(key: Any) -> str:
