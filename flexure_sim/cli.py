@@ -5,10 +5,15 @@ Offline simulation without ROS (and, from the tools package, analysis of recorde
 
     flexure-sim simulate microstage --drive step:1.35e-6 --duration 0.05 [--json]
     flexure-sim simulate microstage --drive step:1.35e-6 --static [--json]
+    flexure-sim simulate microstage --drive cycloid:1.35e-6:2e-3 --duration 0.01
     flexure-sim simulate config/fourbar_mixed.yaml --duration 0.2
+    flexure-sim simulate xy_stage --drive x=step:1e-5 --drive y=ramp:5e-6:2e-3 [--static]
     flexure-sim simulate xy_stage --static [--json]     # several drives: the gain matrix
     flexure-sim simulate microstage --space 3d --static # with its out-of-plane freedoms
     flexure-sim simulate tiptilt_stage --drive step:p1=1e-5,p2=0,p3=0 --duration 0.01
+
+``--drive`` takes one program per drive (tools/drive_programs.py); a 3-D mechanism takes one
+``--drive step:...`` for all its drives (tools/run/simulate_spatial.py).
 """
 from __future__ import annotations
 
@@ -22,10 +27,10 @@ import numpy as np
 
 from flexure_sim.console import quiet_pipe
 from flexure_sim.errors import FlexureSimError
-from flexure_sim.engine.hinges.stress import no_yield_advice
 from flexure_sim.engine.mechanism.loader import load_mechanism, resolve_mechanism_path
-from flexure_sim.engine.mechanism.stroke import check as check_stroke
 from flexure_sim.engine.solver.simulation import DEFAULT_STEP, Simulation, Snapshot
+from flexure_sim.tools import drive_programs
+from flexure_sim.tools.run import simulate_limits
 
 #: Times (s) at which the step response is reported, as in the acceptance figures.
 REPORT_TIMES = (1e-3, 2e-3, 5e-3)
@@ -35,23 +40,7 @@ class UsageError(FlexureSimError, ValueError):
     """A command-line argument is invalid (the message names it)."""
 
 
-def parse_drive(spec: str) -> float:
-    """``step:AMPLITUDE`` (m) -> AMPLITUDE; ``none`` -> 0."""
-    if spec == "none":
-        return 0.0
-    kind, _, value = spec.partition(":")
-    if kind != "step" or not value:
-        raise UsageError(f"--drive {spec!r}: expected step:AMPLITUDE (metres) or none")
-    try:
-        amplitude = float(value)
-    except ValueError:
-        raise UsageError(f"--drive {spec!r}: {value!r} is not a number") from None
-    if not np.isfinite(amplitude):
-        raise UsageError(f"--drive {spec!r}: amplitude must be finite")
-    return amplitude
-
-
-def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
+def summarize(sim: Simulation, snap: Snapshot, amplitude: float, programs=None) -> dict:
     """Return the figures the command prints, as a JSON-ready dict (SI units)."""
     mech = sim.mechanism
     gain = None
@@ -83,14 +72,14 @@ def summarize(sim: Simulation, snap: Snapshot, amplitude: float) -> dict:
             "drive_work": snap.drive_work,
         },
     }
-    if sim.model.actuation:
+    if sim.model.drives.actuation:
         out["actuators"] = actuator_figures(sim, snap)
-    if len(sim.model.drives) > 1 or len(sim.model.outputs) > 1:
-        out["drives"] = {name: {"input": float(snap.drive_inputs[k]),
-                                "force": float(snap.drive_forces[k]),
-                                "position": float(snap.drive_positions[k])}
-                         for k, name in enumerate(snap.drive_names)}
+    if len(sim.model.drives):
+        out["drives"] = drive_programs.drive_figures(sim, snap, programs or {})
+    if sim.model.outputs:
         out["outputs"] = dict(snap.outputs)
+        out["output_units"] = {o.name: "rad" if o.coordinate == "theta" else "m"
+                               for o in sim.model.outputs}
     return out
 
 
@@ -102,7 +91,7 @@ def actuator_figures(sim: Simulation, snap: Snapshot) -> dict:
     displacement (m), stack force (N).
     """
     out = {}
-    for a in sim.model.actuation:
+    for a in sim.model.drives.actuation:
         k = a.drive
         out[snap.drive_names[k]] = {
             "command": float(snap.drive_commands[k]),
@@ -117,7 +106,8 @@ def actuator_figures(sim: Simulation, snap: Snapshot) -> dict:
 
 def _single_command(sim: Simulation) -> bool:
     """Tell whether ``--drive step:A`` commands the mechanism's one drive (with an actuator)."""
-    return sim.drive is not None or (len(sim.model.drives) == 1 and bool(sim.model.actuation))
+    drives = sim.model.drives
+    return sim.drive is not None or (len(drives) == 1 and bool(drives.actuation))
 
 
 def run_simulate(args: argparse.Namespace) -> dict:
@@ -130,50 +120,62 @@ def run_simulate(args: argparse.Namespace) -> dict:
         from flexure_sim.tools.run import simulate_spatial
         if args.stroke_limit:
             raise UsageError("--stroke-limit: not available for 3-D mechanisms yet")
+        args.drive = _spatial_drive(args.drive)
         return simulate_spatial.run(args, path, UsageError)
     mech = load_mechanism(path)
-    amplitude = parse_drive(args.drive)
-    sim = Simulation(mech, dt=args.dt, relinearize_tol=args.relinearize_tol)
-    several = len(sim.model.drives) > 1 or len(sim.model.outputs) > 1
-    if amplitude and several and len(sim.model.drives) > 1:
-        raise UsageError(f"--drive: mechanism {mech.name!r} has {len(sim.model.drives)} drives "
-                         f"({', '.join(sim.model.drive_names)}); --static without --drive "
-                         "reports the gain of every output against every drive")
-    if amplitude and sim.drive is None and not sim.model.drives:
-        raise UsageError(f"--drive: mechanism {mech.name!r} has no drive")
-    if args.static and len(sim.model.stack_index):
+    try:
+        sim = Simulation(mech, dt=args.dt, relinearize_tol=args.relinearize_tol)
+    except ValueError as exc:
+        raise UsageError(f"{mech.name}: {exc}") from None
+    names = sim.model.drives.names
+    programs = drive_programs.parse_drives(args.drive, names)
+    given = {n: p for n, p in programs.items() if p is not None}
+    several = len(names) > 1 or len(sim.model.outputs) > 1
+    inputs = drive_programs.static_inputs(programs, names) if args.static else None
+    amplitude = 0.0     # a single drive's input, for the gain
+    if len(names) == 1 and inputs is not None:
+        amplitude = float(inputs[0])
+    elif len(names) == 1 and names[0] in given:
+        amplitude = given[names[0]].final or 0.0
+    if args.static and len(sim.model.drives.stack):
         raise UsageError(f"--static: mechanism {mech.name!r} has a drive with a finite-stiffness "
                          "piezo stack (its input is the actuator's free stroke, a dynamic "
                          "state): simulate without --static to a steady state")
-    if amplitude and mech.drives:  # the stroke rule of every analysis (mechanism/stroke.py)
-        check_stroke(mech.drives[:1], [amplitude], f"--drive {args.drive}", command=True)
+    drive_programs.check_strokes(mech, given)  # the rule of every analysis (mechanism/stroke.py)
     start = time.perf_counter()
     if args.stroke_limit:
-        return _stroke_limit(args, sim)
+        return simulate_limits.stroke_limit(args, sim, UsageError)
+    if args.static and len(names) > 1 and not given:
+        return _gain_only(sim, path, time.perf_counter() - start)
     if args.static:
-        result = sim.static(amplitude if len(sim.model.drives) <= 1 else
-                            np.zeros(len(sim.model.drives)))
-        out = summarize(sim, result.snapshot, amplitude)
+        result = sim.static(inputs if len(names) else 0.0)
+        out = summarize(sim, result.snapshot, amplitude, programs)
         if several:
             out["gain_matrix"] = gain_matrix(sim)
         wall = time.perf_counter() - start
         out.update(mechanism_file=str(path), mode="static", newton_iterations=result.iterations,
                    residual=result.residual, wall_s=wall)
-        out["hinge_stress"] = _stress(sim, result.snapshot)
-        out["stress_note"] = no_yield_advice(sim.mechanism)
-        out["fatigue"] = _fatigue(args, sim, amplitude)
+        out.update(simulate_limits.static_limits(args, sim, result.snapshot, amplitude,
+                                                 UsageError))
         return out
-    if _single_command(sim):
-        sim.set_command(amplitude)
+    drive_programs.apply(sim, programs)
     n_steps = int(round(args.duration / args.dt))
-    samples = {}
+    samples, outputs_at = {}, {}
     marks = {int(round(t / args.dt)): t for t in REPORT_TIMES if t <= args.duration}
-    for k in range(1, n_steps + 1):
-        sim.step()
-        if k in marks and mech.output is not None:
-            samples[f"{marks[k]:g}"] = sim.snapshot().output
+    done = 0
+    for k in sorted(marks) + [n_steps]:
+        if k > done:
+            sim.step(k - done)
+            done = k
+        if k in marks and sim.model.outputs:
+            snap = sim.snapshot()
+            outputs_at[f"{marks[k]:g}"] = dict(snap.outputs)
+            if mech.output is not None:
+                samples[f"{marks[k]:g}"] = snap.output
     wall = time.perf_counter() - start
-    out = summarize(sim, sim.snapshot(), amplitude)
+    out = summarize(sim, sim.snapshot(), amplitude, programs)
+    if len(sim.model.outputs) > 1:
+        out["outputs_at"] = outputs_at
     if _single_command(sim) and sim.drive is None:  # one actuated drive: the scalar figures
         snap = sim.snapshot()
         out.update(input=amplitude, drive_input=float(snap.drive_positions[0]),
@@ -192,6 +194,20 @@ def run_simulate(args: argparse.Namespace) -> dict:
     return out
 
 
+def _gain_only(sim: Simulation, path, wall: float) -> dict:
+    """
+    Return ``--static`` of several drives without a program: the gain matrix, and what to give.
+
+    At rest there is nothing else to report (hinge deflections and stresses are rounding).
+    """
+    names = sim.model.drives.names
+    example = " ".join(f"--drive {n}=step:A" for n in names)
+    return {"mechanism": sim.mechanism.name, "mechanism_file": str(path), "mode": "gain",
+            "drives": list(names), "gain_matrix": gain_matrix(sim), "wall_s": wall,
+            "hint": f"for the nonlinear static solution at given inputs (its outputs, drive "
+                    f"forces and hinge stresses) give one program per drive: {example}"}
+
+
 def spatial(args: argparse.Namespace, path) -> bool:
     """Tell whether to simulate in 3-D: ``--space 3d``, or a ``space: 3d`` file (auto)."""
     from flexure_sim.engine.mechanism.spatial_loader import is_spatial
@@ -201,6 +217,17 @@ def spatial(args: argparse.Namespace, path) -> bool:
     return args.space == "3d" or three_d
 
 
+def _spatial_drive(specs) -> str:
+    """Return the one ``--drive`` a 3-D run takes (``none`` without), UsageError for several."""
+    if not specs:
+        return "none"
+    if len(specs) > 1:
+        raise UsageError(f"--drive given {len(specs)} times: a 3-D mechanism takes one "
+                         "--drive step:A, step:NAME=VALUE,... or step:V1,V2,... for all its "
+                         "drives")
+    return specs[0]
+
+
 def gain_matrix(sim: Simulation) -> dict:
     """
     Return the exact static gain at rest, each output (rows) against each drive (columns).
@@ -208,63 +235,8 @@ def gain_matrix(sim: Simulation) -> dict:
     ``Simulation.static_gain``, as JSON (m/m, rad/m, m/N, ... per the pair's units).
     """
     G = sim.static_gain()
-    return {"outputs": list(sim.model.output_names), "drives": list(sim.model.drive_names),
+    return {"outputs": list(sim.model.output_names), "drives": list(sim.model.drives.names),
             "matrix": [[float(g) for g in row] for row in G]}
-
-
-def _stress(sim: Simulation, snap: Snapshot) -> dict:
-    """Peak stress and stress ratio per notch/leaf hinge (engine/hinges/stress.py)."""
-    from flexure_sim.engine.hinges.stress import stress_table
-
-    return stress_table(snap.wrenches, sim.mechanism)
-
-
-def _fatigue(args, sim: Simulation, amplitude: float) -> Optional[dict]:
-    """
-    Return the fatigue of cycling the drive between --cycle-from and the static input.
-
-    engine/hinges/fatigue.py; None without a single drive or a cycle (input equal to
-    --cycle-from).
-    """
-    from flexure_sim.engine.hinges import fatigue
-
-    lower = args.cycle_from
-    if not np.isfinite(lower):
-        raise UsageError(f"--cycle-from {lower!r}: must be a finite drive input")
-    if sim.drive is None or amplitude == lower:
-        return None
-    try:
-        return fatigue.static_report(sim, lower, amplitude)
-    except ValueError as exc:
-        raise UsageError(f"fatigue: {exc}") from None
-
-
-def _stroke_limit(args, sim: Simulation) -> dict:
-    """--stroke-limit: the drive input at which the first hinge reaches its yield strength."""
-    from flexure_sim.engine.hinges.stress import stroke_limit
-
-    if sim.drive is None:
-        names = sim.model.drive_names
-        has = (f"{len(names)} drives ({', '.join(names)})" if len(names) > 1 else
-               "no drive" if not names else f"the drive {names[0]!r}, not a displacement drive")
-        raise UsageError(f"--stroke-limit: mechanism {sim.mechanism.name!r} has {has}: the "
-                         "stroke limit is the input of a single displacement drive at which "
-                         "the first hinge yields")
-    from flexure_sim.engine.hinges import fatigue
-
-    try:
-        u, hinge = stroke_limit(sim)
-    except ValueError as exc:
-        raise UsageError(f"--stroke-limit: {exc}") from None
-    life, note = {}, fatigue.no_fatigue_advice(sim.mechanism)
-    if any(h.stress is not None and h.stress.has_fatigue for h in sim.mechanism.hinges):
-        for criterion in fatigue.CRITERIA:  # cycling from --cycle-from up to the input found
-            point, where = fatigue.infinite_life_input(sim, args.cycle_from, u, criterion)
-            life[criterion] = {"input": point, "hinge": where}
-    return {"mechanism": sim.mechanism.name, "mechanism_file": str(resolve_mechanism_path(
-                args.mechanism)), "mode": "stroke_limit", "stroke_limit": u, "hinge": hinge,
-            "actuator_stroke": list(sim.drive.stroke), "cycle_from": args.cycle_from,
-            "infinite_life": life, "fatigue_note": note}
 
 
 def _fmt(v: Optional[float], unit: str, scale: float = 1.0, digits: int = 6) -> str:
@@ -277,15 +249,13 @@ def print_table(out: dict) -> None:
         simulate_spatial.print_table(out)
         return
     if out["mode"] == "stroke_limit":
-        print(f"mechanism: {out['mechanism']}   stroke limit (first hinge at yield): "
-              f"{out['stroke_limit'] * 1e6:.6g} um at hinge {out['hinge']} "
-              f"(actuator stroke {out['actuator_stroke'][1] * 1e6:g} um)")
-        for criterion, v in out["infinite_life"].items():
-            print(f"infinite life ({criterion.capitalize()}, cycling from "
-                  f"{out['cycle_from'] * 1e6:g} um): up to {v['input'] * 1e6:.6g} um, "
-                  f"hinge {v['hinge']} first")
-        if out["fatigue_note"]:
-            print(f"fatigue: {out['fatigue_note']}")
+        simulate_limits.print_stroke_limit(out)
+        return
+    if out["mode"] == "gain":
+        print(f"mechanism: {out['mechanism']}   several drives, no input given")
+        print(f"file:      {out['mechanism_file']}")
+        _print_gain(out["gain_matrix"])
+        print(out["hint"])
         return
     print(f"mechanism: {out['mechanism']}   mode: {out['mode']}   t = {out['t']:.6g} s")
     print(f"file:      {out['mechanism_file']}")
@@ -298,31 +268,24 @@ def print_table(out: dict) -> None:
         print(f"joint-a compression: {_fmt(out['joint_a_compression'], 'nm', 1e9)}")
         print(f"drive force:         {_fmt(out['drive_force'], 'N')}")
     if out.get("gain_matrix"):
-        g = out["gain_matrix"]
-        print("static gain (output per unit input of each drive, exact linearisation at rest):")
-        print("output   " + "".join(f"{d:>14s}" for d in g["drives"]))
-        for name, row in zip(g["outputs"], g["matrix"]):
-            print(f"{name:8s} " + "".join(f"{v:14.6g}" for v in row))
+        _print_gain(out["gain_matrix"])
     for name, a in out.get("actuators", {}).items():
         command = _fmt(a["command"], "V") if a["unit"] == "V" else _fmt(a["command"], "um", 1e6)
         print(f"actuator {name}: command {command}, amplifier {_fmt(a['voltage'], 'V')}, free "
               f"stroke {_fmt(a['free_stroke'], 'um', 1e6)}, applied "
               f"{_fmt(a['applied'], 'um', 1e6)}, stack force {_fmt(a['stack_force'], 'N')}")
+    drive_programs.print_drives(out, _fmt)
     for t, v in out.get("output_at", {}).items():
         print(f"output at {float(t) * 1e3:g} ms:      {_fmt(v, 'um', 1e6)}")
+    units = out.get("output_units", {})
+    for t, values in out.get("outputs_at", {}).items():
+        shown = ", ".join(f"{name} " + (_fmt(v, "urad", 1e6) if units.get(name) == "rad"
+                                        else _fmt(v, "um", 1e6)) for name, v in values.items())
+        print(f"outputs at {float(t) * 1e3:g} ms: {shown}")
     print("hinge deflection, frame b in frame a:  rotation [urad]  x [nm]  y [nm]")
     for name, h in out["hinges"].items():
         print(f"{name:6s} {h['rotation'] * 1e6:14.6g} {h['x'] * 1e9:11.6g} {h['y'] * 1e9:11.6g}")
-    if out.get("hinge_stress"):
-        print("hinge stress:  peak [MPa]  sigma_y [MPa]  ratio")
-        for name, h in out["hinge_stress"].items():
-            sy = "n/a" if h["sigma_y"] is None else f"{h['sigma_y'] / 1e6:.4g}"
-            ratio = "n/a" if h["ratio"] is None else f"{h['ratio']:.4g}"
-            print(f"{name:6s} {h['stress'] / 1e6:17.5g} {sy:>14s} {ratio:>6s}")
-        if out.get("stress_note"):
-            print(f"stress: {out['stress_note']}")
-    if out.get("fatigue"):
-        print_fatigue(out["fatigue"])
+    simulate_limits.print_stress(out)
     e = out["energy"]
     print(f"energy [J]: kinetic {e['kinetic']:.6g}, potential {e['potential']:.6g}, "
           f"dissipated {e['dissipated']:.6g}, drive work {e['drive_work']:.6g}")
@@ -332,25 +295,11 @@ def print_table(out: dict) -> None:
     print(f"wall time: {out['wall_s']:.4g} s{extra}")
 
 
-def print_fatigue(f: dict) -> None:
-    """Print the fatigue of a static cycle (``fatigue.static_report``)."""
-    lo, hi = f["cycle"]
-    print(f"fatigue, cycling the drive {lo * 1e6:g} -> {hi * 1e6:g} um (Shigley 6-12; stress of "
-          "the hinge's worst fibre):")
-    if f["hinges"]:
-        print("hinge  amplitude [MPa]  mean [MPa]  Goodman n  Soderberg n  S_e [MPa] at cycles")
-    for name, h in f["hinges"].items():
-        n = ["inf" if h[c] is None else f"{h[c]:.4g}" for c in ("goodman", "soderberg")]
-        print(f"{name:6s} {h['amplitude'] / 1e6:15.5g} {h['mean'] / 1e6:11.5g} {n[0]:>10s} "
-              f"{n[1]:>12s} {h['sigma_e'] / 1e6:10.4g} at {h['cycles']:.3g}")
-    for criterion, c in f["critical"].items():
-        life = f["infinite_life"][criterion]
-        if c is not None:
-            print(f"critical hinge ({criterion.capitalize()}): {c['hinge']}, n = "
-                  f"{c['safety']:.4g}; infinite life up to {life['input'] * 1e6:.6g} um of "
-                  f"drive input (hinge {life['hinge']})")
-    if f["note"]:
-        print(f"fatigue: {f['note']}")
+def _print_gain(g: dict) -> None:
+    print("static gain (output per unit input of each drive, exact linearisation at rest):")
+    print("output   " + "".join(f"{d:>14s}" for d in g["drives"]))
+    for name, row in zip(g["outputs"], g["matrix"]):
+        print(f"{name:8s} " + "".join(f"{v:14.6g}" for v in row))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -361,8 +310,11 @@ def build_parser() -> argparse.ArgumentParser:
         "mechanism",
         help="built-in name (microstage, fourbar_cantilever, fourbar_mixed) or YAML path",
     )
-    sim.add_argument("--drive", default="none", help="step:AMPLITUDE in metres (volts for a "
-                     "drive whose actuator takes a voltage), or none (default)")
+    sim.add_argument("--drive", action="append", metavar="[NAME=]PROGRAM",
+                     help="a drive's program, once per drive: step:A, ramp:A:T, cycloid:A:T, "
+                     "sine:A:F (A in m, rad, N or V; T in s; F in Hz), each optionally @START "
+                     "(s); NAME= names the drive of a mechanism with several (default: every "
+                     "drive at rest; --static without it reports the gain of several drives)")
     sim.add_argument(
         "--duration", type=float, default=0.05, help="simulated time in seconds (default 0.05)"
     )

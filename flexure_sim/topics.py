@@ -16,6 +16,8 @@ COMMAND = "drive/displacement"
 DRIVE_INPUT = "drive/input"
 #: Force the actuator applies to the driven body, N along the drive axis.
 DRIVE_FORCE = "drive/force"
+#: Full wrench the drive applies to its body (force x, y and moment), in the body's frame.
+DRIVE_WRENCH = "drive/wrench"
 #: Displacement of the output body from rest along the output axis, m.
 OUTPUT = "output/displacement"
 #: The output as the mechanism's sensor reads it (noise, resolution, bandwidth, latency), m.
@@ -57,6 +59,11 @@ def drive_input(drive: str) -> str:
 def drive_force(drive: str) -> str:
     """Force one named displacement drive's actuator applies to its body."""
     return f"drive/{drive}/force"
+
+
+def drive_wrench(drive: str) -> str:
+    """Full wrench one named drive applies to its body, in the body's frame."""
+    return f"drive/{drive}/wrench"
 
 
 def drive_position(drive: str) -> str:

@@ -48,7 +48,7 @@ def record_drives_run(
     """
     mech = load_mechanism(mechanism)
     sim = Simulation(mech, dt=sim_step, relinearize_tol=1e-4)
-    names = list(sim.model.drive_names)
+    names = list(sim.model.drives.names)
     drives = mech.drives
     single_drive = len(drives) == 1 and drives[0].kind == "displacement"
     single_output = len(mech.all_outputs) == 1

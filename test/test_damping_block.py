@@ -52,7 +52,7 @@ def oscillatory_poles(A: np.ndarray) -> np.ndarray:
 def rest_jacobian(sim: Simulation) -> np.ndarray:
     """Exact A = dF/dy of the engine's dynamics at rest (command 0)."""
     model = sim.model
-    return model.jacobian(model.pack(sim.initial_state()), 0.0, 0.0)
+    return model.jacobian(model.pack(sim.initial_state()), 0.0, np.zeros(1))
 
 
 # ------------------------------------------------------------------ microstage_realistic
@@ -113,14 +113,15 @@ def test_free_decay_has_the_logarithmic_decrement_of_the_configured_ratio(realis
     phi = md.shapes[:, 0]
     z = model.z0.copy()
     z[F] += 1e-6 / abs(model.output_matrix[0, F] @ phi) * phi
-    sim.state = State(0.0, z, np.zeros_like(z))
+    sim.state = State(0.0, z, np.zeros_like(z), np.zeros(1), np.zeros(1))
     energy = [sim.snapshot().kinetic_energy + sim.snapshot().potential_energy]
-    outputs, powers = [sim.snapshot().output], [model.rhs(model.pack(sim.state), 0.0, 0.0)[1]]
+    outputs = [sim.snapshot().output]
+    powers = [model.rhs(model.pack(sim.state), 0.0, np.zeros(1))[1]]
     for _ in range(600):
         sim.step(1)
         s = sim.snapshot()
         outputs.append(s.output)
-        powers.append(model.rhs(model.pack(sim.state), s.t, 0.0)[1])
+        powers.append(model.rhs(model.pack(sim.state), s.t, np.zeros(1))[1])
     y = np.array(outputs)
     peaks = []
     for i in range(1, len(y) - 1):
@@ -210,19 +211,20 @@ def test_the_exact_jacobian_with_damping_matches_finite_differences():
     sim.set_command(1.0e-6)
     sim.step(7)
     y, t = model.pack(sim.state), sim.state.t
-    A = model.jacobian(y, t, 1.0e-6)
+    command = np.array([1.0e-6])
+    A = model.jacobian(y, t, command)
     fd = np.empty_like(A)
     for j in range(len(y)):
         h = 1e-6 * max(abs(y[j]), 1e-9)
         yp, ym = y.copy(), y.copy()
         yp[j] += h
         ym[j] -= h
-        fd[:, j] = (model.rhs_python(yp, t, 1.0e-6)[0] - model.rhs_python(ym, t, 1.0e-6)[0]) / (
+        fd[:, j] = (model.rhs_python(yp, t, command)[0] - model.rhs_python(ym, t, command)[0]) / (
             2 * h)
     np.testing.assert_allclose(A, fd, rtol=0, atol=1e-5 * np.abs(A).max())
     # The compiled kernel and the interpreted path give the same forces and power.
-    F1, aux1 = model.rhs(y, t, 1.0e-6)
-    F2, aux2 = model.rhs_python(y, t, 1.0e-6)
+    F1, aux1 = model.rhs(y, t, command)
+    F2, aux2 = model.rhs_python(y, t, command)
     np.testing.assert_allclose(F1, F2, rtol=1e-12, atol=1e-12 * np.abs(F1).max())
     np.testing.assert_allclose(aux1, aux2, rtol=1e-12)
 
@@ -328,34 +330,36 @@ def test_mass_proportional_damping_given_as_two_ratios_is_accepted(tmp_path):
 
 # ------------------------------------------------------------- without the block: unchanged
 
-#: Produced by the code before the damping block (commit 09aee03) with the same calls:
+#: Produced by the code before the damping block (commit 09aee03) with the same calls, then
+#: regenerated once when the stage's inertias became microstage.sci's values to double precision
+#: instead of 6 digits (a change of ~1e-6 in them):
 #: (output, drive force, compression, dissipated, drive work, theta of body4) every 10 steps of
 #: a 1.35 um command step, compiled kernel (microstage) and interpreted path (polynomial law).
 BEFORE = {
     "microstage": [
-        (2.1728422633678487e-05, 16.6753845368631, 1.5145616621969893e-07,
-         3.201062654556955e-05, 4.6137196070998436e-05, -1.2738387276709695e-06),
-        (3.4096944871833295e-05, 24.03151119041611, 1.362531810000095e-07,
-         3.606434740794122e-05, 5.205829747452986e-05, -2.0147958497224224e-06),
-        (3.686294459750452e-05, 29.144043180346674, 1.59581536637865e-07,
-         3.642619876542518e-05, 5.513911662896376e-05, -2.1827970574134625e-06),
-        (3.726949406767086e-05, 30.33372127718739, 1.7806819105521676e-07,
-         3.6526073208107635e-05, 5.6405429886254645e-05, -2.2078729241098704e-06)],
+        (2.172842281379288e-05, 16.675384797844252, 1.514561632984246e-07,
+         3.201062788995053e-05, 4.6137195229827566e-05, -1.2738387379455194e-06),
+        (3.4096944787797036e-05, 24.031511717673315, 1.3625318235656325e-07,
+         3.6064336889632624e-05, 5.205829681412202e-05, -2.0147958449488187e-06),
+        (3.6862944506934626e-05, 29.144043268774748, 1.5958153810370634e-07,
+         3.64261848756083e-05, 5.5139116004757695e-05, -2.1827970521710058e-06),
+        (3.726949403197166e-05, 30.33372126068501, 1.780681916346144e-07,
+         3.652605916615656e-05, 5.6405429263129436e-05, -2.207872922032841e-06)],
     "config/examples/microstage_polynomial_a.yaml": [
-        (2.172955637625446e-05, 16.67467425615091, 1.514235578037315e-07,
-         3.201267358707779e-05, 4.6139492372954765e-05, -1.2732354223583423e-06),
-        (3.409787547224672e-05, 24.032645801287444, 1.362252770777811e-07,
-         3.606627852211351e-05, 5.206072009267102e-05, -2.014264742263482e-06),
-        (3.686395050829888e-05, 29.145007573801628, 1.5955025837142978e-07,
-         3.642813803509569e-05, 5.5141664380122355e-05, -2.1821786531056432e-06),
-        (3.7270632361001406e-05, 30.334635686277938, 1.7803315512272821e-07,
-         3.652800604241863e-05, 5.640801704126586e-05, -2.2072163882280767e-06)],
+        (2.1729556556389355e-05, 16.674674517388134, 1.514235548841919e-07,
+         3.201267497642377e-05, 4.613949153449879e-05, -1.2732354326619104e-06),
+        (3.409787538821492e-05, 24.032646328395455, 1.3622527843433485e-07,
+         3.606626806059685e-05, 5.206071943481685e-05, -2.014264737554447e-06),
+        (3.686395041774371e-05, 29.145007662705407, 1.595502598355364e-07,
+         3.642812419328424e-05, 5.514166375845598e-05, -2.1821786478775056e-06),
+        (3.7270632325315346e-05, 30.334635669625893, 1.7803315569518696e-07,
+         3.652799204328158e-05, 5.640801642068731e-05, -2.2072163861911878e-06)],
 }
-BEFORE_MODES = ([300.61787781439955, 4634.706414069429, 6189.234798055102],
-                [0.9444234646390304, 14.560362389846855, 19.444074740075358])
-BEFORE_FRF = [(20.72283053738977 - 14.641409209016329j),
-              (0.029035896217227908 - 14.658620673987695j),
-              (-1.9764544408625428 - 1.2315101505636057j)]
+BEFORE_MODES = ([300.61788445477464, 4634.706250730204, 6189.23219705728],
+                [0.9444234855055436, 14.560361876707839, 19.44406656879421])
+BEFORE_FRF = [(20.72283049942241 - 14.641409101818253j),
+              (0.029036237982303703 - 14.658620672774662j),
+              (-1.976454483254533 - 1.2315102365272237j)]
 
 
 @pytest.mark.parametrize("name", sorted(BEFORE))

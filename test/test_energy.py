@@ -53,7 +53,7 @@ def _radau_energies(model, command, duration):
 
     def jac(t, Y):
         J = np.zeros((len(Y), len(Y)))
-        J[:-2, :-2] = model.jacobian(Y[:-2], t, command)
+        J[:-2, :-2] = model.jacobian(Y[:-2], t, np.array([command]))
         return J
 
     y0 = np.concatenate([model.z0[part.free], np.zeros(nF + 1), [0.0, 0.0]])
@@ -262,7 +262,7 @@ def test_without_energy_bookkeeping_the_motion_is_the_same_to_the_bit(name):
     mech = load_mechanism(ROOT / "config" / f"{name}.yaml" if "/" not in name else ROOT / name)
     runs = [Simulation(mech, energy=energy) for energy in (True, False)]
     for sim in runs:
-        if sim.model.n_actuators:
+        if sim.model.drives.n_lags:
             sim.set_command(1.35e-6)
         sim.step(200)
     with_energy, without = runs

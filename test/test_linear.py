@@ -257,7 +257,7 @@ def test_jacobian_of_the_model_is_the_engines(stage, stage_model):
     sim = Simulation(stage)
     nF = len(stage_model.free)
     y = np.concatenate([stage_model.z[stage_model.free], np.zeros(nF), [U0]])
-    np.testing.assert_array_equal(stage_model.A, sim.model.jacobian(y, 0.0, U0))
+    np.testing.assert_array_equal(stage_model.A, sim.model.jacobian(y, 0.0, np.array([U0])))
 
 
 # ------------------------------------------------------------- CLI, state space

@@ -58,7 +58,8 @@ def test_model_has_one_input_and_one_actuator_state_per_drive(model, xy):
     sim = Simulation(xy)
     nF = len(model.free)
     y = np.concatenate([model.z[model.free], np.zeros(nF), model.u0])
-    np.testing.assert_array_equal(model.A, sim.model.jacobian(y, 0.0, model.u0))
+    np.testing.assert_array_equal(model.A, sim.model.jacobian(
+        y, 0.0, sim.model.drives.kernel_command(model.u0)))
 
 
 def test_static_gain_matrix_is_the_central_difference_of_static_solves(model, xy):

@@ -114,7 +114,7 @@ def two_drive_microstage():
 def test_two_drives_superpose_for_small_inputs_and_match_the_exact_gain():
     mech = two_drive_microstage()
     sim = Simulation(mech)
-    assert sim.model.drive_names == ("piezo", "tilt")
+    assert sim.model.drives.names == ("piezo", "tilt")
     G = sim.static_gain()
     assert G.shape == (3, 2)
     u = np.array([1e-9, 1e-7])
@@ -131,7 +131,7 @@ def test_single_drive_gain_matches_the_static_solve_of_the_stage():
     sim = Simulation(load_mechanism("microstage"))
     u = 1e-9
     assert sim.static_gain()[0, 0] * u == pytest.approx(sim.static(u).snapshot.output, rel=1e-6)
-    assert sim.model.drive_names == ("drive",)
+    assert sim.model.drives.names == ("drive",)
     assert sim.model.output_names == ("output",)
 
 

@@ -127,7 +127,7 @@ def test_each_drive_lags_its_command_with_its_own_response_time():
     taus = {"x": 1e-3, "y": 3e-3}
     commands = {"x": 1e-6, "y": 0.4e-6}
     sim = Simulation(_xy_with_response_times(taus))
-    names = sim.model.drive_names
+    names = sim.model.drives.names
     assert names == ("x", "y")
     assert [d.response_time for d in sim.mechanism.drives] == [1e-3, 3e-3]
     sim.set_command(commands)
@@ -156,7 +156,7 @@ def _with_y_fixed(xy):
 def test_an_idle_drive_steps_like_a_fixed_body(xy):
     two = Simulation(xy)
     one = Simulation(_with_y_fixed(xy))
-    assert one.model.drive_names == ("x",) and one.drive is not None
+    assert one.model.drives.names == ("x",) and one.drive is not None
     for level, steps in ((1e-6, 13), (0.4e-6, 200), (1.5e-6, 150)):
         two.set_command({"x": level, "y": 0.0})
         one.set_command(level)
@@ -201,7 +201,7 @@ def test_a_stepped_force_drive_settles_at_force_over_the_exact_tangent_stiffness
                                "axis": [1, 0], "response_time": 1e-3, "stroke": [-10, 10],
                                "slew_rate": 1e3})
     sim = Simulation(mech)
-    assert sim.model.n_actuators == 0
+    assert sim.model.drives.n_lags == 0
     force = 1e-3
     settle(sim, {"push": force}, 0.1)
     snap = sim.snapshot()

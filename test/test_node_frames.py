@@ -73,7 +73,7 @@ def test_every_published_frame_id_carries_the_frame_prefix(tmp_path):
             except NodeNameNonExistentError:  # not yet discovered
                 return False
             names.update((t, types[0]) for t, types in found)
-            # 25 tick topics of the stage, /clock, diagnostics, markers (and TF where present)
+            # 26 tick topics of the stage, /clock, diagnostics, markers (and TF where present)
             ours = [t for t, ty in names.items() if ty in CLASSES]
             return len(ours) >= 28 and set(wanted) <= set(names)
 

@@ -99,7 +99,9 @@ def test_stage_topic_table_names_types_frames():
     itf = StageInterface(mech, "fast")
     table = {t.name: t for t in itf.tick_topics}
     assert list(table)[:2] == ["/clock", "bodies/poses"]
-    assert len(table) == 26
+    assert len(table) == 27
+    assert table["drive/wrench"].msg_type is WrenchStamped
+    assert table["drive/wrench"].frame_id == "body6"
     assert (
         table["bodies/poses"].msg_type is PoseArray and table["bodies/poses"].frame_id == "stage"
     )

@@ -20,6 +20,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from flexure_sim.engine.mechanism.loader import load_mechanism
 from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.engine.solver.tick_report import ReportView
 from flexure_sim.engine.hinges.stress import stress_table
 from flexure_sim.node.publish.display import (
     Display, display_every, moving_transforms, static_transforms, tf_message_class)
@@ -71,7 +72,8 @@ def test_a_display_tick_costs_a_fraction_of_the_rclpy_route(loaded):
             f()
         return 1e6 * (time.perf_counter() - t0) / n
 
-    packed = per_call_us(lambda: display.markers(snap, 5), 200)
+    view = ReportView.from_snapshot(snap, mech)
+    packed = per_call_us(lambda: display.markers(view, 5), 200)
     reference = per_call_us(lambda: serialize_message(
         scene.message(snap.poses, snap.wrenches, snap.drive_force, 5)), 50)
     print(f"display tick: packed {packed:.0f} us, rclpy messages + serialize {reference:.0f} us")
@@ -84,7 +86,8 @@ def test_hinges_are_coloured_by_stress_ratio_when_the_file_gives_sigma_y(loaded)
     assert display.colouring == "stress ratio"
     # The stress table (engine/hinges/stress.py, hinge by hinge) is the reference for the colours.
     table = stress_table(snap.wrenches, mech)
-    msg = deserialize_message(display.markers(snap, 0), MarkerArray)
+    msg = deserialize_message(display.markers(ReportView.from_snapshot(snap, mech), 0),
+                              MarkerArray)
     discs = [m for m in msg.markers if m.ns == "hinges"]
     assert [m.text for m in discs] == [h.name for h in mech.hinges]
     for m in discs:

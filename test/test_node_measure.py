@@ -7,6 +7,7 @@ recording read back).
 
 import pytest
 
+from flexure_sim.node.publish.diagnostics import TICK_PARTS
 from flexure_sim.tools.bench import measure
 
 from node_harness import next_domain_id
@@ -21,19 +22,36 @@ def test_measure_reports_pacing_cpu_and_a_complete_recording(tmp_path):
     assert r["wake_spin_s"] == pytest.approx(5e-4)  # the parameters reached the node's pacer
     assert r["stepping_nice"] == 3  # and its stepping thread
     assert r["middleware_threads"] > 0  # and the threads ROS started in its process
-    assert r["steps_per_tick"] == 50 and r["topics_per_tick"] == 25
+    assert r["steps_per_tick"] == 50 and r["topics_per_tick"] == 26
     # The figures are measured and reported; their values are the machine's (the benchmark
     # prints them: `flexure-sim bench --node`). Here what holds on any machine: the window
     # stepped, its late ticks are counted among the paced ones, and the recording is complete
-    # with every tick's 25 topics.
+    # with every tick's 26 topics.
     assert r["real_time_factor"] > 0 and r["ticks"] > 0
     assert 0 <= r["missed_ticks"] <= r["paced_ticks"] and r["paced_ticks"] > 0
     assert 0 < r["node_cpu_cores"] < 2.5
     assert r["recording_complete"] and r["recording_dropped"] == 0
-    assert r["recorded_messages"] >= 25 * r["ticks"]  # the window's ticks, and warm-up's more
+    assert r["recorded_messages"] >= 26 * r["ticks"]  # the window's ticks, and warm-up's more
     assert (tmp_path / "measure.mcap").is_file()
+    # The tick's parts as the node timed them add up to its whole (each window's means).
+    parts = [r[f"{part}_time_mean_us"] for part in TICK_PARTS]
+    assert all(p >= 0 for p in parts) and r["engine_time_mean_us"] > 0
+    assert sum(parts) == pytest.approx(r["tick_time_mean_us"], rel=1e-6)
 
 
 def test_measure_refuses_a_malformed_param():
     with pytest.raises(SystemExit):
         measure.main(["--param", "wake_spin=0.001"])
+
+
+def test_the_ping_pong_floor_counts_every_paced_tick_and_the_answers_it_takes():
+    """A real echo process: every tick paced and counted, answers taken at later ticks only."""
+    from flexure_sim.tools.bench import pingpong
+
+    r = pingpong.run(500.0, 1.0, warmup=0.5, domain_id=next_domain_id())
+    assert r["paced_ticks"] == 500
+    assert 0 <= r["missed_ticks"] <= r["paced_ticks"]
+    assert 0 < r["answers"] <= r["paced_ticks"]
+    assert r["answers"] + r["unanswered"] == r["paced_ticks"]
+    assert r["late_ticks_max"] >= r["late_ticks_p99"] >= 0  # never before the next tick
+    assert 0 <= r["applied_next_tick_fraction"] <= 1

@@ -361,6 +361,7 @@ def test_ticks_with_new_commands_on_several_drives_reach_the_step_by_step_states
     from flexure_sim.node.inputs.command_checks import DriveLimits
     from flexure_sim.node.publish.interface import StageInterface
     from flexure_sim.node.record.session import RecordingSession
+    from flexure_sim.node.stage.loop_parts import LoopParts, LoopSettings
     from flexure_sim.node.stage.stepping_thread import RELINEARIZE_TOL, SteppingLoop
     from test_node_stepping import DT, N_STEPS, RATE, Log
 
@@ -370,8 +371,9 @@ def test_ticks_with_new_commands_on_several_drives_reach_the_step_by_step_states
                                for d in xy.drives])
     sim = Simulation(xy, dt=DT, relinearize_tol=RELINEARIZE_TOL)
     itf = StageInterface(xy, "realtime")
-    loop = SteppingLoop(sim, bank, itf, [None] * len(itf.tick_topics), RecordingSession(Log()),
-                        Log(), time_mode="realtime", rate=RATE, dt=DT, wake_spin=0.0, nice=0)
+    loop = SteppingLoop(LoopParts(LoopSettings("realtime", RATE, DT), sim, itf,
+                                  [None] * len(itf.tick_topics), RecordingSession(Log()), Log(),
+                                  filter=bank))
     commands = [(1e-6, 0.0), (1e-6, 5e-7), (1e-6 + 3e-9, 5e-7), (0.0, 1e-6), (0.0, 1e-6),
                 (2e-6, 0.0), (2e-6, 0.0)]
     for tick in commands:

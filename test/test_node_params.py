@@ -75,7 +75,9 @@ def test_steps_per_tick(rate, step, n):
     (dict(stepping_nice=2.5), "stepping_nice"),
     (dict(stepping_priority=-1), "stepping_priority"),
     (dict(stepping_priority=100), "stepping_priority"),
-    (dict(stepping_priority=50), "wake_spin must be at most 0.0005 s"),  # default spin: 1 ms
+    (dict(stepping_priority=50, wake_spin=1e-3), "wake_spin must be at most 0.0005 s"),
+    (dict(stepping_priority=50, publish_rate=4000.0, sim_step=2.5e-5),  # the default spin
+     "wake_spin must be at most 0.000125 s"),
     (dict(stepping_priority=50, wake_spin=6e-4), "stepping_priority 50 (SCHED_FIFO)"),
     (dict(cpu_latency_us=-2), "cpu_latency_us"),
     (dict(cpu_latency_us=1.5), "cpu_latency_us"),

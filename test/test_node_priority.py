@@ -69,7 +69,7 @@ def test_fast_mode_ignores_the_priority(tmp_path, peer_and_domain):
 
 def test_a_spin_of_the_whole_period_is_refused_at_start_up_naming_both_parameters(tmp_path):
     node = NodeProcess(tmp_path / "node", next_domain_id(), dict(
-        time_mode="realtime", record=False, stepping_priority=PRIORITY))  # wake_spin 1 ms
+        time_mode="realtime", record=False, stepping_priority=PRIORITY, wake_spin=1e-3))
     assert node.wait(60) != 0
     assert "stepping_priority 7 (SCHED_FIFO)" in node.stderr
     assert "wake_spin must be at most 0.0005 s" in node.stderr

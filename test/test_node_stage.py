@@ -34,7 +34,8 @@ STEP = 1.35e-6
 STAGE_TOPICS = (
     ["/bodies/poses"] + [f"/bodies/body{i}/pose" for i in range(1, 7)]
     + [f"/hinges/{h}/{kind}" for h in "abcdefg" for kind in ("wrench", "deflection")]
-    + ["/hinges/a/compression", "/output/displacement", "/drive/input", "/drive/force"]
+    + ["/drive/wrench", "/hinges/a/compression", "/output/displacement", "/drive/input",
+       "/drive/force"]
 )
 TYPES = {
     "/bodies/poses": PoseArray,
@@ -42,6 +43,7 @@ TYPES = {
     "/output/displacement": Float64,
     "/drive/input": Float64,
     "/drive/force": Float64,
+    "/drive/wrench": WrenchStamped,
     "/diagnostics": DiagnosticArray,
     "/clock": Clock,
     "/markers": MarkerArray,

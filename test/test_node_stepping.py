@@ -15,6 +15,7 @@ from flexure_sim.engine.solver.simulation import Simulation
 from flexure_sim.node.inputs.command_checks import CommandFilter, DriveLimits
 from flexure_sim.node.publish.interface import StageInterface
 from flexure_sim.node.record.session import RecordingSession
+from flexure_sim.node.stage.loop_parts import LoopParts, LoopSettings
 from flexure_sim.node.stage.stepping_thread import RELINEARIZE_TOL, SteppingLoop
 
 DT = 1.0e-4
@@ -35,9 +36,10 @@ def make_loop(mechanism):
     drive = mechanism.drive
     filt = CommandFilter(DriveLimits(drive.stroke[0], drive.stroke[1], drive.slew_rate))
     interface = StageInterface(mechanism, "realtime")
-    loop = SteppingLoop(sim, filt, interface, [None] * len(interface.tick_topics),
-                        RecordingSession(Log()), Log(), time_mode="realtime", rate=RATE, dt=DT,
-                        wake_spin=0.0, nice=0)
+    parts = LoopParts(LoopSettings("realtime", RATE, DT), sim, interface,
+                      [None] * len(interface.tick_topics), RecordingSession(Log()), Log(),
+                      filter=filt)
+    loop = SteppingLoop(parts)
     return loop, sim, filt
 
 

@@ -47,8 +47,8 @@ def defined_step(sim: Simulation) -> None:
     s = data.state
     x = actuation.states(model, s)
     before = actuation.held(model, s)
-    after, strokes = np.empty_like(x), np.empty(len(model.actuation))
-    for j, a in enumerate(model.actuation):
+    after, strokes = np.empty_like(x), np.empty(len(model.drives.actuation))
+    for j, a in enumerate(model.drives.actuation):
         volts = float(piezo.command_voltage(a.spec, np.atleast_1d(s.command)[a.drive]))
         xs = x[a.states]
         start = xs if a.spec.lagged else piezo.jump(a.spec, xs, volts)
@@ -56,7 +56,7 @@ def defined_step(sim: Simulation) -> None:
         strokes[j] = 0.5 * (float(piezo.free_stroke(a.spec, start))
                             + float(piezo.free_stroke(a.spec, after[a.states])))
         if a.stack:
-            p = float(model.drive_directions[a.drive] @ (s.z - model.z0))
+            p = float(model.drives.directions[a.drive] @ (s.z - model.z0))
             k = a.spec.stiffness
             s.drive_work += 0.5 * k * ((strokes[j] - p) ** 2 - (before[j] - p) ** 2)
     dynamics.step(model, data, 1, actuation.kernel_command(model, s, strokes))

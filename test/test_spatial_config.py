@@ -29,7 +29,9 @@ def test_shipped_files_load():
     assert stage.planar is not None and len(stage.hinges) == 7
     # the plate of 20 mm: I_xx = I_zz / 2 + m t^2 / 12
     body = stage.bodies[3]
-    assert body.inertia[0][0] == pytest.approx(1.15509e-06 / 2 + 0.01568 * 0.02**2 / 12)
+    # I_zz of body4 as microstage.sci's formula gives it (config/microstage.yaml's header)
+    i_zz = 0.01568 * (0.028**2 + 0.010**2) / 12
+    assert body.inertia[0][0] == pytest.approx(i_zz / 2 + 0.01568 * 0.02**2 / 12)
 
 
 def edit(doc, path, value):

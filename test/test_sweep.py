@@ -88,8 +88,9 @@ def test_step_outputs_agree_with_an_independent_integrator():
     angle = sim.part.free % 3 == 2  # atol: 1e-10 of each component's scale of motion
     scale = np.concatenate([np.where(angle, 1e-3, 1e-5), np.where(angle, 1.0, 1e-2), [1.35e-6]])
     model = sim.model
-    sol = solve_ivp(lambda tt, y: model.rhs(y, tt, 1.35e-6)[0], (0, 0.02), model.pack(sim.state),
-                    method="Radau", jac=lambda tt, y: model.jacobian(y, tt, 1.35e-6), rtol=1e-9,
+    command = np.array([1.35e-6])
+    sol = solve_ivp(lambda tt, y: model.rhs(y, tt, command)[0], (0, 0.02), model.pack(sim.state),
+                    method="Radau", jac=lambda tt, y: model.jacobian(y, tt, command), rtol=1e-9,
                     atol=1e-10 * scale, t_eval=t)
     i = sim.mechanism.body_index("body4")
     col = list(sim.part.free).index(3 * i)

@@ -79,7 +79,7 @@ def hand_gain(mech) -> np.ndarray:
 
 def test_static_solution_matches_the_hand_assembled_linear_stiffness(mech):
     sim = Simulation(mech)
-    assert sim.model.drive_names == ("x", "y")
+    assert sim.model.drives.names == ("x", "y")
     assert sim.model.output_names == ("x", "y", "theta")
     u = (1.0e-10, -0.6e-10)  # small: the twistor law's nonlinear terms stay below 1e-8
     snap = sim.static({"x": u[0], "y": u[1]}).snapshot

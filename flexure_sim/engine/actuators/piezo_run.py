@@ -116,7 +116,7 @@ def stepped(sim, drive: int, times, commands, every: int = 1) -> PiezoRun:
     times = np.asarray(times, dtype=float)
     commands = np.asarray(commands, dtype=float)
     model = sim.model
-    actuated = [a for a in model.actuation if a.drive == drive]
+    actuated = [a for a in model.drives.actuation if a.drive == drive]
     if len(model.drives) != 1 or not actuated:
         raise ValueError("stepped: needs a mechanism with one drive with an actuator block")
     n = int(round((times[-1] - times[0]) / sim.dt))
@@ -191,6 +191,6 @@ def load_stiffness(sim) -> float:
     from flexure_sim.engine.analysis.linear import linearize, static_gain
     from flexure_sim.engine.solver.simulation import Simulation
 
-    if len(sim.model.stack_index):
+    if len(sim.model.drives.stack):
         sim = Simulation(rigid_stacks(sim.mechanism))
     return float(static_gain(linearize(sim, 0.0, wrenches=False), ["drive_force"])[0])

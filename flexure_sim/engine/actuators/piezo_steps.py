@@ -23,7 +23,7 @@ TAU, A, BETA, GAMMA, GAIN, V_MIN, S_MIN = range(7)
 
 
 class Actuators:
-    """The numbers of a model's actuators (``model.actuation``) as arrays for `trajectory`."""
+    """The numbers of a model's actuators (``DriveTable.actuation``) as arrays for `trajectory`."""
 
     def __init__(self, actuation) -> None:
         specs = [a.spec for a in actuation]

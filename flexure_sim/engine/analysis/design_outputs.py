@@ -201,11 +201,12 @@ class Evaluation:
         model = main.model
         Q = forces(v.design, main.sens.twistor, main.sens.ia, main.sens.ib, v.z(main)).Q
         Q = hd.HyperDual(*(np.asarray(p)[model.part.prescribed] for p in hd.parts_of(Q)))
-        inputs = model.drive_inputs(self.setup.input)
+        inputs = model.drives.inputs(self.setup.input)
+        displacement = list(model.drives.displacement)
         out = []
         for d in range(len(model.drives)):
-            if d in model.displacement_index:
-                k = list(model.displacement_index).index(d)
+            if d in displacement:
+                k = displacement.index(d)
                 out.append(-(Q * model.part.D[:, k]).sum())
             else:
                 out.append(hd.HyperDual(float(inputs[d])))

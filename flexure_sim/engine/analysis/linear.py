@@ -8,7 +8,7 @@ About the static equilibrium z* at the drive inputs u* (``Simulation.static``: o
 the engine's first-order system y' = F(y, command), y = (z_F, v_F, u_1 .. u_m) with one
 actuator output u_a per displacement drive (``Model.pack``), has the exact Jacobian
 A = dF/dy (``Model.jacobian``: analytic, no finite differences) and input matrix
-B = dF/dcommand, one column per drive (``Model.drive_names`` order). A displacement drive's
+B = dF/dcommand, one column per drive (``DriveTable.names`` order). A displacement drive's
 command enters through its actuator lag du_a/dt = (command - u_a)/tau_a and the prescribed
 velocities v_P = sum_a D_a (command_a - u_a)/tau_a (D_a = dz_P/du_a, ``Partition.D``); a force
 drive's command is a generalised force e f on the free coordinates (virtual work, held as
@@ -56,6 +56,9 @@ from flexure_sim.engine.analysis.parametric import forces
 from flexure_sim.engine.solver.simulation import Simulation, StaticResult
 
 WRENCH_COMPONENTS = ("moment", "force_x", "force_y")
+#: What a displacement drive's input is (``linearize``): its command, through its lag, or the
+#: displacement itself.
+INPUT_KINDS = ("command", "displacement")
 
 __all__ = ["LinearModel", "Modes", "frf", "gain_matrix", "layout", "linearize", "modes",
            "static_gain", "tangent_at", "wrench_jacobians"]
@@ -64,7 +67,7 @@ __all__ = ["LinearModel", "Modes", "frf", "gain_matrix", "layout", "linearize", 
 # ------------------------------------------------ the engine's internals, in one place
 
 
-def jacobian_at(sim: Simulation, y: np.ndarray, t: float, command: float) -> np.ndarray:
+def jacobian_at(sim: Simulation, y: np.ndarray, t: float, command: np.ndarray) -> np.ndarray:
     """Exact A = dF/dy of the engine's first-order system at y (`Model.jacobian`)."""
     return sim.model.jacobian(y, t, command)
 
@@ -76,7 +79,8 @@ class Layout:
 
     Free and prescribed coordinate indices, the prescribed coordinates' drive-axis components d_u
     and the actuator time constant of a single displacement drive (zeros and None otherwise:
-    ``Partition.D`` and ``Model.tau`` hold every drive's), masses (3 n_bodies), the rest pose z0.
+    ``Partition.D`` and ``DriveTable.tau`` hold every drive's), masses (3 n_bodies), the rest
+    pose z0.
     """
 
     free: np.ndarray
@@ -116,13 +120,17 @@ def tangent_at(sim: Simulation, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 @dataclass
 class LinearModel:
     """
-    x' = A x + B command, y = C x + D command about the equilibrium at the drive inputs.
+    x' = A x + B u + B1 u', y = C x + D u + D1 u' + D2 u'' about the equilibrium.
 
-    x: deviations of (z_F, v_F, u_1 .. u_m) (m, rad, m/s, rad/s, m); command: one per drive
-    (``input_names``, B's columns); outputs are deviations of the named quantities from their
-    static values ``y0``. ``u0``: the drive input of the equilibrium (a number with one drive or
-    none, else one per drive in ``drive_names`` order); ``lags``: per input, the index of its
-    actuator state among the u (-1 for a force drive's input).
+    x: deviations of (z_F, v_F, u_1 .. u_a) (m, rad, m/s, rad/s, m; one actuator output per
+    lagged drive whose input is its command); u: one input per drive (``input_names``, B's
+    columns): per ``input_kinds`` a lagged drive's command, a drive's displacement itself, or a
+    force drive's force. A displacement input's rate and acceleration enter too (the prescribed
+    body's velocity through the damping, its inertia in its drive force): ``B1``, ``D1``, ``D2``
+    (zero for the other inputs; ``frf`` and ``gain_matrix`` include them). Outputs are deviations
+    of the named quantities from their static values ``y0``. ``u0``: the drive input of the
+    equilibrium (a number with one drive or none, else one per drive in ``drive_names`` order);
+    ``lags``: per input, the index of its actuator state among the u (-1 for any other input).
     """
 
     A: np.ndarray
@@ -141,6 +149,10 @@ class LinearModel:
     damping: np.ndarray = field(repr=False, default=None)
     drive_names: tuple = ()
     lags: tuple = ()
+    B1: Optional[np.ndarray] = None
+    D1: Optional[np.ndarray] = None
+    D2: Optional[np.ndarray] = None
+    input_kinds: tuple = ()
 
     def output_index(self, name: str) -> int:
         if name not in self.output_names:
@@ -170,109 +182,147 @@ class LinearModel:
 
 
 def linearize(sim: Simulation, u=None, wrenches: bool = True,
-              static: Optional[StaticResult] = None) -> LinearModel:
+              static: Optional[StaticResult] = None,
+              input_kind: str = "command") -> LinearModel:
     """
     Return the exact linear model about the static equilibrium at the drive inputs u (module doc).
 
     ``u``: a number (a single drive), one value per drive or a {name: value} mapping
-    (``Model.drive_inputs``); None: every drive at 0. ``static``: that equilibrium if already
-    solved (``sim.static(u)``).
+    (``DriveTable.inputs``); None: every drive at 0. ``static``: that equilibrium if already
+    solved (``sim.static(u)``). ``input_kind``: ``command`` (a lagged drive's input is its
+    command, through its lag) or ``displacement`` (every displacement drive's input is its
+    displacement itself: no lag state; the input's rate and acceleration enter through ``B1``,
+    ``D1``, ``D2``). A prescribed drive's (``response_time: 0``) input is its displacement
+    either way.
     """
+    if input_kind not in INPUT_KINDS:
+        raise ValueError(f"input_kind {input_kind!r}: expected one of {', '.join(INPUT_KINDS)}")
     model = sim.model
-    model.require_rigid("the linear model")
+    drives = model.drives
+    drives.require_rigid("the linear model")
     mech = sim.mechanism
-    names = model.drive_names
-    inputs = model.drive_inputs(np.zeros(len(names)) if u is None else u)
+    names = drives.names
+    inputs = drives.inputs(np.zeros(len(names)) if u is None else u)
     single = len(names) == 1
     u0 = float(inputs[0]) if single else 0.0 if not names else inputs.copy()
     st = static if static is not None else sim.static(u0 if single or not names else inputs)
     z = st.z
     lay = layout(sim)
     F, P = lay.free, lay.prescribed
-    disp, force = model.displacement_index, model.force_index
-    nF, N, na, m = len(F), len(z), len(disp), len(names)
-    y = np.concatenate([z[F], np.zeros(nF)] + ([inputs[disp]] if na else []))
-    n = len(y)
-    A = jacobian_at(sim, y, 0.0, u0 if single else model.actuator_command(inputs))
+    force = drives.force
+    nF, N, m = len(F), len(z), len(names)
+    # The lagged drives whose command is the input keep their lag state; the others' input is
+    # the displacement (column of Partition.D, ``drives.displacement`` order).
+    lagged = list(drives.lagged) if input_kind == "command" else []
+    shifted = [k for k in drives.displacement if k not in lagged]
+    column = {int(k): j for j, k in enumerate(drives.displacement)}
+    na = len(lagged)
+    y_full = np.concatenate([z[F], np.zeros(nF), inputs[drives.lagged]])
+    A_full = jacobian_at(sim, y_full, 0.0, drives.kernel_command(inputs))
+    keep = np.r_[0:2 * nF, [2 * nF + list(drives.lagged).index(k) for k in lagged]].astype(int)
+    A = A_full[np.ix_(keep, keep)]
+    n = len(keep)
     dQz, dQv = tangent_at(sim, z)
     mF = lay.mass[F]
-    B = np.zeros((n, m))
+    B, B1 = np.zeros((n, m)), np.zeros((n, m))
     Zx, Vx, Vc = np.zeros((N, n)), np.zeros((N, n)), np.zeros((N, m))
+    Zu, Vu = np.zeros((N, m)), np.zeros((N, m))   # z and v on the inputs and their rates
     Zx[F, np.arange(nF)] = 1.0
     Vx[F, nF + np.arange(nF)] = 1.0
     lags = np.full(m, -1, dtype=int)
-    for a, (k, tau) in enumerate(zip(disp, model.tau)):
-        du = model.D_rows[a]
+    for a, k in enumerate(lagged):
+        du = model.part.D[:, column[k]]
+        tau = drives[k].response_time
         lags[k] = a
         B[nF:2 * nF, k] = dQv[np.ix_(F, P)] @ du / (tau * mF)
         B[2 * nF + a, k] = 1.0 / tau
         Zx[P, 2 * nF + a] = du
         Vx[P, 2 * nF + a] = -du / tau
         Vc[P, k] = du / tau
+    for k in shifted:
+        du = model.part.D[:, column[k]]
+        B[nF:2 * nF, k] = dQz[np.ix_(F, P)] @ du / mF
+        B1[nF:2 * nF, k] = dQv[np.ix_(F, P)] @ du / mF
+        Zu[P, k] = du
+        Vu[P, k] = du
     for k in force:
-        B[nF:2 * nF, k] = model.drive_directions[k][F] / mF
-    out_names, Cs, Ds, y0 = [], [], [], []
+        B[nF:2 * nF, k] = drives.directions[k][F] / mF
+    rows = _Outputs(m)
     snap = st.snapshot
 
-    def add(name, row, d, value):
-        out_names.append(name), Cs.append(row), Ds.append(d), y0.append(value)
+    def position(name, r, value):        # an output of the coordinates alone
+        rows.add(name, r @ Zx, r @ Zu, np.zeros(m), np.zeros(m), value)
 
     for name, c in zip(model.output_names, model.output_matrix):
-        add(name, c @ Zx, np.zeros(m), snap.output if len(model.outputs) == 1 else
-            snap.outputs[name])
+        position(name, c, snap.output if len(model.outputs) == 1 else snap.outputs[name])
     if model.compression is not None:
         # The engine's one definition (engine/solver/compression.py): the drive side's centre of
         # stiffness minus the far side's, along the drive axis.
         (i_drive, c_drive), (i_far, c_far), axis = model.compression
         G = _point_jacobian(i_drive, c_drive, z) - _point_jacobian(i_far, c_far, z)
-        row = axis @ G
-        add("compression", row @ Zx, np.zeros(m), snap.compression)
-    dQP = dQz[P] @ Zx + dQv[P] @ Vx
-    dQPc = dQv[P] @ Vc
-    for a, k in enumerate(disp):
-        dk = model.D_rows[a]
-        row = -(dk @ dQP)
-        d = np.array([-(dk @ dQPc[:, j]) for j in range(m)])
-        for b, (j, tau) in enumerate(zip(disp, model.tau)):  # M_P a_P, a_P = D (u - c)/tau^2
-            mkj = dk @ (lay.mass[P] * model.D_rows[b])
-            row[2 * nF + b] += mkj / tau**2
-            d[j] -= mkj / tau**2
-        add("drive_force" if single else f"drive_force.{names[k]}", row, d,
-            float(snap.drive_forces[k]))
+        position("compression", axis @ G, snap.compression)
+    # Drive forces D_d^T (M_P a_P - Q_P): a lag's a_P = D (u - c)/tau^2, a displacement input's
+    # a_P = D u''.
+    dQP, dQPc = dQz[P] @ Zx + dQv[P] @ Vx, dQv[P] @ Vc
+    dQPu, dQPr = dQz[P] @ Zu, dQv[P] @ Vu
+    for k in drives.displacement:
+        dk = model.part.D[:, column[k]]
+        row, d = -(dk @ dQP), -(dk @ (dQPc + dQPu))
+        d2 = np.zeros(m)
+        for j in drives.displacement:
+            mkj = dk @ (lay.mass[P] * model.part.D[:, column[j]])
+            if j in lagged:
+                tau = drives[j].response_time
+                row[2 * nF + lagged.index(j)] += mkj / tau**2
+                d[j] -= mkj / tau**2
+            else:
+                d2[j] = mkj
+        rows.add("drive_force" if single else f"drive_force.{names[k]}", row, d, -(dk @ dQPr),
+                 d2, float(snap.drive_forces[k]))
     for k in force:
-        add("drive_position" if single else f"drive_position.{names[k]}",
-            model.drive_directions[k] @ Zx, np.zeros(m), float(snap.drive_positions[k]))
+        position("drive_position" if single else f"drive_position.{names[k]}",
+                 drives.directions[k], float(snap.drive_positions[k]))
     if wrenches:
         Jz, Jv = wrench_jacobians(mech, z)
         for k, hinge in enumerate(mech.hinges):
             for c, comp in enumerate(WRENCH_COMPONENTS):
-                add(f"hinges.{hinge.name}.{comp}", Jz[k, c] @ Zx + Jv[k, c] @ Vx,
-                    np.array([Jv[k, c] @ Vc[:, j] for j in range(m)]),
-                    float(snap.wrenches[k, c]))
+                rows.add(f"hinges.{hinge.name}.{comp}", Jz[k, c] @ Zx + Jv[k, c] @ Vx,
+                         Jv[k, c] @ Vc + Jz[k, c] @ Zu, Jv[k, c] @ Vu, np.zeros(m),
+                         float(snap.wrenches[k, c]))
     state_names = (
         [_coord(mech, k) for k in F]
         + [_coord(mech, k, rate=True) for k in F]
-        + (["drive.u"] if single and na else [f"drive.{names[k]}.u" for k in disp])
+        + (["drive.u"] if single and na else [f"drive.{names[k]}.u" for k in lagged])
     )
     K = -dQz[np.ix_(F, F)]
+    C, D, D1, D2, y0 = rows.arrays(n)
     return LinearModel(
-        A,
-        B,
-        np.array(Cs).reshape(len(Cs), n),
-        np.array(Ds, dtype=float).reshape(len(Ds), m),
-        state_names,
-        ["drive"] if single else list(names),
-        out_names,
-        u0,
-        z,
-        np.array(y0, dtype=float),
-        0.5 * (K + K.T),
-        mF.copy(),
-        F.copy(),
-        -dQv[np.ix_(F, F)],
-        tuple(names),
-        tuple(int(a) for a in lags),
-    )
+        A, B, C, D, state_names, ["drive"] if single else list(names), rows.names, u0, z, y0,
+        0.5 * (K + K.T), mF.copy(), F.copy(), -dQv[np.ix_(F, F)], tuple(names),
+        tuple(int(a) for a in lags), B1, D1, D2,
+        tuple("force" if k in force else "command" if k in lagged else "displacement"
+              for k in range(m)))
+
+
+class _Outputs:
+    """The output rows of a linear model as they are added: y = C x + D u + D1 u' + D2 u''."""
+
+    def __init__(self, m: int) -> None:
+        self.m = m
+        self.names: list = []
+        self._rows: list = []
+
+    def add(self, name, c, d, d1, d2, value) -> None:
+        self.names.append(name)
+        self._rows.append((c, d, d1, d2, value))
+
+    def arrays(self, n: int) -> tuple:
+        """Return C, D, D1, D2 and y0 as arrays."""
+        k, m = len(self._rows), self.m
+        parts = list(zip(*self._rows)) if self._rows else [[], [], [], [], []]
+        return (np.array(parts[0], dtype=float).reshape(k, n),
+                *(np.array(p, dtype=float).reshape(k, m) for p in parts[1:4]),
+                np.array(parts[4], dtype=float))
 
 
 def _coord(mech, k: int, rate: bool = False) -> str:

@@ -67,16 +67,18 @@ def frf(
     source: Optional[str] = None,
 ) -> np.ndarray:
     """
-    G(i 2 pi f) = C (i w I - A)^-1 B_d + D_d for one input d: (n_outputs, n_frequencies).
+    G(i 2 pi f) = C (i w I - A)^-1 (B_d + s B1_d) + D_d + s D1_d + s^2 D2_d, s = i w.
 
-    ``source``: the input (a drive's name, ``LinearModel.input_index``; None: the only one).
+    For one input d: (n_outputs, n_frequencies). ``source``: the input (a drive's name,
+    ``LinearModel.input_index``; None: the only one).
     The first-order system has the engine's block structure x = (z, v, u_1 .. u_m) with z' = v
     and each u_a a lag of its own command, so the solve is done in second-order form: with
     s = i w, u_a = command_a / (1 + tau_a s) for the driven actuator (the others stay 0) and
-    v = s z, (s^2 I - s A_vv - A_vz) z = A_vu u + B_v,d command -- an (n_F x n_F) system per
-    frequency instead of (2 n_F + m), with the same exact result. A force drive's input has
-    no lag (B_v,d = M_F^-1 e_F, u = 0). The frequencies are solved ``FRF_CHUNK`` at a time, so
-    the work arrays stay bounded (the result is n_outputs x n_frequencies).
+    v = s z, (s^2 I - s A_vv - A_vz) z = A_vu u + (B_v,d + s B1_v,d) input -- an (n_F x n_F)
+    system per frequency instead of (2 n_F + m), with the same exact result. A force drive's
+    input has no lag (B_v,d = M_F^-1 e_F, u = 0), nor has a displacement input (its rate and
+    acceleration in B1, D1, D2: ``LinearModel``). The frequencies are solved ``FRF_CHUNK`` at
+    a time, so the work arrays stay bounded (the result is n_outputs x n_frequencies).
     """
     k = model.input_index(source)
     rows = _rows(model, outputs)
@@ -107,9 +109,14 @@ def _frf_chunk(model: LinearModel, f: np.ndarray, rows: list, k: int) -> np.ndar
         rhs = u[:, None] * A[nF:2 * nF, 2 * nF + a] + model.B[nF:2 * nF, k]
     else:
         rhs = np.broadcast_to(model.B[nF:2 * nF, k].astype(complex), (len(s), nF))
+    if model.B1 is not None and np.any(model.B1[:, k]):
+        rhs = rhs + s[:, None] * model.B1[nF:2 * nF, k]
     z = np.linalg.solve(M, rhs[..., None])[..., 0]
     x = np.concatenate([z, s[:, None] * z, U], axis=1)
-    return model.C[rows] @ x.T + model.D[rows][:, [k]]
+    G = model.C[rows] @ x.T + model.D[rows][:, [k]]
+    if model.D1 is not None:
+        G = G + model.D1[rows][:, [k]] * s + model.D2[rows][:, [k]] * (s * s)
+    return G
 
 
 def gain_matrix(model: LinearModel, outputs: Optional[Sequence[str]] = None) -> np.ndarray:

@@ -91,7 +91,7 @@ class Sensitivity:
         self.sim = Simulation(mech)
         model = self.sim.model
         try:
-            inputs = model.drive_inputs(u) if model.drives else np.zeros(0)
+            inputs = model.drives.inputs(u) if model.drives else np.zeros(0)
         except ValueError as exc:
             raise ParameterError(f"--input: {exc}") from None
         single = len(inputs) <= 1
@@ -137,15 +137,15 @@ class Sensitivity:
         """
         Return w = dz/du_d (all coordinates) as a HyperDual (module docstring).
 
-        ``d``: the drive's index (``Model.drive_names``); ``z``: the hyper-dual equilibrium.
+        ``d``: the drive's index (``DriveTable.names``); ``z``: the hyper-dual equilibrium.
         """
         model = self.sim.model
         F, N = self.free, len(self.z)
         w0, e = np.zeros(N), np.zeros(N)
-        if d in model.displacement_index:
-            w0[model.part.prescribed] = model.part.D[:, list(model.displacement_index).index(d)]
+        if d in model.drives.displacement:
+            w0[model.part.prescribed] = model.part.D[:, list(model.drives.displacement).index(d)]
         else:
-            e = model.drive_directions[d]
+            e = model.drives.directions[d]
         w = hd.HyperDual(w0, np.zeros(N), np.zeros(N), np.zeros(N))
         h = COMPLEX_STEP
         for _ in range(3):
@@ -264,7 +264,7 @@ def gain_keys(mech) -> list:
 def _gain_pair(model, key: str) -> tuple:
     """(output row, drive index) of ``gain.<output>.<drive>``; ParameterError listing them."""
     for o, oname in enumerate(model.output_names):
-        for d, dname in enumerate(model.drive_names):
+        for d, dname in enumerate(model.drives.names):
             if key == f"gain.{oname}.{dname}":
                 return o, d
     keys = ", ".join(gain_keys(model.mechanism)) or "none: the mechanism has no drive or output"
@@ -362,7 +362,7 @@ def sensitivities(
         )
         for o, v in sens.outputs(design, sens.equilibrium(design), of).items():
             second[o][f"{p}|{q}"] = float(v.d)
-    u0 = sens.u if np.ndim(sens.u) == 0 else dict(zip(model.drive_names, sens.u.tolist()))
+    u0 = sens.u if np.ndim(sens.u) == 0 else dict(zip(model.drives.names, sens.u.tolist()))
     result = {"input": u0, "values": values, "gradient": gradient, "second": second}
     if hessian:
         result["hessian"] = {o: [[second[o][f"{p}|{q}" if i <= j else f"{q}|{p}"]

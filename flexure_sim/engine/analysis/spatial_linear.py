@@ -118,7 +118,7 @@ def linearize(model: SpatialModel, u=None, wrenches: bool = True,
         ["drive"] if single else list(names), out_names,
         float(inputs[0]) if single else inputs.copy(), st.z, np.array(y0, dtype=float),
         0.5 * (K + K.T), np.diag(M).copy(), F.copy(), -dQ[F, nF:2 * nF], tuple(names),
-        tuple(int(a) for a in lags), M)
+        tuple(int(a) for a in lags), mass_matrix=M)
 
 
 def modes(lin: SpatialLinearModel) -> Modes:

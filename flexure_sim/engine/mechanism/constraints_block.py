@@ -56,6 +56,22 @@ def _actuator(ctx: _Ctx, key: str, spec: dict, kind: str, stroke: list) -> Any:
     return actuator_spec(ctx, f"{key}.actuator", spec["actuator"], (stroke[0], stroke[1]))
 
 
+def _response_time(ctx: _Ctx, key: str, spec: dict, kind: str) -> float:
+    """
+    Read a drive's ``response_time`` (s): > 0, or 0 for a prescribed displacement.
+
+    0 (``type: drive`` only): the displacement follows its command or program exactly
+    (engine/solver/drives.py), so it takes no piezo ``actuator:`` block, whose stroke would
+    drive a lag.
+    """
+    value = _number(ctx, f"{key}.response_time", _require(ctx, key, spec, "response_time"),
+                    nonnegative=True, positive=kind == "force")
+    if value == 0.0 and "actuator" in spec:
+        raise ctx.fail(f"{key}.response_time", "0 (a prescribed displacement) takes no "
+                       "actuator: block; give the actuator's lag a response_time > 0")
+    return value
+
+
 def _outputs(ctx: _Ctx, raw: Any, by_name: dict[str, Body]) -> tuple[Output, ...]:
     """
     Read the ``outputs:`` list.
@@ -122,8 +138,7 @@ def _constraints(ctx, raw, by_name) -> list:
             c = Drive(
                 body,
                 (1.0, 0.0) if coord is not None else _axis(ctx, f"{key}.axis", axis_spec),
-                _number(ctx, f"{key}.response_time", _require(ctx, key, spec, "response_time"),
-                        positive=True),
+                _response_time(ctx, key, spec, kind),
                 (stroke[0], stroke[1]),
                 _number(ctx, f"{key}.slew_rate", _require(ctx, key, spec, "slew_rate"),
                         positive=True),

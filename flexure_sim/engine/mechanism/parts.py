@@ -99,7 +99,9 @@ class Drive:
     The actuator output follows the command through a first-order lag,
     du/dt = (command - u) / response_time: the slow pole of the dissertation's second-order
     input constraint (eqs. 6.21-6.23), which with B = t_char K is overdamped with a slow
-    time constant t_char. ``stroke`` is the actuator's range [min, max] (m) and
+    time constant t_char. ``response_time`` 0: no lag, the displacement is prescribed exactly
+    (a command is reached over one engine step; a program is followed with its rate and
+    acceleration: engine/solver/programs.py). ``stroke`` is the actuator's range [min, max] (m) and
     ``slew_rate`` its speed limit (m/s); the node enforces both on commands.
 
     ``name`` tells drives apart (``drive`` for a mechanism's single unnamed drive).

@@ -88,7 +88,7 @@ class Drive:
     name: str = "drive"
     coordinate: Optional[str] = None
     kind: str = "displacement"
-    #: A piezo actuator block: not supported in 3-D (always None; ``drives.DriveMixin`` reads it).
+    #: A piezo actuator block: not supported in 3-D (always None; ``drives.DriveTable`` reads it).
     actuator: None = None
 
     def direction(self, mech: "Mechanism") -> np.ndarray:

@@ -59,14 +59,15 @@ def states(model, s: State) -> np.ndarray:
     """Return the actuators' states of ``s`` (each at rest, ``piezo.initial_state``, if None)."""
     if s.actuator is not None:
         return s.actuator
-    parts = [piezo.initial_state(a.spec) for a in model.actuation]
+    parts = [piezo.initial_state(a.spec) for a in model.drives.actuation]
     return np.concatenate(parts) if parts else np.zeros(0)
 
 
 def free_strokes(model, s: State) -> np.ndarray:
-    """Return each actuated drive's free stroke x_a (m, P6) at ``s`` (``model.actuation``)."""
+    """Return each actuated drive's free stroke x_a (m, P6) at ``s`` (``DriveTable.actuation``)."""
     x = states(model, s)
-    return np.array([float(piezo.free_stroke(a.spec, x[a.states])) for a in model.actuation])
+    return np.array([float(piezo.free_stroke(a.spec, x[a.states]))
+                     for a in model.drives.actuation])
 
 
 def held(model, s: State) -> np.ndarray:
@@ -81,9 +82,9 @@ def kernel_command(model, s: State, strokes=None) -> np.ndarray:
     The state's, with each actuated drive's entry replaced by its free stroke ``strokes``
     (default: the held ones, ``held``).
     """
-    command = model.actuator_command(s.command).copy()
+    command = model.drives.kernel_command(s.command, s.programs, s.t - 0.5 * model.dt)
     strokes = held(model, s) if strokes is None else strokes
-    for a, x in zip(model.actuation, strokes):
+    for a, x in zip(model.drives.actuation, strokes):
         command[a.slot] = x
     return command
 
@@ -102,20 +103,23 @@ def step(model, data: Data, n: int = 1) -> None:
     between steps are counted there (``stepping.switch_work``).
     Without actuated drives, ``dynamics.step`` itself (one call for the n steps).
     """
-    if not model.actuation:
+    drives = model.drives
+    if not drives.actuation:
         dynamics.step(model, data, n)
         return
-    commands = np.broadcast_to(np.asarray(data.state.command, dtype=float), (len(model.drives),))
+    commands = data.state.command
     volts = np.array([float(piezo.command_voltage(a.spec, commands[a.drive]))
-                      for a in model.actuation])
-    actuators = model.actuators
-    slots = [a.slot for a in model.actuation]
+                      for a in drives.actuation])
+    actuators = drives.actuators
+    slots = [a.slot for a in drives.actuation]
     remaining = int(n)
     while remaining > 0:  # the command is held: only the actuators' states change
         chunk = min(remaining, BLOCK)
         s = data.state
         after, strokes = actuators.run(chunk, states(model, s), volts, model.dt)
-        rows = np.repeat(model.actuator_command(s.command)[None, :], chunk, axis=0)
+        rows = drives.kernel_rows(s, model.dt, chunk)
+        if rows is None:
+            rows = np.repeat(drives.kernel_command(s.command)[None, :], chunk, axis=0)
         rows[:, slots] = strokes
         dynamics.step(model, data, chunk, kernel_command(model, s), rows)
         data.state.actuator, data.state.held = after, strokes[-1].copy()
@@ -136,11 +140,11 @@ def report(model, s: State, forces: np.ndarray, inputs: np.ndarray) -> dict:
     volts, strokes, stack = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
     x, hold = states(model, s), held(model, s)
     energy = 0.0
-    for a, xh in zip(model.actuation, hold):
+    for a, xh in zip(model.drives.actuation, hold):
         volts[a.drive] = x[a.states][0]
         strokes[a.drive] = float(piezo.free_stroke(a.spec, x[a.states]))
         if a.stack:
-            p = float(model.drive_directions[a.drive] @ (s.z - model.z0))
+            p = float(model.drives.directions[a.drive] @ (s.z - model.z0))
             force = float(piezo.stack_force(a.spec, xh, p))
             inputs[a.drive], forces[a.drive], stack[a.drive] = p, force, force
             energy += 0.5 * force * (xh - p)

@@ -95,6 +95,18 @@ class Assembly:
             self._ia, self._ib = self.ia.astype(np.int64), self.ib.astype(np.int64)
             self._ca, self._cb = np.ascontiguousarray(self.ca), np.ascontiguousarray(self.cb)
 
+    def kernel_arrays(self) -> tuple:
+        """
+        Return the compiled kernel's hinge arguments (``kernels.quadratic_forces``).
+
+        (ia, ib, ca, cb, phia, phib, kind, W, C); only for a ``compiled`` assembly
+        (ValueError otherwise).
+        """
+        if not self.compiled:
+            raise ValueError("kernel_arrays: not every hinge law is quadratic (no compiled path)")
+        return (self._ia, self._ib, self._ca, self._cb, self.phia, self.phib, self._kind,
+                self._W, self._C)
+
     # ------------------------------------------------------------------ geometry
     def relative(self, z: np.ndarray, second: bool = True):
         """

@@ -9,6 +9,8 @@ frames are put (they move the centre with them only in coordinates, not physical
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from flexure_sim.engine.laws.quadratic import LawBatch
@@ -16,14 +18,26 @@ from flexure_sim.engine.kinematics.planar import J, rot
 from flexure_sim.engine.mechanism.parts import Mechanism
 
 
-def point_displacement(i: int, c: np.ndarray, z: np.ndarray, z0: np.ndarray) -> np.ndarray:
-    """Displacement from rest (root frame) of the point at c (body coordinates) on body i."""
-    def at(zz):
-        th = zz[3 * i + 2]
-        cs, sn = np.cos(th), np.sin(th)
-        return zz[3 * i:3 * i + 2] + np.array([cs * c[0] - sn * c[1], sn * c[0] + cs * c[1]])
+def compression_of(z, z0, i_drive: int, cdx: float, cdy: float, i_far: int, cfx: float,
+                   cfy: float, ax: float, ay: float) -> float:
+    """
+    Return the compression at coordinates z.
 
-    return at(z) - at(z0)
+    Along (ax, ay): the displacement from rest of the point (cdx, cdy) of body ``i_drive``
+    minus that of the point (cfx, cfy) of body ``i_far`` (body coordinates of
+    ``compression_points``). Scalar arithmetic only, so that Numba compiles this very source
+    for the tick report (``tick_report``); ``Model.hinge_compression`` calls it as Python.
+    """
+    i, j = 3 * i_drive, 3 * i_far
+    c, s = math.cos(z[i + 2]), math.sin(z[i + 2])
+    c0, s0 = math.cos(z0[i + 2]), math.sin(z0[i + 2])
+    dx = (z[i] + (c * cdx - s * cdy)) - (z0[i] + (c0 * cdx - s0 * cdy))
+    dy = (z[i + 1] + (s * cdx + c * cdy)) - (z0[i + 1] + (s0 * cdx + c0 * cdy))
+    c, s = math.cos(z[j + 2]), math.sin(z[j + 2])
+    c0, s0 = math.cos(z0[j + 2]), math.sin(z0[j + 2])
+    dx -= (z[j] + (c * cfx - s * cfy)) - (z0[j] + (c0 * cfx - s0 * cfy))
+    dy -= (z[j + 1] + (s * cfx + c * cfy)) - (z0[j + 1] + (s0 * cfx + c0 * cfy))
+    return dx * ax + dy * ay
 
 
 def stiffness_centre(K: np.ndarray) -> np.ndarray:

@@ -6,6 +6,9 @@ A mechanism has any number of named drives (``mechanism.Drive``), in constraint 
 - a **displacement drive** d prescribes its body's coordinates, z_P = z_P0 + D_d u_d, where
   u_d, the actuator output, follows the drive's command c_d as a first-order lag of its own,
   du_d/dt = (c_d - u_d) / tau_d; the u_d are integrated states (y = (z_F, v_F, u));
+- a **prescribed drive** (a displacement drive with ``response_time: 0``) prescribes its
+  displacement p_d(t) itself, with its rate and acceleration, from a program (``programs``):
+  z_P = z_P0 + D_d p_d(t), no state; a held command c_d is reached by a ramp over one step;
 - a **force drive** j applies the generalized force e_j f_j (virtual work; e_j its direction)
   on coordinates that stay free; the commanded force f_j is held as it is (no lag);
 - a **stack drive** s, a displacement drive whose piezo ``actuator:`` block has a finite stack
@@ -15,23 +18,25 @@ A mechanism has any number of named drives (``mechanism.Drive``), in constraint 
   Q += e_s k_s (x_s - e_s . (z - z0)), potential 1/2 k_s (x_s - e_s . (z - z0))^2
   (actuators/piezo.py P7).
 
-The stepping kernel takes the commands in *actuator order*: the displacement drives' commands,
-then the force drives' forces, then the stack drives' free strokes (``actuator_command``; an
-actuated drive's entry is its actuator's free stroke, not the user's command: solver/actuation.py).
-A state keeps u and the commands in the simplest form: a number for a single actuator (single
-drive), a vector otherwise
-(``state_u``; ``Simulation.set_command``).
+A ``Model`` holds them in a ``DriveTable``. The stepping kernel takes the commands in *kernel
+order* (``DriveTable.order``): the displacement drives' commands, then the force drives' forces,
+then the stack drives' free strokes (``DriveTable.kernel_command``; an actuated drive's entry is
+its actuator's free stroke, not the user's command: solver/actuation.py). A state holds u as an
+array of one actuator output per displacement drive and its commands as an array of one value per
+drive (``state.State``; ``Simulation.set_command``), whatever their number.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Optional, Union
+from typing import Iterator, Optional
 
 import numpy as np
 
 from flexure_sim.engine.actuators.piezo import PiezoSpec
 from flexure_sim.engine.actuators.piezo_steps import Actuators
+from flexure_sim.engine.mechanism.parts import Drive, Mechanism
+from flexure_sim.engine.solver.programs import PIECE_WIDTH, hold
 
 
 def stacked(drive) -> bool:
@@ -58,9 +63,9 @@ class Actuated:
     """
     One drive with a (non-identity) actuator.
 
-    ``drive``: its index (``Model.drive_names`` order); ``slot``: its entry in the kernel's
-    command vector (actuator order); ``states``: its slice of ``State.actuator``; ``stack``:
-    whether it is a stack drive (finite k_s).
+    ``drive``: its index (``DriveTable.names`` order); ``slot``: its entry in the kernel's
+    command vector (``DriveTable.order``); ``states``: its slice of ``State.actuator``;
+    ``stack``: whether it is a stack drive (finite k_s).
     """
 
     drive: int
@@ -70,11 +75,11 @@ class Actuated:
     stack: bool
 
 
-def actuated(model: "DriveMixin") -> tuple[Actuated, ...]:
-    """Return the drives of ``model`` whose actuator block is not the identity."""
-    order = list(model.actuator_command(np.arange(len(model.drives), dtype=float)).astype(int))
+def actuated(drives: "DriveTable") -> tuple[Actuated, ...]:
+    """Return the drives of the table whose actuator block is not the identity."""
+    order = list(drives.order)
     out, offset = [], 0
-    for k, d in enumerate(model.drives):
+    for k, d in enumerate(drives):
         if d.kind != "displacement" or transparent(d.actuator):
             continue
         size = d.actuator.size
@@ -84,114 +89,210 @@ def actuated(model: "DriveMixin") -> tuple[Actuated, ...]:
     return tuple(out)
 
 
-class DriveMixin:
+class DriveTable:
     """
-    The per-drive part of ``model.Model``: inputs, commands and forces of every drive.
+    Every drive of a ``model.Model``, by kind, with the constants the stepping kernel takes.
 
-    Needs the model's ``drives``, ``drive_names``, ``drive_directions``, ``displacement_index``,
-    ``force_index``, ``part``, ``mass``, ``z0`` and ``assembly``.
+    Iterating, indexing and ``len`` give the mechanism's ``Drive`` objects in constraint order;
+    ``names`` their names and ``directions`` their directions e_k (rows over the 3 n_bodies
+    coordinates: drive k's input is e_k . (z - z0), a force drive's generalized force e_k f).
+    The index arrays (into that order) of each kind:
+
+    - ``displacement``: the drives that prescribe their body's displacement (each a column of
+      ``Partition.D``, in this order); of those ``lagged``: a first-order lag of its command,
+      whose output u is an integrated state (in the order of u), and ``prescribed``
+      (``response_time: 0``): the displacement follows its program exactly (module doc);
+    - ``force``: the force drives; ``stack``: the stack drives (a finite piezo stack, ``stacked``).
+
+    ``order``: the kernel's command vector holds the lagged drives' commands, then the force
+    drives' forces, then the stack drives' free strokes, then per prescribed drive the kernel row
+    of its program's piece (``programs.PIECE_WIDTH`` entries from ``first_program``;
+    ``kernel_command``).
     """
 
-    def _drive_constants(self) -> None:
-        """Set the actuator time constants and the force drives' directions (kernel arrays)."""
-        actuators = [self.drives[k] for k in self.displacement_index]
-        #: Time constant (s) and stroke span (m) per displacement drive (actuator order).
-        self.tau = np.array([d.response_time for d in actuators], dtype=float)
-        self.stroke_span = np.array([d.stroke[1] - d.stroke[0] for d in actuators], dtype=float)
-        #: D^T, rows contiguous: dz_P/du_d per displacement drive.
-        self.D_rows = np.ascontiguousarray(self.part.D.T, dtype=float)
+    def __init__(self, mechanism: Mechanism, part, z0: Optional[np.ndarray] = None) -> None:
+        self._drives: tuple[Drive, ...] = tuple(mechanism.drives)
+        drives = self._drives
+        # ``z0``: the rest coordinates (default: a planar mechanism's poses; the spatial
+        # engine's 6 per body: ``spatial_model``).
+        if z0 is None:
+            z0 = np.array([b.pose for b in mechanism.bodies], dtype=float).ravel()
+        n, N = len(drives), len(z0)
+        self.names: tuple[str, ...] = tuple(d.name for d in drives)
+        self.directions = np.array([d.direction(mechanism) for d in drives]).reshape(n, N)
+        self.displacement = np.array(
+            [k for k, d in enumerate(drives) if d.kind == "displacement" and not stacked(d)],
+            dtype=int)
+        self.lagged = np.array([k for k in self.displacement if drives[k].response_time > 0],
+                               dtype=int)
+        self.prescribed = np.array([k for k in self.displacement
+                                    if drives[k].response_time == 0], dtype=int)
+        self.force = np.array([k for k, d in enumerate(drives) if d.kind == "force"], dtype=int)
+        self.stack = np.array([k for k, d in enumerate(drives) if stacked(d)], dtype=int)
+        self.order = np.concatenate([self.lagged, self.force, self.stack]).astype(int)
+        #: Where the prescribed drives' piece rows start in the kernel's command vector.
+        self.first_program = len(self.order)
+        #: The kernel's command vector is the commands as they are (no program rows, drive
+        #: order); ``plain``: moreover one drive, so a number is its whole command.
+        self.in_order = (not len(self.prescribed)
+                         and bool(np.array_equal(self.order, np.arange(n))))
+        self.plain = self.in_order and n == 1
+        lagged = [drives[k] for k in self.lagged]
+        #: Time constant (s) and stroke span (m) per lagged drive (the order of u).
+        self.tau = np.array([d.response_time for d in lagged], dtype=float)
+        self.stroke_span = np.array([d.stroke[1] - d.stroke[0] for d in lagged], dtype=float)
+        column = {int(k): j for j, k in enumerate(self.displacement)}
+        #: D^T, rows contiguous: dz_P/du_d per lagged drive; D_p: dz_P/dp_d per prescribed
+        #: drive (columns).
+        self.lag_rows = np.ascontiguousarray(part.D[:, [column[k] for k in self.lagged]].T,
+                                             dtype=float)
+        self.D_prescribed = np.ascontiguousarray(
+            part.D[:, [column[k] for k in self.prescribed]], dtype=float).reshape(
+                len(part.prescribed), len(self.prescribed))
         #: Direction e_j (rows) of each force drive, and e_j . z0.
-        self.force_dir = np.ascontiguousarray(
-            self.drive_directions[self.force_index], dtype=float).reshape(
-                len(self.force_index), len(self.z0))
-        self.force_z0 = self.force_dir @ self.z0
+        self.force_dir = np.ascontiguousarray(self.directions[self.force], dtype=float).reshape(
+            len(self.force), N)
+        self.force_z0 = self.force_dir @ z0
         #: Per stack drive: direction e_s (rows), e_s . z0 and the stack stiffness k_s (N/m).
-        self.stack_dir = np.ascontiguousarray(
-            self.drive_directions[self.stack_index], dtype=float).reshape(
-                len(self.stack_index), len(self.z0))
-        self.stack_z0 = self.stack_dir @ self.z0
-        self.stack_k = np.array([self.drives[k].actuator.stiffness for k in self.stack_index],
-                                dtype=float)
+        self.stack_dir = np.ascontiguousarray(self.directions[self.stack], dtype=float).reshape(
+            len(self.stack), N)
+        self.stack_z0 = self.stack_dir @ z0
+        self.stack_k = np.array([drives[k].actuator.stiffness for k in self.stack], dtype=float)
         #: sum_s k_s e_s e_s^T: minus the stack springs' exact dQ/dz (None without stacks).
-        self.stack_K = (self.stack_dir.T * self.stack_k) @ self.stack_dir if len(
-            self.stack_index) else None
-        self._order = np.concatenate([self.displacement_index, self.force_index,
-                                      self.stack_index]).astype(int)
-        #: The drives with a (non-identity) piezo actuator (engine/solver/actuation.py).
+        self.stack_K = ((self.stack_dir.T * self.stack_k) @ self.stack_dir
+                        if len(self.stack) else None)
+        #: The drives with a (non-identity) piezo actuator (engine/solver/actuation.py), and
+        #: their numbers as arrays, for stepping them n steps in one call (piezo_steps.py).
         self.actuation = actuated(self)
-        #: Their numbers as arrays, for stepping them n steps in one call
-        # (actuators/piezo_steps.py).
         self.actuators = Actuators(self.actuation)
+        self._z0 = z0
+        #: Per drive, its body's index (``bodies``) and the (coordinate 0..2 of the body, index
+        #: into the prescribed coordinates) pairs it holds (``holds``, from ``Partition.held``):
+        #: where its reaction acts.
+        self.bodies = np.array([mechanism.body_index(d.body) for d in drives], dtype=int)
+        place = {int(c): j for j, c in enumerate(part.prescribed)}
+        self.holds = tuple(tuple((c % 3, place[c]) for c in coords) for coords in part.held)
+
+    def __len__(self) -> int:
+        return len(self._drives)
+
+    def __iter__(self) -> Iterator[Drive]:
+        return iter(self._drives)
+
+    def __getitem__(self, k: int) -> Drive:
+        return self._drives[k]
+
+    def __bool__(self) -> bool:
+        return bool(self._drives)
+
+    @property
+    def kernel_width(self) -> int:
+        """Return the length of the kernel's command vector (``kernel_command``)."""
+        return len(self.order) + PIECE_WIDTH * len(self.prescribed)
+
+    @property
+    def n_lags(self) -> int:
+        """Return the number of lagged drives (actuator outputs u in the state)."""
+        return len(self.lagged)
 
     def require_rigid(self, what: str) -> None:
         """Raise ValueError naming the drives with a finite stack, which ``what`` cannot handle."""
-        if len(self.stack_index):
-            names = ", ".join(self.drive_names[k] for k in self.stack_index)
+        if len(self.stack):
+            names = ", ".join(self.names[k] for k in self.stack)
             raise ValueError(f"{what}: drive {names} has a finite-stiffness piezo stack, whose "
                              "input is its actuator's free stroke; use the stage with rigid "
                              "stacks (actuation.rigid_stacks) or step to a steady state")
 
-    @property
-    def n_actuators(self) -> int:
-        """Return the number of displacement drives (actuator states u)."""
-        return len(self.displacement_index)
+    def check_state(self, u: np.ndarray, command: np.ndarray) -> None:
+        """Raise ValueError unless a state's u and command have this table's lengths."""
+        if len(u) != self.n_lags or len(command) != len(self):
+            raise ValueError(f"state: u has {len(u)} entries and command {len(command)}; the "
+                             f"mechanism has {self.n_lags} displacement drives (one actuator "
+                             f"output each) and {len(self)} drives (one command each)")
 
-    def actuator_command(self, command) -> np.ndarray:
+    def kernel_command(self, command: np.ndarray, programs: tuple = (),
+                       t: float = 0.0) -> np.ndarray:
         """
-        Return the kernel's command vector: displacement drives' commands, then the forces.
+        Return the kernel's command vector (``order``) from one command per drive.
 
-        ``command``: a state's command (a number: every drive's; or one value per drive, in
-        ``drive_names`` order).
+        ``command``: one value per drive (``names`` order), as a state holds it; ``programs``:
+        a state's programs (one per drive or none, ``State.programs``): a prescribed drive's
+        entry is its program's piece in force at ``t`` (``Program.row``), or, without a program,
+        its command held.
         """
-        values = np.broadcast_to(np.asarray(command, dtype=float), (len(self.drives),))
-        return np.ascontiguousarray(values[self._order], dtype=float)
+        if self.in_order:  # a closed loop's tick: ~0.3 us against ~1 us for the general path
+            return np.array(command, dtype=float, ndmin=1)
+        values = np.asarray(command, dtype=float)
+        out = values[self.order]
+        if not len(self.prescribed):
+            return np.ascontiguousarray(out)
+        rows = [programs[k].row(t) if programs and programs[k] is not None
+                else hold(values[k]) for k in self.prescribed]
+        return np.ascontiguousarray(np.concatenate([out] + rows))
 
-    def kernel_command(self, command) -> np.ndarray:
+    def kernel_rows(self, state, dt: float, n: int) -> Optional[np.ndarray]:
         """
-        Return ``command`` as the kernel takes it.
+        Return the kernel's command vector of each of n steps from ``state`` (None: no program).
 
-        An array is taken as already in actuator order (``actuator_command``); a number is
-        every drive's.
+        Shape (n, ``kernel_width``): a lagged or force drive with a program holds its value at
+        each step's midpoint, a prescribed drive's the piece in force there; the other drives
+        hold the state's commands.
         """
-        if isinstance(command, np.ndarray):
-            return command
-        return np.full(len(self.drives), float(command))
+        programs = state.programs
+        if not programs or all(p is None for p in programs):
+            return None
+        mid = state.t + dt * (np.arange(int(n)) + 0.5)
+        rows = np.repeat(self.kernel_command(state.command, programs, mid[0])[None, :], n, axis=0)
+        slot = {int(k): j for j, k in enumerate(self.order)}
+        for k, program in enumerate(programs):
+            if program is None:
+                continue
+            if k in slot:
+                rows[:, slot[k]] = program.values(mid)
+            else:
+                j = self.first_program + PIECE_WIDTH * list(self.prescribed).index(k)
+                rows[:, j:j + PIECE_WIDTH] = program.rows(mid)
+        return rows
 
-    def actuator_u(self, u) -> np.ndarray:
-        """One actuator output per displacement drive from a state's u (number or vector)."""
-        if np.ndim(u) == 0:  # a state's number: np.full is ~10x cheaper than broadcasting
-            return np.full(self.n_actuators, float(u))
-        return np.broadcast_to(np.asarray(u, dtype=float), (self.n_actuators,)).astype(float)
-
-    def state_u(self, u: np.ndarray) -> Union[float, np.ndarray]:
-        """Return a state's u from the actuator outputs: a number (none or one), else a vector."""
-        if self.n_actuators <= 1:
-            return float(u[0]) if self.n_actuators else 0.0
-        return np.array(u, dtype=float)
-
-    def state_inputs(self, u, command) -> np.ndarray:
+    def held_command(self, row: np.ndarray, command: np.ndarray, programs: tuple) -> np.ndarray:
         """
-        Return each drive's input in a stepped state.
+        Return a state's ``command`` after a step that held the kernel vector ``row``.
 
-        Per drive (``drive_names`` order): a displacement drive's actuator output u, a force
-        drive's commanded force.
+        The lagged and force drives with a program take the value it held; the others keep
+        theirs (a prescribed drive's command is its target, set with the program).
         """
-        out = np.zeros(len(self.drives))
-        out[self.displacement_index] = self.actuator_u(u)
-        if len(self.force_index):
-            commands = np.broadcast_to(np.asarray(command, dtype=float), (len(self.drives),))
-            out[self.force_index] = commands[self.force_index]
+        out = np.array(command, dtype=float)
+        for j, k in enumerate(self.order):
+            if programs and programs[k] is not None:
+                out[k] = row[j]
         return out
 
-    def drive_inputs(self, value) -> np.ndarray:
+    def state_inputs(self, u: np.ndarray, command: np.ndarray, programs: tuple = (),
+                     t: float = 0.0) -> np.ndarray:
         """
-        Return one input per drive (``drive_names`` order).
+        Return each drive's input in a stepped state (``names`` order).
 
-        One input per drive (``drive_names`` order) from a number (a single drive), a sequence of
-        one value per drive, or a {name: value} mapping naming every drive; ValueError naming the
-        problem (and the drive) otherwise, also for non-finite values.
+        A lagged drive's actuator output u, a prescribed drive's displacement (its program's
+        value at t, or its command without one), a force drive's commanded force.
         """
-        names = self.drive_names
+        out = np.zeros(len(self))
+        out[self.lagged] = u
+        command = np.asarray(command, dtype=float)
+        out[self.force] = command[self.force]
+        for k in self.prescribed:
+            out[k] = (programs[k].value(t) if programs and programs[k] is not None
+                      else command[k])
+        return out
+
+    def inputs(self, value) -> np.ndarray:
+        """
+        Return one input per drive (``names`` order).
+
+        From a number (a single drive), a sequence of one value per drive, or a {name: value}
+        mapping naming every drive; ValueError naming the problem (and the drive) otherwise,
+        also for non-finite values.
+        """
+        names = self.names
         if isinstance(value, dict):
             unknown = sorted(set(value) - set(names))
             missing = [n for n in names if n not in value]
@@ -220,49 +321,59 @@ class DriveMixin:
                              f"(drive {', '.join(bad)})")
         return out
 
-    def drive_force(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
-                    Q: Optional[np.ndarray] = None) -> float:
+    def forces(self, D: np.ndarray, reactions: np.ndarray, inputs=None) -> np.ndarray:
         """
-        Force the actuator applies to the driven body along the drive axis (N).
+        Return the force each drive's actuator applies (``names`` order).
 
-        The drive-axis component of the constraint forces lambda_P = M_P a_P - Q_P (eq. 6.4) for
-        the single displacement drive; 0 without one.
+        Along its direction (N; N m on theta): a displacement drive's share D_d^T lambda_P of
+        the constraint forces ``reactions`` = lambda_P (``Model.constraint_forces``; D:
+        ``Partition.D``); a force drive's commanded force (its entry of ``inputs``, 0 without).
         """
-        if self.drive is None:
-            return 0.0
-        if Q is None:
-            Q = self.generalized_forces(z, v)[0]
-        P = self.part.prescribed
-        return float((self.mass[P] * aP - Q[P]) @ self.part.du)
-
-    def drive_forces(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
-                     Q: Optional[np.ndarray] = None, inputs=None) -> np.ndarray:
-        """
-        Return the force each drive's actuator applies.
-
-        Per drive (``drive_names`` order), the force (N; N m on theta) its actuator applies along
-        its direction: a displacement drive's share D_d^T lambda_P of the constraint forces
-        lambda_P = M_P a_P - Q_P (eq. 6.4; Q the hinges' forces); a force drive's commanded force
-        (its entry of ``inputs``, 0 without).
-        """
-        out = np.zeros(len(self.drives))
-        if len(self.displacement_index):
-            if Q is None:
-                Q = self.generalized_forces(z, v)[0]
-            P = self.part.prescribed
-            out[self.displacement_index] = self.part.D.T @ (self.mass[P] * aP - Q[P])
-        if inputs is not None and len(self.force_index):
-            out[self.force_index] = np.asarray(inputs, dtype=float)[self.force_index]
+        out = np.zeros(len(self))
+        if len(self.displacement):
+            out[self.displacement] = D.T @ reactions
+        if inputs is not None and len(self.force):
+            out[self.force] = np.asarray(inputs, dtype=float)[self.force]
         return out
 
-    def drive_positions(self, z: np.ndarray) -> np.ndarray:
+    def wrenches(self, reactions: np.ndarray, forces: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """
+        Return the full wrench each drive applies to its body: (n_drives, 3), (moment, fx, fy).
+
+        What the drive's constraints and actuator apply to the driven body, in the body's frame
+        at its origin (the moment about the origin, the forces along the body's axes): the
+        constraint forces ``reactions`` = lambda_P (``Model.constraint_forces``, eq. 6.4) on the
+        coordinates the drive prescribes (its axis and the coordinates it holds: the reaction of
+        a held drive tip in force x, y and moment), plus e_k f_k for a force drive's force or a
+        stack drive's spring force f_k (``forces``, ``forces`` order). The body's generalized
+        forces on (x, y, theta) are the force in the root frame and the moment about the body's
+        origin, turned into the body's frame by R(theta)^T. Along the drive's axis it is
+        ``forces`` (a rigid drive's constraint force).
+        """
+        n = len(self)
+        root = np.zeros((n, 3))           # (fx, fy, moment) in the root frame
+        for k, held in enumerate(self.holds):
+            for c, j in held:
+                root[k, c] += reactions[j]
+        for k in np.concatenate([self.force, self.stack]).astype(int):
+            i = self.bodies[k]
+            root[k] += self.directions[k, 3 * i:3 * i + 3] * forces[k]
+        theta = z[3 * self.bodies + 2] if n else np.zeros(0)
+        cs, sn = np.cos(theta), np.sin(theta)
+        out = np.empty((n, 3))
+        out[:, 0] = root[:, 2]
+        out[:, 1] = cs * root[:, 0] + sn * root[:, 1]
+        out[:, 2] = -sn * root[:, 0] + cs * root[:, 1]
+        return out
+
+    def positions(self, z: np.ndarray) -> np.ndarray:
         """
         Return each driven body's displacement along its drive's direction.
 
         Per drive, the driven body's displacement from rest along the drive's direction (a
         displacement drive's input; where a force drive's body has moved).
         """
-        return self.drive_directions @ (z - self.z0)
+        return self.directions @ (z - self._z0)
 
 
 def _number(value, name: str) -> float:

@@ -25,8 +25,12 @@ import numpy as np
 import scipy.linalg
 
 from flexure_sim.engine.solver import step_energy, step_loop as stepping
+from flexure_sim.engine.solver.motion import kernel_coordinates
 from flexure_sim.engine.solver.state import Data, Linearization, State
 from flexure_sim.engine.solver.model import Model, SolverError
+
+#: Steps per call when the drives follow programs (bounds the per-step command rows' memory).
+BLOCK = 4096
 
 
 def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> None:
@@ -41,22 +45,34 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
     linear solve with the e^{hA} already at hand (A - I/tau is regular: A's eigenvalues have
     no positive real part for a damped mechanism; an exponential is the fallback).
     """
-    if model.energy:
-        A, g, damping, load_rows = model.jacobian(y, t, command, damping=True)
-    else:
-        A = model.jacobian(y, t, command)
-    h = model.dt
+    tangent = model.tangent(y, t, command) if model.energy else None
+    A = model.jacobian(y, t, command) if tangent is None else tangent.A
+    m, h = A.shape[0], model.dt
     expA, phi1, phi2 = phi_matrices(A, h)
     if model.energy:
         part = model.part
         tau, D = model.motion[0], model.motion[2]
         shifted = [_shifted_phi1(A, expA, h, tk) for tk in tau]
-        drive_mass = [float(dk @ (model.mass[part.prescribed] * dk)) for dk in model.D_rows]
-        sines = np.array([[j, c.amplitude, 2.0 * np.pi * c.frequency, c.phase]
-                          for j, c in part.timed], dtype=float).reshape(-1, 4).T
+        drive_mass = [float(dk @ (model.mass[part.prescribed] * dk))
+                      for dk in model.drives.lag_rows]
+        # The timed coordinates: sine rates, then those the prescribed drives' programs move
+        # (their velocity is entry AUX_LOAD + n_lags + i of the energy rates).
+        first = step_energy.AUX_LOAD + len(tau)
+        sines = np.array([[j, c.amplitude, 2.0 * np.pi * c.frequency, c.phase, -1.0]
+                          for j, c in part.timed]
+                         + [[j, 0.0, 0.0, 0.0, first + i]
+                            for i, j in enumerate(model.program_index)],
+                         dtype=float).reshape(-1, 5).T
+        timed = [j for j, _ in part.timed] + list(model.program_index)
+        # How the program coordinates' displacement and velocity force dv_F/dt.
+        nF, pc = len(part.free), model.program_index
+        forcing = np.zeros((m, 2 * len(pc)))
+        dz, dv = tangent.free_by_prescribed
+        forcing[nF:2 * nF, :len(pc)] = dz[:, pc] / model.mass_free[:, None]
+        forcing[nF:2 * nF, len(pc):] = dv[:, pc] / model.mass_free[:, None]
         emats = step_energy.energy_matrices(
-            A, phi1, phi2, h, g, damping, part.free, part.prescribed, D, drive_mass, tau,
-            shifted, sines, load_rows[[j for j, _ in part.timed]])
+            A, phi1, phi2, h, tangent.G, tangent.damping, part.free, part.prescribed, D,
+            drive_mass, tau, shifted, sines, tangent.load_rows[timed], forcing)
     else:
         emats = step_energy.NO_ENERGY
     data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, emats)
@@ -117,7 +133,7 @@ def _advance(model: Model, data: Data, n, y, t, rows, held, F0, aux0, ye):
 
 def jump_work(model: Model, s: State, command) -> float:
     """
-    Work of the drives' velocity jumps when the commands change (``command``: actuator order).
+    Work of the drives' velocity jumps when the commands change (``command``: kernel order).
 
     The prescribed velocities jump from those of ``s`` to those of the new command, which takes the
     kinetic energy 1/2 M_P (v_P+^2 - v_P-^2) from the actuator (an impulse M_P dv_P acting at the
@@ -132,30 +148,61 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     """
     Advance ``data`` n fixed steps with the drives' commands held at state.command.
 
-    ``command``: the kernel's command vector (actuator order) to hold instead of the state's
-    (the piezo actuators' free strokes, engine/solver/actuation.py). ``rows``: one such vector per
-    step, shape (n, len(command)), to hold step by step instead (``command`` then is the one
-    held before the first step; each change is the drives' work, ``stepping.switch_work``).
+    ``command``: the kernel's command vector (``DriveTable.kernel_command``) to hold instead of
+    the state's (the piezo actuators' free strokes, engine/solver/actuation.py). ``rows``: one
+    such vector per step, shape (n, len(command)), to hold step by step instead (``command``
+    then is the one held before the first step; each change is the drives' work,
+    ``stepping.switch_work``).
+
+    Without ``command``, the drives with a program (``State.programs``) follow it, one kernel
+    command row per step (``DriveTable.kernel_rows``; ``BLOCK`` steps per call at most).
 
     Time is origin + k dt, k the steps taken since the origin (the t of a state this data
     did not step itself), not a running sum: t stays on the step grid however long the
     run, so stamps derived from it stay on the tick grid.
+
+    A step whose iteration does not converge even with a fresh Jacobian is retried once with the
+    Jacobian taken where the lagged drives have settled (their rates zero): after a command step
+    a lag far faster than the step gives the prescribed body a huge rate for a tiny part of the
+    step, and the damping's derivative at that rate is no model of the rest of the step (the
+    answer does not depend on where the Jacobian is taken, only the iteration's convergence).
     """
     s = data.state
-    command = np.ascontiguousarray(
-        model.actuator_command(s.command) if command is None else command, dtype=float)
+    cache = data.cache
+    if command is None:
+        if s.programs and n > BLOCK:
+            for start in range(0, int(n), BLOCK):
+                step(model, data, min(BLOCK, int(n) - start))
+            return
+        if s.programs:
+            command = model.drives.kernel_command(s.command, s.programs, s.t - 0.5 * model.dt)
+            rows = model.drives.kernel_rows(s, model.dt, n)
+            key = command.tobytes()
+        elif (cache is not None and cache[0] is s and not cache[8]
+              and cache[7] == s.command.tobytes()):
+            command, key = cache[6], cache[1]  # commands held on: the last vector
+        else:
+            command = model.drives.kernel_command(s.command)
+            key = command.tobytes()
+    else:
+        command = np.ascontiguousarray(command, dtype=float)
+        key = command.tobytes()
     rows = command.reshape(1, -1) if rows is None else np.ascontiguousarray(rows, dtype=float)
-    key = command.tobytes()
     clock = data.clock
     if clock is None or clock[0] is not s:
         clock = (s, s.t, 0)
     _, origin, k = clock
     dt = model.dt
-    y, t = model.pack(s), s.t
-    cache = data.cache
-    if cache is not None and cache[0] is s and cache[1] == key:
-        F0, aux0, ye = cache[2:5]
+    t = s.t
+    if cache is not None and cache[0] is s:
+        y = cache[5]  # model.pack(s), bit for bit: s was unpacked from it
+        if cache[1] == key:
+            F0, aux0, ye = cache[2:5]
+        else:
+            F0, aux0 = model.rhs(y, t, command)
+            ye = y
     else:
+        y = model.pack(s)
         F0, aux0 = model.rhs(y, t, command)
         ye = y
     if model.energy:
@@ -163,7 +210,7 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     else:
         dissipated = work = math.nan
     remaining = int(n)
-    fresh = False
+    fresh = settled = False
     while remaining > 0:
         ahead = rows[min(int(n) - remaining, len(rows) - 1):]
         if data.lin is None or (model.relinearize_tol is not None
@@ -182,18 +229,53 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
         data.stats.iterations += iterations
         if status == stepping.NOT_CONTRACTING:
             if steps == 0 and fresh:
-                raise SolverError(
-                    f"step to t = {t + dt:.6g} s did not converge even with a fresh Jacobian; "
-                    f"reduce the step ({dt:g} s)")
+                if settled or not model.drives.n_lags:
+                    raise SolverError(_not_converging(model, t + dt))
+                linearize(model, data, y, t, _settled(model, y, ahead[0]))
+                settled = True
+                continue
             data.lin = None
         elif status == stepping.SLOW:
             data.lin = None
         if steps:
-            fresh = False
-    if not np.all(np.isfinite(y)):
+            fresh = settled = False
+    if not np.isfinite(y).all():
         raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
-    z, v, u = model.unpack(y, t, command)
-    data.state = State(t, z, v, model.state_u(u), s.command, dissipated, work)
+    if model.compiled:  # Model.unpack, compiled: a few us less per call
+        z, v = kernel_coordinates(y, t, command, model.kernel_args[:12])
+        nF = len(model.part.free)
+        u = y[2 * nF:2 * nF + model.drives.n_lags].copy()
+    else:
+        z, v, u = model.unpack(y, t, command)
+    held = model.drives.held_command(command, s.command, s.programs) if s.programs else s.command
+    data.state = State(t, z, v, u, held, dissipated, work, programs=s.programs)
     data.clock = (data.state, origin, k)
-    # F at the new state seeds the next call while the command is unchanged.
-    data.cache = (data.state, command.tobytes(), F0, aux0, ye)
+    # The cache seeds the next call: (state, command key, F and energy rates while the command
+    # is unchanged, where they were taken, y, the kernel's command vector held last, the bytes
+    # of the state's commands and the programs it was held under). The vector also serves the
+    # tick report (``tick_report.TickReport.fill_data``) while those are the state's.
+    data.cache = (data.state, command.tobytes(), F0, aux0, ye, y, command, held.tobytes(),
+                  s.programs)
+
+
+def _settled(model: Model, y: np.ndarray, command: np.ndarray) -> np.ndarray:
+    """Return ``command`` with each lagged drive's entry at its output u in y (rates zero)."""
+    nF, n = len(model.part.free), model.drives.n_lags
+    out = command.copy()
+    out[:n] = y[2 * nF:2 * nF + n]
+    return out
+
+
+def _not_converging(model: Model, t: float) -> str:
+    """Why a step did not converge, and what to do (naming lags faster than the step)."""
+    dt = model.dt
+    drives = model.drives
+    fast = [f"{drives.names[k]} ({tau:g} s)" for k, tau in zip(drives.lagged, drives.tau)
+            if tau < dt]
+    text = (f"step to t = {t:.6g} s did not converge even with a fresh Jacobian; reduce the "
+            f"step ({dt:g} s)")
+    if fast:
+        text += (f"; drive {', '.join(fast)} lags its command much faster than the step: give "
+                 "it response_time: 0 (its displacement then follows the command, a step rising "
+                 "over one engine step, or a program exactly), or a step near its response time")
+    return text

@@ -14,9 +14,11 @@ where lambda_P are the constraint forces (the Lagrange multipliers of eq. 6.4, s
 force the drive must supply is the drive-axis component of lambda). Unlike the
 dissertation's Baumgarte-stabilised multipliers (6.21-6.23), nothing drifts.
 
-The driven coordinates follow the actuator outputs u, one per displacement drive, each a
+The driven coordinates follow the actuator outputs u, one per lagged displacement drive, each a
 first-order lag of its command (``Drive``); u is part of the integrated state
-y = (z_F, v_F, u). A force drive's held force enters Q on its free coordinates (``drives``).
+y = (z_F, v_F, u). A prescribed drive's (``response_time: 0``) coordinates follow its program,
+a function of time (``programs``). A force drive's held force enters Q on its free coordinates
+(``drives``).
 A ``Model`` holds the partition, masses, the hinge assembly, the mechanism's damping matrix C
 (a ``damping:`` block: Rayleigh or modal, built once at rest by
 ``damping_models.damping_matrix``; Q -= C v on all coordinates, dissipating v^T C v) and the
@@ -26,18 +28,19 @@ It never changes after construction, so any number of ``Data`` may share it.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
 
 from flexure_sim.errors import FlexureSimError
-from flexure_sim.engine.solver import step_loop as stepping
+from flexure_sim.engine.solver import derivatives, step_loop as stepping
 from flexure_sim.engine.solver.assembly import Assembly
-from flexure_sim.engine.solver.compression import compression_points, point_displacement
+from flexure_sim.engine.solver.compression import compression_of, compression_points
 from flexure_sim.engine.mechanism.damping_models import damping_matrix
-from flexure_sim.engine.solver.drives import DriveMixin, stacked
-from flexure_sim.engine.mechanism.parts import COORDINATE_NAMES, Drive, Fixed, Mechanism, SineRate
+from flexure_sim.engine.solver.derivatives import Tangent
+from flexure_sim.engine.solver.drives import DriveTable
+from flexure_sim.engine.mechanism.parts import Drive, Mechanism
+from flexure_sim.engine.solver.partition import partition
 
 #: Default fixed step (s): 10 steps per millisecond.
 DEFAULT_STEP = 1e-4
@@ -47,70 +50,7 @@ class SolverError(FlexureSimError, RuntimeError):
     """The solver could not produce a finite answer (names the cause)."""
 
 
-@dataclass
-class Partition:
-    """
-    Free and prescribed coordinate indices.
-
-    Per prescribed coordinate dz_P/du (the drive axis component) of the single displacement
-    drive (zeros with none or several); the sine-rate constraints as (index into prescribed,
-    constraint); ``D``: dz_P/du per displacement drive (columns, ``Model.displacement_index``
-    order).
-    """
-
-    free: np.ndarray
-    prescribed: np.ndarray
-    du: np.ndarray
-    timed: list = field(default_factory=list)
-    D: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-
-
-def partition(mech: Mechanism) -> Partition:
-    """Split the 3 n_bodies coordinates of ``mech`` by its constraints."""
-    prescribed: set[int] = set()
-    timed = []
-    columns = []
-    for c in mech.constraints:
-        i = mech.body_index(c.body)
-        if isinstance(c, Fixed):
-            prescribed.update(3 * i + k for k in range(3))
-        elif isinstance(c, Drive) and c.kind == "displacement" and stacked(c):
-            if c.coordinate is None:  # the axis coordinate free (the stack pulls), rest held
-                prescribed.update(3 * i + k for k in range(3) if k != _axis_coordinate(c))
-        elif isinstance(c, Drive) and c.kind == "displacement":
-            if c.coordinate is None:
-                prescribed.update(3 * i + k for k in range(3))  # along the axis, rest held
-            else:
-                prescribed.add(3 * i + COORDINATE_NAMES.index(c.coordinate))
-            columns.append(c.direction(mech))
-        elif isinstance(c, SineRate):
-            prescribed.add(3 * i + COORDINATE_NAMES.index(c.coordinate))
-            timed.append((3 * i + COORDINATE_NAMES.index(c.coordinate), c))
-    P = np.array(sorted(prescribed), dtype=int)
-    F = np.array([k for k in range(3 * len(mech.bodies)) if k not in prescribed], dtype=int)
-    pos = {k: j for j, k in enumerate(P)}
-    D = np.array(columns, dtype=float).reshape(len(columns), -1)[:, P].T if columns else (
-        np.zeros((len(P), 0)))
-    du = D[:, 0].copy() if D.shape[1] == 1 else np.zeros(len(P))
-    return Partition(F, P, du, [(pos[k], c) for k, c in timed], D)
-
-
-def _axis_coordinate(drive: Drive) -> int:
-    """
-    Return the coordinate (0: x, 1: y) a stack drive's axis runs along.
-
-    A finite stack frees its body along the axis and holds the other coordinates as the rigid
-    drive does, so the axis must be a coordinate axis (else ValueError naming the drive).
-    """
-    ax = np.abs(np.asarray(drive.axis, dtype=float))
-    for k in (0, 1):
-        if ax[k] == 1.0 and ax[1 - k] == 0.0:
-            return k
-    raise ValueError(f"drive {drive.name!r}: an actuator with a finite stack stiffness needs an "
-                     f"axis along x or y (or a coordinate), got axis {tuple(drive.axis)}")
-
-
-class Model(DriveMixin):
+class Model:
     """
     The constants of a mechanism prepared for stepping with fixed step ``dt`` (s).
 
@@ -147,25 +87,6 @@ class Model(DriveMixin):
         self.dt = float(dt)
         self.relinearize_tol = relinearize_tol
         self.energy = bool(energy)
-        #: Every drive (constraint order), their names and directions e (rows; the input
-        #: of drive d is e_d . (z - z0)), the displacement and force drives' indices.
-        self.drives: tuple[Drive, ...] = mechanism.drives
-        self.drive_names = tuple(d.name for d in self.drives)
-        self.drive_directions = np.array([d.direction(mechanism) for d in self.drives]
-                                         ).reshape(len(self.drives), 3 * len(mechanism.bodies))
-        self.displacement_index = np.array(
-            [k for k, d in enumerate(self.drives) if d.kind == "displacement" and not stacked(d)],
-            dtype=int)
-        #: The stack drives (a piezo actuator of finite stiffness k_s: ``drives.stacked``).
-        self.stack_index = np.array([k for k, d in enumerate(self.drives) if stacked(d)],
-                                    dtype=int)
-        self.force_index = np.array(
-            [k for k, d in enumerate(self.drives) if d.kind == "force"], dtype=int)
-        #: The single drive of a mechanism with one displacement drive and no other (the
-        #: scalar interfaces: linear model, stroke limit), else None.
-        self.drive: Optional[Drive] = (
-            self.drives[0] if len(self.drives) == 1 and len(self.displacement_index) == 1
-            else None)
         nb = len(mechanism.bodies)
         self.mass = np.array([[b.mass, b.mass, b.inertia]
                              for b in mechanism.bodies], dtype=float).ravel()
@@ -179,8 +100,19 @@ class Model(DriveMixin):
             rest = self.assembly.forces(self.z0, np.zeros_like(self.z0), jacobian=True)
             self.damping = damping_matrix(mechanism.damping, self.mass, -rest.dQ_dz,
                                           self.part.free)
-        self._drive_constants()
+        #: Every drive, by kind, and the kernel's drive constants (``drives.DriveTable``).
+        self.drives = DriveTable(mechanism, self.part)
+        self._check_lags()
+        #: The single drive of a mechanism with one displacement drive and no other (the
+        #: scalar interfaces: linear model, stroke limit), else None.
+        self.drive: Optional[Drive] = (
+            self.drives[0] if len(self.drives) == 1 and len(self.drives.displacement) == 1
+            else None)
         self.motion = self._motion_arrays()
+        #: The prescribed coordinates (indices into ``part.prescribed``) that the prescribed
+        #: drives' programs move: timed like the sine rates in the energy bookkeeping.
+        self.program_index = np.flatnonzero(np.any(self.drives.D_prescribed != 0.0, axis=1)
+                                            ).astype(np.int64)
         self.compression = compression_points(mechanism)
         self.length_scale = max(
             1e-3, float(np.ptp(self.z0.reshape(nb, 3)[:, :2]))) if nb > 1 else 1.0
@@ -193,6 +125,26 @@ class Model(DriveMixin):
         self.output_matrix = np.array([o.direction(mechanism) for o in self.outputs]
                                       ).reshape(len(self.outputs), 3 * nb)
 
+    #: A lag shorter than this fraction of the step is refused (``_check_lags``).
+    shortest_lag = 1e-5
+
+    def _check_lags(self) -> None:
+        """
+        Refuse a lag far shorter than the step, naming the drive and what to give instead.
+
+        Below ``shortest_lag`` dt the lag ends within the step to e^-100000 and the step's
+        matrices (e^{-h/tau}, (A - I/tau)^-1) no longer hold it in floating point; its limit is
+        a prescribed displacement (``response_time: 0``). Longer lags, down to that bound, step
+        at any dt (``integrator.step`` re-linearizes where the lag has settled).
+        """
+        for k, tau in zip(self.drives.lagged, self.drives.tau):
+            if tau < self.shortest_lag * self.dt:
+                raise ValueError(
+                    f"drive {self.drives.names[k]!r}: response_time {tau:g} s is below "
+                    f"{self.shortest_lag:g} of the step ({self.dt:g} s), too short a lag to "
+                    "step; give response_time: 0 (the displacement then follows its command "
+                    "exactly, a step rising over one engine step) or a smaller step")
+
     @property
     def compiled(self) -> bool:
         """Whether stepping runs the compiled kernel (every law quadratic)."""
@@ -202,43 +154,53 @@ class Model(DriveMixin):
         """Arguments of stepping.prescribed_motion after (t, u, command)."""
         part = self.part
         sines = [c for _, c in part.timed]
+        d = self.drives
         return (
-            self.tau,
+            d.tau,
             self.z0[part.prescribed].copy(),
-            np.ascontiguousarray(part.D, dtype=float).reshape(len(part.prescribed),
-                                                              self.n_actuators),
+            np.ascontiguousarray(d.lag_rows.T, dtype=float).reshape(len(part.prescribed),
+                                                                    d.n_lags),
             np.array([j for j, _ in part.timed], dtype=np.int64),
             np.array([c.amplitude for c in sines], dtype=float),
             np.array([2.0 * np.pi * c.frequency for c in sines], dtype=float),
             np.array([c.phase for c in sines], dtype=float),
+            d.D_prescribed,
+            d.first_program,
         )
 
     def _iteration_atol(self) -> np.ndarray:
         free = self.part.free
         per_coord = np.where(free % 3 == 2, 1e-12, 1e-12 * self.length_scale)
-        return np.concatenate([per_coord, per_coord / self.dt, 1e-12 * self.stroke_span])
+        return np.concatenate([per_coord, per_coord / self.dt, 1e-12 * self.drives.stroke_span])
 
     def _kernel_args(self) -> tuple:
-        a = self.assembly
+        d = self.drives
         part = self.part
-        tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase = self.motion
+        tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase, Dp, first_program = self.motion
         damping = self.damping if self.damping is not None else np.zeros((0, 0))
         return (part.free.astype(np.int64), part.prescribed.astype(np.int64), self.mass, zP0, D,
-                tau, sine_index, sine_amp, sine_w, sine_phase, self.force_dir, self.force_z0,
-                self.stack_dir, self.stack_z0, self.stack_k, a._ia, a._ib, a._ca, a._cb,
-                a.phia, a.phib, a._kind, a._W, a._C,
-                np.ascontiguousarray(damping))
+                tau, sine_index, sine_amp, sine_w, sine_phase, Dp, first_program,
+                self.program_index, d.force_dir, d.force_z0, d.stack_dir, d.stack_z0, d.stack_k,
+                *self.assembly.kernel_arrays(), np.ascontiguousarray(damping))
 
     # ------------------------------------------------------------- coordinates
-    def prescribed(self, t: float, u, command):
+    def prescribed(self, t: float, u: np.ndarray, command: np.ndarray):
         """
         Return z_P, v_P, a_P: prescribed coordinates, their rates and accelerations.
 
-        ``u``: a state's u (``actuator_u``); ``command``: a number or the actuator-order vector
-        (``kernel_command``).
+        ``u``: the actuator outputs (a state's u); ``command``: the kernel's command vector
+        (``DriveTable.kernel_command``).
         """
-        return stepping.prescribed_motion(t, self.actuator_u(u), self.kernel_command(command),
-                                          *self.motion)
+        return stepping.prescribed_motion(t, u, self._checked(command), *self.motion)
+
+    def _checked(self, command) -> np.ndarray:
+        """Return ``command`` if it is a kernel command vector; TypeError naming it otherwise."""
+        width = self.drives.kernel_width
+        if not (isinstance(command, np.ndarray) and command.shape == (width,)
+                and command.dtype == np.float64):
+            raise TypeError(f"command: expected the kernel's command vector, a float array of "
+                            f"{width} (DriveTable.kernel_command), got {command!r}")
+        return command
 
     def full(self, zF, vF, t, u, command):
         """All coordinates z, velocities v (root frame) and a_P from the free ones."""
@@ -253,13 +215,13 @@ class Model(DriveMixin):
     def pack(self, state) -> np.ndarray:
         """Return y = (z_F, v_F, u) of a state (one u per displacement drive)."""
         part = self.part
-        return np.concatenate([state.z[part.free], state.v[part.free],
-                               self.actuator_u(state.u)])
+        self.drives.check_state(state.u, state.command)
+        return np.concatenate([state.z[part.free], state.v[part.free], state.u])
 
-    def unpack(self, y: np.ndarray, t: float, command):
-        """(z, v, u) of y at time t under ``command`` (u: the actuator outputs, a vector)."""
+    def unpack(self, y: np.ndarray, t: float, command: np.ndarray):
+        """(z, v, u) of y at time t under the kernel ``command`` (u: the actuator outputs)."""
         nF = len(self.part.free)
-        u = y[2 * nF:2 * nF + self.n_actuators].copy()
+        u = y[2 * nF:2 * nF + self.drives.n_lags].copy()
         z, v, _ = self.full(y[:nF], y[nF:2 * nF], t, u, command)
         return z, v, u
 
@@ -286,84 +248,78 @@ class Model(DriveMixin):
         """Return dQ/dv of all forces from the hinges' dQ/dv: minus C (``damping``) if given."""
         return dQ_dv if self.damping is None else dQ_dv - self.damping
 
-    def rhs(self, y: np.ndarray, t: float, command):
+    def rhs(self, y: np.ndarray, t: float, command: np.ndarray):
         """
         Return F(y, t) and the energy rates (``stepping.energy_rates``).
 
-        ``command``: a number or the actuator-order vector (``kernel_command``).
+        ``command``: the kernel's command vector (``DriveTable.kernel_command``).
         """
-        command = self.kernel_command(command)
         if self.compiled:
-            return stepping.kernel_rhs(y, t, command, self.kernel_args)
+            return stepping.kernel_rhs(y, t, self._checked(command), self.kernel_args)
         return self.rhs_python(y, t, command)
 
     def rhs_python(self, y: np.ndarray, t: float, command, _args=None):
         """F(y, t) and the energy rates through Assembly (any hinge law)."""
         part = self.part
-        command = self.kernel_command(command)
-        nF, nd = len(part.free), self.n_actuators
+        d = self.drives
+        nF, nd = len(part.free), d.n_lags
         u = y[2 * nF:2 * nF + nd]
         z, v, aP = self.full(y[:nF], y[nF:2 * nF], t, u, command)
         Q, potential, dissipation = self.generalized_forces(z, v)
-        applied, springs = stepping.applied_forces(Q, z, command, nd, self.force_dir,
-                                                   self.force_z0, self.stack_dir, self.stack_z0,
-                                                   self.stack_k)
+        applied, springs = stepping.applied_forces(Q, z, command, nd, d.force_dir, d.force_z0,
+                                                   d.stack_dir, d.stack_z0, d.stack_k)
         potential += springs
         F = np.empty_like(y)
         F[:nF] = y[nF:2 * nF]
         F[nF:2 * nF] = Q[part.free] / self.mass_free
-        F[2 * nF:] = (command[:nd] - u) / self.tau
-        aux = np.empty(stepping.AUX_LOAD + nd)
+        F[2 * nF:] = (command[:nd] - u) / d.tau
+        aux = np.empty(stepping.AUX_LOAD + nd + 2 * len(self.program_index))
         return F, stepping.energy_rates(aux, Q, v, potential, dissipation, applied,
                                         part.prescribed, self.mass, self.motion[2],
-                                        self.motion[3], aP)
+                                        self.motion[3], self.program_index, aP)
 
-    def jacobian(self, y: np.ndarray, t: float, command, load_gradient: bool = False,
-                 damping: bool = False):
+    def jacobian(self, y: np.ndarray, t: float, command) -> np.ndarray:
         """
-        Exact A = dF/dy for y = (z_F, v_F, u).
+        Return the exact A = dF/dy for y = (z_F, v_F, u) (``derivatives.jacobian_parts``).
 
-        Rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v), du_d/dt = (command_d - u_d)/tau_d, with z_P,
-        v_P depending on each u_d through D_d (the force drives' held forces do not depend on y;
-        the stack springs add -k_s e e^T to dQ/dz);
-        dQ/dv includes -C (``velocity_jacobian``), also through v_P. With ``load_gradient`` also
-        G (rows g_d = dq_d/dy) of the drive loads q_d = D_d^T Q_P: (A, G); with ``damping`` also
-        the damping matrix -dQ/dv over all coordinates (1/2 the Hessian of the dissipated power
-        in the velocities) and dQ_P/dy: (A, G, C, dQ_P/dy).
+        Rows dz_F/dt = v_F, M_F dv_F/dt = Q_F(z, v), du_d/dt = (command_d - u_d)/tau_d.
         """
-        part = self.part
-        nF = len(part.free)
-        z, v, _ = self.unpack(y, t, command)
-        hf = self.assembly.forces(z, v, jacobian=True)
-        mF = self.mass_free
-        m = len(y)
-        A = np.zeros((m, m))
-        A[:nF, nF:2 * nF] = np.eye(nF)
-        Kzz, Kvv = hf.dQ_dz, self.velocity_jacobian(hf.dQ_dv)
-        if self.stack_K is not None:  # the stack springs: dQ/dz = -k_s e e^T
-            Kzz = Kzz - self.stack_K
-        FF = np.ix_(part.free, part.free)
-        A[nF:2 * nF, :nF] = Kzz[FF] / mF[:, None]
-        A[nF:2 * nF, nF:2 * nF] = Kvv[FF] / mF[:, None]
-        G = np.zeros((self.n_actuators, m))
-        FP = np.ix_(part.free, part.prescribed)
-        PF, PP = np.ix_(part.prescribed, part.free), np.ix_(part.prescribed, part.prescribed)
-        for k, (dk, tau) in enumerate(zip(self.D_rows, self.tau)):
-            A[nF:2 * nF, 2 * nF + k] = (Kzz[FP] @ dk - Kvv[FP] @ dk / tau) / mF
-            A[2 * nF + k, 2 * nF + k] = -1.0 / tau
-            G[k, :nF] = dk @ Kzz[PF]
-            G[k, nF:2 * nF] = dk @ Kvv[PF]
-            for j, (dj, tau_j) in enumerate(zip(self.D_rows, self.tau)):
-                G[k, 2 * nF + j] = dk @ (Kzz[PP] @ dj - Kvv[PP] @ dj / tau_j)
-        if damping:
-            rows = np.zeros((len(part.prescribed), m))  # dQ_P/dy
-            rows[:, :nF], rows[:, nF:2 * nF] = Kzz[PF], Kvv[PF]
-            for k, (dk, tau) in enumerate(zip(self.D_rows, self.tau)):
-                rows[:, 2 * nF + k] = Kzz[PP] @ dk - Kvv[PP] @ dk / tau
-            return A, G, -Kvv, rows
-        return (A, G) if load_gradient else A
+        return derivatives.jacobian_parts(self, y, t, command).A
+
+    def tangent(self, y: np.ndarray, t: float, command) -> Tangent:
+        """
+        Return A (``jacobian``) and the derivatives the step's energy integrals need.
+
+        ``derivatives.Tangent``: the drive loads' gradient, the damping matrix, dQ_P/dy.
+        """
+        return derivatives.tangent(self, y, t, command)
 
     # --------------------------------------------------------------- measures
+    def constraint_forces(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
+                          Q: Optional[np.ndarray] = None) -> np.ndarray:
+        """
+        Return the constraint forces lambda_P = M_P a_P - Q_P on the prescribed coordinates.
+
+        The Lagrange multipliers of eq. 6.4: what the constraints apply to the bodies (N, N m).
+        ``Q``: the generalized forces at (z, v) (``generalized_forces``; evaluated if None).
+        """
+        if Q is None:
+            Q = self.generalized_forces(z, v)[0]
+        P = self.part.prescribed
+        return self.mass[P] * aP - Q[P]
+
+    def drive_forces(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
+                     Q: Optional[np.ndarray] = None, inputs=None) -> np.ndarray:
+        """
+        Return the force each drive's actuator applies along its direction (``DriveTable.forces``).
+
+        A displacement drive's share D_d^T lambda_P of the constraint forces
+        (``constraint_forces``), a force drive's commanded force (its entry of ``inputs``).
+        """
+        reactions = (self.constraint_forces(z, v, aP, Q) if len(self.drives.displacement)
+                     else np.zeros(len(self.part.prescribed)))
+        return self.drives.forces(self.part.D, reactions, inputs)
+
     def output_displacement(self, z: np.ndarray) -> Optional[float]:
         """Return the (first) output's displacement from rest (m, or rad on theta), or None."""
         if not self.outputs:
@@ -384,5 +340,4 @@ class Model(DriveMixin):
         if self.compression is None:
             return None
         (i_drive, c_drive), (i_far, c_far), axis = self.compression
-        return float((point_displacement(i_drive, c_drive, z, self.z0)
-                      - point_displacement(i_far, c_far, z, self.z0)) @ axis)
+        return float(compression_of(z, self.z0, i_drive, *c_drive, i_far, *c_far, *axis))

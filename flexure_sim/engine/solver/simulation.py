@@ -18,6 +18,7 @@ reset); each steps independently and exactly as a simulation built from the mech
 """
 from __future__ import annotations
 
+import math
 from typing import Optional, Union
 
 import numpy as np
@@ -27,12 +28,13 @@ from flexure_sim.engine.solver.compression import stiffness_centre
 from flexure_sim.engine.solver.state import Data, State, StepStats
 from flexure_sim.engine.mechanism.parts import Mechanism
 from flexure_sim.engine.solver.model import DEFAULT_STEP, Model, SolverError
+from flexure_sim.engine.solver.programs import Program
 from flexure_sim.engine.solver.snapshot import Snapshot, snapshot
 from flexure_sim.engine.solver.statics import StaticResult, StaticSweep
 
 __all__ = [
-    "DEFAULT_STEP", "Model", "Simulation", "Snapshot", "SolverError", "State", "StaticResult",
-    "StaticSweep", "StepStats", "stiffness_centre",
+    "DEFAULT_STEP", "Model", "Program", "Simulation", "Snapshot", "SolverError", "State",
+    "StaticResult", "StaticSweep", "StepStats", "stiffness_centre",
 ]
 
 
@@ -56,7 +58,7 @@ class Simulation:
             self.model = source
         else:
             self.model = Model(source, dt, relinearize_tol, True if energy is None else energy)
-        self.data = Data(self.model.z0)
+        self.data = Data(self.model.z0, self.model.drives.n_lags, len(self.model.drives))
 
     # The model's constants, as attributes of the simulation (read-only views).
     mechanism = property(lambda self: self.model.mechanism)
@@ -89,7 +91,7 @@ class Simulation:
 
     def initial_state(self) -> State:
         """All bodies at their unstressed poses, at rest, actuator at zero, t = 0."""
-        return State(0.0, self.model.z0.copy(), np.zeros_like(self.model.z0))
+        return self.data.initial_state()
 
     def reset(self) -> None:
         """Back to the initial state; statistics restart."""
@@ -111,16 +113,76 @@ class Simulation:
         a force drive's its force (N, N m on theta); a drive with a piezo ``actuator:`` block
         takes its actuator's command (V for ``command: voltage``, else the nominal m; the
         engine does not clamp it: ``piezo.command_limits`` gives the stroke in that unit). A
-        number (a single drive), or one value per drive (a sequence in ``model.drive_names``
+        number (a single drive), or one value per drive (a sequence in ``model.drives.names``
         order or a {name: value} mapping); each must be finite (ValueError naming the drive).
-        Held until the next call.
+        Held until the next call; it replaces a drive's program (``set_programs``). A prescribed
+        drive (``response_time: 0``) moves to its target over the next step, linearly (its
+        displacement cannot jump: ``programs.Program.for_prescribed``).
         """
+        s = self.data.state
+        if type(command) is float and self.model.drives.plain and not s.programs:
+            # The common case, quickly: a number for one lagged or force drive (a stepping
+            # node's tick; ``DriveTable.plain``), as ``DriveTable.inputs`` makes it an array.
+            if not math.isfinite(command):
+                raise ValueError(f"drive command must be finite, got {command!r}")
+            s.command = np.array((command,))  # ~0.3 us; np.full ~1 us
+            return
         if np.ndim(command) == 0 and not isinstance(command, dict) and not np.isfinite(command):
             raise ValueError(f"drive command must be finite, got {command!r}")
-        if not self.model.drives:
+        drives = self.model.drives
+        if not drives:
             raise ValueError(f"mechanism {self.model.mechanism.name!r} has no drive")
-        values = self.model.drive_inputs(command)
-        self.data.state.command = float(values[0]) if len(values) == 1 else values
+        values = drives.inputs(command)
+        if not len(drives.prescribed) and not s.programs:
+            s.command = values
+            return
+        now = drives.state_inputs(s.u, s.command, s.programs, s.t)
+        programs = [None] * len(drives)
+        for k in drives.prescribed:
+            if values[k] != now[k]:
+                programs[k] = Program("step", values[k] - now[k], start=s.t,
+                                      initial=now[k]).for_prescribed(self.model.dt)
+        s.command, s.programs = values, tuple(programs) if any(programs) else ()
+
+    def set_programs(self, programs: dict) -> None:
+        """
+        Make drives follow programs of time (``programs.Program``): {drive name: program}.
+
+        A lagged drive's command, or a force drive's force, holds each step the program's value
+        at the step's midpoint; a prescribed drive's displacement follows it exactly (a step
+        rising over one engine step), and must start where the drive is (ValueError otherwise:
+        it cannot jump). None for a drive: it holds its present command. Drives not named keep
+        what they follow. A drive with a piezo actuator takes commands only (ValueError).
+        Times are simulation time (``state.t``).
+        """
+        drives = self.model.drives
+        unknown = sorted(set(programs) - set(drives.names))
+        if unknown:
+            raise ValueError(f"programs: unknown drive {', '.join(unknown)} (drives: "
+                             f"{', '.join(drives.names) or 'none'})")
+        s = self.data.state
+        actuated = {a.drive for a in drives.actuation}
+        now = drives.state_inputs(s.u, s.command, s.programs, s.t)
+        command = np.array(s.command, dtype=float)
+        out = list(s.programs) if s.programs else [None] * len(drives)
+        for name, program in programs.items():
+            k = drives.names.index(name)
+            if program is not None and k in actuated:
+                raise ValueError(f"drive {name!r} has a piezo actuator: give it a command "
+                                 "(set_command); programs drive the other drives")
+            if program is not None and k in drives.prescribed:
+                program = program.for_prescribed(self.model.dt)
+                start = program.value(s.t)
+                if not np.isclose(start, now[k], rtol=1e-12, atol=1e-15):
+                    raise ValueError(
+                        f"drive {name!r} (response_time 0: a prescribed displacement) is at "
+                        f"{now[k]:g} but its program ({program.describe()}) is at {start:g} at "
+                        f"t = {s.t:g} s: a prescribed displacement cannot jump")
+                command[k] = program.final if program.final is not None else program.initial
+            elif program is None:
+                command[k] = now[k] if k in drives.prescribed else command[k]
+            out[k] = program
+        s.command, s.programs = command, tuple(out) if any(p is not None for p in out) else ()
 
     def static(self, u, t: float = 0.0, tol: float = 1e-13,
                max_iter: int = 50) -> StaticResult:
@@ -136,7 +198,7 @@ class Simulation:
         Return the exact static gain at rest, outputs against drives.
 
         Exact static gain at rest, outputs (rows) against drives (columns)
-        (``statics.static_gain``; names: ``model.output_names``, ``model.drive_names``).
+        (``statics.static_gain``; names: ``model.output_names``, ``model.drives.names``).
         """
         return statics.static_gain(self.model, t)
 

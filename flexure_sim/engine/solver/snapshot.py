@@ -26,7 +26,7 @@ class Snapshot:
     compression: of the compression hinge (``Model.hinge_compression``): along the drive
     axis, at its centre of stiffness, its drive side's displacement minus its far side's (m),
     or None.
-    drive_names, drive_inputs, drive_commands, drive_forces: per drive (``Model.drive_names``
+    drive_names, drive_inputs, drive_commands, drive_forces: per drive (``DriveTable.names``
     order) its input (a displacement drive's actuator output, the prescribed displacement; a
     force drive's commanded force), its command and the force its actuator applies
     (``Model.drive_forces``); drive_positions: each driven body's displacement along its drive's
@@ -39,6 +39,10 @@ class Snapshot:
     for a finite stack, P7, held x_a; the drive force of a rigid one). Its command is in
     drive_commands (V for ``command: voltage``), its applied displacement x_out in drive_positions
     (also its drive_inputs entry for a finite stack). potential_energy includes the stack springs'.
+    drive_wrenches (n_drives, 3): (moment, fx, fy), the full wrench each drive applies to its
+    body (its constraint's reaction in every coordinate it holds, plus an applied force), in the
+    driven body's frame, moment about its origin (``DriveTable.wrenches``); along the drive's
+    axis it is drive_forces.
     """
 
     t: float
@@ -64,6 +68,7 @@ class Snapshot:
     drive_voltages: np.ndarray = field(default_factory=lambda: np.zeros(0))
     drive_free_strokes: np.ndarray = field(default_factory=lambda: np.zeros(0))
     drive_stack_forces: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    drive_wrenches: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
@@ -75,18 +80,22 @@ def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
     """
     Q, deflections, wrenches, energy, _ = model.assembly.report(s.z, s.v)
     Q = model.add_damping(Q, s.v)[0]  # the drive forces see the damping matrix too
-    command = (actuation.kernel_command(model, s) if model.actuation
-               else model.actuator_command(s.command))
+    drives = model.drives
+    drives.check_state(s.u, s.command)
+    # The prescribed motion the state was reached under (its last step's program pieces).
+    command = (actuation.kernel_command(model, s) if drives.actuation
+               else drives.kernel_command(s.command, s.programs, s.t - 0.5 * model.dt))
     _, _, aP = model.prescribed(s.t, s.u, command)
     if inputs is None:
-        inputs = model.state_inputs(s.u, s.command)
+        inputs = drives.state_inputs(s.u, s.command, s.programs, s.t)
     else:
         aP = np.zeros_like(aP)  # a static state: at rest
     inputs = np.array(inputs, dtype=float)
-    commands = np.broadcast_to(np.asarray(s.command, dtype=float), (len(model.drives),))
-    forces = model.drive_forces(s.z, s.v, aP, Q, inputs)
+    commands = s.command
+    reactions = model.constraint_forces(s.z, s.v, aP, Q)
+    forces = drives.forces(model.part.D, reactions, inputs)
     piezo = actuation.report(model, s, forces, inputs)  # fills the stack drives' entries
-    positions = model.drive_positions(s.z)
+    positions = drives.positions(s.z)
     nb = len(model.mechanism.bodies)
     return Snapshot(
         t=s.t,
@@ -103,11 +112,12 @@ def snapshot(model: Model, s: State, inputs=None) -> Snapshot:
         potential_energy=energy + piezo.pop("stack_energy"),
         dissipated=s.dissipated,
         drive_work=s.drive_work,
-        drive_names=model.drive_names,
+        drive_names=drives.names,
         drive_inputs=np.asarray(inputs, dtype=float).copy(),
         drive_forces=forces,
         drive_positions=positions,
         outputs=dict(zip(model.output_names, model.output_values(s.z).tolist())),
         drive_commands=commands.copy(),
+        drive_wrenches=drives.wrenches(reactions, forces, s.z),
         **piezo,
     )

@@ -3,7 +3,7 @@ The spatial engine's compiled stepping: F(y, t) of a spatial mechanism, and the 
 
 F(y, t) for y = (z_F, w_F, u) (``spatial_model.SpatialModel``): the prescribed coordinates and
 their
-rates from the drives (``step_loop.prescribed_motion``, the planar engine's), the generalized
+rates from the drives (``motion.prescribed_motion``, the planar engine's), the generalized
 forces and coordinate rates of ``spatial_chain.terms``, and
 
     dz_F/dt = (dz/dt)_F,    dw_F/dt = (M^-1 Q)_F,    du/dt = (command - u) / tau,
@@ -24,6 +24,7 @@ from flexure_sim.engine import jit
 from flexure_sim.engine.jit import njit
 from flexure_sim.engine.solver import spatial_chain as chain
 from flexure_sim.engine.solver import step_loop as stepping
+from flexure_sim.engine.solver.motion import prescribed_motion
 from flexure_sim.engine.solver.step_energy import AUX_LOAD
 
 
@@ -36,17 +37,18 @@ def spatial_rhs(y, t, command, args):
     (``step_energy.NO_ENERGY``), so the chain runs without its reports (``spatial_chain.terms``).
 
     ``args`` (``SpatialModel.kernel_args``) = (free, prescribed, zP0, D, tau, sine_index,
-    sine_amp, sine_w, sine_phase, first_force, constants, inverse_mass, inverse_inertia): the
+    sine_amp, sine_w, sine_phase, Dp, first_program, first_force, constants, inverse_mass,
+    inverse_inertia): the
     partition and the drives as the planar kernel's, ``spatial_chain.terms``'s constants, 1/m
     per body and I_b^-1 (nb, 9).
     """
-    (free, prescribed, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, first_force,
-     constants, inverse_mass, inverse_inertia) = args
+    (free, prescribed, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, Dp, first_program,
+     first_force, constants, inverse_mass, inverse_inertia) = args
     nF = free.shape[0]
     nd = tau.shape[0]
     u = y[2 * nF:2 * nF + nd]
-    zP, vP, aP = stepping.prescribed_motion(t, u, command, tau, zP0, D, sine_index, sine_amp,
-                                            sine_w, sine_phase)
+    zP, vP, aP = prescribed_motion(t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w,
+                                   sine_phase, Dp, first_program)
     nb = inverse_mass.shape[0]
     N = 6 * nb
     z = np.empty(N)

@@ -26,9 +26,10 @@ from flexure_sim.engine.mechanism.spatial_loader import drive_coordinates
 from flexure_sim.engine.mechanism.spatial_parts import Drive, Mechanism
 from flexure_sim.engine.solver import spatial_chain as chain
 from flexure_sim.engine.solver import spatial_kernels as kernels
-from flexure_sim.engine.solver.drives import DriveMixin
-from flexure_sim.engine.solver.model import DEFAULT_STEP, Partition, SolverError
-from flexure_sim.engine.solver.step_loop import prescribed_motion
+from flexure_sim.engine.solver.drives import DriveTable
+from flexure_sim.engine.solver.model import DEFAULT_STEP, SolverError
+from flexure_sim.engine.solver.motion import prescribed_motion
+from flexure_sim.engine.solver.partition import Partition
 
 
 def partition(mech: Mechanism) -> Partition:
@@ -49,11 +50,12 @@ def partition(mech: Mechanism) -> Partition:
     return Partition(F, P, du, [], D)
 
 
-class SpatialModel(DriveMixin):
+class SpatialModel:
     """
     The constants of a spatial mechanism prepared for stepping with fixed step ``dt`` (s).
 
-    Same facade as ``solver.model.Model``: drives (``DriveMixin``), ``pack``/``unpack``/
+    Same facade as ``solver.model.Model``: drives (a ``DriveTable`` of 6 coordinates per body,
+    and the per-drive methods below that read it), ``pack``/``unpack``/
     ``full``, ``rhs``, ``jacobian``, ``output_values``; ``relinearize_tol`` as there. Energy
     bookkeeping of the steps is off in 3-D (``energy`` False: ``dissipated`` and
     ``drive_work`` are NaN); each hinge's energy and power are reported (``snapshot``).
@@ -77,17 +79,6 @@ class SpatialModel(DriveMixin):
         self.relinearize_tol = relinearize_tol
         nb = len(mechanism.bodies)
         self.n_coordinates = 6 * nb
-        self.drives = mechanism.drives
-        self.drive_names = tuple(d.name for d in self.drives)
-        self.drive_directions = np.array([d.direction(mechanism) for d in self.drives]
-                                         ).reshape(len(self.drives), 6 * nb)
-        self.displacement_index = np.array(
-            [k for k, d in enumerate(self.drives) if d.kind == "displacement"], dtype=int)
-        self.force_index = np.array(
-            [k for k, d in enumerate(self.drives) if d.kind == "force"], dtype=int)
-        self.stack_index = np.zeros(0, dtype=int)
-        self.drive = (self.drives[0] if len(self.drives) == 1
-                      and len(self.displacement_index) == 1 else None)
         masses = np.array([b.mass for b in mechanism.bodies], dtype=float)
         self.inertia = np.array([b.inertia for b in mechanism.bodies], dtype=float)
         #: Diagonal of M (the inertia tensors' diagonals on the rotations: D_d^T M_P D_d needs
@@ -96,11 +87,23 @@ class SpatialModel(DriveMixin):
                                     for m, I in zip(masses, self.inertia)])
         self.z0 = np.concatenate([[*b.position, 0.0, 0.0, 0.0] for b in mechanism.bodies])
         self.part = partition(mechanism)
-        self._drive_constants()
+        #: Every drive (``drives.DriveTable``; no piezo actuator, no prescribed displacement
+        #: in 3-D: every displacement drive is a lag of its command).
+        self.drives = DriveTable(mechanism, self.part, self.z0)
+        d = self.drives
+        if len(d.prescribed):
+            raise ValueError(f"drive {d.names[d.prescribed[0]]!r}: response_time 0 (a prescribed "
+                             "displacement) is not available in 3-D yet; give a lag")
+        self.drive_names, self.drive_directions = d.names, d.directions
+        self.displacement_index, self.force_index, self.stack_index = (
+            d.displacement, d.force, d.stack)
+        self.tau, self.stroke_span, self.D_rows = d.tau, d.stroke_span, d.lag_rows
+        self.drive = (d[0] if len(d) == 1 and len(d.displacement) == 1 else None)
         self.motion = (self.tau, self.z0[self.part.prescribed].copy(),
                        np.ascontiguousarray(self.part.D, dtype=float).reshape(
                            len(self.part.prescribed), self.n_actuators),
-                       np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0), np.zeros(0))
+                       np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0), np.zeros(0),
+                       d.D_prescribed, d.first_program)
         self.constants = self._constants()
         self.kernel_args = (self.part.free.astype(np.int64),
                             self.part.prescribed.astype(np.int64), *self.motion[1:3],
@@ -114,6 +117,60 @@ class SpatialModel(DriveMixin):
         self.output_names = tuple(o.name for o in self.outputs)
         self.output_matrix = np.array([o.direction(mechanism) for o in self.outputs]
                                       ).reshape(len(self.outputs), 6 * nb)
+
+    # ----------------------------------------------------------------- drives
+    @property
+    def n_actuators(self) -> int:
+        """Return the number of displacement drives (actuator states u)."""
+        return self.drives.n_lags
+
+    def actuator_command(self, command) -> np.ndarray:
+        """Return the kernel's command vector from a state's command (a number: every drive's)."""
+        values = np.broadcast_to(np.asarray(command, dtype=float), (len(self.drives),))
+        return self.drives.kernel_command(values)
+
+    def kernel_command(self, command) -> np.ndarray:
+        """Return ``command`` as the kernel takes it: an array as it is, a number every drive's."""
+        if isinstance(command, np.ndarray):
+            return command
+        return np.full(len(self.drives), float(command))
+
+    def actuator_u(self, u) -> np.ndarray:
+        """Return one actuator output per displacement drive from a state's u (or a number)."""
+        return np.broadcast_to(np.asarray(u, dtype=float), (self.n_actuators,)).astype(float)
+
+    def state_u(self, u: np.ndarray) -> np.ndarray:
+        """Return a state's u from the actuator outputs (``state.State``: a 1-D array)."""
+        return np.array(u, dtype=float).reshape(self.n_actuators)
+
+    def state_inputs(self, u, command) -> np.ndarray:
+        """Return each drive's input in a stepped state (``DriveTable.state_inputs``)."""
+        commands = np.broadcast_to(np.asarray(command, dtype=float), (len(self.drives),))
+        return self.drives.state_inputs(self.actuator_u(u), commands)
+
+    def drive_inputs(self, value) -> np.ndarray:
+        """Return one input per drive from a number, a sequence or a mapping (``inputs``)."""
+        return self.drives.inputs(value)
+
+    def drive_forces(self, z: np.ndarray, v: np.ndarray, aP: np.ndarray,
+                     Q: Optional[np.ndarray] = None, inputs=None) -> np.ndarray:
+        """
+        Return the force each drive's actuator applies (``DriveTable.forces``).
+
+        A displacement drive's share D_d^T lambda_P of the constraint forces
+        lambda_P = M_P a_P - Q_P (eq. 6.4), a force drive's commanded force.
+        """
+        P = self.part.prescribed
+        reactions = np.zeros(len(P))
+        if len(self.drives.displacement):
+            if Q is None:
+                Q = self.generalized_forces(z, v)[0]
+            reactions = self.mass[P] * aP - Q[P]
+        return self.drives.forces(self.part.D, reactions, inputs)
+
+    def drive_positions(self, z: np.ndarray) -> np.ndarray:
+        """Return each driven body's displacement along its drive's direction."""
+        return self.drives.positions(z)
 
     @property
     def first_force(self) -> int:

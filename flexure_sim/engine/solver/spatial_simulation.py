@@ -92,7 +92,7 @@ class SpatialSimulation:
             self.model = source
         else:
             self.model = SpatialModel(source, dt, relinearize_tol)
-        self.data = Data(self.model.z0)
+        self.data = Data(self.model.z0, self.model.n_actuators, len(self.model.drives))
 
     mechanism = property(lambda self: self.model.mechanism)
     dt = property(lambda self: self.model.dt)
@@ -124,8 +124,7 @@ class SpatialSimulation:
         """Set the drives' targets: a number (single drive), a sequence or a {name: value}."""
         if not self.model.drives:
             raise ValueError(f"mechanism {self.model.mechanism.name!r} has no drive")
-        values = self.model.drive_inputs(command)
-        self.data.state.command = float(values[0]) if len(values) == 1 else values
+        self.data.state.command = self.model.drive_inputs(command)
 
     def snapshot(self, state: Optional[State] = None) -> SpatialSnapshot:
         """Everything the simulation reports, at ``state`` (default: the current state)."""
@@ -140,7 +139,7 @@ class SpatialSimulation:
         st = self.static(u)
         state = State(0.0, st.z, np.zeros_like(st.z),
                       self.model.state_u(st.inputs[self.model.displacement_index]),
-                      float(st.inputs[0]) if len(st.inputs) == 1 else st.inputs.copy())
+                      st.inputs.copy())
         return snapshot(self.model, state, st.inputs)
 
     def static_gain(self) -> np.ndarray:

@@ -7,8 +7,8 @@ read the model and update the data.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Optional, Union
+from dataclasses import dataclass, field, replace
+from typing import Optional
 
 import numpy as np
 
@@ -19,30 +19,37 @@ class State:
     Simulation state.
 
     z, v: (x, y, theta) and (vx, vy, omega) per body in the root frame (3 n_bodies, body order). u:
-    actuator output along the drive's direction (m, rad on theta); command: the actuators'
-    current targets (m or rad; a force drive's force, N or N m). With a single drive both are
-    numbers (u is 0 for a force drive); with several, u holds one value per displacement drive
-    and command one per drive (``Model.drive_names`` order). Energy bookkeeping since the last
-    reset: dissipated (J) by hinge damping and drive_work (J) done by the drives and the
+    the actuator outputs, one per displacement drive (``DriveTable.lagged`` order), along each
+    drive's direction (m, rad on theta); command: the drives' current targets, one per drive
+    (``DriveTable.names`` order; m or rad, a force drive's force in N or N m). Both are always
+    1-D float arrays (a number given is taken as a one-entry array). Energy bookkeeping since
+    the last reset: dissipated (J) by hinge damping and drive_work (J) done by the drives and the
     prescribed coordinates. actuator: the piezo actuators' states (engine/solver/actuation.py;
     None: at rest, or no actuator); held: their free strokes x_a (m) held over the last step.
+    programs: per drive its ``programs.Program`` or None (one per drive, or () for none): the
+    inputs that follow a function of time (``Simulation.set_programs``).
     """
 
     t: float
     z: np.ndarray
     v: np.ndarray
-    u: Union[float, np.ndarray] = 0.0
-    command: Union[float, np.ndarray] = 0.0
+    u: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    command: np.ndarray = field(default_factory=lambda: np.zeros(0))
     dissipated: float = 0.0
     drive_work: float = 0.0
     actuator: Optional[np.ndarray] = None
     held: Optional[np.ndarray] = None
+    programs: tuple = ()
+
+    def __post_init__(self) -> None:
+        self.u = np.array(self.u, dtype=float, ndmin=1)
+        self.command = np.array(self.command, dtype=float, ndmin=1)
+        if self.u.ndim != 1 or self.command.ndim != 1:
+            raise ValueError(f"State: u and command must be 1-D arrays, got shapes "
+                             f"{self.u.shape} and {self.command.shape}")
 
     def copy(self) -> "State":
-        return replace(self, z=self.z.copy(), v=self.v.copy(), u=np.copy(self.u)
-                       if isinstance(self.u, np.ndarray) else self.u,
-                       command=np.copy(self.command)
-                       if isinstance(self.command, np.ndarray) else self.command,
+        return replace(self, z=self.z.copy(), v=self.v.copy(),
                        actuator=None if self.actuator is None else self.actuator.copy(),
                        held=None if self.held is None else self.held.copy())
 
@@ -81,13 +88,20 @@ class Data:
     ``clock``: (state, origin t, steps since origin), so time stays on the step grid.
     """
 
-    def __init__(self, z0: np.ndarray):
+    def __init__(self, z0: np.ndarray, n_lags: int = 0, n_drives: int = 0):
         self.z0 = np.asarray(z0, dtype=float)
-        self.state = State(0.0, self.z0.copy(), np.zeros_like(self.z0))
+        #: Lengths of a state's u and command (``DriveTable.n_lags`` and its number of drives).
+        self.n_lags, self.n_drives = int(n_lags), int(n_drives)
+        self.state = self.initial_state()
         self.stats = StepStats()
         self.lin: Optional[Linearization] = None
         self.cache: Optional[tuple] = None
         self.clock: Optional[tuple] = None
+
+    def initial_state(self) -> State:
+        """Return the unstressed poses at rest, every actuator output and command 0, t = 0."""
+        return State(0.0, self.z0.copy(), np.zeros_like(self.z0), np.zeros(self.n_lags),
+                     np.zeros(self.n_drives))
 
     def reset(self) -> None:
         """
@@ -95,7 +109,7 @@ class Data:
 
         Statistics and caches restart.
         """
-        self.state = State(0.0, self.z0.copy(), np.zeros_like(self.z0))
+        self.state = self.initial_state()
         self.stats = StepStats()
         self.lin = None
         self.cache = None

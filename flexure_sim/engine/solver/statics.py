@@ -56,16 +56,15 @@ def static(model: Model, u, t: float = 0.0, tol: float = 1e-13,
     (relative to the mechanism's size). Without free coordinates (every body fixed or
     driven) the prescribed pose is the equilibrium: 0 iterations, forces as reported.
     """
-    model.require_rigid("static equilibrium")
-    inputs = model.drive_inputs(u)
+    drives = model.drives
+    drives.require_rigid("static equilibrium")
+    inputs = drives.inputs(u)
     zF, iterations = newton(model, inputs, t, model.z0[model.part.free].copy(), None, tol,
                             max_iter)[:2]
     z = _z_static(model, zF, t, inputs)
     Q = model.assembly.generalized_forces(z, np.zeros_like(z))[0] + _applied(model, inputs)
     residual = float(np.max(np.abs(Q[model.part.free]), initial=0.0))
-    u0 = float(inputs[0]) if len(inputs) else float(u) if np.ndim(u) == 0 else 0.0
-    state = State(t, z, np.zeros_like(z), model.state_u(inputs[model.displacement_index]),
-                  u0 if len(inputs) <= 1 else inputs.copy())
+    state = State(t, z, np.zeros_like(z), inputs[drives.lagged], inputs.copy())
     return StaticResult(snapshot(model, state, inputs), iterations, residual, z)
 
 
@@ -76,7 +75,7 @@ def static_sweep(model: Model, inputs, t: float = 0.0, tol: float = 1e-13) -> St
     Each started from the previous one and reusing the factorised stiffness while Newton keeps
     contracting fast.
     """
-    model.require_rigid("static sweep")
+    model.drives.require_rigid("static sweep")
     inputs = np.asarray(inputs, dtype=float)
     if not np.all(np.isfinite(inputs)):
         raise ValueError("drive inputs must be finite")
@@ -90,7 +89,7 @@ def static_sweep(model: Model, inputs, t: float = 0.0, tol: float = 1e-13) -> St
     lu = None
     total = 0
     for k, u in enumerate(inputs):
-        one = model.drive_inputs(float(u)) if model.drives else np.zeros(0)
+        one = model.drives.inputs(float(u)) if model.drives else np.zeros(0)
         zF, iterations, lu = newton(model, one, t, zF, lu, tol, 50)
         total += iterations
         z = _z_static(model, zF, t, one)
@@ -112,40 +111,45 @@ def _z_static(model: Model, zF: np.ndarray, t: float, inputs: np.ndarray) -> np.
     All coordinates: z_F, and z_P = the held and timed values at t plus D u (the displacement
     drives' inputs).
     """
-    z = model.full(zF, np.zeros(len(zF)), t, 0.0, 0.0)[0]
-    if len(model.displacement_index):
-        z[model.part.prescribed] += model.part.D @ inputs[model.displacement_index]
+    d = model.drives
+    z = model.full(zF, np.zeros(len(zF)), t, np.zeros(d.n_lags), d.kernel_command(
+        np.zeros(len(d))))[0]
+    if len(d.displacement):
+        z[model.part.prescribed] += model.part.D @ inputs[d.displacement]
     return z
 
 
 def _applied(model: Model, inputs: np.ndarray) -> np.ndarray:
     """Generalized forces of the force drives, sum_d e_d f_d (virtual work)."""
-    if not len(model.force_index):
+    d = model.drives
+    if not len(d.force):
         return np.zeros(len(model.z0))
-    return model.drive_directions[model.force_index].T @ inputs[model.force_index]
+    return d.directions[d.force].T @ inputs[d.force]
 
 
 def static_gain(model: Model, t: float = 0.0) -> np.ndarray:
     """
     Return the exact static gain at rest.
 
-    Exact static gain at rest: d(output k)/d(input d) for every output (rows, ``output_names``) and
-    drive (columns, ``drive_names``), from the tangent stiffness K = dQ/dz at the unstressed pose:
-    a displacement drive moves z_P by D_d and the free coordinates by dz_F = -K_FF^-1 K_FP D_d; a
-    force drive applies e_d: dz_F = -K_FF^-1 e_dF (the linearised equilibrium Q_F + E_F f = 0).
+    Exact static gain at rest: d(output k)/d(input d) for every output (rows, ``output_names``)
+    and drive (columns, ``DriveTable.names``), from the tangent stiffness K = dQ/dz at the
+    unstressed pose: a displacement drive moves z_P by D_d and the free coordinates by
+    dz_F = -K_FF^-1 K_FP D_d; a force drive applies e_d: dz_F = -K_FF^-1 e_dF (the linearised
+    equilibrium Q_F + E_F f = 0).
     Output k moves by c_k . dz.
     """
-    model.require_rigid("static gain")
+    d = model.drives
+    d.require_rigid("static gain")
     z = _z_static(model, model.z0[model.part.free].copy(), t, np.zeros(len(model.drives)))
     K = model.assembly.forces(z, np.zeros_like(z), jacobian=True).dQ_dz
     F, P = model.part.free, model.part.prescribed
     dz = np.zeros((len(z), len(model.drives)))
     rhs = np.zeros((len(F), len(model.drives)))
-    if len(model.displacement_index):
-        dz[np.ix_(P, model.displacement_index)] = model.part.D
-        rhs[:, model.displacement_index] = K[np.ix_(F, P)] @ model.part.D
-    if len(model.force_index):
-        rhs[:, model.force_index] = model.drive_directions[model.force_index][:, F].T
+    if len(d.displacement):
+        dz[np.ix_(P, d.displacement)] = model.part.D
+        rhs[:, d.displacement] = K[np.ix_(F, P)] @ model.part.D
+    if len(d.force):
+        rhs[:, d.force] = d.directions[d.force][:, F].T
     if len(F):
         dz[F] = -np.linalg.solve(K[np.ix_(F, F)], rhs)
     return model.output_matrix @ dz

@@ -40,7 +40,14 @@ Psi_k = int_0^h e^{-s/tau} (phi_k-term of w) ds (``weighted_phi``), m_d = D_k^T 
 ``rest`` the trapezoidal rule on what the linear model leaves of q. Timed (sine-rate)
 constraints: their power sum_j v_j (M_j a_j - Q_j) with v_j held at the step's start and
 Q_j = Q_j0 + dQ_j/dy w(s), so its integral takes int_0^h w ds as the dissipation does; the
-rest (the rates' change over the step, the nonlinear part) by the trapezoidal rule.
+rest (the rates' change over the step, the nonlinear part) by the trapezoidal rule. The
+coordinates a prescribed drive's program moves are timed the same way, and in the dissipation
+their velocity rises over the step as b_j + a_j s + c_j s^2 (its rate at the start, its value
+at the end) with the free coordinates it forces (``energy_matrices``): at a stiff damped hinge
+between a prescribed and a free body the power is a small difference of large products of
+their velocities, which a velocity held over the step would spoil. The program's time
+dependence is in the motion's remainder, so a program's motion and energies are second order
+in the step (a lag's are exact in its linear part).
 
 The remainder iteration accepts y_{n+1} one correction beyond the point where F and the
 rates were last evaluated; the rests are taken at the points where the rates were evaluated
@@ -79,8 +86,8 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
     are disjoint, so each drive's work is its own) and adds the force drives' held forces'
     work, the change of their potential ``AUX_APPLIED`` (exact).
     """
-    erows, escal, G, V, Cx, R, SP, B, sines, Trows, T = emats
-    if G.shape[0] == 0:   # NO_ENERGY: the model does not integrate energies
+    erows, escal, G, V, Cx, R, SP, B, sines, Trows, T, Ep = emats
+    if escal.shape[0] == 0:   # NO_ENERGY: the model does not integrate energies
         return 0.0, 0.0
     m = y0.shape[0]
     nx = Cx.shape[0]
@@ -110,12 +117,38 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
         for i in range(B.shape[0]):
             b[i] += B[i, k] * command[k]
     # Timed constraints: power sum_j v_j lambda_j, lambda_j = M_j a_j - Q_j(y) following the
-    # linear model lambda_j0 - dQ_j/dy w(s), v_j held at v_j(t0); the rest trapezoidal.
+    # linear model lambda_j0 - dQ_j/dy w(s), v_j held at v_j(t0); the rest trapezoidal. A sine
+    # rate's v_j(t0) from its formula, a program coordinate's as the rates at t0 hold it.
     timed0 = aux0[AUX_TIMED_POWER]
     linear = 0.0
     moved = 0.0
+    q = Ep.shape[1] // 2
+    ns = sines.shape[1] - q
+    # The program coordinates' velocities over the step, b_j + a_j s + c_j s^2, from their
+    # rates at t0 and their velocities at t0 + h (functions of time: exact at both ends): the
+    # generator's gamma(0) = a_j and kappa = 2 c_j. Their forcing of the free coordinates is in
+    # the generator, so it leaves the remainder: N1p.
+    accel = np.zeros(2 * q)
+    where = np.zeros(q, dtype=np.int64)
+    N1p = N1
+    if q:
+        N1p = N1.copy()
+        for k in range(q):
+            slot = int(sines[4, ns + k])
+            a = aux0[slot + q]
+            c2 = (aux1[slot] - aux0[slot] - a * h) / (h * h)
+            accel[k], accel[q + k] = a, 2.0 * c2
+            where[k] = int(sines[0, ns + k])
+            moved_z = a * h * h / 2.0 + c2 * h * h * h / 3.0
+            moved_v = a * h + c2 * h * h
+            for j in range(m):
+                N1p[j] -= Ep[j, k] * moved_z + Ep[j, q + k] * moved_v
     for i in range(sines.shape[1]):
-        vj = sines[1, i] * math.sin(sines[2, i] * t0 + sines[3, i])
+        slot = int(sines[4, i])
+        if slot < 0:
+            vj = sines[1, i] * math.sin(sines[2, i] * t0 + sines[3, i])
+        else:
+            vj = aux0[slot]
         b[int(sines[0, i])] = vj
         for j in range(m):
             linear += vj * (T[i, j] * F0[j] + T[i, m + j] * N1[j])
@@ -127,11 +160,22 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
     x0 = y0[nF:]
     gv = Cx @ x0 + c
     p0 = x0 @ gv + c @ x0 + c0
-    xi = np.concatenate((F0, N1))
+    xi = np.concatenate((F0, N1p, accel))
     dissipated = h * p0 + 2.0 * (gv @ (V @ xi)) + xi @ (G @ xi)
+    c1, c01 = c, c0     # the linear model's c, c_0 at the step's end
+    if q:
+        # The program velocities rise by beta(s) = a s + c s^2 over the step (the generator's
+        # beta, gamma, kappa): the linear term 2 (R^T x_n + S_P b)_pc . int beta ds.
+        gb = R.T @ x0 + SP @ b
+        b1 = b.copy()
+        for k in range(q):
+            a, c2 = accel[k], 0.5 * accel[q + k]
+            dissipated += 2.0 * gb[where[k]] * (a * h * h / 2.0 + c2 * h * h * h / 3.0)
+            b1[where[k]] += a * h + c2 * h * h
+        c1, c01 = R @ b1, b1 @ (SP @ b1)
     xa, xb = ye0[nF:], ye1[nF:]
     rho = (aux0[AUX_DISSIPATION] - (xa @ (Cx @ xa) + 2.0 * (c @ xa) + c0)
-           + aux1[AUX_DISSIPATION] - (xb @ (Cx @ xb) + 2.0 * (c @ xb) + c0))
+           + aux1[AUX_DISSIPATION] - (xb @ (Cx @ xb) + 2.0 * (c1 @ xb) + c01))
     return dissipated + 0.5 * h * rho, work
 
 
@@ -139,7 +183,7 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
 #: the types ``energy_matrices`` returns, so the compiled loop keeps one signature.
 NO_ENERGY = (np.zeros((0, 3, 0)), np.zeros((0, N_SCALARS)), np.zeros((0, 0)), np.zeros((0, 0)),
              np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)),
-             np.zeros((4, 0)), np.zeros((0, 0)), np.zeros((0, 0)))
+             np.zeros((5, 0)), np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)))
 
 
 def weighted_phi(A, phi1, phi2, h, tau, shifted_phi1):
@@ -211,16 +255,18 @@ def _doubled_integrals(M: np.ndarray, Q: np.ndarray, h: float, terms: int):
 
 
 def energy_matrices(A, phi1, phi2, h, G_load, damping, free, prescribed, D, drive_mass, tau,
-                    shifted_phi1, sines, timed_rows):
+                    shifted_phi1, sines, timed_rows, forcing=None):
     """
     Build the per-linearization matrices of ``step_energy`` (module docstring).
 
     A, phi1 = h phi_1(hA), phi2 = h phi_2(hA): the step's; G_load: rows g_k = dq_k/dy of the
     displacement drives' loads; damping: C = -dQ/dv over all coordinates; free, prescribed:
     coordinate indices; D: dz_P/du (a column per displacement drive), drive_mass: D_k^T M_P D_k,
-    tau: response times, shifted_phi1: h phi_1(h(A - I/tau_k)) (all per drive); sines: (4, n)
-    rows (index into prescribed, amplitude, omega, phase) of the timed constraints, timed_rows
-    (n, m) their dQ_j/dy.
+    tau: response times, shifted_phi1: h phi_1(h(A - I/tau_k)) (all per drive); sines: (5, n)
+    rows (index into prescribed, amplitude, omega, phase, -1) of the sine-rate constraints, then
+    (index into prescribed, 0, 0, 0, entry of the energy rates holding its velocity) of each
+    coordinate a prescribed drive's program moves; timed_rows (n, m) their dQ_j/dy; forcing
+    (m, 2 q): dF/dz_j and dF/dv_j of each program coordinate j (columns, displacements first).
     """
     m = A.shape[0]
     nF, nd = len(free), D.shape[1]
@@ -236,14 +282,30 @@ def energy_matrices(A, phi1, phi2, h, G_load, damping, free, prescribed, D, driv
     Cx = L.T @ C @ L
     R = L.T @ C[:, prescribed]
     SP = C[np.ix_(prescribed, prescribed)]
-    # Generator of (w, f, n): w' = A w + f, f' = n / h, n' = 0; xi_0 = (0, F_0, N_1).
-    M = np.zeros((3 * m, 3 * m))
+    # Generator of (w, f, n): w' = A w + f, f' = n / h, n' = 0; xi_0 = (0, F_0, N_1). With q
+    # program coordinates also (pi, beta, gamma, kappa): their displacement and velocity offsets
+    # from t0, pi' = beta, beta' = gamma, gamma' = kappa, kappa' = 0 (the velocity rises by
+    # a s + c s^2 over the step: gamma(0) = a, kappa = 2 c, ``step_energy``), which force w as
+    # they force the motion (``forcing``). Then the dissipated power's products of program and
+    # free velocities integrate as exactly as the motion: at a stiff damped hinge between a
+    # prescribed body and a free one the power is a small difference of large such products.
+    sines = np.asarray(sines, dtype=float).reshape(5, -1)
+    pc = sines[0, sines[4] >= 0.0].astype(int)
+    q = len(pc)
+    forcing = np.zeros((m, 2 * q)) if forcing is None else np.asarray(forcing, dtype=float)
+    M = np.zeros((3 * m + 4 * q, 3 * m + 4 * q))
     M[:m, :m] = A
     M[:m, m:2 * m] = np.eye(m)
-    M[m:2 * m, 2 * m:] = np.eye(m) / h
-    Q = np.zeros((3 * m, 3 * m))
+    M[m:2 * m, 2 * m:3 * m] = np.eye(m) / h
+    M[:m, 3 * m:3 * m + 2 * q] = forcing
+    M[3 * m:3 * m + 3 * q, 3 * m + q:] = np.eye(3 * q)
+    Q = np.zeros_like(M)
     Q[nF:m, nF:m] = Cx
+    Q[nF:m, 3 * m + q:3 * m + 2 * q] = R[:, pc]
+    Q[3 * m + q:3 * m + 2 * q, nF:m] = R[:, pc].T
+    Q[3 * m + q:3 * m + 2 * q, 3 * m + q:3 * m + 2 * q] = SP[np.ix_(pc, pc)]
     Gfull, integral, _ = quadratic_integrals(M, Q, h)
+    start = np.r_[m:3 * m, 3 * m + 2 * q:3 * m + 4 * q]    # (f, n, gamma, kappa): xi's entries
     rows = max(nd, 1)
     erows = np.zeros((rows, 3, m))
     escal = np.zeros((rows, N_SCALARS))
@@ -255,8 +317,7 @@ def energy_matrices(A, phi1, phi2, h, G_load, damping, free, prescribed, D, driv
         escal[k, E_DRIVE_MASS] = drive_mass[k]
         escal[k, E_TAU] = tau[k]
         escal[k, E_HAS_DRIVE] = 1.0
-    timed_rows = np.asarray(timed_rows, dtype=float).reshape(-1, m)
-    out = (erows, escal, Gfull[m:, m:], integral[nF:m, m:], Cx, R, SP, B,
-           np.asarray(sines, dtype=float).reshape(4, -1), timed_rows,
-           timed_rows @ integral[:m, m:])
+    timed_rows = np.asarray(timed_rows, dtype=float).reshape(len(timed_rows), m)
+    out = (erows, escal, Gfull[np.ix_(start, start)], integral[nF:m][:, start], Cx, R, SP, B,
+           sines, timed_rows, timed_rows @ integral[:m, m:3 * m], forcing)
     return tuple(np.ascontiguousarray(a) for a in out)

@@ -18,7 +18,8 @@ contract (1) or contracts slowly (2), so the caller can re-linearize. The loop c
 ``rhs(y, t, command, args)`` -> (F, energy rates ``energy_rates``): compiled with the force
 kernel for quadratic laws (``advance``), or as plain Python with ``Model.rhs_python``
 for any law (``advance_interpreted``); one source, two bindings of ``rhs`` (and of
-``switch``, the work of a change of the held command between steps: ``switch_work``).
+``switch``, the work of a change of the held command between steps: ``switch_work``). Where
+the constraints put the prescribed coordinates: ``motion``.
 """
 from __future__ import annotations
 
@@ -31,45 +32,13 @@ from flexure_sim.engine import jit as kernel_cache
 from flexure_sim.engine.solver import step_energy as step_energy_module
 from flexure_sim.engine.jit import njit
 from flexure_sim.engine.solver.kernels import quadratic_forces
+from flexure_sim.engine.solver.motion import coordinates, prescribed_motion
 from flexure_sim.engine.solver.step_energy import (
     AUX_APPLIED, AUX_DISSIPATION, AUX_ENERGY, AUX_LOAD, AUX_TIMED_POWER,
 )
 from flexure_sim.engine.solver.step_energy import step_energy
 
 CONVERGED, NOT_CONTRACTING, SLOW = 0, 1, 2
-
-
-@njit(cache=True)
-def prescribed_motion(t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase):
-    """
-    z_P, v_P, a_P.
-
-    Held coordinates, the displacement drives (column k of D: dz_P/du_k; u_k a first-order lag
-    of command[k] with time constant tau[k], so v_P = sum_k D_k (command_k - u_k)/tau_k) and
-    prescribed sine rates (omega = a sin(w t + phase)).
-    """
-    nP = zP0.shape[0]
-    zP = zP0.copy()
-    vP = np.zeros(nP)
-    aP = np.zeros(nP)
-    for k in range(tau.shape[0]):
-        udot = (command[k] - u[k]) / tau[k]
-        udd = -udot / tau[k]
-        for i in range(nP):
-            zP[i] += D[i, k] * u[k]
-            if k == 0:  # assigned, not added to 0: keeps the sign of a zero rate
-                vP[i] = D[i, k] * udot
-                aP[i] = D[i, k] * udd
-            else:
-                vP[i] += D[i, k] * udot
-                aP[i] += D[i, k] * udd
-    for i in range(sine_index.shape[0]):
-        j = sine_index[i]
-        a, w, ph = sine_amp[i], sine_w[i], sine_phase[i]
-        zP[j] += a / w * (math.cos(ph) - math.cos(w * t + ph))
-        vP[j] = a * math.sin(w * t + ph)
-        aP[j] = a * w * math.cos(w * t + ph)
-    return zP, vP, aP
 
 
 @njit(cache=True, inline="always")
@@ -112,32 +81,23 @@ def kernel_rhs(y, t, command, args):
     """
     F(y, t) and the energy rates (``step_energy.AUX_*``) with the compiled quadratic-law forces.
 
-    y = (z_F, v_F, u) with one u per displacement drive; command: the displacement drives'
-    commands, then the force drives' forces (``Model.actuator_command``).
-    args = (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase,
-    force_dir, force_z0, stack_dir, stack_z0, stack_k, ia, ib, ca, cb, phia, phib, kind, W, C,
-    damping) -- see
-    Model._kernel_args; ``damping``: the mechanism's damping matrix (0 x 0 without one),
-    Q -= damping v and dissipation += v^T damping v (``Model.add_damping``).
+    y = (z_F, v_F, u) with one u per lagged drive; command: the kernel's command vector
+    (``DriveTable.kernel_command``).
+    args = (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, Dp,
+    first_program, program_index, force_dir, force_z0, stack_dir, stack_z0, stack_k, ia, ib, ca,
+    cb, phia, phib, kind, W, C, damping) -- see Model._kernel_args; ``damping``: the mechanism's
+    damping matrix (0 x 0 without one), Q -= damping v and dissipation += v^T damping v
+    (``Model.add_damping``).
     """
-    (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, force_dir,
-     force_z0, stack_dir, stack_z0, stack_k, ia, ib, ca, cb, phia, phib, kind, W, C,
-     damping) = args
+    (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, Dp,
+     first_program, program_index, force_dir, force_z0, stack_dir, stack_z0, stack_k, ia, ib,
+     ca, cb, phia, phib, kind, W, C, damping) = args
     nF = free.shape[0]
     nd = tau.shape[0]
     u = y[2 * nF:2 * nF + nd]
-    zP, vP, aP = prescribed_motion(
-        t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase
-    )
     N = mass.shape[0]
-    z = np.empty(N)
-    v = np.empty(N)
-    for i in range(nF):
-        z[free[i]] = y[i]
-        v[free[i]] = y[nF + i]
-    for i in range(prescribed.shape[0]):
-        z[prescribed[i]] = zP[i]
-        v[prescribed[i]] = vP[i]
+    z, v, aP = coordinates(y, t, command, free, prescribed, N, tau, zP0, D, sine_index,
+                           sine_amp, sine_w, sine_phase, Dp, first_program)
     Q = np.empty(N)
     n = ia.shape[0]
     potential, dissipation = quadratic_forces(
@@ -151,7 +111,7 @@ def kernel_rhs(y, t, command, args):
                                       stack_z0, stack_k)
     potential += springs
     m = y.shape[0]
-    out = np.empty(m + AUX_LOAD + nd)  # F and the energy rates: one allocation
+    out = np.empty(m + AUX_LOAD + nd + 2 * program_index.shape[0])  # F, energy rates
     F = out[:m]
     for i in range(nF):
         F[i] = y[nF + i]
@@ -159,22 +119,25 @@ def kernel_rhs(y, t, command, args):
     for k in range(nd):
         F[2 * nF + k] = (command[k] - u[k]) / tau[k]
     return F, energy_rates(out[m:], Q, v, potential, dissipation, applied, prescribed, mass, D,
-                           sine_index, aP)
+                           sine_index, program_index, aP)
 
 
 @njit(cache=True, inline="always")
 def energy_rates(aux, Q, v, potential, dissipation, applied, prescribed, mass, D, sine_index,
-                 aP):
+                 program_index, aP):
     """
     Fill and return ``aux``: the energy figures the stepping loop integrates.
 
     The figures are indexed by ``step_energy.AUX_*``.
 
-    Power of the timed (sine-rate) constraints sum v_P (M a_P - Q_P), dissipated power,
-    mechanical energy T + U, the held forces' potential (``applied_forces``) and per
-    displacement drive k its load D_k . Q_P.
+    Power of the timed constraints (sine rates, then the coordinates the prescribed drives'
+    programs move: ``program_index``) sum v_P (M a_P - Q_P), dissipated power, mechanical energy
+    T + U, the held forces' potential (``applied_forces``), per lagged drive k its load
+    D_k . Q_P, then the velocity of each program coordinate and then their accelerations (for
+    the step's linear model).
     """
-    for k in range(D.shape[1]):
+    nd = D.shape[1]
+    for k in range(nd):
         load = 0.0
         for i in range(prescribed.shape[0]):
             load += D[i, k] * Q[prescribed[i]]
@@ -183,6 +146,12 @@ def energy_rates(aux, Q, v, potential, dissipation, applied, prescribed, mass, D
     for i in range(sine_index.shape[0]):
         j = prescribed[sine_index[i]]
         timed += (mass[j] * aP[sine_index[i]] - Q[j]) * v[j]
+    q = program_index.shape[0]
+    for i in range(q):
+        j = prescribed[program_index[i]]
+        timed += (mass[j] * aP[program_index[i]] - Q[j]) * v[j]
+        aux[AUX_LOAD + nd + i] = v[j]
+        aux[AUX_LOAD + nd + q + i] = aP[program_index[i]]
     kinetic = 0.0
     for j in range(mass.shape[0]):
         kinetic += 0.5 * mass[j] * v[j] * v[j]
@@ -195,11 +164,12 @@ def energy_rates(aux, Q, v, potential, dissipation, applied, prescribed, mass, D
 
 @njit(cache=True)
 def switch_work(y, t, old, new, free, prescribed, mass, tau, zP0, D, sine_index, sine_amp,
-                sine_w, sine_phase, n_forces, stack_dir, stack_z0, stack_k):
+                sine_w, sine_phase, Dp, first_program, n_forces, stack_dir, stack_z0, stack_k):
     """
     Return the drives' work when the held command changes from ``old`` to ``new`` at (y, t).
 
-    The prescribed velocities jump (``dynamics.jump_work``): 1/2 M_P (v_P+^2 - v_P-^2); the
+    The prescribed velocities jump (``dynamics.jump_work``; a lag's command or a program's piece
+    changes, at a continuous position): 1/2 M_P (v_P+^2 - v_P-^2); the
     stack springs' anchors move at fixed z (solver/actuation.py): sum_s 1/2 k_s
     ((x_s' - p_s)^2 - (x_s - p_s)^2), p_s = e_s . (z - z0). ``n_forces``: the force drives'
     count (the stacks' strokes follow the force drives' forces in the command).
@@ -208,8 +178,9 @@ def switch_work(y, t, old, new, free, prescribed, mass, tau, zP0, D, sine_index,
     nd = tau.shape[0]
     u = y[2 * nF:2 * nF + nd]
     zP, v0, _ = prescribed_motion(t, u, old, tau, zP0, D, sine_index, sine_amp, sine_w,
-                                  sine_phase)
-    v1 = prescribed_motion(t, u, new, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase)[1]
+                                  sine_phase, Dp, first_program)
+    v1 = prescribed_motion(t, u, new, tau, zP0, D, sine_index, sine_amp, sine_w, sine_phase, Dp,
+                           first_program)[1]
     work = 0.0
     for i in range(prescribed.shape[0]):
         work += 0.5 * mass[prescribed[i]] * (v1[i] * v1[i] - v0[i] * v0[i])
@@ -232,10 +203,11 @@ def switch_work(y, t, old, new, free, prescribed, mass, tau, zP0, D, sine_index,
 @njit(cache=True)
 def kernel_switch_work(y, t, old, new, args):
     """`switch_work` with the compiled kernel's arguments (``kernel_rhs``)."""
-    (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, force_dir,
-     _, stack_dir, stack_z0, stack_k) = args[:15]
+    (free, prescribed, mass, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, Dp,
+     first_program, _, force_dir, _, stack_dir, stack_z0, stack_k) = args[:18]
     return switch_work(y, t, old, new, free, prescribed, mass, tau, zP0, D, sine_index, sine_amp,
-                       sine_w, sine_phase, force_dir.shape[0], stack_dir, stack_z0, stack_k)
+                       sine_w, sine_phase, Dp, first_program, force_dir.shape[0], stack_dir,
+                       stack_z0, stack_k)
 
 
 def _advance(
@@ -303,7 +275,7 @@ def _advance(
             F1, aux1 = rhs(y1, t1, command, args)
             N1 = F1 - F0 - A @ (y1 - y)
             y_next = U + phi2 @ N1
-            change = np.max(np.abs(y_next - y1) / weight)
+            change = np.max(np.abs(y_next - y1) / weight) if y.shape[0] else 0.0
             if not math.isfinite(change):
                 break
             if change <= 1.0:
@@ -351,10 +323,10 @@ def _interpreted_rhs(y, t, command, model):
 
 
 def _interpreted_switch_work(y, t, old, new, model):
+    d = model.drives
     return switch_work(y, t, old, new, model.part.free.astype(np.int64),
                        model.part.prescribed.astype(np.int64), model.mass, *model.motion,
-                       model.force_dir.shape[0],
-                       model.stack_dir, model.stack_z0, model.stack_k)
+                       d.force_dir.shape[0], d.stack_dir, d.stack_z0, d.stack_k)
 
 
 #: The same loop as plain Python, calling ``Model.rhs_python`` (any hinge law); pass the

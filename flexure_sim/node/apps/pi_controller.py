@@ -35,9 +35,16 @@ import sys
 import time
 from typing import Any, Optional
 
-from flexure_sim.control.pi_notch import PIConfig, PIController
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64, UInt64
+from std_srvs.srv import Trigger
+
 from flexure_sim import topics
 from flexure_sim.console import quiet_pipe
+from flexure_sim.control.pi_notch import PIConfig, PIController
 from flexure_sim.errors import FlexureSimError
 
 #: (name, default, description) of every parameter; all can be changed live except the
@@ -82,115 +89,106 @@ def config_from(values: dict[str, Any]) -> PIConfig:
         notch_damping=float(values["notch_damping"]), notch_depth=float(values["notch_depth"]))
 
 
-def make_node() -> Any:
-    """Build the controller node (rclpy imported here: the module loads without ROS)."""
-    from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-    from rclpy.duration import Duration
-    from rclpy.node import Node
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-    from std_msgs.msg import Float64, UInt64
-    from std_srvs.srv import Trigger
+#: The command topic's QoS and the measurement's: the newest reading only. A controller that
+#: fell behind answers the latest reading instead of working through a queue of stale ones
+#: (whose answers would come ever later); in lockstep nothing is skipped (one reading per step).
+QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                 reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+NEWEST = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                    reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
-    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                     reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-    # The measurement: the newest reading only. A controller that fell behind answers the
-    # latest reading instead of working through a queue of stale ones (whose answers would
-    # come ever later); in lockstep nothing is skipped (one reading per step).
-    newest = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                        reliability=ReliabilityPolicy.RELIABLE,
-                        durability=DurabilityPolicy.VOLATILE)
 
-    class PIControllerNode(Node):
-        def __init__(self) -> None:
-            super().__init__("pi_controller")
-            for name, default, text in PARAMETERS:
-                # Doubles accept integers too (-p ki:=20): the law converts with float().
-                self.declare_parameter(name, default, ParameterDescriptor(
-                    description=text, read_only=name in READ_ONLY,
-                    dynamic_typing=isinstance(default, float)))
-            values = self.values()
-            try:
-                problem = config_from(values).problem()
-            except (TypeError, ValueError) as exc:
-                problem = f"a gain or limit is not a number ({exc})"
-            if problem:
-                raise StartupError(f"invalid parameters: {problem}")
-            self.law = PIController(config_from(values))
+class PIControllerNode(Node):
+    """The controller node (module docstring): one command per measurement received."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("pi_controller", **kwargs)
+        for name, default, text in PARAMETERS:
+            # Doubles accept integers too (-p ki:=20): the law converts with float().
+            self.declare_parameter(name, default, ParameterDescriptor(
+                description=text, read_only=name in READ_ONLY,
+                dynamic_typing=isinstance(default, float)))
+        values = self.values()
+        try:
+            problem = config_from(values).problem()
+        except (TypeError, ValueError) as exc:
+            problem = f"a gain or limit is not a number ({exc})"
+        if problem:
+            raise StartupError(f"invalid parameters: {problem}")
+        self.law = PIController(config_from(values))
+        self.setpoint = float(values["setpoint"])
+        self.answered = 0
+        self.handshake = bool(values["handshake"])
+        path = values["trace_path"]
+        self.trace = open(path, "w") if path else None  # noqa: SIM115
+        self.command_pub = self.create_publisher(Float64, values["command_topic"], QOS)
+        self.answered_pub = (self.create_publisher(UInt64, "~/answered", QOS)
+                             if self.handshake else None)
+        self.create_subscription(Float64, values["measurement_topic"], self.on_measurement,
+                                 NEWEST)
+        self.create_subscription(Float64, values["setpoint_topic"], self.on_setpoint, QOS)
+        self.create_service(Trigger, "~/reset", self.on_reset)
+        self.add_on_set_parameters_callback(self.validate)
+        self.add_post_set_parameters_callback(self.apply)
+        c = self.law.config
+        self.get_logger().info(
+            f"PI kp {c.kp:g}, ki {c.ki:g} 1/s, T {c.period:g} s, notch "
+            f"{c.notch_frequency:g} Hz, command [{c.u_min:g}, {c.u_max:g}] m; "
+            f"{self.resolve_topic_name(values['measurement_topic'])} -> "
+            f"{self.command_pub.topic_name}")
+
+    def values(self) -> dict[str, Any]:
+        return {name: self.get_parameter(name).value for name, _, _ in PARAMETERS}
+
+    def validate(self, params: list[Any]) -> Any:
+        values = {**self.values(), **{p.name: p.value for p in params}}
+        try:
+            problem = config_from(values).problem()
+        except (TypeError, ValueError) as exc:
+            problem = str(exc)
+        return SetParametersResult(successful=not problem, reason=problem)
+
+    def apply(self, params: list[Any]) -> None:
+        values = self.values()
+        law = PIController(config_from(values))
+        law.integral = self.law.integral  # the integral carries over (no bump)
+        self.law = law
+        if any(p.name == "setpoint" for p in params):
             self.setpoint = float(values["setpoint"])
-            self.answered = 0
-            self.handshake = bool(values["handshake"])
-            path = values["trace_path"]
-            self.trace = open(path, "w") if path else None  # noqa: SIM115
-            self.command_pub = self.create_publisher(Float64, values["command_topic"], qos)
-            self.answered_pub = (self.create_publisher(UInt64, "~/answered", qos)
-                                 if self.handshake else None)
-            self.create_subscription(Float64, values["measurement_topic"], self.on_measurement,
-                                     newest)
-            self.create_subscription(Float64, values["setpoint_topic"], self.on_setpoint, qos)
-            self.create_service(Trigger, "~/reset", self.on_reset)
-            self.add_on_set_parameters_callback(self.validate)
-            self.add_post_set_parameters_callback(self.apply)
-            c = self.law.config
-            self.get_logger().info(
-                f"PI kp {c.kp:g}, ki {c.ki:g} 1/s, T {c.period:g} s, notch "
-                f"{c.notch_frequency:g} Hz, command [{c.u_min:g}, {c.u_max:g}] m; "
-                f"{self.resolve_topic_name(values['measurement_topic'])} -> "
-                f"{self.command_pub.topic_name}")
 
-        def values(self) -> dict[str, Any]:
-            return {name: self.get_parameter(name).value for name, _, _ in PARAMETERS}
+    def on_reset(self, _request: Any, response: Any) -> Any:
+        """
+        Integral and notch back to rest.
 
-        def validate(self, params: list[Any]) -> Any:
-            values = {**self.values(), **{p.name: p.value for p in params}}
-            try:
-                problem = config_from(values).problem()
-            except (TypeError, ValueError) as exc:
-                problem = str(exc)
-            return SetParametersResult(successful=not problem, reason=problem)
+        Answer count to 0, setpoint to the parameter (with the stage's ~/reset: a new run).
+        """
+        self.law.reset()
+        self.answered = 0
+        self.setpoint = float(self.get_parameter("setpoint").value)
+        response.success, response.message = True, "controller reset"
+        return response
 
-        def apply(self, params: list[Any]) -> None:
-            values = self.values()
-            law = PIController(config_from(values))
-            law.integral = self.law.integral  # the integral carries over (no bump)
-            self.law = law
-            if any(p.name == "setpoint" for p in params):
-                self.setpoint = float(values["setpoint"])
+    def on_setpoint(self, msg: Any) -> None:
+        self.setpoint = float(msg.data)
 
-        def on_reset(self, _request: Any, response: Any) -> Any:
-            """
-            Integral and notch back to rest.
+    def on_measurement(self, msg: Any) -> None:
+        y = float(msg.data)
+        u = self.law.update(self.setpoint, y)
+        self.command_pub.publish(Float64(data=u))
+        wall = time.time_ns()
+        self.answered += 1
+        if self.trace is not None:
+            self.trace.write(f"{self.answered} {y!r} {u!r} {wall}\n")
+        if self.answered_pub is not None:
+            if not self.command_pub.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT)):
+                self.get_logger().warn(
+                    f"command {self.answered} not acknowledged within {ACK_TIMEOUT:g} s")
+            self.answered_pub.publish(UInt64(data=self.answered))
 
-            Answer count to 0, setpoint to the parameter (with the stage's ~/reset: a new run).
-            """
-            self.law.reset()
-            self.answered = 0
-            self.setpoint = float(self.get_parameter("setpoint").value)
-            response.success, response.message = True, "controller reset"
-            return response
-
-        def on_setpoint(self, msg: Any) -> None:
-            self.setpoint = float(msg.data)
-
-        def on_measurement(self, msg: Any) -> None:
-            y = float(msg.data)
-            u = self.law.update(self.setpoint, y)
-            self.command_pub.publish(Float64(data=u))
-            wall = time.time_ns()
-            self.answered += 1
-            if self.trace is not None:
-                self.trace.write(f"{self.answered} {y!r} {u!r} {wall}\n")
-            if self.answered_pub is not None:
-                if not self.command_pub.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT)):
-                    self.get_logger().warn(
-                        f"command {self.answered} not acknowledged within {ACK_TIMEOUT:g} s")
-                self.answered_pub.publish(UInt64(data=self.answered))
-
-        def close(self) -> None:
-            if self.trace is not None:
-                self.trace.close()
-                self.trace = None
-
-    return PIControllerNode()
+    def close(self) -> None:
+        if self.trace is not None:
+            self.trace.close()
+            self.trace = None
 
 
 @quiet_pipe
@@ -209,7 +207,7 @@ def main(args: Optional[list[str]] = None) -> int:
     error = None
     try:
         rclpy.init(args=args)
-        node = make_node()
+        node = PIControllerNode()
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

@@ -23,7 +23,7 @@ import math
 import time
 from dataclasses import dataclass, fields
 from enum import Enum
-from typing import Callable, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 
 class CommandStatus(Enum):
@@ -232,9 +232,11 @@ class CommandFilter:
         self.target = self.applied = self._initial
         self._checked = True
 
-    def differs(self, command: float) -> bool:
-        """Whether the applied target is not ``command`` (a plain float compare: per tick)."""
-        return command != self.applied
+    def differs(self, command: Any) -> bool:
+        """Whether the applied target is not ``command`` (a number, or a one-entry array)."""
+        if not isinstance(command, (int, float)):
+            command = command[0]
+        return bool(command != self.applied)
 
     @staticmethod
     def describe(value: float) -> str:

@@ -20,8 +20,8 @@ MAX_SIM_STEP = 1e-2
 COMMAND_RELIABILITIES = ("reliable", "best_effort")
 #: Values of ``record_format``.
 RECORD_FORMATS = ("bag", "mcap")
-#: Default of ``wake_spin``: see its description (measured in BENCHMARKS.md).
-WAKE_SPIN_S = 1e-3
+#: Default of ``wake_spin``: see its description and docs/node.md, "Time" (BENCHMARKS.md).
+WAKE_SPIN_S = 2e-4
 #: Default of ``stepping_nice``: see its description (measured in BENCHMARKS.md).
 STEPPING_NICE = -10
 #: Default of ``cpu_latency_us``: see its description (measured in BENCHMARKS.md).
@@ -49,300 +49,124 @@ class ParamSpec:
     description: str
 
 
+#: Placeholders of the defaults the mechanism's drive gives (`parameter_specs`).
+DRIVE_MIN, DRIVE_MAX, DRIVE_SLEW = "drive stroke_min", "drive stroke_max", "drive slew_rate"
+_DRIVE = (DRIVE_MIN, DRIVE_MAX, DRIVE_SLEW)
+
+#: Every parameter, in declaration order: the fields of `ParamSpec` (name, default, type,
+#: unit, read-only, low, high, description). docs/node.md, "Parameters", is this table for users.
+TABLE: tuple[tuple[Any, ...], ...] = (
+    ("mechanism", "microstage", str, "", True, None, None,
+     "Built-in mechanism name (microstage, fourbar_cantilever, fourbar_mixed) or path of a "
+     "mechanism YAML file."),
+    ("publish_rate", 1000.0, float, "Hz", False, 1.0, MAX_PUBLISH_RATE,
+     "Ticks per second: each tick advances the simulation by 1/publish_rate s and publishes "
+     "every topic once (diagnostics at ~10 Hz). 1/publish_rate must be a whole multiple of "
+     "sim_step."),
+    ("monitor_rate", 0.0, float, "Hz", False, 0.0, MAX_PUBLISH_RATE,
+     "Rate of the monitoring topics (body poses, hinge wrenches and deflections): published "
+     "and recorded every round(publish_rate / monitor_rate)-th tick, while the control topics "
+     "(output, output/measured, drive, compression, /clock) keep every tick. 0: every tick."),
+    ("sim_step", DEFAULT_STEP, float, "s", True, 0.0, MAX_SIM_STEP,
+     "Fixed engine step, in (0, 0.01] s; must divide the publish period. Read-only."),
+    ("time_mode", "realtime", str, "", True, None, None,
+     "realtime: ticks paced by a steady clock; fast: as fast as possible, publishes /clock; "
+     "lockstep: one tick per ~/step call, publishes /clock. Read-only."),
+    ("stroke_min", DRIVE_MIN, float, "m", False, None, None,
+     "Lower end of the actuator stroke; commands below it are clamped."),
+    ("stroke_max", DRIVE_MAX, float, "m", False, None, None,
+     "Upper end of the actuator stroke; commands above it are clamped."),
+    ("slew_rate", DRIVE_SLEW, float, "m/s", False, 0.0, None,
+     "Actuator speed limit (> 0): the commanded target moves towards each new command at most "
+     "this fast."),
+    ("wake_spin", WAKE_SPIN_S, float, "s", False, 0.0, 1.0,
+     "Real-time mode: the last part of the wait for each tick that is busy-waited instead of "
+     "slept. The default sleeps most of a 1 kHz period and leaves that core to the "
+     "controller, the recorder and the middleware; at 4 kHz it spins the whole period. A "
+     "sleeping core can take long to wake, above all on virtual machines; publish_rate's "
+     "period or more: the stepping thread never sleeps (one busy core)."),
+    ("merge_late_ticks", 0, int, "ticks", False, 0, 1000,
+     "Real-time mode: a loop late by this many tick periods or more merges the ticks it is "
+     "late for into the next one, which steps the engine through all their periods and "
+     "publishes once (simulated time stays with wall time; the merged ticks are not published,"
+     " and are counted). 0: never, every tick is published and late ones run back to back."),
+    ("stepping_nice", STEPPING_NICE, int, "", True, -20, 19,
+     "Niceness asked for the stepping thread at start-up (Linux), and for the ROS middleware's"
+     " threads, whose locks it waits on. Below the other processes' it gets a shared core "
+     "first, which keeps real-time ticks on time next to busy nodes. Needs CAP_SYS_NICE or an "
+     "RLIMIT_NICE allowing it; if refused, the node says so once and runs unchanged. "
+     "Read-only."),
+    ("stepping_priority", STEPPING_PRIORITY, int, "", True, 0, 99,
+     "Real-time mode: 1-99 runs the stepping thread under the kernel's real-time policy "
+     "SCHED_FIFO at this priority, so that it preempts every normally scheduled process "
+     "(niceness is weighed against other processes, not absolute); 0, the default: normal "
+     "scheduling with stepping_nice. The thread must then sleep part of every tick: wake_spin "
+     "at most half the tick period (1e-4 s is a good start). Needs CAP_SYS_NICE or an "
+     "RLIMIT_RTPRIO allowing it; if refused, the node says so once and runs unchanged. "
+     "Read-only."),
+    ("cpu_latency_us", CPU_LATENCY_US, int, "us", True, -1, 100000,
+     "Real-time mode: CPU wake-up latency asked of the kernel while the stage steps (Linux PM "
+     "QoS, /dev/cpu_dma_latency; 0: idle CPUs poll instead of halting, so a thread woken on "
+     "one runs at once; -1, the default: no request). Needs write access to "
+     "/dev/cpu_dma_latency; if refused, the node says so once and runs unchanged. Read-only."),
+    ("command_reliability", "reliable", str, "", True, None, None,
+     "Reliability of the drive command subscription: reliable (only reliable publishers are "
+     "heard) or best_effort (reliable and best-effort publishers alike; a command lost on the "
+     "wire is not resent). A publisher that does not match gets a warning and a diagnostics "
+     "count. Read-only."),
+    ("frame_prefix", "", str, "", True, None, None,
+     "Put in front of every frame id the node publishes (root stage, body and hinge frames; "
+     "headers, child frames, markers, TF), e.g. stage1/, so two stages can share one TF tree "
+     "and one view. No leading slash. Read-only."),
+    ("display_rate", 30.0, float, "Hz", False, 0.0, MAX_PUBLISH_RATE,
+     "Rate of the markers (and TF) in simulated time: every round(publish_rate / display_rate)"
+     " ticks, at most every tick; 0 turns them off. In real-time mode that is wall time too; "
+     "in fast mode it is display_rate times the real-time factor."),
+    ("display_scale", 1.0, float, "", False, 0.0, None,
+     "Magnification of the displacements drawn by the markers about the rest pose (micrometre "
+     "motions are invisible at 1); published poses, wrenches and TF stay true. At 1 the "
+     "outlines sit on the TF body frames."),
+    ("record", True, bool, "", False, None, None,
+     "Record every published topic and the received drive commands to MCAP (same as ~/record)."),
+    ("record_dir", "runs", str, "", False, None, None,
+     "Directory of the recordings (relative to the working directory), created if missing; "
+     "recordings are named <mechanism>_<namespace_node>_<UTC time> (a bag directory, or that "
+     ".mcap file), with _1, _2, ... when the name is taken (names are claimed atomically)."),
+    ("record_path", "", str, "", False, None, None,
+     "Explicit bag directory (or, ending in .mcap, file) for the next recording (later ones "
+     "get _1, _2, ... or the next free one); empty: a new name in record_dir. Existing "
+     "recordings are never overwritten."),
+    ("record_format", "bag", str, "", False, None, None,
+     "bag: a rosbag2 bag directory per recording (metadata.yaml + <name>_0.mcap, split by "
+     "record_max_bytes / record_max_duration), as ros2 bag record writes; mcap: one MCAP file."
+     " A record_path ending in .mcap is one file either way. Applies from the next recording."),
+    ("record_max_bytes", 0, int, "B", False, 0, None,
+     "Bag format: start a new file of the bag once the current one holds this many bytes of "
+     "messages (before MCAP framing and compression); 0: no limit."),
+    ("record_max_duration", 0.0, float, "s", False, 0.0, None,
+     "Bag format: start a new file once the current one spans this much simulated time; 0: no "
+     "limit."),
+)
+
+
 def parameter_specs(
     drive_defaults: Optional[tuple[float, float, float]] = None,
     unused_because: str = "the mechanism has no drive",
 ) -> list[ParamSpec]:
     """
-    All parameters.
+    Return every parameter of `TABLE`, the drive's defaults filled in.
 
     ``drive_defaults`` = (stroke_min, stroke_max, slew_rate) of the mechanism's drive, or None when
     it has no drive (the limits are then unused, ``unused_because`` says why).
     """
-    smin, smax, slew = drive_defaults if drive_defaults is not None else (0.0, 0.0, 1.0)
+    values = dict(zip(_DRIVE, drive_defaults if drive_defaults is not None else (0.0, 0.0, 1.0)))
     unused = "" if drive_defaults is not None else f" Unused: {unused_because}."
-    return [
-        ParamSpec(
-            "mechanism",
-            "microstage",
-            str,
-            "",
-            True,
-            None,
-            None,
-            "Built-in mechanism name (microstage, fourbar_cantilever, fourbar_mixed) or path "
-            "of a mechanism YAML file.",
-        ),
-        ParamSpec(
-            "publish_rate",
-            1000.0,
-            float,
-            "Hz",
-            False,
-            1.0,
-            MAX_PUBLISH_RATE,
-            "Ticks per second: each tick advances the simulation by 1/publish_rate s and "
-            "publishes every topic once (diagnostics at ~10 Hz). 1/publish_rate must be a "
-            "whole multiple of sim_step.",
-        ),
-        ParamSpec(
-            "monitor_rate",
-            0.0,
-            float,
-            "Hz",
-            False,
-            0.0,
-            MAX_PUBLISH_RATE,
-            "Rate of the monitoring topics (body poses, hinge wrenches and deflections): "
-            "published and recorded every round(publish_rate / monitor_rate)-th tick, "
-            "while the control topics (output, output/measured, drive, compression, "
-            "/clock) keep every tick. 0: every tick.",
-        ),
-        ParamSpec(
-            "sim_step",
-            DEFAULT_STEP,
-            float,
-            "s",
-            True,
-            0.0,
-            MAX_SIM_STEP,
-            "Fixed engine step, in (0, 0.01] s; must divide the publish period. Read-only.",
-        ),
-        ParamSpec(
-            "time_mode",
-            "realtime",
-            str,
-            "",
-            True,
-            None,
-            None,
-            "realtime: ticks paced by a steady clock; fast: as fast as possible, publishes "
-            "/clock; lockstep: one tick per ~/step call, publishes /clock. Read-only.",
-        ),
-        ParamSpec(
-            "stroke_min",
-            smin,
-            float,
-            "m",
-            False,
-            None,
-            None,
-            "Lower end of the actuator stroke; commands below it are clamped." + unused,
-        ),
-        ParamSpec(
-            "stroke_max",
-            smax,
-            float,
-            "m",
-            False,
-            None,
-            None,
-            "Upper end of the actuator stroke; commands above it are clamped." + unused,
-        ),
-        ParamSpec(
-            "slew_rate",
-            slew,
-            float,
-            "m/s",
-            False,
-            0.0,
-            None,
-            "Actuator speed limit (> 0): the commanded target moves towards each new "
-            "command at most this fast." + unused,
-        ),
-        ParamSpec(
-            "wake_spin",
-            WAKE_SPIN_S,
-            float,
-            "s",
-            False,
-            0.0,
-            1.0,
-            "Real-time mode: the last part of the wait for each tick that is busy-waited "
-            "instead of slept (at most the publish period: then the stepping thread never "
-            "sleeps). A sleeping core can take milliseconds to wake, above all on virtual "
-            "machines, and the tick then starts late; spinning costs CPU time.",
-        ),
-        ParamSpec(
-            "merge_late_ticks",
-            0,
-            int,
-            "ticks",
-            False,
-            0,
-            1000,
-            "Real-time mode: a loop late by this many tick periods or more merges the ticks "
-            "it is late for into the next one, which steps the engine through all their "
-            "periods and publishes once (simulated time stays with wall time; the merged "
-            "ticks are not published, and are counted). 0: never, every tick is published "
-            "and late ones run back to back.",
-        ),
-        ParamSpec(
-            "stepping_nice",
-            STEPPING_NICE,
-            int,
-            "",
-            True,
-            -20,
-            19,
-            "Niceness asked for the stepping thread at start-up (Linux), and for the ROS "
-            "middleware's threads, whose locks it waits on. Below the other processes' it "
-            "gets a shared core first, which keeps real-time ticks on time next to busy "
-            "nodes. Needs CAP_SYS_NICE or an RLIMIT_NICE allowing it; if refused, the node "
-            "says so once and runs unchanged. Read-only.",
-        ),
-        ParamSpec(
-            "stepping_priority",
-            STEPPING_PRIORITY,
-            int,
-            "",
-            True,
-            0,
-            99,
-            "Real-time mode: 1-99 runs the stepping thread under the kernel's real-time "
-            "policy SCHED_FIFO at this priority, so that it preempts every normally scheduled "
-            "process (niceness is weighed against other processes, not absolute); 0, the "
-            "default: normal scheduling with stepping_nice. The thread must then sleep part "
-            "of every tick: wake_spin at most half the tick period (1e-4 s is a good start). "
-            "Needs CAP_SYS_NICE or an RLIMIT_RTPRIO allowing it; if refused, the node says "
-            "so once and runs unchanged. Read-only.",
-        ),
-        ParamSpec(
-            "cpu_latency_us",
-            CPU_LATENCY_US,
-            int,
-            "us",
-            True,
-            -1,
-            100000,
-            "Real-time mode: CPU wake-up latency asked of the kernel while the stage steps "
-            "(Linux PM QoS, /dev/cpu_dma_latency; 0: idle CPUs poll instead of halting, so a "
-            "thread woken on one runs at once; -1, the default: no request). Needs write "
-            "access to /dev/cpu_dma_latency; if refused, the node says so once and runs "
-            "unchanged. Read-only.",
-        ),
-        ParamSpec(
-            "command_reliability",
-            "reliable",
-            str,
-            "",
-            True,
-            None,
-            None,
-            "Reliability of the drive command subscription: reliable (only reliable "
-            "publishers are heard) or best_effort (reliable and best-effort publishers "
-            "alike; a command lost on the wire is not resent). A publisher that does not "
-            "match gets a warning and a diagnostics count. Read-only.",
-        ),
-        ParamSpec(
-            "frame_prefix",
-            "",
-            str,
-            "",
-            True,
-            None,
-            None,
-            "Put in front of every frame id the node publishes (root stage, body and "
-            "hinge frames; headers, child frames, markers, TF), e.g. stage1/, so two "
-            "stages can share one TF tree and one view. No leading slash. Read-only.",
-        ),
-        ParamSpec(
-            "display_rate",
-            30.0,
-            float,
-            "Hz",
-            False,
-            0.0,
-            MAX_PUBLISH_RATE,
-            "Rate of the markers (and TF) in simulated time: every round(publish_rate / "
-            "display_rate) ticks, at most every tick; 0 turns them off. In real-time mode "
-            "that is wall time too; in fast mode it is display_rate times the real-time "
-            "factor.",
-        ),
-        ParamSpec(
-            "display_scale",
-            1.0,
-            float,
-            "",
-            False,
-            0.0,
-            None,
-            "Magnification of the displacements drawn by the markers about the rest pose "
-            "(micrometre motions are invisible at 1); published poses, wrenches and TF "
-            "stay true. At 1 the outlines sit on the TF body frames.",
-        ),
-        ParamSpec(
-            "record",
-            True,
-            bool,
-            "",
-            False,
-            None,
-            None,
-            "Record every published topic and the received drive commands to MCAP "
-            "(same as ~/record).",
-        ),
-        ParamSpec(
-            "record_dir",
-            "runs",
-            str,
-            "",
-            False,
-            None,
-            None,
-            "Directory of the recordings (relative to the working directory), created if "
-            "missing; recordings are named <mechanism>_<namespace_node>_<UTC time> (a bag "
-            "directory, or that .mcap file), with _1, _2, ... when the name is taken "
-            "(names are claimed atomically).",
-        ),
-        ParamSpec(
-            "record_path",
-            "",
-            str,
-            "",
-            False,
-            None,
-            None,
-            "Explicit bag directory (or, ending in .mcap, file) for the next recording "
-            "(later ones get _1, _2, ... or the next free one); empty: a new name in "
-            "record_dir. Existing recordings are never overwritten.",
-        ),
-        ParamSpec(
-            "record_format",
-            "bag",
-            str,
-            "",
-            False,
-            None,
-            None,
-            "bag: a rosbag2 bag directory per recording (metadata.yaml + <name>_0.mcap, "
-            "split by record_max_bytes / record_max_duration), as ros2 bag record writes; "
-            "mcap: one MCAP file. A record_path ending in .mcap is one file either way. "
-            "Applies from the next recording.",
-        ),
-        ParamSpec(
-            "record_max_bytes",
-            0,
-            int,
-            "B",
-            False,
-            0,
-            None,
-            "Bag format: start a new file of the bag once the current one holds this many "
-            "bytes of messages (before MCAP framing and compression); 0: no limit.",
-        ),
-        ParamSpec(
-            "record_max_duration",
-            0.0,
-            float,
-            "s",
-            False,
-            0.0,
-            None,
-            "Bag format: start a new file once the current one spans this much simulated "
-            "time; 0: no limit.",
-        ),
-    ]
+    out = []
+    for name, default, kind, unit, read_only, low, high, text in TABLE:
+        if default in values:
+            default, text = values[default], text + unused
+        out.append(ParamSpec(name, default, kind, unit, read_only, low, high, text))
+    return out
 
 
 def as_declared_type(spec: Optional[ParamSpec], value: Any) -> Any:

@@ -11,4 +11,5 @@ What the stage node publishes: its interface, message packing, display, diagnost
 - ``markers``: The stage drawn for RViz and Foxglove: a ``visualization_msgs/MarkerArray`` per
   display tick.
 - ``reference_messages``: The stage node's tick messages as rclpy message objects.
+- ``tick_frame``: A tick's messages packed in one compiled call, into the recorder's batch frame.
 """

@@ -8,22 +8,26 @@ stress ratio, at level OK, WARN or ERROR (docs/node.md).
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
-from flexure_sim.engine.hinges.stress import ratio_map
 from flexure_sim.node.publish import interface as itf
+
+
+#: The parts of a tick timed by the stepping loop, in order (`Window.add`): commands taken and
+#: the state saved, engine steps, tick report, packing, hand-off to the recorder, publishing.
+TICK_PARTS = ("intake", "engine", "report", "pack", "record", "publish")
 
 
 class Window:
     """
     Accumulators of one diagnostics window and the cumulative counters at its start.
 
-    The accumulators are wall-clock timings of the stepping thread.
+    The accumulators are wall-clock timings of the stepping thread: per part of a tick
+    (`TICK_PARTS`) its sum, and the largest engine, publishing and whole-tick times.
     """
 
-    __slots__ = ("ticks", "step_sum", "step_max", "snap_sum", "pub_sum", "pub_max", "tick_max",
+    __slots__ = ("ticks", "sums", "engine_max", "publish_max", "tick_sum", "tick_max",
                  "wall0", "sim0", "missed0", "lin0", "steps0", "counters0", "engine_failures0",
                  "intake0")
 
@@ -31,50 +35,70 @@ class Window:
                  counters0: dict[str, int], engine_failures0: int,
                  intake0: tuple[int, float]) -> None:
         self.ticks = 0
-        self.step_sum = self.step_max = self.snap_sum = self.pub_sum = self.pub_max = 0.0
-        self.tick_max = 0.0
+        self.sums = [0.0] * len(TICK_PARTS)
+        self.engine_max = self.publish_max = self.tick_sum = self.tick_max = 0.0
         self.wall0, self.sim0, self.missed0 = wall0, sim0, missed0
         self.lin0, self.steps0 = lin0, steps0
         self.counters0 = counters0
         self.engine_failures0 = engine_failures0
         self.intake0 = intake0
 
-    def add(self, step_time: float, snap_time: float, pub_time: float, tick_time: float) -> None:
-        """
-        One tick's wall-clock times (s).
-
-        Engine steps, snapshot, pack + record + publish, whole tick.
-        """
+    def add(self, intake: float, engine: float, report: float, pack: float, record: float,
+            publish: float, tick: float) -> None:
+        """One tick's wall-clock times (s): each part of `TICK_PARTS`, and the whole tick."""
         self.ticks += 1
-        self.step_sum += step_time
-        self.snap_sum += snap_time
-        self.pub_sum += pub_time
-        if step_time > self.step_max:
-            self.step_max = step_time
-        if pub_time > self.pub_max:
-            self.pub_max = pub_time
-        if tick_time > self.tick_max:
-            self.tick_max = tick_time
+        sums = self.sums
+        sums[0] += intake
+        sums[1] += engine
+        sums[2] += report
+        sums[3] += pack
+        sums[4] += record
+        sums[5] += publish
+        self.tick_sum += tick
+        if engine > self.engine_max:
+            self.engine_max = engine
+        if publish > self.publish_max:
+            self.publish_max = publish
+        if tick > self.tick_max:
+            self.tick_max = tick
+
+
+@dataclass(frozen=True)
+class DiagnosticsPort:
+    """
+    Where the diagnostics go.
+
+    ``publisher``, recording ``channel``, the status' ``name`` and ``hardware_id``; ``extra``
+    returns further (values, notes, level) from the node (QoS problems).
+    """
+
+    publisher: Any
+    channel: int
+    name: str
+    hardware_id: str
+    extra: Any = None
 
 
 class Diagnostics:
     """
     Builds and publishes the status of the stepping loop ``loop`` (a `SteppingLoop`).
 
-    Recorded on channel ``channel`` of its recording session, then published by ``publisher``.
-    ``extra`` returns further (counters, notes, level) from the node (QoS problems).
+    Recorded on the port's channel of the loop's recording session, then published by its
+    publisher (`DiagnosticsPort`).
     """
 
-    def __init__(self, loop: Any, publisher: Any, channel: int, name: str, hardware_id: str,
-                 extra: Any = None) -> None:
+    def __init__(self, loop: Any, port: DiagnosticsPort) -> None:
         self.loop = loop
-        self._publisher = publisher
-        self._channel = channel
-        self._name = name
-        self._hardware_id = hardware_id
-        self._extra = extra
-        #: Hinges with a yield strength: names, indices, sigma/sigma_y = C . |wrench|.
-        self._stress = ratio_map(loop.sim.mechanism)
+        self._publisher = port.publisher
+        self._channel = port.channel
+        self._name = port.name
+        self._hardware_id = port.hardware_id
+        self._extra = port.extra
+        hinges = loop.sim.mechanism.hinges
+        #: The hinges with a yield strength (indices, names): their stress ratios are in the
+        #: tick report.
+        self._stress = [(k, h.name) for k, h in enumerate(hinges)
+                        if h.stress is not None and h.stress.sigma_y is not None]
         self.window = self.new_window()
 
     def stress_ratio(self) -> tuple[list[tuple[str, Any]], list[str], int]:
@@ -84,16 +108,15 @@ class Diagnostics:
         The largest hinge stress ratio sigma / sigma_y at the window's last tick
         (engine/hinges/stress.py), WARN above 1; nothing if no hinge has sigma_y.
         """
-        names, index, coefficients = self._stress
-        snap = self.loop.snapshot
-        if not names or snap is None:
+        report = self.loop.report
+        if not self._stress or not self.loop.reported:
             return [], [], itf.OK
-        ratios = (coefficients * np.abs(snap.wrenches[index])).sum(axis=1)
-        k = int(np.argmax(ratios))
+        ratios = report.values[report.index["stress_ratios"]]
+        k, name = max(self._stress, key=lambda hinge: ratios[hinge[0]])  # the first largest
         ratio = float(ratios[k])
-        values = [("stress_ratio_max", ratio), ("stress_ratio_hinge", names[k])]
+        values = [("stress_ratio_max", ratio), ("stress_ratio_hinge", name)]
         if ratio > 1.0:
-            return values, [f"hinge {names[k]} above its yield strength "
+            return values, [f"hinge {name} above its yield strength "
                             f"(stress ratio {ratio:.3g})"], itf.WARN
         return values, [], itf.OK
 
@@ -171,13 +194,12 @@ class Diagnostics:
             ("stepping_priority", loop.priority),
             ("cpu_latency_us", loop.cpu_latency_us),
             ("ticks", loop.ticks),
-            ("step_time_mean_us", 1e6 * w.step_sum / n),
-            ("step_time_max_us", 1e6 * w.step_max),
-            ("engine_step_time_mean_us", 1e6 * w.step_sum / max(steps, 1)),
-            ("snapshot_time_mean_us", 1e6 * w.snap_sum / n),
-            ("publish_time_mean_us", 1e6 * w.pub_sum / n),
-            ("publish_time_max_us", 1e6 * w.pub_max),
-            ("tick_time_mean_us", 1e6 * (w.step_sum + w.snap_sum + w.pub_sum) / n),
+            *[(f"{part}_time_mean_us", 1e6 * total / n)
+              for part, total in zip(TICK_PARTS, w.sums)],
+            ("engine_time_max_us", 1e6 * w.engine_max),
+            ("engine_step_time_mean_us", 1e6 * w.sums[1] / max(steps, 1)),
+            ("publish_time_max_us", 1e6 * w.publish_max),
+            ("tick_time_mean_us", 1e6 * w.tick_sum / n),
             ("tick_time_max_us", 1e6 * w.tick_max),
             ("solver_iterations", getattr(stats, "iterations", 0)),
             ("linearizations", stats.linearizations),

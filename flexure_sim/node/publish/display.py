@@ -8,8 +8,8 @@ publish ticks (at least every tick), so a recording holds the same markers in ev
 mode and a ``use_sim_time`` viewer sees display_rate in its own time. In real-time mode that
 is display_rate of wall time too; in fast mode it is display_rate times the real-time factor.
 
-Hinge colours: the stress ratio sigma / sigma_y (`engine.stress.ratio_map`, the map the
-diagnostics use; green 0, red 1 = yield) when the mechanism file gives a yield strength
+Hinge colours: the stress ratio sigma / sigma_y (the engine's tick report, as the
+diagnostics'; green 0, red 1 = yield) when the mechanism file gives a yield strength
 ``sigma_y`` to some hinge (hinges without one are drawn at 0); otherwise |wrench| relative
 to its peak so far (`markers.MarkerScene`).
 
@@ -152,20 +152,6 @@ def tf_message(transforms: list[Transform], stamp_ns: int, message_class: type) 
     return message_class(transforms=out)
 
 
-def stress_ratios(wrenches: np.ndarray, stress: tuple) -> np.ndarray:
-    """
-    Return sigma / sigma_y per hinge; 0 for hinges without a yield strength.
-
-    ``stress`` is `engine.stress.ratio_map` of the mechanism (the same map as the diagnostics'
-    stress ratio).
-    """
-    names, index, coefficients = stress
-    w = np.asarray(wrenches, dtype=float)
-    out = np.zeros(len(w))
-    out[index] = (coefficients * np.abs(w[index])).sum(axis=1)
-    return out
-
-
 class Display:
     """Markers (and TF transforms) of one tick, as the stepping thread needs them."""
 
@@ -180,11 +166,17 @@ class Display:
         #: "stress ratio" or "|wrench| / peak": what the hinge colours show.
         self.colouring = "stress ratio" if self.stress is not None else "|wrench| / peak"
 
-    def markers(self, snap: Any, stamp_ns: int) -> bytes:
-        """CDR bytes of the MarkerArray of ``snap``."""
-        ratios = (stress_ratios(snap.wrenches, self.stress)
+    def markers(self, report: Any, stamp_ns: int) -> bytes:
+        """
+        CDR bytes of the MarkerArray of a tick.
+
+        ``report``: the engine's tick report (``tick_report.ReportView``: poses, wrenches, the
+        drive's force and the stress ratios, NaN where a hinge has no yield strength).
+        """
+        ratios = (np.nan_to_num(report.stress_ratios, nan=0.0)
                   if self.stress is not None else None)
-        specs = self.scene.specs(snap.poses, snap.wrenches, float(snap.drive_force), ratios)
+        specs = self.scene.specs(report.poses, report.wrenches, float(report.drive_force),
+                                 ratios)
         return self.packer.pack(specs, stamp_ns)
 
 
@@ -210,14 +202,15 @@ class DisplayOutput:
         self.time_sum = 0.0
         self.time_max = 0.0
 
-    def publish(self, snap: Any, stamp: int) -> None:
+    def publish(self, report: Any, stamp: int) -> None:
+        """Publish (and record) the display of the tick report ``report`` (a ``ReportView``)."""
         t0 = time.perf_counter()
-        payload = self.display.markers(snap, stamp)
+        payload = self.display.markers(report, stamp)
         items = [(self._channels[0], payload)]
         tf = None
         if self._tf_pub is not None:
             d = self.display
-            tf = tf_message(moving_transforms(d.mechanism, d.frames, snap.poses), stamp,
+            tf = tf_message(moving_transforms(d.mechanism, d.frames, report.poses), stamp,
                             self._tf_class)
         session = self._session
         if session.current is not None:
@@ -248,13 +241,13 @@ class DisplayOutput:
 
 
 def build_display(node: Any, values: Any, qos: QoSProfile, watch: Any,
-                  first_channel: int) -> tuple[list, Any]:
+                  first_channel: int) -> tuple[DisplayOutput, list, Any]:
     """
     Create the stage node's markers publisher, and TF publishers where tf2_msgs is importable.
 
-    Sets the stepping loop's display output (recording channels from ``first_channel`` on).
-    Returns the recorded display topics, (resolved name, type name, QoS) in channel order, and
-    the /tf_static publisher (None without TF).
+    Returns the display output for the stepping loop (recording channels from
+    ``first_channel`` on), the recorded display topics, (resolved name, type name, QoS) in
+    channel order, and the /tf_static publisher (None without TF).
     """
     from visualization_msgs.msg import MarkerArray
 
@@ -276,7 +269,5 @@ def build_display(node: Any, values: Any, qos: QoSProfile, watch: Any,
         recorded += [(tf_pub.topic_name, TF.type_name, tf_qos()),
                      (static_pub.topic_name, TF_STATIC.type_name, tf_static_qos())]
     channels = list(range(first_channel, first_channel + len(recorded)))
-    loop = node.loop
-    loop.display = DisplayOutput(display, pub, node.session, channels, tf_pub, tf_class)
-    loop.display_every = display_every(loop.rate, float(values["display_rate"]))
-    return recorded, static_pub
+    output = DisplayOutput(display, pub, node.session, channels, tf_pub, tf_class)
+    return output, recorded, static_pub

@@ -228,6 +228,16 @@ class StageInterface:
                     f"({fr.hinge_a(h.name)}); translation (p_x, p_y, 0), yaw alpha",
                 )
             )
+        #: The drives whose full wrench is published (every drive; a WrenchStamped each).
+        self.wrench_drives = tuple(mech.drives)
+        for d in self.wrench_drives:
+            specs.append(_spec(
+                f"drive_wrench:{d.name}",
+                topics.DRIVE_WRENCH if self.has_drive else topics.drive_wrench(d.name),
+                WrenchStamped, "N, N m", fr.body(d.body),
+                f"full wrench drive {d.name} applies to its body {d.body} (the reaction of every "
+                f"coordinate it holds and its applied force), in the body's frame "
+                f"({fr.body(d.body)}), torque about its origin"))
         if self.compression_hinge is not None:
             c = self.compression_hinge
             specs.append(_spec(
@@ -285,8 +295,9 @@ class StageInterface:
             )
         self.tick_topics: tuple[TopicSpec, ...] = tuple(specs)
         #: Indices in `tick_topics` of the control topics (published every tick whatever
-        #: ``monitor_rate``): everything but poses, wrenches and deflections.
-        monitoring = ("poses", "pose", "wrench", "deflection")
+        #: ``monitor_rate``): everything but poses, wrenches (hinges' and drives') and
+        #: deflections.
+        monitoring = ("poses", "pose", "wrench", "deflection", "drive_wrench")
         self.control_indices: tuple[int, ...] = tuple(
             i for i, spec in enumerate(specs) if spec.key.split(":")[0] not in monitoring)
         self.diagnostics = _spec("diagnostics", topics.DIAGNOSTICS, DiagnosticArray, "", "",
@@ -321,6 +332,7 @@ class StageInterface:
         self._deflections = [
             StampedPacker(fr.hinge_a(h), 7, strings=(fr.hinge_b(h),)) for h in self.hinge_names
         ]
+        self._drive_wrenches = [StampedPacker(fr.body(d.body), 6) for d in self.wrench_drives]
 
     def packers(self) -> list[Any]:
         """Return the packer of each tick topic, in `tick_topics` order (for the padding test)."""
@@ -331,6 +343,7 @@ class StageInterface:
         out.extend(self._poses)
         for w, d in zip(self._wrenches, self._deflections):
             out.extend((w, d))
+        out.extend(self._drive_wrenches)
         n_float = len(self.tick_topics) - len(out)
         out.extend([self._float] * n_float)
         return out
@@ -396,6 +409,8 @@ class StageInterface:
             out.append(wp.pack(sec, nsec, fx, fy, 0.0, 0.0, 0.0, m))
             h = 0.5 * a
             out.append(dp.pack(sec, nsec, px, py, 0.0, 0.0, 0.0, sin(h), cos(h)))
+        for wp, (m, fx, fy) in zip(self._drive_wrenches, snap.drive_wrenches.tolist()):
+            out.append(wp.pack(sec, nsec, fx, fy, 0.0, 0.0, 0.0, m))
 
     # ------------------------------------------------------ reference messages
     def messages(self, snap: Any, stamp_ns: int, measured: float = 0.0) -> list[Any]:

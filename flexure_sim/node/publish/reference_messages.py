@@ -65,5 +65,12 @@ def reference_messages(itf: Any, snap: Any, stamp_ns: int, measured: float = 0.0
         r = d.transform.rotation
         r.x, r.y, r.z, r.w = yaw_quaternion(a)
         out.append(d)
+    for d, (m, fx, fy) in zip(itf.wrench_drives, snap.drive_wrenches.tolist()):
+        w = WrenchStamped()
+        w.header.stamp = stamp
+        w.header.frame_id = fr.body(d.body)
+        w.wrench.force.x, w.wrench.force.y, w.wrench.force.z = fx, fy, 0.0
+        w.wrench.torque.x, w.wrench.torque.y, w.wrench.torque.z = 0.0, 0.0, m
+        out.append(w)
     out.extend(Float64(data=v) for v in itf.scalars(snap, measured))
     return out

@@ -259,15 +259,25 @@ class ProcessRecording:
         for channel, data in items:
             parts.append(FRAME_ITEM.pack(channel, len(data)))
             parts.append(data)
+        return self.write_frame(b"".join(parts), [channel for channel, _ in items])
+
+    def write_frame(self, body: bytes, channels: Sequence[int]) -> bool:
+        """
+        Send one tick's batch frame body as it is, ``channels`` one per message.
+
+        `write_batch` builds such a body; the stepping loop packs its tick straight into one
+        (``publish.tick_frame``). False if the frame was dropped (only when not ``lossless``;
+        counted).
+        """
         lossless = self.lossless
-        if self.process.send(b"B", b"".join(parts), droppable=not lossless, wait=lossless):
-            self.sent += len(items)
+        if self.process.send(b"B", body, droppable=not lossless, wait=lossless):
+            self.sent += len(channels)
             if self._unreported:
                 self._report_dropped(wait=lossless)
             return True
-        self.dropped += len(items)
+        self.dropped += len(channels)
         unreported = self._unreported
-        for channel, _ in items:
+        for channel in channels:
             unreported[channel] = unreported.get(channel, 0) + 1
         return False
 

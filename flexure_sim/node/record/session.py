@@ -243,6 +243,16 @@ class RecordingSession:
         except RecordingError as exc:
             self._failed(exc)
 
+    def write_frame(self, body: bytes, channels: Sequence[int]) -> None:
+        """Record one batch frame body as packed (``ProcessRecording.write_frame``)."""
+        recording = self.current
+        if recording is None:
+            return
+        try:
+            recording.write_frame(body, channels)
+        except RecordingError as exc:
+            self._failed(exc)
+
     def note(self, name: str, data: Mapping[str, str]) -> None:
         """Write a metadata record in the current file (if any)."""
         if self.current is not None:

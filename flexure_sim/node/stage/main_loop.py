@@ -10,8 +10,8 @@ from __future__ import annotations
 import threading
 
 from rclpy.context import Context
-from rclpy.executors import Executor, ExternalShutdownException
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.task import Future
 
 #: Period of the main loop's watchdog (`spin_until_stopped`): the executor itself never wakes
@@ -32,8 +32,10 @@ def spin_until_stopped(executor: Executor, stopped: Future, context: Context) ->
 
     A shutdown ends it wherever it lands. rclpy's signal handler shuts the context down
     concurrently with the executor, and when that lands while the executor builds its wait set,
-    rclpy raises RCLError ("the given context is not valid") rather than
-    ExternalShutdownException: the same shutdown, not a failure.
+    rclpy raises its implementation's RCLError ("the given context is not valid") rather than
+    ExternalShutdownException: the same shutdown, not a failure. rclpy exports no public name
+    for that error, so any exception raised once the context is shut down counts as the
+    shutdown; while the context is ok it propagates.
     """
     ended = threading.Event()
 
@@ -51,8 +53,15 @@ def spin_until_stopped(executor: Executor, stopped: Future, context: Context) ->
             executor.spin_until_future_complete(stopped)
     except ExternalShutdownException:
         pass
-    except _rclpy.RCLError:
+    except Exception:  # noqa: BLE001 - see the docstring: a shutdown's, unless the context is ok
         if context.ok():
             raise
     finally:
         ended.set()
+
+
+def spin(node: Node) -> None:
+    """`spin_until_stopped` of a stage node (``shell.StageNode``) in an executor of its own."""
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    spin_until_stopped(executor, node.stopped, node.context)

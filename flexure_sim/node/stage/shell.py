@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Any, Optional
 
 import rclpy
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -30,22 +29,22 @@ from flexure_sim.recording import RecordingError
 from flexure_sim.node.publish import interface as itf
 from flexure_sim.node.inputs.command_intake import intake_for
 from flexure_sim.node.params.declare import coerce_integer_overrides, declare
-from flexure_sim.node.publish.diagnostics import Diagnostics
+from flexure_sim.node.publish.diagnostics import DiagnosticsPort
 from flexure_sim.node.publish import display as dsp
-from flexure_sim.node.publish.display import display_every
 from flexure_sim.node.inputs.drive_bank import (
-    LIMIT_KEYS, FilterBank, command_limits, drive_limits, drive_parameter_specs, drives_problem,
-    in_command_units, named_drives, parameter_name, stroke_ends, units,
+    FilterBank, command_limits, drive_limits, drive_parameter_specs, in_command_units,
+    named_drives, units,
 )
-from flexure_sim.node.inputs.command_checks import CommandFilter, DriveLimits
+from flexure_sim.node.inputs.command_checks import CommandFilter, WarningThrottle
 from flexure_sim.node.stage.engine_guard import StrokeProbe
 from flexure_sim.node.stage.pacing import set_threads_nice
-from flexure_sim.node.params.checks import validate
-from flexure_sim.node.params.table import as_declared_type, parameter_specs
+from flexure_sim.node.params.live import LiveParameters
+from flexure_sim.node.params.table import parameter_specs
 from flexure_sim.node.stage.polled import PolledGroup, never_called
 from flexure_sim.node.stage.qos_watch import QosWatch
 from flexure_sim.node.stage.requests import REQUEST_TIMEOUT_S
-from flexure_sim.node.record.session import PARAMETER_CHANGE_NAME, RecordingSession, run_metadata
+from flexure_sim.node.record.session import RecordingSession, run_metadata
+from flexure_sim.node.stage.loop_parts import LoopParts, LoopSettings
 from flexure_sim.node.stage.stepping_thread import RELINEARIZE_TOL, SteppingLoop
 
 NODE_NAME = "stage_node"
@@ -75,7 +74,7 @@ def load(mechanism_arg: Any) -> tuple[Any, Path]:
     return mech, path
 
 
-class StageNode(Node):
+class StageNode(LiveParameters, Node):
     """The stage node. Construct after ``rclpy.init``; call `shutdown` before destroy_node."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -92,8 +91,74 @@ class StageNode(Node):
             raise
 
     def _build(self) -> None:
+        values = self._declare_parameters()
+        self.interface = self._interface(values)
+        sim, drive_filter = self._simulation(values)
+        self.qos_watch = watch = QosWatch(self._log, values["command_reliability"])
+        qos = itf.stream_qos()
+        tick_pubs = [self.create_publisher(t.msg_type, t.name, qos,
+                                           event_callbacks=watch.publisher_callbacks(t.name))
+                     for t in self.interface.tick_topics]
+        self._tick_names = [p.topic_name for p in tick_pubs]
+        diagnostics = self.interface.diagnostics
+        diag_pub = self.create_publisher(
+            diagnostics.msg_type, diagnostics.name, qos,
+            event_callbacks=watch.publisher_callbacks(diagnostics.name))
+        self._diag_topic = diag_pub.topic_name
+        # Recording channels: the tick topics in publishing order, diagnostics, commands, the
+        # display's topics.
+        self._command_subs = [self.create_subscription(
+            spec.msg_type, spec.name, never_called, itf.command_qos(values["command_reliability"]),
+            raw=True, callback_group=PolledGroup()) for spec in self.interface.commands]
+        command_topics = [sub.topic_name for sub in self._command_subs]
+        throttle = WarningThrottle(1.0)
+        drive = self.mechanism.drive if not self._named else None
+        intake = intake_for(self._command_subs, drive_filter, self._named, len(tick_pubs) + 1,
+                            self.session.write, self._log, throttle,
+                            units(drive)[0] if drive else "m")
+        display, self._display_topics, self._tf_static_pub = dsp.build_display(
+            self, values, qos, watch, len(tick_pubs) + 1 + len(command_topics))
+
+        def check_graph() -> None:  # by the stepping thread, not on an executor timer
+            for topic in command_topics:
+                watch.check_command_publishers(self, topic)
+        parts = LoopParts(
+            LoopSettings.from_values(values), sim, self.interface, tick_pubs, self.session,
+            self._log, filter=drive_filter, intake=intake, display=display, throttle=throttle,
+            graph_check=check_graph if command_topics else None,
+            diagnostics=DiagnosticsPort(diag_pub, len(tick_pubs), self.get_name(),
+                                        self.mechanism.name, watch.diagnostics))
+        self.loop = loop = SteppingLoop(parts)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_service(SetBool, "~/record", self._on_record)
+        self.create_service(Trigger, "~/step", self._on_step)
+        if values["record"]:
+            try:
+                self._start_recording()
+            except RecordingError as exc:
+                raise StartupError(f"cannot record: {exc}") from exc
+        self._sync_record_param = False
+        self.add_pre_set_parameters_callback(self._coerce_parameters)
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        rec = self.session.current
+        self._log.info(
+            f"mechanism {self.mechanism.name} ({self.mechanism_path}), {loop.time_mode} mode, "
+            f"{loop.rate:g} Hz x {loop.n_steps} engine steps of {loop.dt:g} s, "
+            f"{len(tick_pubs)} topics per tick, recording {rec.path if rec else 'off'}")
+        # Everything built so far lives as long as the node: keep it out of the collector's
+        # full passes, which would otherwise pause the stepping loop for milliseconds.
+        gc.collect()
+        gc.freeze()
+        loop.start(self._stepping_ended, self._stepping_failed)
+
+    def _declare_parameters(self) -> dict[str, Any]:
+        """
+        Declare the parameters, load the mechanism; return the values, validated as a whole.
+
+        StartupError names what is wrong.
+        """
         coerce_integer_overrides(self)
-        # ---- mechanism and parameters (validated before anything starts) ----
         declare(self, parameter_specs()[0])
         self.mechanism, self.mechanism_path = load(self.get_parameter("mechanism").value)
         #: The named drives (several, or a force drive; `drive_bank`), else the single drive.
@@ -116,15 +181,19 @@ class StageNode(Node):
         problem = self._problem(values, {**values, **own})
         if problem:
             raise StartupError(f"invalid parameters: {problem}")
-        time_mode = values["time_mode"]
-        dt = float(values["sim_step"])
+        return values
+
+    def _interface(self, values: dict[str, Any]) -> itf.StageInterface:
         try:
-            self.interface = itf.StageInterface(
-                self.mechanism, time_mode, values["frame_prefix"])
+            return itf.StageInterface(self.mechanism, values["time_mode"], values["frame_prefix"])
         except ValueError as exc:
             raise StartupError(str(exc)) from exc
+
+    def _simulation(self, values: dict[str, Any]) -> tuple[Simulation, Any]:
+        """Build the simulation, stepped once and reset (warm), and the drives' command filter."""
         # No energy bookkeeping: the node publishes no energies (Model.energy).
-        sim = Simulation(self.mechanism, dt=dt, relinearize_tol=RELINEARIZE_TOL, energy=False)
+        sim = Simulation(self.mechanism, dt=float(values["sim_step"]),
+                         relinearize_tol=RELINEARIZE_TOL, energy=False)
         try:
             # Warm up (compiled kernels, first Jacobian) before the first paced tick.
             sim.step(1)
@@ -133,153 +202,20 @@ class StageNode(Node):
         except Exception as exc:  # noqa: BLE001 - the engine's own message, at start-up
             raise StartupError(
                 f"the engine failed its first step: {type(exc).__name__}: {exc}") from exc
+        drive = self.mechanism.drive if not self._named else None
         drive_filter: Any = None
         if drive is not None:
             drive_filter = CommandFilter(self._limits(values))
-        elif named:
-            drive_filter = FilterBank([d.name for d in named],
-                                      [drive_limits(values, d.name) for d in named])
+        elif self._named:
+            drive_filter = FilterBank([d.name for d in self._named],
+                                      [drive_limits(values, d.name) for d in self._named])
         if drive_filter is not None and drive_filter.differs(0.0):
             sim.set_command(drive_filter.applied)
-
-        # ---- publishers, subscription, services ----
-        qos = itf.stream_qos()
-        reliability = values["command_reliability"]
-        self.qos_watch = watch = QosWatch(self._log, reliability)
-        tick_pubs = [self.create_publisher(t.msg_type, t.name, qos,
-                                           event_callbacks=watch.publisher_callbacks(t.name))
-                     for t in self.interface.tick_topics]
-        self._tick_names = [p.topic_name for p in tick_pubs]
-        diag_pub = self.create_publisher(
-            self.interface.diagnostics.msg_type, self.interface.diagnostics.name, qos,
-            event_callbacks=watch.publisher_callbacks(self.interface.diagnostics.name))
-        self._diag_topic = diag_pub.topic_name
-        self.loop = loop = SteppingLoop(
-            sim, drive_filter, self.interface, tick_pubs, self.session, self._log,
-            time_mode=time_mode, rate=float(values["publish_rate"]), dt=dt,
-            wake_spin=float(values["wake_spin"]), nice=int(values["stepping_nice"]),
-            cpu_latency_us=int(values["cpu_latency_us"]),
-            priority=int(values["stepping_priority"]),
-            merge_after=int(values["merge_late_ticks"]),
-            monitor_rate=float(values["monitor_rate"]))
-        # Recording channels: the tick topics in publishing order, diagnostics, commands.
-        self._command_subs = [self.create_subscription(
-            spec.msg_type, spec.name, never_called, itf.command_qos(reliability), raw=True,
-            callback_group=PolledGroup()) for spec in self.interface.commands]
-        command_topics = [sub.topic_name for sub in self._command_subs]
-        if command_topics:  # run by the stepping thread, not on an executor timer (qos_watch)
-            loop.graph_check = lambda: [watch.check_command_publishers(self, topic)
-                                        for topic in command_topics]
-        loop.intake = intake_for(self._command_subs, drive_filter, named, len(tick_pubs) + 1,
-                                 self.session.write, self._log, loop.throttle,
-                                 units(drive)[0] if drive else "m")
-        loop.diagnostics = Diagnostics(loop, diag_pub, len(tick_pubs), self.get_name(),
-                                       self.mechanism.name, watch.diagnostics)
-        first = len(tick_pubs) + 1 + len(command_topics)  # after the commands
-        #: Extra recorded topics: (resolved name, type name, QoS), in channel order.
-        self._display_topics, self._tf_static_pub = dsp.build_display(self, values, qos, watch,
-                                                                      first)
-        self.create_service(Trigger, "~/reset", self._on_reset)
-        self.create_service(SetBool, "~/record", self._on_record)
-        self.create_service(Trigger, "~/step", self._on_step)
-        if values["record"]:
-            try:
-                self._start_recording()
-            except RecordingError as exc:
-                raise StartupError(f"cannot record: {exc}") from exc
-        self._sync_record_param = False
-        self.add_pre_set_parameters_callback(self._coerce_parameters)
-        self.add_on_set_parameters_callback(self._validate_parameters)
-        self.add_post_set_parameters_callback(self._apply_parameters)
-
-        rec = self.session.current
-        self._log.info(
-            f"mechanism {self.mechanism.name} ({self.mechanism_path}), {time_mode} mode, "
-            f"{loop.rate:g} Hz x {loop.n_steps} engine steps of {dt:g} s, "
-            f"{len(tick_pubs)} topics per tick, recording {rec.path if rec else 'off'}")
-        # Everything built so far lives as long as the node: keep it out of the collector's
-        # full passes, which would otherwise pause the stepping loop for milliseconds.
-        gc.collect()
-        gc.freeze()
-        loop.start(self._stepping_ended, self._stepping_failed)
+        return sim, drive_filter
 
     @property
     def time_mode(self) -> str:
         return self.loop.time_mode
-
-    # ================================================================ parameters
-    def _values(self) -> dict[str, Any]:
-        return {name: self.get_parameter(name).value for name in self._specs}
-
-    @staticmethod
-    def _limits(values: dict[str, Any]) -> DriveLimits:
-        return DriveLimits(float(values["stroke_min"]), float(values["stroke_max"]),
-                           float(values["slew_rate"]))
-
-    def _problem(self, values: dict[str, Any], current: dict[str, Any]) -> Optional[str]:
-        """
-        Why ``values`` are invalid, or None.
-
-        Checked as a whole, per drive, and whether the engine could follow the (changed) stroke
-        ends.
-        """
-        problem = validate(values) or drives_problem(values, [d.name for d in self._named])
-        if problem:
-            return problem
-        for name, drive, unit in stroke_ends(self.mechanism):
-            if values[name] != current[name]:
-                problem = self._probe.end_problem(name, values[name], drive, unit)
-                if problem:
-                    return problem
-        return None
-
-    def _coerce_parameters(self, params: list[Parameter]) -> list[Parameter]:
-        """Pre-set callback: ``ros2 param set ... 1e-6`` or ``2`` sets a double parameter."""
-        out = []
-        for p in params:
-            value = as_declared_type(self._specs.get(p.name), p.value)
-            out.append(p if value is p.value else Parameter(p.name, Parameter.Type.DOUBLE, value))
-        return out
-
-    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        """On-set callback: check the whole resulting set of values; no side effects."""
-        current = self._values()
-        values = dict(current)
-        for p in params:
-            if p.name in values:
-                values[p.name] = p.value
-        problem = self._problem(values, current)
-        return SetParametersResult(successful=problem is None, reason=problem or "")
-
-    def _apply_parameters(self, params: list[Parameter]) -> None:
-        """Post-set callback: hand accepted changes to the stepping thread."""
-        names = {p.name for p in params}
-        values = self._values()
-        loop = self.loop
-        if names & {"stroke_min", "stroke_max", "slew_rate"} and not self._named \
-                and loop.filter is not None:
-            limits = self._limits(values)
-            loop.requests.call(lambda: loop.filter.set_limits(limits))
-        for d in self._named:
-            if names & {parameter_name(d.name, k) for k in LIMIT_KEYS}:
-                one, limits = loop.filter.filter(d.name), drive_limits(values, d.name)
-                loop.requests.call(lambda one=one, limits=limits: one.set_limits(limits))
-        if names & {"publish_rate", "wake_spin", "monitor_rate", "merge_late_ticks"}:
-            rate, spin = float(values["publish_rate"]), float(values["wake_spin"])
-            monitor, merge = float(values["monitor_rate"]), int(values["merge_late_ticks"])
-            loop.requests.call(lambda: loop.set_pacing(rate, spin, monitor, merge))
-        if names & {"publish_rate", "display_rate"}:
-            every = display_every(float(values["publish_rate"]), float(values["display_rate"]))
-            loop.requests.call(lambda: setattr(loop, "display_every", every))
-        if "display_scale" in names:
-            scale = float(values["display_scale"])
-            loop.requests.call(lambda: setattr(loop.display.display.scene, "display_scale", scale))
-        if "record" in names and not self._sync_record_param:
-            ok, message = self._set_recording(bool(values["record"]))
-            (self._log.info if ok else self._log.error)(message)
-        changed = {p.name: itf.value_text(p.value) for p in params}
-        loop.requests.call(lambda: self.session.note(
-            PARAMETER_CHANGE_NAME, {"t": repr(loop.sim.state.t), **changed}))
 
     # ================================================================ services
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:

@@ -3,10 +3,11 @@
 
     ros2 run flexure_sim stage_node [--ros-args -p mechanism:=<name|file.yaml> -p NAME:=VALUE]
 
-`main` follows the Jazzy idiom (``rclpy.init``, spin, ``destroy_node``, ``try_shutdown``) and
-guarantees one-line endings (docs/node.md): exit 0 after SIGINT or SIGTERM (the
-recording finished), 1 when the node cannot start or the simulation stopped, 2 for bad
-command-line arguments; never a traceback, whenever a signal lands.
+`main` follows the ros2 demos' idiom (``rclpy.init``, the node, spin, ``destroy_node`` and
+``try_shutdown``); `Run` holds what it started and how it ends, with one-line endings
+(docs/node.md): exit 0 after SIGINT or SIGTERM (the recording finished), 1 when the node
+cannot start or the simulation stopped, 2 for bad command-line arguments; never a traceback,
+whenever a signal lands.
 
 Signals (`SignalGuard`): the handler is installed before anything heavy is imported. During
 start-up the first SIGINT/SIGTERM aborts it (an exception from the handler); while the node
@@ -98,51 +99,109 @@ def _usage() -> str:
     return "\n".join(lines)
 
 
-class _Run:
-    """What `main` started, for the clean-up."""
+class Done(BaseException):
+    """The command line asked for no node (``--help``): exit with ``code``."""
 
-    def __init__(self) -> None:
-        self.rclpy: Any = None
-        self.node: Any = None
+    def __init__(self, code: int) -> None:
+        super().__init__(code)
+        self.code = code
 
 
-def _user_args(argv: list[str]) -> list[str]:
-    """Return the arguments that are not ROS arguments; UsageError if the ROS ones do not parse."""
-    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+def command_line(args: Optional[list[str]]) -> list[str]:
+    """
+    Return the arguments for ``rclpy.init``; Done after ``--help``, UsageError if malformed.
+
+    Only ROS arguments are accepted (``--ros-args -p NAME:=VALUE``): rclpy's own parser checks
+    them (any failure of it is a bad argument: rclpy names its error type in no public module).
+    """
     from rclpy.utilities import remove_ros_args
 
+    argv = sys.argv if args is None else args
+    if any(a in ("-h", "--help") for a in argv[1:]):
+        print(_usage())
+        raise Done(0)
     try:
-        return remove_ros_args(argv)[1:]
-    except _rclpy.RCLInvalidROSArgsError as exc:
+        user_args = remove_ros_args(argv)[1:]
+    except Exception as exc:  # noqa: BLE001 - rclpy's RCLInvalidROSArgsError
         raise UsageError(f"{exc} (see --help)") from None
+    if user_args:
+        raise UsageError(f"unexpected arguments {user_args}; parameters go after --ros-args as "
+                         "-p NAME:=VALUE (see --help)")
+    return argv
 
 
-def _start_and_spin(argv: list[str], run: _Run, guard: SignalGuard) -> None:
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-    from rclpy.signals import SignalHandlerOptions
+class Run:
+    """
+    What `main` started, and how it ends (module docstring).
 
-    from flexure_sim.node.stage.main_loop import spin_until_stopped
-    from flexure_sim.node.stage.pacing import process_threads
-    from flexure_sim.node.stage.shell import StageNode
+    The signal guard is installed at construction; `failed` turns what ended the run into a
+    message and an exit code, `end` finishes the recording, releases ROS and prints the one
+    line.
+    """
 
-    run.rclpy = rclpy
-    # rclpy's handlers sit on top of the guard's: a signal shuts the context down (ending
-    # spin_until_stopped), then reaches the guard.
-    before = process_threads()
-    try:
+    def __init__(self) -> None:
+        self.guard = SignalGuard()
+        self.guard.install()
+        self.rclpy: Any = None
+        self.node: Any = None
+        self.error: Optional[str] = None
+        self.code = 0
+        self._threads: set[int] = set()
+
+    def init(self, argv: list[str]) -> None:
+        """``rclpy.init`` with rclpy's signal handlers on top of the guard's."""
+        import rclpy
+        from rclpy.signals import SignalHandlerOptions
+
+        from flexure_sim.node.stage.pacing import process_threads
+
+        sys.setswitchinterval(SWITCH_INTERVAL_S)
+        self.rclpy = rclpy
+        self._threads = process_threads()
+        # A signal shuts the context down (ending spin_until_stopped), then reaches the guard.
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.ALL)
-    except _rclpy.RCLInvalidROSArgsError as exc:
-        raise UsageError(f"{exc} (see --help)") from None
-    run.node = StageNode()
-    # The threads ROS started in this process: the middleware's (not Python's own).
-    python = {thread.native_id for thread in threading.enumerate()}
-    run.node.adopt_middleware_threads(process_threads() - before - python)
-    guard.started()
-    executor = SingleThreadedExecutor()
-    executor.add_node(run.node)
-    spin_until_stopped(executor, run.node.stopped, run.node.context)
+
+    def started(self, node: Any) -> Any:
+        """Start-up is over: ``node`` runs; the middleware's threads get its stepping niceness."""
+        from flexure_sim.node.stage.pacing import process_threads
+
+        self.node = node
+        python = {thread.native_id for thread in threading.enumerate()}
+        node.adopt_middleware_threads(process_threads() - self._threads - python)
+        self.guard.started()
+        return node
+
+    def failed(self, exc: BaseException) -> None:
+        """Take note of what ended the run."""
+        if isinstance(exc, Done):
+            self.code = exc.code
+        elif isinstance(exc, Interrupted):
+            self.error = _startup_error(exc.__context__)
+        elif isinstance(exc, UsageError):
+            self.error, self.code = str(exc), 2
+        elif isinstance(exc, Exception):
+            self.error = _startup_error(exc)
+            if self.error is None and self.guard.received is None:
+                self.error = f"{type(exc).__name__}: {exc}"
+        # KeyboardInterrupt (a handler other than the guard's, none expected): as SIGINT.
+
+    def end(self) -> int:
+        """Finish the recording, release ROS, print the one line; return the exit code."""
+        self.guard.started()
+        if self.rclpy is not None or self.node is not None:
+            try:
+                if _clean_up(self):
+                    self.code = 1
+            except Exception as exc:  # noqa: BLE001 - still one line
+                self.error = self.error or f"while shutting down: {type(exc).__name__}: {exc}"
+        if self.error is not None:
+            print(f"stage_node: error: {self.error}", file=sys.stderr)
+            self.code = max(self.code, 1)
+        elif self.guard.received is not None:
+            when = " during start-up" if self.node is None else ""
+            print(f"stage_node: stopped by {self.guard.name}{when}", file=sys.stderr)
+        _ignore_signals()
+        return self.code
 
 
 def _startup_error(exc: Optional[BaseException]) -> Optional[str]:
@@ -159,7 +218,7 @@ def _startup_error(exc: Optional[BaseException]) -> Optional[str]:
     return None
 
 
-def _clean_up(run: _Run) -> bool:
+def _clean_up(run: Run) -> bool:
     """Finish the recording and release ROS; True if the simulation had failed."""
     failed = False
     node = run.node
@@ -185,54 +244,20 @@ def _clean_up(run: _Run) -> bool:
 @quiet_pipe
 def main(args: Optional[list[str]] = None) -> int:
     """Entry point of ``stage_node`` / ``ros2 run flexure_sim stage_node``."""
-    guard = SignalGuard()
-    guard.install()
-    run = _Run()
-    error: Optional[str] = None
-    code = 0
+    run = Run()  # before anything heavy is imported: signals from here on
     try:
         try:
-            argv = sys.argv if args is None else args
-            if any(a in ("-h", "--help") for a in argv[1:]):
-                print(_usage())
-                return _exit_now(0)
-            user_args = _user_args(argv)
-            if user_args:
-                print(f"stage_node: error: unexpected arguments {user_args}; parameters go "
-                      "after --ros-args as -p NAME:=VALUE (see --help)", file=sys.stderr)
-                return _exit_now(2)
-            sys.setswitchinterval(SWITCH_INTERVAL_S)
-            _start_and_spin(argv, run, guard)
+            argv = command_line(args)
+            from flexure_sim.node.stage.main_loop import spin
+            from flexure_sim.node.stage.shell import StageNode
+
+            run.init(argv)  # rclpy.init
+            spin(run.started(StageNode()))
         finally:
-            guard.started()  # the exception the guard may raise can only land before this
-    except Interrupted as exc:
-        error = _startup_error(exc.__context__)
-    except KeyboardInterrupt:
-        pass  # a handler other than the guard's (none expected): same as SIGINT
-    except UsageError as exc:
-        error, code = str(exc), 2
-    except Exception as exc:  # noqa: BLE001 - one line, never a traceback
-        error = _startup_error(exc)
-        if error is None and guard.received is None:
-            error = f"{type(exc).__name__}: {exc}"
-    try:
-        if _clean_up(run):
-            code = 1
-    except Exception as exc:  # noqa: BLE001 - still one line
-        error = error or f"while shutting down: {type(exc).__name__}: {exc}"
-    if error is not None:
-        print(f"stage_node: error: {error}", file=sys.stderr)
-        code = max(code, 1)
-    elif guard.received is not None:
-        when = " during start-up" if run.node is None else ""
-        print(f"stage_node: stopped by {guard.name}{when}", file=sys.stderr)
-    _ignore_signals()
-    return code
-
-
-def _exit_now(code: int) -> int:
-    _ignore_signals()
-    return code
+            run.guard.started()  # the exception the guard may raise can only land before this
+    except (Done, Interrupted, KeyboardInterrupt, Exception) as exc:
+        run.failed(exc)
+    return run.end()
 
 
 def _ignore_signals() -> None:

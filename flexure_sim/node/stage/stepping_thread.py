@@ -2,9 +2,12 @@
 The stage node's stepping thread.
 
 It owns the `Simulation` and the recording, and per publish tick applies the drive commands
-received since the last tick (`commands`), advances the engine by round(1 / (publish_rate *
-sim_step)) steps and publishes the state (`interface`), packing each message to CDR once and
-publishing and recording the same bytes.
+received since the last tick (`command_intake`), advances the engine by round(1 /
+(publish_rate * sim_step)) steps, reports the state in one compiled call (the engine's
+``tick_report``), packs every message into one recorder frame in another (`tick_frame`), hands
+that frame to the recorder and publishes slices of it: the bytes recorded are the bytes
+published. The loop is built from its parts (`LoopParts`, made by ``shell.StageNode``) and its
+settings (`LoopSettings`, the node's parameters), all in one `LoopParts`.
 
 Real-time mode paces ticks with absolute deadlines of a steady clock (`pacing.Pacer`; with
 ``merge_late_ticks`` a loop that many ticks late merges them into one that steps the engine
@@ -17,19 +20,22 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, Optional, Sequence
+from typing import Any, Optional
 
 from flexure_sim.engine.actuators.sensor import Sensor
-from flexure_sim.engine.solver.simulation import Simulation, SolverError
+from flexure_sim.engine.solver.simulation import SolverError
+from flexure_sim.engine.solver.tick_report import TickReport
+from flexure_sim.node.params.checks import monitor_every, steps_per_tick
+from flexure_sim.node.publish import tick_frame
 from flexure_sim.node.publish.diagnostics import Diagnostics
-from flexure_sim.node.inputs.command_checks import CommandFilter, WarningThrottle
-from flexure_sim.node.stage.engine_guard import EngineHold, snapshot_finite
+from flexure_sim.node.publish.display import display_every
 from flexure_sim.node.stage.cpu_latency import request_cpu_latency
+from flexure_sim.node.stage.engine_guard import EngineHold
+from flexure_sim.node.stage.loop_parts import LoopParts
+from flexure_sim.node.stage.overrun import OverrunWatch
 from flexure_sim.node.stage.pacing import Pacer, set_thread_fifo, set_thread_nice
 from flexure_sim.node.stage.qos_watch import GRAPH_CHECK_PERIOD_S
-from flexure_sim.node.params.checks import monitor_every, steps_per_tick
 from flexure_sim.node.stage.requests import RequestQueue
-from flexure_sim.node.record.session import RecordingSession
 
 #: Engine's relinearize_tol: None = its default, re-linearize only when the step's iteration
 #: stops contracting (the answer does not depend on where the Jacobian was taken), which lets
@@ -49,64 +55,72 @@ def crossed(first: int, count: int, every: int) -> bool:
 
 
 class SteppingLoop:
-    """Ticks of one simulation. Build, attach `diagnostics` and `intake`, then `start`."""
+    """Ticks of one simulation, built from its `LoopParts` (settings included); then `start`."""
 
-    def __init__(self, sim: Simulation, drive_filter: Optional[CommandFilter], interface: Any,
-                 publishers: Sequence[Any], session: RecordingSession, log: Any, *,
-                 time_mode: str, rate: float, dt: float, wake_spin: float, nice: int,
-                 monitor_rate: float = 0.0, merge_after: int = 0,
-                 cpu_latency_us: int = -1, priority: int = 0) -> None:
-        self.sim = sim
-        self.filter = drive_filter
-        self.interface = interface
-        self._publishers = list(publishers)
-        self.session = session
-        self._log = log
+    def __init__(self, parts: LoopParts) -> None:
+        settings = parts.settings
+        self.sim = sim = parts.sim
+        self.filter = parts.filter
+        self.interface = interface = parts.interface
+        self._publishers = list(parts.publishers)
+        self.session = parts.session
+        self._log = parts.log
+        self.intake = parts.intake
+        self.display = parts.display
+        self.graph_check = parts.graph_check
+        self.throttle = parts.throttle
+        time_mode, rate, dt = settings.time_mode, settings.rate, settings.dt
         self.time_mode = time_mode
         self.rate = rate
         self.dt = dt
         self.n_steps, _ = steps_per_tick(rate, dt)
         self.diag_every = max(1, round(rate / DIAGNOSTICS_RATE))
-        self.monitor_rate = monitor_rate
+        self.monitor_rate = settings.monitor_rate
         #: Ticks per publication of the monitoring topics (``monitor_rate``).
-        self.monitor_every = monitor_every(rate, monitor_rate)
+        self.monitor_every = monitor_every(rate, settings.monitor_rate)
+        #: Publish ticks per display tick (0: off).
+        self.display_every = (display_every(rate, settings.display_rate)
+                              if parts.display is not None else 0)
         self._control_publishers = [self._publishers[i] for i in interface.control_indices]
+        #: What each tick publishes, in one compiled call (engine), and its messages packed in
+        #: another (`tick_frame`; None: `interface.encode` from a snapshot, where the packed
+        #: layouts do not apply).
+        self.report = TickReport(sim.model)
+        self.reported = False
+        self.frame = (tick_frame.TickFrame(interface, self.report.index)
+                      if interface.packed and tick_frame.APPLIES else None)
+        self._output_at = self.report.index["outputs"].start
+        self.report.fill_data(sim.data)  # loads the compiled kernels before the first tick
+        if self.frame is not None:
+            self.frame.pack(self.report.values, 0.0, 0)
         #: The output's sensor (``output/measured``), sampled once per published tick.
         spec = interface.mechanism.sensor if interface.has_sensor else None
         self.sensor: Optional[Sensor] = Sensor(spec, 1.0 / rate) if spec is not None else None
         self.pacer: Optional[Pacer] = (
-            Pacer(1.0 / rate, spin_s=min(wake_spin, 1.0 / rate)) if time_mode == "realtime"
-            else None)
-        self._set_merge(merge_after)
+            Pacer(1.0 / rate, spin_s=min(settings.wake_spin, 1.0 / rate))
+            if time_mode == "realtime" else None)
+        self._set_merge(settings.merge_after)
+        #: Warns when real-time ticks do not fit their period (`overrun`).
+        self.overrun = OverrunWatch(1.0 / rate, time.perf_counter())
         #: Niceness asked for the stepping thread (and the middleware's threads, `shell`), and
         #: the one in effect; middleware threads given it (`StageNode.adopt_middleware_threads`).
-        self.nice_request = nice
+        self.nice_request = settings.nice
         self.nice = 0
         self.middleware_threads = 0
         #: SCHED_FIFO priority asked for the stepping thread in real time (0: none), and the
         #: one in effect.
-        self._priority_request = priority if time_mode == "realtime" else 0
+        self._priority_request = settings.priority if time_mode == "realtime" else 0
         self.priority = 0
         #: CPU wake-up latency to ask for in real-time mode (`cpu_latency`; -1: none), and
         #: the one in effect while the loop runs (-1: none held).
-        self._latency_request = cpu_latency_us if time_mode == "realtime" else -1
+        self._latency_request = settings.cpu_latency_us if time_mode == "realtime" else -1
         self.cpu_latency_us = -1
         self.ticks = 0
         self.runs = 0
+        #: Wall time of the last tick's work (s).
+        self._tick_work = 0.0
         self.hold = EngineHold()
-        self.throttle = WarningThrottle(1.0)
-        self.intake: Any = None
-        #: A check of the ROS graph (`qos_watch.QosWatch.check_command_publishers`) run
-        #: between ticks every GRAPH_CHECK_PERIOD_S of wall time; None: none.
-        self.graph_check: Any = None
         self._next_graph_check = 0.0
-        self.diagnostics: Optional[Diagnostics] = None
-        #: The last published snapshot (the diagnostics' hinge stress ratio), None before.
-        self.snapshot: Any = None
-        #: Display output (`display.DisplayOutput`) and publish ticks per display tick
-        #: (0: off); set before `start`.
-        self.display: Any = None
-        self.display_every = 0
         self.requests = RequestQueue(self.alive)
         self.run_wall0 = time.perf_counter()
         self.run_sim0 = sim.state.t
@@ -114,6 +128,8 @@ class SteppingLoop:
         self._thread: Optional[threading.Thread] = None
         #: Why the thread ended, if it failed.
         self.failure: Optional[BaseException] = None
+        self.diagnostics: Optional[Diagnostics] = (
+            Diagnostics(self, parts.diagnostics) if parts.diagnostics is not None else None)
 
     # ------------------------------------------------------------------ thread
     def start(self, on_end: Any, on_failure: Any) -> None:
@@ -168,11 +184,16 @@ class SteppingLoop:
                     requests.wake.clear()
                     self._check_graph()
                     continue
-                if pacer is not None:
+                if pacer is None:
+                    self.tick()
+                else:
                     pacer.wait()
-                self.tick()
-                if pacer is not None:
-                    pacer.done()
+                    self.tick()
+                    missed = pacer.done()
+                    warning = self.overrun.tick(time.perf_counter(), self._tick_work, missed,
+                                                self._settings_text())
+                    if warning is not None:
+                        self._log.warning(warning)
                 self._check_graph()
         except BaseException as exc:  # noqa: BLE001 - reported, then the node shuts down
             if not self._stop.is_set() and self._on_failure(exc):
@@ -249,7 +270,7 @@ class SteppingLoop:
 
     def tick(self) -> bool:
         """
-        One publish tick: commands, engine steps, publish + record every topic.
+        One publish tick: commands, engine steps, report, pack, record, publish.
 
         In real time it may cover several periods (`Pacer.span`): the engine steps through
         all of them, the state at the end is published. Returns False when the engine failed:
@@ -262,44 +283,65 @@ class SteppingLoop:
         if self.intake is not None:
             self.intake.apply(round(sim.state.t * 1e9))
         self.hold.save(sim, self.filter)
+        t1 = perf()
+        report = self.report
         try:
             if span > 1:
                 self._merged_periods(span - 1)
             self._advance_engine()
-            t1 = perf()
-            snap = sim.snapshot()
-            if not snapshot_finite(snap):
-                raise SolverError(f"non-finite result at t = {snap.t:.9g} s")
+            t2 = perf()
+            values = report.fill_data(sim.data)
+            if not report.finite:
+                raise SolverError(f"non-finite result at t = {sim.state.t:.9g} s")
         except Exception as exc:  # noqa: BLE001 - any engine failure: hold, report, go on
             message = self.hold.restore(sim, self.filter, exc)
             if self.throttle.event("engine") is not None:
                 self._log.error(message + f" ({self.hold.failures} engine failures in all)")
             self._count_tick(round(sim.state.t * 1e9), span)
+            self._tick_work = perf() - t0
             return False
-        t2 = perf()
-        self.snapshot = snap
-        stamp = round(snap.t * 1e9)
-        measured = self.sensor.sample(float(snap.output)) if self.sensor is not None else 0.0
+        t3 = perf()
+        self.reported = True
+        stamp = round(sim.state.t * 1e9)
+        measured = (self.sensor.sample(float(values[self._output_at]))
+                    if self.sensor is not None else 0.0)
         monitor = crossed(self.ticks, span, self.monitor_every)
-        payloads = self.interface.encode(snap, stamp, measured, monitor)
-        if monitor:
-            channels: Sequence[int] = range(len(payloads))
-            publishers = self._publishers
-        else:
-            channels, publishers = self.interface.control_indices, self._control_publishers
+        publishers = self._publishers if monitor else self._control_publishers
+        session = self.session
+        frame = self.frame
         # Recorded first, so that the file holds every message a subscriber can have seen even
         # if a shutdown interrupts the publishing. Channels 0..n-1: the tick topics.
-        if self.session.current is not None:
-            self.session.write(list(zip(channels, payloads)), stamp)
-        for pub, payload in zip(publishers, payloads):
-            pub.publish(payload)
-        t3 = perf()
+        if frame is not None:
+            body, layout = frame.pack(values, measured, stamp, monitor)
+            t4 = perf()
+            if session.current is not None:
+                session.write_frame(body, layout.channels)
+            t5 = perf()
+            for pub, (start, end) in zip(publishers, layout.spans):
+                pub.publish(body[start:end])
+        else:
+            payloads = self.interface.encode(sim.snapshot(), stamp, measured, monitor)
+            channels = range(len(payloads)) if monitor else self.interface.control_indices
+            t4 = perf()
+            if session.current is not None:
+                session.write(list(zip(channels, payloads)), stamp)
+            t5 = perf()
+            for pub, payload in zip(publishers, payloads):
+                pub.publish(payload)
+        t6 = perf()
+        self._tick_work = t6 - t0
         if self.diagnostics is not None:
-            self.diagnostics.window.add(t1 - t0, t2 - t1, t3 - t2, t3 - t0)
+            self.diagnostics.window.add(t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5,
+                                        t6 - t0)
         if self.display_every and crossed(self.ticks, span, self.display_every):
-            self.display.publish(snap, stamp)
+            self.display.publish(report.view(), stamp)
         self._count_tick(stamp, span)
         return True
+
+    def _settings_text(self) -> str:
+        """Return the settings the overrun warning quotes (`overrun`)."""
+        return (f"publish_rate {self.rate:g} Hz, monitor_rate {self.monitor_rate:g} Hz, "
+                f"stepping_priority {self.priority}")
 
     def _count_tick(self, stamp: int, span: int = 1) -> None:
         first = self.ticks + 1
@@ -333,6 +375,7 @@ class SteppingLoop:
             self.sensor.set_period(1.0 / rate)
         if self.pacer is not None:
             self.pacer.set_period(1.0 / rate)
+        self.overrun.set_period(1.0 / rate, time.perf_counter())
         self._set_merge(merge_after)
         self._log.info(f"publish_rate {rate:g} Hz: {self.n_steps} engine steps per tick")
 

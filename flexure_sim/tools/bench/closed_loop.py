@@ -1,10 +1,11 @@
 """
-The closed loop at 1 kHz, measured.
+The closed loop, measured.
 
 stage_node in real-time mode (recording on) with ``pi_controller`` in a second process answering
-every measurement.
+every measurement, at 1 kHz or, with ``--rate``, faster with the engine step scaled so that a
+tick still takes `STEPS_PER_TICK` steps (what a slower machine does at 1 kHz).
 
-    python -m flexure_sim.tools.bench.closed_loop --duration 10 [--monitor-rate 100]
+    python -m flexure_sim.tools.bench.closed_loop --duration 10 [--rate 2000] [--monitor-rate 100]
         [--merge-late-ticks 2] [--param NAME=VALUE ...] [--hog] [--json]
 
 The stage is the built-in one with a sensor (`SENSOR`: its noise makes every reading unique,
@@ -30,6 +31,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
@@ -37,13 +39,16 @@ import yaml
 
 from flexure_sim import topics
 from flexure_sim.engine.mechanism.loader import resolve_mechanism_path
-from flexure_sim.engine.solver.simulation import DEFAULT_STEP
 
 #: The sensor of the measured stage (a capacitive gauge of 1 nm RMS noise).
 SENSOR = {"noise_rms": 1.0e-9, "latency": 0, "seed": 1}
 #: Setpoint of the run, m of output (the stage's output for ~0.7 um of drive).
 SETPOINT = 2.0e-5
 RATE = 1000.0
+#: How long the controller may take to start, s.
+START_TIMEOUT_S = 60.0
+#: Engine steps per tick at every rate (the node's default at 1 kHz).
+STEPS_PER_TICK = 10
 #: A CPU-bound process at the lowest priority: it only takes time nobody else wants.
 HOG = "import os\nos.nice(19)\nwhile True:\n    pass\n"
 
@@ -71,6 +76,14 @@ class ControllerProcess:
         self._log = open(workdir / "controller.stderr", "wb")  # noqa: SIM115
         self.proc = subprocess.Popen(args, cwd=workdir, env=env, stdout=self._log,
                                      stderr=subprocess.STDOUT)
+        # Started once its node exists (it opens the trace then): the warm-up follows.
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while not self.trace.exists():
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                self.stop()
+                raise RuntimeError("pi_controller did not start: "
+                                   + (workdir / "controller.stderr").read_text()[-2000:])
+            time.sleep(0.05)
 
     def stop(self) -> None:
         if self.proc.poll() is None:
@@ -131,16 +144,17 @@ def command_latency(recording: Path, trace: Path, period: float) -> dict[str, An
 
 
 def run(duration: float = 10.0, params: Optional[dict[str, str]] = None,
-        hog: bool = False) -> dict[str, Any]:
+        hog: bool = False, rate: float = RATE) -> dict[str, Any]:
     """
-    One real-time closed-loop run of ``duration`` s (after the warm-up).
+    One real-time closed-loop run of ``duration`` s (after the warm-up) at ``rate`` Hz.
 
     The node's figures (`measure.run_node`) plus `command_latency`; ``hog``: next to `Hog`.
+    The engine step is 1 / (`STEPS_PER_TICK` rate); the controller's period 1 / rate.
     """
     from flexure_sim.tools.bench import measure  # needs ROS 2
 
     workdir = Path(tempfile.mkdtemp(prefix="stage_closed_loop_"))
-    period = 1.0 / RATE
+    period = 1.0 / rate
     hogger = Hog() if hog else None
     try:
         stage = sensor_stage(workdir / "stage_with_sensor.yaml")
@@ -150,7 +164,7 @@ def run(duration: float = 10.0, params: Optional[dict[str, str]] = None,
             controllers.append(ControllerProcess(env, cwd, period))
             return controllers[-1]
 
-        result = measure.run_node("realtime", duration, RATE, DEFAULT_STEP, True, False,
+        result = measure.run_node("realtime", duration, rate, period / STEPS_PER_TICK, True, False,
                                   mechanism=str(stage), keep_dir=workdir, params=params,
                                   companion=start)
         result.update(command_latency(workdir / "measure.mcap", controllers[0].trace, period))
@@ -167,7 +181,8 @@ def summary(r: dict[str, Any]) -> str:
     """One line of the figures."""
     def pct(v: Optional[float]) -> str:
         return "n/a" if v is None else f"{100 * v:.2f} %"
-    return (f"closed loop at 1 kHz (pi_controller in a 2nd process, recording on): missed ticks "
+    return (f"closed loop at {r['publish_rate'] / 1e3:g} kHz (pi_controller in a 2nd process, "
+            f"recording on): missed ticks "
             f"{pct(r.get('missed_fraction'))} ({r.get('merged_ticks') or 0} of them merged, "
             f"real-time factor {r['real_time_factor']:.3f}), "
             f"jitter p50/p99 {1e6 * r['jitter_p50_s']:.0f}/"
@@ -182,6 +197,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m flexure_sim.tools.bench.closed_loop",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--duration", type=float, default=10.0, help="measuring window, s")
+    parser.add_argument("--rate", type=float, default=RATE,
+                        help=f"publish_rate, Hz (default {RATE:g}); the engine step is scaled "
+                             f"to {STEPS_PER_TICK} steps a tick")
     parser.add_argument("--monitor-rate", type=float, default=0.0,
                         help="the node's monitor_rate, Hz (0: every tick)")
     parser.add_argument("--merge-late-ticks", type=int, default=0,
@@ -199,7 +217,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if not sep or not name:
             parser.error(f"--param {item!r}: expected NAME=VALUE")
         params[name] = value
-    r = run(args.duration, params=params, hog=args.hog)
+    r = run(args.duration, params=params, hog=args.hog, rate=args.rate)
     print(json.dumps(r) if args.json else summary(r))
     return 0
 

@@ -33,6 +33,7 @@ from typing import Any, Callable, Optional, Sequence
 
 from flexure_sim import topics
 from flexure_sim.engine.solver.simulation import DEFAULT_STEP
+from flexure_sim.node.publish.diagnostics import TICK_PARTS
 from flexure_sim.tools.bench.tick_profile import profile
 
 
@@ -188,10 +189,9 @@ def run_node(
         "wall_s": w1 - w0, "sim_s": sim,
         "real_time_factor": sim / (w1 - w0),
         "ticks": int(delta("ticks")),
-        "step_time_mean_us": mean("step_time_mean_us"),
+        # The parts of a tick (publish/diagnostics.py TICK_PARTS), means over the window.
+        **{f"{part}_time_mean_us": mean(f"{part}_time_mean_us") for part in TICK_PARTS},
         "engine_step_time_mean_us": mean("engine_step_time_mean_us"),
-        "snapshot_time_mean_us": mean("snapshot_time_mean_us"),
-        "publish_time_mean_us": mean("publish_time_mean_us"),
         "tick_time_mean_us": mean("tick_time_mean_us"),
         "tick_time_max_us": max(float(v["tick_time_max_us"]) for _, v in window[1:]),
         "solver_iterations_per_step": delta("solver_iterations") / max(delta("engine_steps"), 1),
@@ -274,15 +274,11 @@ def _print_run(r: dict[str, Any]) -> None:
             f"{r.get('merged_ticks', 0)} of them merged, "
             f"slips {r['slips']}, worst wake-up lateness {r['max_late_us']:.0f} us"
         )
-    print(
-        f"   per tick: engine {r['step_time_mean_us']:.0f} us "
-        f"({r['engine_step_time_mean_us']:.1f} us/step, "
-        f"{r['solver_iterations_per_step']:.2f} iterations/step), snapshot "
-        f"{r['snapshot_time_mean_us']:.0f} us, "
-        f"pack+publish+record {r['publish_time_mean_us']:.0f} us; mean "
-        f"{r['tick_time_mean_us']:.0f} us, "
-        f"max {r['tick_time_max_us']:.0f} us"
-    )
+    parts = ", ".join(f"{part} {r[f'{part}_time_mean_us']:.1f} us" for part in TICK_PARTS)
+    print(f"   per tick: {parts}"
+          + f"; in all {r['tick_time_mean_us']:.1f} us (max {r['tick_time_max_us']:.0f} us); "
+          f"engine {r['engine_step_time_mean_us']:.2f} us/step, "
+          f"{r['solver_iterations_per_step']:.2f} iterations/step")
     if r.get("node_cpu_cores") is not None:
         print(f"   node process CPU: {r['node_cpu_cores']:.2f} cores; stepping thread niceness "
               f"{r['stepping_nice']} (and {r.get('middleware_threads')} middleware threads), "

@@ -9,6 +9,7 @@ flexure-sim modes microstage [--input U] [--count N] [--json] [-o DIR]
 flexure-sim frf microstage --from drive --to output [--to hinges.a.force_x] [--fmin F --fmax F
                 --points N | --frequencies F1,F2,...] [-o DIR] [--csv]
 flexure-sim linearize microstage --input U -o model.npz|model.mat|model.json
+flexure-sim frf microstage --input-kind displacement ...   # the drive's displacement as input
 
 With several drives (config/xy_stage.yaml) ``--input`` takes one value per drive (``x=1e-6,y=0``
 or ``1e-6,0``; default every drive at 0), ``frf --from`` names the drive and the model has one
@@ -46,7 +47,7 @@ def _model(args, wrenches: bool = True) -> tuple:
         return _spatial_model(args, wrenches)
     mech = load_mechanism(args.mechanism)
     sim = Simulation(mech)
-    actuated = [sim.model.drive_names[a.drive] for a in sim.model.actuation]
+    actuated = [sim.model.drives.names[a.drive] for a in sim.model.drives.actuation]
     if actuated:
         raise ValueError(f"mechanism {mech.name!r}: drive {', '.join(actuated)} has a piezo "
                          "actuator block, whose amplifier, hysteresis and creep the linear model "
@@ -59,12 +60,12 @@ def _model(args, wrenches: bool = True) -> tuple:
         value = None
     elif value is not None:
         try:
-            value = sim.model.drive_inputs(value)
+            value = sim.model.drives.inputs(value)
         except ValueError as exc:
             raise ValueError(f"--input {args.input!r}: {exc}") from None
         check_stroke(mech.drives, value, f"--input {args.input!r}")
         value = float(value[0]) if len(value) == 1 else value
-    return mech, linear.linearize(sim, value, wrenches=wrenches)
+    return mech, linear.linearize(sim, value, wrenches=wrenches, input_kind=args.input_kind)
 
 
 def _spatial(args) -> bool:
@@ -307,6 +308,16 @@ def export_model(model: linear.LinearModel, path: Path, mechanism: str) -> Path:
         "drive's N, N m)",
     }
     arrays = {"A": model.A, "B": model.B, "C": model.C, "D": model.D}
+    if "displacement" in model.input_kinds:
+        # x' = A x + B u + B1 u': in xi = x - B1 u the model is proper, xi' = A xi + (B + A B1) u,
+        # y = C xi + (D + C B1) u + D1 u' + D2 u'' (D1, D2: the outputs that see the input's
+        # rate and acceleration: damping forces, the driven body's inertia).
+        arrays = {"A": model.A, "B": model.B + model.A @ model.B1, "C": model.C,
+                  "D": model.D + model.C @ model.B1, "D1": model.D1, "D2": model.D2}
+        meta["input_kinds"] = list(model.input_kinds)
+        meta["units"] += (
+            "; a displacement input (input_kinds) is the drive's displacement itself: the "
+            "states are x - B1 u, x the deviations above, and y = C xi + D u + D1 u' + D2 u''")
     suffix = path.suffix.lower()
     if suffix == ".npz":
         np.savez(path, **arrays, **{k: np.array(v) for k, v in meta.items()})
@@ -360,6 +371,11 @@ def _common(p) -> None:
         help="drive input (m) of the static equilibrium; with several drives one per drive: "
         "NAME=VALUE,... or V1,V2,... (default: every drive at 0)",
     )
+    p.add_argument(
+        "--input-kind", choices=linear.INPUT_KINDS, default="command",
+        help="a displacement drive's input: its command, through the drive's response_time lag "
+        "(default), or its displacement itself (no lag: what a model with a prescribed "
+        "displacement has; a drive with response_time 0 takes it either way)")
 
 
 def register(subparsers) -> None:

@@ -66,7 +66,7 @@ def loop_summary(args) -> tuple[dict, piezo_run.PiezoRun]:
             raise ValueError(f"--dynamic: {steps} steps of {sim.dt:g} s; raise --frequency or "
                              "--dt, or lower --cycles")
         every = max(1, steps // (args.points * args.cycles))
-        run = piezo_run.stepped(sim, sim.model.drive_names.index(drive.name), times, commands,
+        run = piezo_run.stepped(sim, sim.model.drives.names.index(drive.name), times, commands,
                                 every)
     else:
         t_eval = np.linspace(times[0], times[-1], args.points * args.cycles + 1)

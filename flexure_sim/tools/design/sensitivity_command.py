@@ -41,7 +41,7 @@ def run(args) -> int:
         value = parse_drive_inputs(args.input)
         if value is not None and params.mechanism.drives:  # the stroke rule (stroke.py)
             try:
-                inputs = Simulation(params.mechanism).model.drive_inputs(value)
+                inputs = Simulation(params.mechanism).model.drives.inputs(value)
             except ValueError:
                 inputs = None  # sensitivities says what is wrong with it
             if inputs is not None:

@@ -19,6 +19,10 @@ Tools on recorded runs: info, analyse, plot, export.
 - ``run_info``: ``flexure-sim info RUN.mcap``.
 - ``runlog``: A recorded run as typed time series, read in one streaming pass.
 - ``series``: Time series of a recorded run, built message by message in compact arrays.
+- ``simulate_limits``: ``flexure-sim simulate``'s hinge limits: stresses, the fatigue of a
+  static cycle, the stroke limit.
+- ``simulate_spatial``: ``flexure-sim simulate`` for 3-D mechanisms: a step response or the
+  static equilibrium.
 - ``step_analysis``: Step detection and step-response metrics: pure functions on NumPy arrays (no
   files, no ROS).
 - ``timebase``: From log time to simulation time.

@@ -55,7 +55,7 @@ def static_comparison(run: Run, steps: list[DriveStep], drives: list[str],
     from flexure_sim.engine.solver.simulation import Simulation, SolverError
 
     sim = Simulation(mech)
-    names, onames = list(sim.model.drive_names), list(sim.model.output_names)
+    names, onames = list(sim.model.drives.names), list(sim.model.output_names)
     if sorted(names) != sorted(drives) or sorted(onames) != sorted(outputs):
         return None, (f"no static comparison: the recorded mechanism's drives ({', '.join(names)})"
                       f" and outputs ({', '.join(onames)}) are not the run's")
