@@ -44,7 +44,7 @@ frequency response is G(i w) = C (i w I - A)^-1 B + D.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Optional, Union
 
 import numpy as np
 
@@ -64,7 +64,8 @@ __all__ = ["LinearModel", "Modes", "frf", "gain_matrix", "layout", "linearize", 
 # ------------------------------------------------ the engine's internals, in one place
 
 
-def jacobian_at(sim: Simulation, y: np.ndarray, t: float, command: float) -> np.ndarray:
+def jacobian_at(sim: Simulation, y: np.ndarray, t: float,
+                command: Union[float, np.ndarray]) -> np.ndarray:
     """Exact A = dF/dy of the engine's first-order system at y (`Model.jacobian`)."""
     return sim.model.jacobian(y, t, command)
 
@@ -138,7 +139,7 @@ class LinearModel:
     stiffness: np.ndarray = field(repr=False)
     mass: np.ndarray = field(repr=False)
     free: np.ndarray = field(repr=False)
-    damping: np.ndarray = field(repr=False, default=None)
+    damping: np.ndarray = field(repr=False)
     drive_names: tuple = ()
     lags: tuple = ()
 
@@ -217,8 +218,8 @@ def linearize(sim: Simulation, u=None, wrenches: bool = True,
     def add(name, row, d, value):
         out_names.append(name), Cs.append(row), Ds.append(d), y0.append(value)
 
-    for name, c in zip(model.output_names, model.output_matrix):
-        add(name, c @ Zx, np.zeros(m), snap.output if len(model.outputs) == 1 else
+    for name, out_row in zip(model.output_names, model.output_matrix):
+        add(name, out_row @ Zx, np.zeros(m), snap.output if len(model.outputs) == 1 else
             snap.outputs[name])
     if model.compression is not None:
         # The engine's one definition (engine/solver/compression.py): the drive side's centre of

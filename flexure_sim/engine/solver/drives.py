@@ -26,12 +26,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Optional, Union
+from typing import TYPE_CHECKING, Any, Callable, Optional, Union
 
 import numpy as np
 
 from flexure_sim.engine.actuators.piezo import PiezoSpec
 from flexure_sim.engine.actuators.piezo_steps import Actuators
+
+if TYPE_CHECKING:  # model.py imports this module
+    from flexure_sim.engine.solver.model import Partition
 
 
 def stacked(drive) -> bool:
@@ -91,6 +94,20 @@ class DriveMixin:
     Needs the model's ``drives``, ``drive_names``, ``drive_directions``, ``displacement_index``,
     ``force_index``, ``part``, ``mass``, ``z0`` and ``assembly``.
     """
+
+    # What the host model sets in its constructor (declarations only, for the type checker);
+    # a drive is a planar or a spatial ``Drive`` (mechanism/parts.py, spatial_parts.py).
+    drives: tuple[Any, ...]
+    drive: Optional[Any]
+    drive_names: tuple[str, ...]
+    drive_directions: np.ndarray
+    displacement_index: np.ndarray
+    force_index: np.ndarray
+    stack_index: np.ndarray
+    part: Partition
+    mass: np.ndarray
+    z0: np.ndarray
+    generalized_forces: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, float, float]]
 
     def _drive_constants(self) -> None:
         """Set the actuator time constants and the force drives' directions (kernel arrays)."""
