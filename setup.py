@@ -6,9 +6,11 @@ One layout serves colcon (ament_python) and plain pip:
 - pip ignores it, so small launchers are also installed as data_files under
   lib/flexure_sim/ (what `ros2 run` looks for), next to the ament index marker.
 
-Dependencies: package.xml names the same ones by their rosdep keys. matplotlib is only needed
-by `flexure-sim plot` (extra "plot"); the node and the other tools never import it. The extra
-"test" is how colcon (and a Jazzy ament_python package) learns that `colcon test` runs pytest.
+Dependencies: package.xml names the same ones by their rosdep keys (the optional "sweep" and
+"fe" extras are pip-only: a ROS install adds them with pip when it needs them). matplotlib is
+only needed by `flexure-sim plot` (extra "plot"); the node and the other tools never import it.
+The extra "test" is how colcon (and a Jazzy ament_python package) learns that `colcon test`
+runs pytest.
 """
 from glob import glob
 
@@ -37,12 +39,18 @@ setup(
         (f"share/{PACKAGE}/launch", sorted(glob("launch/*.launch.py"))),
         (f"lib/{PACKAGE}", [f"scripts/ros2run/{name}" for name in sorted(EXECUTABLES)]),
     ],
-    install_requires=["numpy", "scipy", "numba", "PyYAML", "mcap", "mcap-ros2-support"],
+    # The oldest versions the code needs, as requirements.txt states them (test_packaging.py
+    # holds the two lists equal): NumPy 1.26 is Jazzy's on Ubuntu 24.04; the MCAP writer calls
+    # Writer.flush(), new in mcap 1.6.
+    install_requires=["numpy>=1.26", "scipy>=1.11", "numba>=0.59", "PyYAML>=6.0", "mcap>=1.6",
+                      "mcap-ros2-support>=0.5"],
     extras_require={
-        "plot": ["matplotlib"],
+        "plot": ["matplotlib>=3.7"],
         # flexure-sim sweep (Dask, Parquet, progress bar); imported only when a sweep runs.
-        "sweep": ["dask", "distributed", "pyarrow", "tqdm"],
-        "test": ["pytest", "rosbags"],
+        "sweep": ["dask>=2024.1", "distributed>=2024.1", "pyarrow>=14", "tqdm>=4.66"],
+        # model: fe hinges and flexure-sim hinge; imported only when a hinge is meshed.
+        "fe": ["gmsh>=4.11", "scikit-fem>=9.0"],
+        "test": ["pytest>=7.4", "rosbags>=0.10"],
     },
     zip_safe=True,
     maintainer="flexure_sim developers",

@@ -8,6 +8,7 @@ mechanisms: found in the running code's own install (engine/mechanism/builtins.p
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -52,6 +53,24 @@ def package_xml_depends() -> dict[str, set[str]]:
     return out
 
 
+def _name(requirement: str) -> str:
+    """Return the distribution name of a requirement such as ``numpy>=1.26``."""
+    return re.split(r"[<>=!~ ;\[]", requirement, maxsplit=1)[0]
+
+
+def test_setup_and_requirements_state_the_same_minimum_versions():
+    setup = setup_keywords()
+    declared = setup["install_requires"] + [r for extra in setup["extras_require"].values()
+                                            for r in extra]
+    lines = [line.split("#")[0].strip() for line in
+             (ROOT / "requirements.txt").read_text().splitlines()]
+    required = {_name(line): line for line in lines if line}
+    for req in declared:
+        assert re.search(r">=\d", req), f"setup.py: {req} states no minimum version"
+        assert required.get(_name(req)) == req, (
+            f"setup.py says {req}, requirements.txt {required.get(_name(req), 'nothing')}")
+
+
 def test_package_xml_names_every_python_dependency_by_its_rosdep_key():
     setup = setup_keywords()
     deps = package_xml_depends()
@@ -59,12 +78,14 @@ def test_package_xml_names_every_python_dependency_by_its_rosdep_key():
     test = deps.get("test_depend", set()) | deps.get("depend", set())
     wanted = [(r, run) for r in setup["install_requires"] + setup["extras_require"]["plot"]]
     wanted += [(r, test) for r in setup["extras_require"]["test"]]
+    wanted = [(_name(r), have) for r, have in wanted]
     missing = [f"{req} ({ROSDEP_KEYS.get(req, 'no key known: add it to ROSDEP_KEYS')})"
                for req, have in wanted if ROSDEP_KEYS.get(req) not in have]
     assert not missing, f"package.xml lacks: {', '.join(missing)}"
-    assert "matplotlib" not in setup["install_requires"], "matplotlib is the extra 'plot'"
+    assert "matplotlib" not in map(_name, setup["install_requires"]), (
+        "matplotlib is the extra 'plot'")
     # colcon runs pytest (not unittest, which finds nothing) when pytest is a test dependency.
-    assert "pytest" in setup["extras_require"]["test"]
+    assert "pytest" in map(_name, setup["extras_require"]["test"])
 
 
 def test_the_node_does_not_import_matplotlib():
