@@ -48,6 +48,10 @@ class HingeForces:
     wrench_b: np.ndarray
 
 
+#: Stands for the per-hinge Jacobian blocks when they are not asked for (never written).
+_NO_JACOBIAN = np.empty((0, 3, 3))
+
+
 @dataclass(frozen=True)
 class HingeJacobians(HingeForces):
     """`HingeForces` with the exact Jacobians (``Assembly.forces(..., jacobian=True)``)."""
@@ -188,8 +192,10 @@ class Assembly:
         energy = np.empty(n)
         grad = np.empty((n, 3))
         fdamp = np.empty((n, 3))
-        # d2U/dr2, C_r and d(C_r r_dot)/dr, filled when the Jacobian is asked for
-        hess, Cr, fdamp_dr = (np.empty((n, 3, 3)) for _ in range(3))
+        # d2U/dr2, C_r and d(C_r r_dot)/dr: allocated and filled when the Jacobian is asked for
+        hess = Cr = fdamp_dr = _NO_JACOBIAN
+        if jacobian:
+            hess, Cr, fdamp_dr = np.empty((n, 3, 3)), np.empty((n, 3, 3)), np.empty((n, 3, 3))
         for idx, batch in self.groups:
             ev = batch.evaluate(r[idx, 0], r[idx, 1:], rdot[idx], jacobian=jacobian)
             energy[idx], grad[idx], fdamp[idx] = ev.energy, ev.grad, ev.damping_force
