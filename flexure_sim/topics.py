@@ -1,8 +1,8 @@
 """
 Names of the stage node's interface: topics, frames and recording metadata records.
 
-One home for every name the node publishes under and the tools look for (README
-"## stage_node"), with no ROS import, so the engine-free tools share them with the node.
+One home for every name the node publishes under and the tools look for (docs/node.md),
+with no ROS import, so the engine-free tools share them with the node.
 Topic names are relative to the node's namespace, except `CLOCK`.
 """
 from __future__ import annotations

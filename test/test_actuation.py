@@ -120,7 +120,7 @@ def test_triangle_drive_gives_the_analytic_loop_width(stiffness):
     actuator's (measured 3e-7 off at dt = 1e-4). Finite stack: the issue's 2 %; the stack's
     8 kHz mode is above the 5 kHz Nyquist rate of dt = 1e-4, so the held mean free stroke
     (a staircase against the triangle's ramp) leaves a ramp-direction offset: measured
-    -0.21 % at dt = 1e-4, -0.03 % at dt = 2e-5 (README, "Piezo actuator", limits).
+    -0.21 % at dt = 1e-4, -0.03 % at dt = 2e-5 (docs/mechanism_file.md, "Piezo actuator", limits).
     """
     sim = stage(stiffness=stiffness, response_time=1e-6, creep=(), bandwidth=0.0)
     spec = sim.model.drives[0].actuator

@@ -4,7 +4,7 @@ The stage closed by the example controller (pi_controller).
 Both real processes, in the stage's lockstep mode: deterministic, and the step response settles to
 the setpoint.
 
-Handshake (README "Developing a controller against the stage"): the test calls the stage's
+Handshake (docs/controller_guide.md): the test calls the stage's
 ``~/step`` for tick k + 1 only after the controller's ``~/answered`` reached k; the controller
 (``handshake:=true``) publishes that count only once every reliable reader of its command --
 the stage's -- acknowledged it, so the command is in the stage before the tick that applies

@@ -8,6 +8,7 @@ solve).
 """
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -48,6 +49,10 @@ def test_hinge_prints_the_fe_stiffness_next_to_the_closed_forms(capsys):
     assert f["paros_weisbord"]["diag"][2] is None  # no shear formula
     # The same hinge from the stage's mechanism file.
     same = _json(capsys, ["hinge", "--from", "microstage:notch", "--json"])
+    assert same["fe"]["diag"] == out["fe"]["diag"]
+    # ... and from the FE stage's, whose model names its material (E, nu given, strengths unused)
+    fe_stage = Path(__file__).resolve().parents[1] / "config/examples/microstage_fe.yaml"
+    same = _json(capsys, ["hinge", "--from", f"{fe_stage}:notch", "--json"])
     assert same["fe"]["diag"] == out["fe"]["diag"]
     # The table.
     assert main(["hinge", "--from", "microstage:notch", "--plane", "stress"]) == 0

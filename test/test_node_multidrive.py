@@ -352,7 +352,7 @@ def test_ticks_with_new_commands_on_several_drives_reach_the_step_by_step_states
     """
     The loop's shortcut (one compiled call once every drive's ramp has ended) on `xy_stage`.
 
-    Reference: the drives' definition (README: Drive commands) stepped one engine step at a
+    Reference: the drives' definition (docs/node.md: drive commands) stepped one engine step at a
     time, each drive's target moving towards its command by at most its slew_rate * dt.
     """
     from flexure_sim.engine.mechanism.loader import load_mechanism

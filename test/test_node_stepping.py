@@ -43,7 +43,7 @@ def make_loop(mechanism):
 
 def reference_ramp(mechanism, commands):
     """
-    Step the drive's definition (README: Drive commands), independently of the loop's shortcuts.
+    Step the drive's definition (docs/node.md: drive commands), apart from the loop's shortcuts.
 
     The applied target moves towards each tick's command by at most slew_rate * dt per
     engine step, and the engine takes one step per applied value.

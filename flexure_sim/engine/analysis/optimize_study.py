@@ -37,8 +37,10 @@ import numpy as np
 
 from flexure_sim.engine.analysis import design_outputs
 from flexure_sim.engine.analysis.study import StudyError, _base_mechanism, _read
-from flexure_sim.engine.analysis.study_checks import check_outputs, drive_input, number
-from flexure_sim.engine.mechanism.doc_paths import apply, resolve_path
+from flexure_sim.engine.analysis.study_checks import (
+    check_outputs, drive_input, number, spec_paths,
+)
+from flexure_sim.engine.mechanism.doc_paths import apply
 from flexure_sim.engine.mechanism.loader import ConfigError, mechanism_from_dict
 from flexure_sim.engine.mechanism.parameters import ParameterError, Parameters
 from flexure_sim.engine.solver.drives import stacked
@@ -210,23 +212,8 @@ def _count(data: dict, key: str, default: int, fail, zero: bool = False) -> int:
 
 
 def _variable(spec: Any, key: str, doc: dict, fail) -> Variable:
-    if not isinstance(spec, dict):
-        raise fail(key, f"expected a mapping (path, lower, upper), got {spec!r}")
-    unknown = sorted(set(spec) - _VARIABLE_KEYS)
-    if unknown:
-        raise fail(f"{key}.{unknown[0]}",
-                   f"unknown key (allowed: {', '.join(sorted(_VARIABLE_KEYS))})")
-    if ("path" in spec) == ("paths" in spec):
-        raise fail(key, "give either path or paths")
-    texts = [spec["path"]] if "path" in spec else spec["paths"]
-    pkey = f"{key}.path" if "path" in spec else f"{key}.paths"
-    if not isinstance(texts, list) or not texts:
-        raise fail(pkey, f"expected a non-empty list of paths, got {texts!r}")
-    resolved = [resolve_path(doc, t, lambda problem, k=pkey: fail(k, problem)) for t in texts]
-    paths, through, bases = zip(*resolved)
-    offset = spec.get("offset", False)
-    if not isinstance(offset, bool):
-        raise fail(f"{key}.offset", f"expected true or false, got {offset!r}")
+    texts, paths, through, bases, offset = spec_paths(
+        spec, key, doc, _VARIABLE_KEYS, "path, lower, upper", fail)
     for bound in ("lower", "upper"):
         if bound not in spec:
             raise fail(f"{key}.{bound}", "missing required key (the variable's bounds)")

@@ -45,10 +45,11 @@ from flexure_sim.errors import FlexureSimError
 from flexure_sim.engine.mechanism.loader import (
     ConfigError, mechanism_from_dict, resolve_mechanism_path,
 )
-from flexure_sim.engine.mechanism.doc_paths import apply, resolve_path
+from flexure_sim.engine.mechanism.doc_paths import apply
 from flexure_sim.engine.mechanism.parts import Mechanism
 from flexure_sim.engine.analysis.study_checks import (
     Channels, DriveInput, check_defined, check_outputs, drive_input, number as _number,
+    spec_paths,
 )
 from flexure_sim.engine.analysis.study_size import Batches, Range, built, check_fits
 from flexure_sim.engine.mechanism.yaml_files import read_yaml
@@ -292,26 +293,8 @@ def _step(raw: Any, fail) -> dict:
 
 
 def _parameter(spec: Any, key: str, doc: dict, fail) -> Parameter:
-    if not isinstance(spec, dict):
-        raise fail(key, f"expected a mapping (path and values/range/normal/uniform), got {spec!r}")
-    unknown = sorted(set(spec) - _PARAM_KEYS)
-    if unknown:
-        raise fail(f"{key}.{unknown[0]}",
-                   f"unknown key (allowed: {', '.join(sorted(_PARAM_KEYS))})")
-    if ("path" in spec) == ("paths" in spec):
-        raise fail(key, "give either path or paths")
-    texts = [spec["path"]] if "path" in spec else spec["paths"]
-    pkey = f"{key}.path" if "path" in spec else f"{key}.paths"
-    if not isinstance(texts, list) or not texts:
-        raise fail(pkey, f"expected a non-empty list of paths, got {texts!r}")
-    resolved = []
-    for j, text in enumerate(texts):
-        k = pkey if "path" in spec else f"{pkey}[{j}]"
-        resolved.append(resolve_path(doc, text, lambda problem, k=k: fail(k, problem)))
-    paths, through, bases = zip(*resolved)
-    offset = spec.get("offset", False)
-    if not isinstance(offset, bool):
-        raise fail(f"{key}.offset", f"expected true or false, got {offset!r}")
+    texts, paths, through, bases, offset = spec_paths(
+        spec, key, doc, _PARAM_KEYS, "path and values/range/normal/uniform", fail)
     sources = [s for s in _SOURCES if s in spec]
     if len(sources) != 1:
         raise fail(key, f"give exactly one of {', '.join(_SOURCES)} (got {sources or 'none'})")

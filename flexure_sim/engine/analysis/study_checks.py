@@ -29,6 +29,7 @@ from typing import Any, Optional, Union
 from flexure_sim.engine.hinges import fatigue
 from flexure_sim.engine.hinges.stress import no_yield_advice
 from flexure_sim.engine.solver.drives import stacked
+from flexure_sim.engine.mechanism.doc_paths import resolve_path
 from flexure_sim.engine.mechanism.parts import Mechanism, coordinate_unit
 from flexure_sim.engine.mechanism.stroke import REASON, outside
 
@@ -81,6 +82,37 @@ def number(value: Any, key: str, fail, positive: bool = False) -> float:
     if positive and value <= 0:
         raise fail(key, f"must be positive, got {value!r}")
     return float(value)
+
+
+def spec_paths(spec: Any, key: str, doc: dict, allowed: set, expected: str, fail) -> tuple:
+    """
+    Check a sweep parameter's or an optimisation variable's mapping and resolve its paths.
+
+    ``allowed``: its keys; ``expected``: what the mapping holds, for the message. Returns
+    (texts, paths, through, bases, offset): the path texts, and per path the concrete steps,
+    the hinge stiffness it reaches through and the base value (doc_paths.resolve_path), and
+    whether the values are offsets from the bases.
+    """
+    if not isinstance(spec, dict):
+        raise fail(key, f"expected a mapping ({expected}), got {spec!r}")
+    unknown = sorted(set(spec) - allowed)
+    if unknown:
+        raise fail(f"{key}.{unknown[0]}", f"unknown key (allowed: {', '.join(sorted(allowed))})")
+    if ("path" in spec) == ("paths" in spec):
+        raise fail(key, "give either path or paths")
+    texts = [spec["path"]] if "path" in spec else spec["paths"]
+    pkey = f"{key}.path" if "path" in spec else f"{key}.paths"
+    if not isinstance(texts, list) or not texts:
+        raise fail(pkey, f"expected a non-empty list of paths, got {texts!r}")
+    resolved = []
+    for j, text in enumerate(texts):
+        k = pkey if "path" in spec else f"{pkey}[{j}]"
+        resolved.append(resolve_path(doc, text, lambda problem, k=k: fail(k, problem)))
+    paths, through, bases = zip(*resolved)
+    offset = spec.get("offset", False)
+    if not isinstance(offset, bool):
+        raise fail(f"{key}.offset", f"expected true or false, got {offset!r}")
+    return texts, paths, through, bases, offset
 
 
 def drive_input(raw: Any, mech: Mechanism, fail) -> Optional[DriveInput]:

@@ -19,11 +19,12 @@ Sec. 6-12: a compressive midrange stress does not shorten the life), so in both 
     u = 1/n = sigma_a / S_e + max(sigma_m, 0) / S,     S = S_u (Goodman) or S_y (Soderberg).
 
 The points are the section's critical fibres, with their signed stresses
-(``StressGeometry.fibres``): the two notch roots (K_t (+-6 m / (t h^2) + f_x / (t h))) and the
-two faces of both clamped ends of a leaf. A hinge's factor is that of its worst point; the
-mechanism's, that of its worst hinge (the *critical hinge*). A model whose stress is a bound of
-magnitudes (no signed fibres) takes sigma_a and sigma_m as the stress of the alternating and
-of the mean wrench, (w_2 - w_1)/2 and (w_2 + w_1)/2, the mean counted as tensile: an upper bound.
+(``StressGeometry.fibres``): the two notch roots (K_t (+-6 m / (t h^2) + f_x / (t h))), the
+two faces of both clamped ends of a leaf, and for a finite-element hinge the surface points
+where its unit wrenches' stresses peak and their mirror images, each with its von Mises stress
+signed as its tangential stress (engine/hinges/stress.py; in plane strain von Mises includes
+sigma_zz = nu sigma_t, which cycles in proportion). A hinge's factor is that of its worst
+point; the mechanism's, that of its worst hinge (the *critical hinge*).
 
 S_e is the table's fatigue strength of polished specimens at its stated cycle count
 (engine/hinges/materials.yaml): "infinite life" below means u <= 1 at that count (aluminium
@@ -69,13 +70,9 @@ def cycle(geometry: StressGeometry, w1, w2) -> tuple[Any, Any]:
     """
     Return (sigma_a, sigma_m) per point, (..., k), of a cycle between wrenches w1 and w2.
 
-    Signed fibres where the model has them, else the bound of the module docstring (k = 1).
+    From the signed fibres (module docstring).
     """
     f1, f2 = geometry.fibres(w1), geometry.fibres(w2)
-    if f1 is None:
-        amplitude = geometry.stress((w2 - w1) * 0.5)
-        mean = geometry.stress((w2 + w1) * 0.5)
-        return amplitude[..., None], mean[..., None]
     return np.abs(f2 - f1) * 0.5, (f1 + f2) * 0.5
 
 
@@ -83,13 +80,9 @@ def envelope(geometry: StressGeometry, wrenches: np.ndarray) -> tuple[np.ndarray
     """
     Return (sigma_a, sigma_m) per point of the largest cycle of a record of wrenches (T, 3).
 
-    Each point cycles between its smallest and largest stress of the record; a model without
-    signed fibres between the componentwise extremes of the wrench.
+    Each point cycles between its smallest and largest stress of the record.
     """
-    wrenches = np.asarray(wrenches, dtype=float)
-    f = geometry.fibres(wrenches)
-    if f is None:
-        return cycle(geometry, wrenches.min(axis=0), wrenches.max(axis=0))
+    f = geometry.fibres(np.asarray(wrenches, dtype=float))
     lo, hi = f.min(axis=0), f.max(axis=0)
     return (hi - lo) * 0.5, (hi + lo) * 0.5
 

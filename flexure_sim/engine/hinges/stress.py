@@ -42,7 +42,12 @@ moment and force, c = (c_m, c_x, c_y), from the same solve as the stiffness
     sigma = c_m |m| + c_x |f_x| + c_y |f_y|
 
 (von Mises is a norm of the stress tensor: exact for one component, conservative for
-combinations, like the formulas above). The handbook K_t is for the closed forms only.
+combinations, like the formulas above). The handbook K_t is for the closed forms only. Its
+fibres are the surface points where the unit wrenches' stresses peak and their mirror images
+(both notch roots, the four fillet roots of a leaf; fe/elastic.py): at a traction-free
+surface the stress is uniaxial along it and linear in the wrench, so point p's von Mises
+stress signed as its tangential stress is a_p . (m, f_x, f_y) with the rows a_p of
+fe.model.fibre_coefficients. Their largest magnitude is at most the bound above.
 
 Hinges with a ``matrix`` stiffness or a fitted polynomial law have no geometry: no stress.
 
@@ -146,10 +151,23 @@ def leaf_stress(wrench, length, thickness, width):
     ) + np.abs(fy) / (width * thickness)
 
 
-def fe_stress(wrench, c_m, c_x, c_y):
+def fe_stress(wrench, c_m, c_x, c_y, rows=()):
     """Peak stress (Pa) of a finite-element hinge under wrench (m, f_x, f_y) (module docstring)."""
     return (c_m * np.abs(wrench[..., 0]) + c_x * np.abs(wrench[..., 1])
             + c_y * np.abs(wrench[..., 2]))
+
+
+def fe_fibres(wrench, c_m, c_x, c_y, rows):
+    """
+    Signed stress (Pa) at a finite-element hinge's fibres, (..., k): a_p . (m, f_x, f_y).
+
+    ``rows``: the fibres' coefficients a_p (module docstring), floats or HyperDual scalars.
+    """
+    plain = not any(isinstance(x, hd.HyperDual) for row in rows for x in row)
+    if plain and not isinstance(wrench, hd.HyperDual):
+        return np.asarray(wrench, dtype=float) @ np.array(rows, dtype=float).reshape(-1, 3).T
+    return _stack_last([a * wrench[..., 0] + b * wrench[..., 1] + c * wrench[..., 2]
+                        for a, b, c in rows])
 
 
 def leaf_fibres(wrench, length, thickness, width):
@@ -177,9 +195,8 @@ def _stack_last(items):
 #: the order of the stress function's arguments.
 STRESS_KEYS = {"notch": ("D", "h", "t"), "cantilever": ("length", "thickness", "width")}
 _STRESS_FUNCTIONS = {"notch": notch_stress, "cantilever": leaf_stress, "fe": fe_stress}
-#: Signed stress at the critical points of the section (fatigue: engine/hinges/fatigue.py);
-#: an fe hinge's stress is a bound of magnitudes (von Mises), with no sign to cycle.
-_FIBRE_FUNCTIONS = {"notch": notch_fibres, "cantilever": leaf_fibres}
+#: Signed stress at the critical points of the section (fatigue: engine/hinges/fatigue.py).
+_FIBRE_FUNCTIONS = {"notch": notch_fibres, "cantilever": leaf_fibres, "fe": fe_fibres}
 
 
 @dataclass(frozen=True)
@@ -189,7 +206,8 @@ class StressGeometry:
 
     Its stiffness ``model`` (notch, cantilever or fe), the ``dimensions`` (m) of that model in
     the order of STRESS_KEYS[model] -- for ``fe`` the three peak-stress coefficients
-    (Pa/(N m), Pa/N, Pa/N) --, the yield strength ``sigma_y`` (Pa) or None, and for fatigue
+    (Pa/(N m), Pa/N, Pa/N) and the fibres' coefficient rows, a tuple of 3-tuples --, the yield
+    strength ``sigma_y`` (Pa) or None, and for fatigue
     (engine/hinges/fatigue.py) the ultimate strength ``sigma_u`` and the fully reversed fatigue
     strength ``sigma_e`` (Pa) at ``cycles`` cycles, or None; the ``material`` they come from
     (engine/hinges/materials.py) or None for numbers given in the file; ``key``: the stiffness
@@ -227,10 +245,9 @@ class StressGeometry:
         """
         Return the signed stress (Pa) at the section's critical points, (..., k).
 
-        None for a model whose stress is a bound of magnitudes only (no sign to cycle).
+        The fatigue criteria cycle it (engine/hinges/fatigue.py).
         """
-        fn = _FIBRE_FUNCTIONS.get(self.model)
-        return None if fn is None else fn(wrench, *self.dimensions)
+        return _FIBRE_FUNCTIONS[self.model](wrench, *self.dimensions)
 
     @property
     def has_fatigue(self) -> bool:

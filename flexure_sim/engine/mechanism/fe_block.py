@@ -6,8 +6,9 @@ Part of the loader (stiffness_block.py); messages name the file, key and problem
 engine/hinges/fe/shapes.py: circular D, h, t; elliptical a, b, h, t; corner_filleted length,
 r, h, t; leaf length, thickness, width and optional fillet), ``E`` (Pa), ``nu``, optional
 ``plane`` (auto, stress, strain; auto by the rule of engine/hinges/fe/model.py), optional
-``resolution`` (elements across a section, 4..64, default 16) and ``sigma_y`` (Pa, for the
-stress analyses). The stiffness and the peak-stress coefficients come from one
+``resolution`` (elements across a section, 4..64, default 16) and the strengths (``material``,
+``sigma_y``, ``sigma_u``, ``sigma_e``: stiffness_block.py). The stiffness, the peak-stress
+coefficients and the fibres' signed-stress coefficients (fatigue) come from one
 finite-element solve, cached on disk (engine/hinges/fe/cache.py).
 """
 from __future__ import annotations
@@ -79,15 +80,13 @@ def fe_stiffness(ctx: Ctx, key: str, spec: dict, sigma_y,
                        "its clamped corners: give it a fillet radius > 0 for the stress "
                        "analyses")
     try:
-        K = fe_model.stiffness(name, geo, v["E"], v["nu"], v["plane"], v["resolution"])
-        coefficients = (None if sharp else  # no finite peak stress: no stress
-                        fe_model.stress_coefficients(name, geo, v["nu"], v["plane"],
-                                                     v["resolution"]))
+        K, peak, fibres = fe_model.hinge(name, geo, v["E"], v["nu"], v["plane"], v["resolution"])
     except ShapeError as exc:
         raise ctx.fail(key, str(exc)) from None
     except MeshError as exc:
         raise ctx.fail(key, f"the finite-element model failed: {exc}") from None
     # floats, or HyperDual entries where a design (mechanism/parameters.py) seeds derivatives
-    geometry = (None if coefficients is None
-                else StressGeometry("fe", tuple(coefficients), sigma_y, **strengths))
+    # no finite peak stress in a sharp leaf: no stress
+    geometry = (None if sharp else StressGeometry(
+        "fe", (*peak, tuple(tuple(row) for row in fibres)), sigma_y, **strengths))
     return hd.asarray(K), geometry

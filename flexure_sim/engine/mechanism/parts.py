@@ -29,7 +29,7 @@ def coordinate_unit(coordinate: Optional[str], force: bool = False) -> str:
     Return the SI unit of a displacement (or force) along an axis, or about theta.
 
     m along an axis, rad about theta; N and N m for a force (the units of drive inputs and
-    outputs, README "Several drives and outputs; the XY stage").
+    outputs, docs/mechanism_file.md, "Several drives and outputs; the XY stage").
     """
     if coordinate == "theta":
         return "N m" if force else "rad"
@@ -111,7 +111,7 @@ class Drive:
     the force range).
 
     ``actuator``: the piezo stack model of the ``actuator:`` block (engine/actuators/piezo.py),
-    None without one. Parsed and validated; not yet used by stepping (see README "Piezo actuator").
+    None without one (docs/mechanism_file.md, "Piezo actuator").
     """
 
     body: str

@@ -4,7 +4,7 @@ A mechanism prepared for stepping (Model) apart from its State; the Simulation f
 - ``actuation``: Piezo actuators (engine/actuators/piezo.py) in the stepping of a ``Model``:
   operator splitting.
 - ``assembly``: Generalized forces of all hinges on all bodies, with exact Jacobians.
-- ``compression``: Where and how a hinge's compression is measured (README "Conventions").
+- ``compression``: Where and how a hinge's compression is measured (docs/engine.md, "Conventions").
 - ``drives``: The drives of a ``Model``: their constants, inputs and commands, and what each one
   does.
 - ``integrator``: Fixed-step stiff-stable stepping of a ``Model``, updating a ``Data``.

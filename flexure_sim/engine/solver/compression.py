@@ -1,5 +1,5 @@
 """
-Where and how a hinge's compression is measured (README "Conventions").
+Where and how a hinge's compression is measured (docs/engine.md, "Conventions").
 
 The compression hinge (e.g. the stage's joint a) is measured at its centre of stiffness,
 along the drive axis: the displacement from rest of that point as carried by the hinge's

@@ -9,7 +9,7 @@ measurement (``output/measured``, or ``output/displacement``), keeps the latest 
 value) and answers every measurement received with exactly one command on
 ``drive/displacement`` (std_msgs/Float64, m). Nothing is timed by a clock: one command per
 measurement, so in the stage's lockstep mode the run is a deterministic function of the
-measurements (README "Developing a controller against the stage"). The measurement
+measurements (docs/controller_guide.md). The measurement
 subscription keeps only the newest reading (reliable, keep last 1): in real time a
 controller that fell behind skips stale readings rather than answering them ever later.
 
@@ -200,8 +200,7 @@ def main(args: Optional[list[str]] = None) -> int:
     if any(a in ("-h", "--help") for a in argv[1:]):
         print("usage: pi_controller [--ros-args -p NAME:=VALUE ...]\n\nan example PI "
               "controller closing the loop around stage_node (one command per measurement); "
-              "its parameters and topics: the README, \"Developing a controller against the "
-              "stage\"")
+              "its parameters and topics: docs/controller_guide.md")
         return 0
     import rclpy
     from rclpy.executors import ExternalShutdownException

@@ -3,7 +3,7 @@ The stage node's ``diagnostics`` topic.
 
 One ``DiagnosticStatus`` per window of ticks (~10 Hz of simulated time) with timings, pacing,
 solver work, command counters, engine failures, recording state, QoS problems and the largest hinge
-stress ratio, at level OK, WARN or ERROR (README "Diagnostics").
+stress ratio, at level OK, WARN or ERROR (docs/node.md).
 """
 from __future__ import annotations
 

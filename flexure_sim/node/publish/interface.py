@@ -10,7 +10,7 @@ bytes (what the node publishes and records; see `cdr`). Tests prove them identic
 the packed layouts do not apply (middleware other than Fast DDS, a type without a packer:
 `cdr.packing_applies`), `encode` serializes the reference messages with serialize_message.
 
-Conventions (README "## stage_node"):
+Conventions (docs/node.md):
 - frames: root ``stage``; one frame per body, named after it; per hinge ``hinge_<name>``
   (its frame b, on body B) and ``hinge_<name>_a`` (its frame a, on body A), each with the
   node's ``frame_prefix`` in front (`topics.Frames`, the one place they are made). No leading

@@ -7,7 +7,7 @@ hands everything that touches the simulation or the recording to the stepping th
 (`stepping`) through its request queue (`requests`). Recording files are managed by a
 `session.RecordingSession`, diagnostics by `diagnostics`, incompatible QoS by `qos_watch`.
 The executor (main thread) serves only services, parameter changes and QoS events. Topics,
-parameters and services are documented in README.md, "## stage_node".
+parameters and services are documented in docs/node.md.
 """
 from __future__ import annotations
 

@@ -4,7 +4,7 @@
     ros2 run flexure_sim stage_node [--ros-args -p mechanism:=<name|file.yaml> -p NAME:=VALUE]
 
 `main` follows the Jazzy idiom (``rclpy.init``, spin, ``destroy_node``, ``try_shutdown``) and
-guarantees one-line endings (README "## stage_node"): exit 0 after SIGINT or SIGTERM (the
+guarantees one-line endings (docs/node.md): exit 0 after SIGINT or SIGTERM (the
 recording finished), 1 when the node cannot start or the simulation stopped, 2 for bad
 command-line arguments; never a traceback, whenever a signal lands.
 
@@ -32,7 +32,7 @@ SIGNALS = (signal.SIGINT, signal.SIGTERM)
 USAGE = """usage: stage_node [--ros-args -p NAME:=VALUE ...]
 
 Simulates a planar flexure mechanism (default: the built-in micropositioning stage) and
-publishes its state; see README.md "## stage_node" for topics, frames and QoS.
+publishes its state; see docs/node.md for topics, frames and QoS.
 
 parameters:
 """

@@ -30,6 +30,7 @@ import numpy as np
 
 from flexure_sim.engine.fitting.least_squares import wrench_errors
 from flexure_sim.engine.fitting.wrench_data import WrenchData, write_wrench_csv
+from flexure_sim.engine.hinges import materials
 from flexure_sim.engine.hinges.fe import model as fe_model
 from flexure_sim.engine.hinges.fe import report as fe_report
 from flexure_sim.engine.hinges.fe.samples import wrench_samples, working_box
@@ -95,7 +96,11 @@ def _spec(args: argparse.Namespace) -> tuple[str, dict[str, Any], str]:
         if name not in models or not isinstance(models[name], dict):
             raise ConfigError(f"{path}: stiffness_models.{name}: no such stiffness model "
                               f"({', '.join(models) or 'none'})")
-        spec = dict(models[name])
+        # a named material gives E and nu (engine/hinges/materials.py); strengths are not used
+        spec = materials.resolve(models[name], lambda k, problem: ConfigError(
+            f"{path}: stiffness_models.{name}.{k}: {problem}"))
+        for k in ("material", *materials.STRENGTH_KEYS):
+            spec.pop(k, None)
         kind = spec.get("model")
         if kind in _FROM:
             shape, keys = _FROM[kind]
@@ -104,7 +109,6 @@ def _spec(args: argparse.Namespace) -> tuple[str, dict[str, Any], str]:
         elif kind != "fe":
             raise ConfigError(f"{path}: stiffness_models.{name}: a {kind!r} model has no "
                               "geometry (notch, cantilever or fe)")
-        spec.pop("sigma_y", None)
         return spec, f"stiffness_models.{name}", str(path)
     if not args.shape:
         raise ConfigError("give a shape with its values, or --from MECHANISM:MODEL")

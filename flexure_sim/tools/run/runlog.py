@@ -8,7 +8,7 @@ the file. Times are in seconds of simulation time (`timebase`), values in SI uni
 
 - scalar topics (``std_msgs/Float64``): `Run.scalar` -> `Series` with values of shape (n,);
 - hinge wrenches: `Run.wrenches` -> {hinge: Series (n, 3) of (moment, f_x, f_y)} (N m, N, N),
-  the wrench the hinge exerts on its body B, in its frame b (README, "Conventions");
+  the wrench the hinge exerts on its body B, in its frame b (docs/engine.md, "Conventions");
 - body poses (``poses=True``): `Run.poses` -> {body: Series (n, 3) of (x, y, yaw)} in the root
   frame, from ``/bodies/<body>/pose`` or else from the ``/bodies/poses`` array and the body
   names of the ``flexure_sim`` metadata record.

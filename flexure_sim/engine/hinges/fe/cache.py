@@ -29,8 +29,9 @@ import numpy as np
 
 from flexure_sim.errors import FlexureSimError
 
-#: Bump when the solver changes what a key means (mesh sizing, elements, stress sampling).
-SCHEMA = 1
+#: Bump when the solver changes what a key means (mesh sizing, elements, stress sampling)
+#: or what a result holds (2: the fibres' signed stresses, elastic.py).
+SCHEMA = 2
 
 
 class CacheWarning(FlexureSimError, UserWarning):

@@ -22,6 +22,19 @@ by construction; the stiffness is K = C^-1.
 Stress: each unit-wrench solution's von Mises stress at the vertices of every element (where
 the linear P2 stress takes its extremes in an element), unaveraged; the peak over the mesh and
 where it is. Plane strain adds sigma_zz = nu (sigma_xx + sigma_yy).
+
+Fibres (the points fatigue cycles, engine/hinges/fatigue.py). At a traction-free surface the
+in-plane stress is uniaxial along the surface, sigma_nn = sigma_nt = 0, so the tangential
+stress is the in-plane trace, sigma_t = sigma_xx + sigma_yy (an invariant: no tangent needed),
+and it is linear in the wrench: sigma_t = a . (m, f_x, f_y) with a the unit wrenches' traces.
+Von Mises there is |sigma_t| in plane stress and |sigma_t| sqrt(1 - nu + nu^2) in plane strain
+(sigma_zz = nu sigma_t); a fibre's coefficients are a times that factor, the von Mises stress
+with the sign of sigma_t (tension positive). The trace at a surface vertex is averaged over
+the elements sharing it. The points: for each unit wrench the free-surface vertex (not on a
+clamp line) where |sigma_t| is largest, and the vertices nearest its mirror images in both
+axes of the symmetric hinge (both notch roots, the four fillet roots of a leaf), each vertex
+once; or, for a moved mesh (solves.morph), the vertices nearest given points, so that the
+derivatives follow the same material points.
 """
 from __future__ import annotations
 
@@ -44,7 +57,9 @@ class Solution:
     ``compliance`` (3, 3); ``peak`` (3,): the largest von Mises stress under each unit wrench
     (m, f_x, f_y); ``peak_at`` (3, 2): where; ``dofs``: the number of unknowns;
     ``displacements`` (3, N, 2): the nodal displacement of each unit-wrench solution (kept for
-    pictures; N nodes of the mesh); ``von_mises`` (3, M, 3) at each element's vertices.
+    pictures; N nodes of the mesh); ``von_mises`` (3, M, 3) at each element's vertices;
+    ``fibres`` (k, 3): the signed von Mises stress of each fibre point under the unit wrenches,
+    ``fibres_at`` (k, 2): where (module docstring).
     """
 
     compliance: np.ndarray
@@ -53,6 +68,8 @@ class Solution:
     dofs: int
     displacements: np.ndarray
     von_mises: np.ndarray
+    fibres: np.ndarray
+    fibres_at: np.ndarray
 
 
 def lame(nu: float, plane: str) -> tuple[float, float]:
@@ -86,8 +103,12 @@ def _clamp_dofs(basis, nodes_x: float, half: float, tol: float):
     return np.unique(ux), np.unique(uy)
 
 
-def solve(m: HingeMesh, half: float, nu: float, plane: str) -> Solution:
-    """Compliance and peak stresses of the meshed hinge ``m`` (clamps at x = -half, +half)."""
+def solve(m: HingeMesh, half: float, nu: float, plane: str, at=None) -> Solution:
+    """
+    Compliance and peak stresses of the meshed hinge ``m`` (clamps at x = -half, +half).
+
+    ``at`` (k, 2): the fibre points to take (module docstring), or None to find them.
+    """
     from skfem import Basis, ElementTriP2, ElementVector, asm
     from skfem.models.elasticity import linear_elasticity
 
@@ -121,8 +142,10 @@ def solve(m: HingeMesh, half: float, nu: float, plane: str) -> Solution:
     C = x[ni:, :]
     C = 0.5 * (C + C.T)
     u = T @ x  # (n, 3): full displacement of each unit-wrench case
-    peak, peak_at, vm = _von_mises(mesh, element, u, lam, mu, nu, plane)
-    return Solution(C, peak, peak_at, ni + 3, _to_mesh_nodes(m, basis, u), vm)
+    peak, peak_at, vm, trace = _von_mises(mesh, element, u, lam, mu, nu, plane)
+    fibres, fibres_at = _fibres(mesh, trace, half, nu, plane, at)
+    return Solution(C, peak, peak_at, ni + 3, _to_mesh_nodes(m, basis, u), vm, fibres,
+                    fibres_at)
 
 
 def _to_mesh_nodes(m: HingeMesh, basis, u: np.ndarray) -> np.ndarray:
@@ -137,13 +160,17 @@ def _to_mesh_nodes(m: HingeMesh, basis, u: np.ndarray) -> np.ndarray:
 
 
 def _von_mises(mesh, element, u, lam, mu, nu, plane):
-    """Peak von Mises stress of each load case, where, and the values at element vertices."""
+    """
+    Peak von Mises stress of each load case and where; von Mises and the in-plane trace.
+
+    The last two at each element's vertices, (cases, M, 3).
+    """
     from skfem import Basis
 
     vertices = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     vb = Basis(mesh, element, quadrature=(vertices, np.full(3, 1.0 / 6.0)))
     xy = vb.mapping.F(vertices)  # (2, elements, 3)
-    peaks, where, fields = [], [], []
+    peaks, where, fields, traces = [], [], [], []
     for k in range(u.shape[1]):
         grad = vb.interpolate(u[:, k]).grad  # (2, 2, elements, 3)
         exx, eyy = grad[0, 0], grad[1, 1]
@@ -159,4 +186,36 @@ def _von_mises(mesh, element, u, lam, mu, nu, plane):
         peaks.append(vm[i])
         where.append(xy[:, i[0], i[1]])
         fields.append(vm)
-    return np.array(peaks), np.array(where), np.array(fields)
+        traces.append(sxx + syy)
+    return np.array(peaks), np.array(where), np.array(fields), np.array(traces)
+
+
+def _fibres(mesh, trace, half: float, nu: float, plane: str, at=None):
+    """
+    Return the fibres' signed von Mises coefficients (k, 3) and their points (k, 2).
+
+    ``trace`` (3, M, 3): sigma_xx + sigma_yy of each unit wrench at the element vertices;
+    ``at``: the points to take, or None to find them (module docstring).
+    """
+    t = mesh.t  # (3, M): the vertex of each element's quadrature point (the vertices)
+    count = np.bincount(t.ravel(), minlength=mesh.p.shape[1])
+    nodal = np.array([np.bincount(t.ravel(), weights=tr.T.ravel(), minlength=len(count))
+                      for tr in trace]) / np.maximum(count, 1)  # (3, vertices)
+    free = mesh.boundary_nodes()
+    free = free[np.abs(mesh.p[0, free]) < half * (1.0 - 1e-9)]  # not on a clamp line
+    xy = mesh.p[:, free].T
+
+    def nearest(points) -> list:
+        d = ((xy[None, :, :] - np.asarray(points, dtype=float)[:, None, :]) ** 2).sum(-1)
+        return [int(free[i]) for i in np.argmin(d, axis=1)]
+
+    if at is None:
+        points = []
+        for case in nodal:
+            x, y = mesh.p[:, free[np.argmax(np.abs(case[free]))]]
+            points += [(x, y), (-x, y), (x, -y), (-x, -y)]
+        nodes = list(dict.fromkeys(nearest(points)))
+    else:  # one node per given point, in their order (a moved mesh's derivatives)
+        nodes = nearest(at)
+    factor = np.sqrt(1.0 - nu + nu * nu) if plane == "strain" else 1.0
+    return factor * nodal[:, nodes].T, mesh.p[:, nodes].T.copy()

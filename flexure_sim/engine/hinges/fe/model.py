@@ -79,16 +79,20 @@ def _parts(x) -> tuple[float, float, float, float]:
 
 
 def _evaluate(case: Case, ratios, nu) -> np.ndarray:
-    """[K^ (9), s^ (3)] of the case's mesh moved to (ratios, nu); the case itself if equal."""
+    """
+    [K^ (9), s^ (3), f^ (3k)] of the case's mesh moved to (ratios, nu); the case itself if equal.
+
+    f^: the fibres' signed stresses (k, 3) under the unit wrenches, row by row (elastic.py).
+    """
     target = None if (tuple(ratios) == case.ratios and nu == case.nu) else (tuple(ratios), nu)
     res = solve(case, target)
-    return np.concatenate([np.linalg.inv(res.compliance).ravel(), res.peak])
+    return np.concatenate([np.linalg.inv(res.compliance).ravel(), res.peak, res.fibres.ravel()])
 
 
 def dimensionless(name: str, values: Mapping[str, Any], nu, plane: str = "auto",
                   n: int = DEFAULT_RESOLUTION):
     """
-    Return (K^ (3, 3), s^ (3,), plane) of a hinge in the finite-element solve's convention.
+    Return (K^ (3, 3), s^ (3,), f^ (k, 3), plane) of a hinge, the solve's convention scaled out.
 
     Floats, or object arrays of HyperDual scalars when the ratios or nu carry derivative parts
     (module docstring). The leaf is already turned to the cantilever's convention.
@@ -105,7 +109,7 @@ def dimensionless(name: str, values: Mapping[str, Any], nu, plane: str = "auto",
     f0 = _evaluate(case, a[:-1], a[-1])
     active = [k for k, p in enumerate(parts) if any(p[1:])]
     if not active:
-        out = [f0[:9].reshape(3, 3), f0[9:]]
+        out = f0
     else:
         steps = {k: STEP * (abs(a[k]) if k < len(a) - 1 else 1.0) for k in active}
 
@@ -132,14 +136,16 @@ def dimensionless(name: str, values: Mapping[str, Any], nu, plane: str = "auto",
         D = sum(grad[k] * parts[k][3] for k in active)
         D = D + sum(hess[k, j] * parts[k][1] * parts[j][2]
                     for k in active for j in active if (k, j) in hess)
-        objs = np.array([hd.HyperDual(*p) for p in zip(f0, B, C, D)], dtype=object)
-        out = [objs[:9].reshape(3, 3), objs[9:]]
-    K, peak = out
+        out = np.array([hd.HyperDual(*p) for p in zip(f0, B, C, D)], dtype=object)
+    K, peak, fibres = out[:9].reshape(3, 3), out[9:12], out[12:].reshape(-1, 3)
     if name == "leaf":
         K = np.array([[_LEAF_SIGN[i] * _LEAF_SIGN[j] * K[_LEAF_ORDER[i], _LEAF_ORDER[j]]
                        for j in range(3)] for i in range(3)], dtype=K.dtype)
         peak = np.array([peak[o] for o in _LEAF_ORDER], dtype=peak.dtype)
-    return K, peak, plane
+        # sigma = a_int . w_int, w_int[ORDER[i]] = SIGN[i] w[i]: a[i] = SIGN[i] a_int[ORDER[i]]
+        fibres = np.array([[_LEAF_SIGN[i] * row[_LEAF_ORDER[i]] for i in range(3)]
+                           for row in fibres], dtype=fibres.dtype).reshape(-1, 3)
+    return K, peak, fibres, plane
 
 
 def _scaled(K, ell, factor):
@@ -161,9 +167,7 @@ def stiffness(name: str, values: Mapping[str, Any], E, nu, plane: str = "auto",
     ``values``: the shape's geometry keys (shapes.SHAPES), floats or HyperDual; float array, or
     an object array of HyperDual entries when anything carries derivative parts.
     """
-    s = shape(name)
-    K, _, _ = dimensionless(name, values, nu, plane, n)
-    return _scaled(K, values[s.lengths[0]], E * values[s.plate])
+    return hinge(name, values, E, nu, plane, n)[0]
 
 
 def stress_coefficients(name: str, values: Mapping[str, Any], nu, plane: str = "auto",
@@ -175,7 +179,33 @@ def stress_coefficients(name: str, values: Mapping[str, Any], nu, plane: str = "
     tensor, so the peak of a sum is at most the sum of the peaks): exact for one component,
     a conservative bound for combined loads.
     """
+    return hinge(name, values, 1.0, nu, plane, n)[1]
+
+
+def fibre_coefficients(name: str, values: Mapping[str, Any], nu, plane: str = "auto",
+                       n: int = DEFAULT_RESOLUTION) -> np.ndarray:
+    """
+    Signed stress per unit wrench at the surface's critical points, (k, 3), at the hinge frame.
+
+    Row p holds (Pa/(N m), Pa/N, Pa/N): the von Mises stress at point p, signed as its
+    tangential stress (tension positive), is row_p . (m, f_x, f_y) (elastic.py).
+    """
+    return hinge(name, values, 1.0, nu, plane, n)[2]
+
+
+def hinge(name: str, values: Mapping[str, Any], E, nu, plane: str = "auto",
+          n: int = DEFAULT_RESOLUTION):
+    """
+    Return (stiffness (3, 3), peak coefficients [3], fibre coefficients (k, 3)) of one solve.
+
+    The three results of ``stiffness``, ``stress_coefficients`` and ``fibre_coefficients``;
+    the stresses scale as sigma = m s^_m / (t ell^2), f s^_f / (t ell) (module docstring).
+    """
     s = shape(name)
     ell, t = values[s.lengths[0]], values[s.plate]
-    _, peak, _ = dimensionless(name, values, nu, plane, n)
-    return [peak[0] / (t * ell * ell), peak[1] / (t * ell), peak[2] / (t * ell)]
+    K, peak, fibres, _ = dimensionless(name, values, nu, plane, n)
+    per = [t * ell * ell, t * ell, t * ell]
+    rows = [[row[j] / per[j] for j in range(3)] for row in fibres]
+    dual = fibres.dtype == object or _is_hd(ell, t)
+    fibres = np.array(rows, dtype=object if dual else float).reshape(-1, 3)
+    return _scaled(K, ell, E * t), [peak[j] / per[j] for j in range(3)], fibres

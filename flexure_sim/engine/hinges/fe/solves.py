@@ -14,7 +14,9 @@ error (~1e-5) to a difference of the order of the step; instead the base case's 
 clamp line and the end of the straight part of the outline stay where they belong, and y
 is scaled by the ratio of the two outlines' half-widths at the point, which puts every
 boundary node on the new outline exactly. The discrete stiffness is then a smooth function
-of the geometry whose derivative is that of the finite-element model.
+of the geometry whose derivative is that of the finite-element model. The fibre points
+(elastic.py) of a moved mesh are the base case's, moved the same way: the derivatives of a
+fibre's coefficients follow one material point rather than jump between surface nodes.
 """
 from __future__ import annotations
 
@@ -61,19 +63,28 @@ class Result:
     """
     Compliance (3, 3) and peak von Mises stresses (3,) under unit wrenches, dimensionless.
 
-    ``peak_at`` (3, 2): where each peak is (in the reference length); ``seconds``: the time the
-    solve took (0 when read from the cache).
+    ``peak_at`` (3, 2): where each peak is (in the reference length); ``fibres`` (k, 3): the
+    signed von Mises stress of the surface's critical points under the unit wrenches, and
+    ``fibres_at`` (k, 2) where they are (elastic.py); ``seconds``: the time the solve took (0
+    when read from the cache).
     """
 
     compliance: np.ndarray
     peak: np.ndarray
     peak_at: np.ndarray
+    fibres: np.ndarray
+    fibres_at: np.ndarray
     seconds: float
 
 
 def morph(m: HingeMesh, source: Profile, target: Profile) -> HingeMesh:
     """Move the nodes of ``m``, a mesh of ``source``, onto ``target`` (module docstring)."""
-    x, y = m.nodes[:, 0], m.nodes[:, 1]
+    return replace(m, nodes=moved(m.nodes, source, target))
+
+
+def moved(points: np.ndarray, source: Profile, target: Profile) -> np.ndarray:
+    """Return points (k, 2) in ``source`` moved onto ``target`` as ``morph`` moves nodes."""
+    x, y = points[:, 0], points[:, 1]
     ax = np.abs(x)
     if source.flat > 0:
         inner = ax * (target.flat / source.flat)
@@ -83,14 +94,15 @@ def morph(m: HingeMesh, source: Profile, target: Profile) -> HingeMesh:
     outer = target.flat + (ax - source.flat) * (arc1 / arc0 if arc0 > 0 else 0.0)
     xn = np.sign(x) * np.where(ax <= source.flat, inner, outer)
     yn = y * target.y_top(xn) / source.y_top(x)
-    return replace(m, nodes=np.stack([xn, yn], axis=1))
+    return np.stack([xn, yn], axis=1)
 
 
-_LAYOUT = {"compliance": (3, 3), "peak": (3,), "peak_at": (3, 2)}
+_LAYOUT = {"compliance": (3, 3), "peak": (3,), "peak_at": (3, 2), "fibres": (-1, 3),
+           "fibres_at": (-1, 2)}
 
 
 def _result(values: dict, seconds: float) -> Result:
-    return Result(values["compliance"], values["peak"], values["peak_at"], seconds)
+    return Result(*(values[k] for k in _LAYOUT), seconds)
 
 
 def solve(case: Case, target: Optional[tuple[tuple[float, ...], float]] = None) -> Result:
@@ -106,6 +118,7 @@ def solve(case: Case, target: Optional[tuple[tuple[float, ...], float]] = None) 
     stored = cache.load(key, _LAYOUT)
     if stored is not None:
         return _result(stored, 0.0)
+    at = None if target is None else solve(case).fibres_at  # the base case's fibre points
     start = time.perf_counter()
     base = profile(case.shape, case.ratios)
     m = mesh_profile(base, case.n)
@@ -113,8 +126,9 @@ def solve(case: Case, target: Optional[tuple[tuple[float, ...], float]] = None) 
     if target is not None:
         prof, nu = profile(case.shape, tuple(target[0])), float(target[1])
         m = morph(m, base, prof)
-    sol = solve_mesh(m, prof.half, nu, case.plane)
-    values = {"compliance": sol.compliance, "peak": sol.peak, "peak_at": sol.peak_at}
+        at = moved(at, base, prof)
+    sol = solve_mesh(m, prof.half, nu, case.plane, at)
+    values = {k: getattr(sol, k) for k in _LAYOUT}
     cache.store(key, values)
     return _result({k: np.asarray(v, dtype=float) for k, v in values.items()},
                    time.perf_counter() - start)
