@@ -44,7 +44,7 @@ frequency response is G(i w) = C (i w I - A)^-1 B + D.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Optional, Union
 
 import numpy as np
 
@@ -146,7 +146,7 @@ class LinearModel:
     stiffness: np.ndarray = field(repr=False)
     mass: np.ndarray = field(repr=False)
     free: np.ndarray = field(repr=False)
-    damping: np.ndarray = field(repr=False, default=None)
+    damping: np.ndarray = field(repr=False)
     drive_names: tuple = ()
     lags: tuple = ()
     B1: Optional[np.ndarray] = None

@@ -38,6 +38,9 @@ from flexure_sim.engine.actuators.piezo_steps import Actuators
 from flexure_sim.engine.mechanism.parts import Drive, Mechanism
 from flexure_sim.engine.solver.programs import PIECE_WIDTH, hold
 
+if TYPE_CHECKING:  # model.py imports this module
+    from flexure_sim.engine.solver.model import Partition
+
 
 def stacked(drive) -> bool:
     """Tell whether a drive is a stack drive: a displacement drive with a finite stack k_s."""

@@ -115,6 +115,8 @@ def moved_too_far(model: Model, data: Data, z: np.ndarray) -> bool:
     tol = model.relinearize_tol
     if tol is None:
         return False
+    if data.lin is None:  # none yet: one is due
+        return True
     moved = np.abs(z - data.lin.z)
     moved[0::3] /= model.length_scale
     moved[1::3] /= model.length_scale
@@ -123,6 +125,7 @@ def moved_too_far(model: Model, data: Data, z: np.ndarray) -> bool:
 
 def _advance(model: Model, data: Data, n, y, t, rows, held, F0, aux0, ye):
     lin = data.lin
+    assert lin is not None  # step() linearizes before it advances
     common = (n, y, t, model.dt, rows, held, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,
               model.atol, model.max_iterations, model.relinearize_after, F0, aux0, ye,
               lin.emats)
