@@ -368,7 +368,8 @@ def sensitivities(
         )
         for o, v in sens.outputs(design, sens.equilibrium(design), of).items():
             second[o][f"{p}|{q}"] = float(v.d)
-    u0 = sens.u if np.ndim(sens.u) == 0 else dict(zip(model.drives.names, sens.u.tolist()))
+    u0 = (dict(zip(model.drives.names, sens.u.tolist())) if isinstance(sens.u, np.ndarray)
+          else sens.u)
     result = {"input": u0, "values": values, "gradient": gradient, "second": second}
     if hessian:
         result["hessian"] = {o: [[second[o][f"{p}|{q}" if i <= j else f"{q}|{p}"]
