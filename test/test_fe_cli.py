@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from flexure_sim.cli import main
-from flexure_sim.engine.hinges.fe import model
+from flexure_sim.engine.hinges.fe import fe_model as model
 from flexure_sim.engine.mechanism.loader import mechanism_from_dict
 from flexure_sim.engine.mechanism.polynomial_files import load_law
 from flexure_sim.engine.solver.simulation import Simulation

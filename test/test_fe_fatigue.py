@@ -16,7 +16,7 @@ import yaml
 import notch_fe
 from flexure_sim.cli import main
 from flexure_sim.engine.hinges import fatigue
-from flexure_sim.engine.hinges.fe import model, solves
+from flexure_sim.engine.hinges.fe import fe_model as model, solves
 from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.mechanism.loader import load_mechanism
 from flexure_sim.engine.solver.simulation import Simulation

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 import notch_fe
-from flexure_sim.engine.hinges.fe import closed_forms, convergence, model, shapes, solves
+from flexure_sim.engine.hinges.fe import closed_forms, convergence, shapes, solves
+from flexure_sim.engine.hinges.fe import fe_model as model
 from reference_figures import NOTCH_KO
 
 

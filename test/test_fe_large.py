@@ -12,7 +12,7 @@ from scipy.integrate import solve_bvp
 
 from flexure_sim.engine.fitting.least_squares import wrench_errors
 from flexure_sim.engine.fitting.wrench_data import WrenchData
-from flexure_sim.engine.hinges.fe import large, mesh, model, samples, shapes, solves
+from flexure_sim.engine.hinges.fe import large, mesh, fe_model as model, samples, shapes, solves
 from flexure_sim.engine.laws.quadratic import QuadraticLaw
 
 

@@ -14,7 +14,7 @@ import pytest
 
 import notch_fe
 from flexure_sim.engine.analysis.sensitivity import sensitivities
-from flexure_sim.engine.hinges.fe import model
+from flexure_sim.engine.hinges.fe import fe_model as model
 from flexure_sim.engine.hinges.stress import stress_table
 from flexure_sim.engine.mechanism.loader import ConfigError, mechanism_from_dict
 from flexure_sim.engine.mechanism.parameters import ParameterError, Parameters

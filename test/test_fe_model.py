@@ -15,7 +15,7 @@ import pytest
 
 from conftest import ROOT
 from flexure_sim.engine.kinematics import hyperdual as hd
-from flexure_sim.engine.hinges.fe import cache, model, solves
+from flexure_sim.engine.hinges.fe import cache, fe_model as model, solves
 
 GEO = {"D": 3e-3, "h": 0.25e-3, "t": 0.02}
 

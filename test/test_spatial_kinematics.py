@@ -14,7 +14,7 @@ import scipy.linalg
 from scipy.spatial.transform import Rotation
 
 from flexure_sim.engine.kinematics import generic
-from flexure_sim.engine.kinematics import spatial as rot
+from flexure_sim.engine.kinematics import quaternion as rot
 from flexure_sim.engine.mechanism.spatial_loader import spatial_from_dict
 from flexure_sim.engine.solver.model import SolverError
 from flexure_sim.engine.solver.spatial_simulation import SpatialSimulation

@@ -12,7 +12,7 @@ import scipy.linalg
 from scipy.spatial.transform import Rotation
 
 from flexure_sim.engine.hinges.spatial_stiffness import adjoint, transform_stiffness
-from flexure_sim.engine.kinematics import spatial as rot
+from flexure_sim.engine.kinematics import quaternion as rot
 from flexure_sim.engine.laws.quadratic import LawBatch, QuadraticLaw, wrench_on_element
 from flexure_sim.engine.laws.spatial import SpatialLaw
 from flexure_sim.engine.mechanism.parts import Fixed

@@ -15,7 +15,7 @@ No ROS here. Sub-packages, each importing only the ones listed before it:
 ``jit`` holds Numba's ``njit`` and the kernel cache every compiled module uses.
 
 The spatial engine (bodies with six coordinates, hinges with 6x6 stiffness) lives beside the
-planar one in the same layers, its modules named ``spatial*``: ``kinematics.spatial``,
+planar one in the same layers, its modules named ``spatial*``: ``kinematics.quaternion``,
 ``laws.spatial``, ``hinges.spatial_stiffness``, ``mechanism.spatial_loader``,
 ``solver.spatial_simulation`` (the facade), ``analysis.spatial_linear``.
 """

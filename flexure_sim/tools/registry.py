@@ -22,7 +22,7 @@ TOOL_MODULES: tuple[str, ...] = (
     "tools.design.sensitivity_command",
     "tools.bench.benchmarks",
     "tools.design.sweep",
-    "tools.design.optimize",
+    "tools.design.optimize_command",
     "tools.design.piezo_loop",
     "tools.design.hinge",
 )

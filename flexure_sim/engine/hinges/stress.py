@@ -37,7 +37,7 @@ moment f_x L / 2 at either end, so the largest end moment is |m| + |f_x| L / 2:
 (straight beam, no concentration: the fillets at the clamps are not modelled).
 Finite-element hinge (``model: fe``, engine/hinges/fe): the peak von Mises stress per unit
 moment and force, c = (c_m, c_x, c_y), from the same solve as the stiffness
-(fe.model.stress_coefficients); the stress of a wrench is bounded by
+(fe.fe_model.stress_coefficients); the stress of a wrench is bounded by
 
     sigma = c_m |m| + c_x |f_x| + c_y |f_y|
 
@@ -47,7 +47,7 @@ fibres are the surface points where the unit wrenches' stresses peak and their m
 (both notch roots, the four fillet roots of a leaf; fe/elastic.py): at a traction-free
 surface the stress is uniaxial along it and linear in the wrench, so point p's von Mises
 stress signed as its tangential stress is a_p . (m, f_x, f_y) with the rows a_p of
-fe.model.fibre_coefficients. Their largest magnitude is at most the bound above.
+fe.fe_model.fibre_coefficients. Their largest magnitude is at most the bound above.
 
 Hinges with a ``matrix`` stiffness or a fitted polynomial law have no geometry: no stress.
 

@@ -10,6 +10,6 @@ Kinematics: planar (rotations, twists, twistors) and spatial (quaternions, rotat
   derivatives.
 - ``scalar``: Formulas written once on a generic scalar: floats in Numba, NumPy arrays,
   HyperDual arrays.
-- ``spatial``: Rotations of the spatial engine: unit quaternions, rotation vectors, and their
+- ``quaternion``: Rotations of the spatial engine: unit quaternions, rotation vectors, and their
   Jacobians.
 """

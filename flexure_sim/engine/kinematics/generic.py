@@ -1,7 +1,7 @@
 """
 Formulas written once on a generic scalar: compiled by Numba, evaluated on hyper-dual numbers.
 
-The spatial engine's force chain (``kinematics.spatial``, ``laws.spatial``,
+The spatial engine's force chain (``kinematics.quaternion``, ``laws.spatial``,
 ``solver.spatial_chain``) is plain Python on scalars: the arithmetic operators and NumPy's
 ufuncs (``np.sin``, ``np.sqrt``, ``np.arctan``), which Numba compiles for floats and complex
 numbers and which ``hyperdual.HyperDual`` implements for numbers carrying exact derivatives

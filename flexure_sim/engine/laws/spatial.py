@@ -15,7 +15,7 @@ with q_r the quaternion of R. The law coordinates c are 6-vectors, rotation firs
   dual angle theta^ and screw axis s^ (the planar (xi, x1, x2) of eq. 4.7 are its entries
   z, x, y when the motion is planar);
 - ``twist``: c = (omega, v) = log D, omega = G(q_r) xi the rotation vector
-  (``kinematics.spatial.angle_factor``) and v = Jl^-1(omega) p = p - omega x p / 2
+  (``kinematics.quaternion.angle_factor``) and v = Jl^-1(omega) p = p - omega x p / 2
   + c omega x (omega x p) (planar: eqs. 2.106-2.108).
 
 A law is a potential U(c) and a dissipation D = 1/2 c_dot^T C c_dot (``SpatialLaw``):
@@ -52,7 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexure_sim.engine.kinematics.generic import generic, revalidate
-from flexure_sim.engine.kinematics.spatial import angle_factor, cross, jr_coefficient
+from flexure_sim.engine.kinematics.quaternion import angle_factor, cross, jr_coefficient
 from flexure_sim.errors import as_array
 
 #: Law coordinate types (the ``law`` of a hinge), as in the planar engine.

@@ -5,7 +5,7 @@ Part of the loader (stiffness_block.py); messages name the file, key and problem
 ``shape`` (circular, elliptical, corner_filleted, leaf), the shape's lengths (m; see
 engine/hinges/fe/shapes.py: circular D, h, t; elliptical a, b, h, t; corner_filleted length,
 r, h, t; leaf length, thickness, width and optional fillet), ``E`` (Pa), ``nu``, optional
-``plane`` (auto, stress, strain; auto by the rule of engine/hinges/fe/model.py), optional
+``plane`` (auto, stress, strain; auto by the rule of engine/hinges/fe/fe_model.py), optional
 ``resolution`` (elements across a section, 4..64, default 16) and the strengths (``material``,
 ``sigma_y``, ``sigma_u``, ``sigma_e``: stiffness_block.py). The stiffness, the peak-stress
 coefficients and the fibres' signed-stress coefficients (fatigue) come from one
@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from flexure_sim.engine.hinges.fe import model as fe_model
+from flexure_sim.engine.hinges.fe import fe_model
 from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.hinges.fe.mesh import MeshError
 from flexure_sim.engine.hinges.fe.shapes import SHAPES, ShapeError

@@ -27,7 +27,7 @@ from __future__ import annotations
 from typing import Any
 
 from flexure_sim.engine.hinges import spatial_stiffness as stiffness
-from flexure_sim.engine.kinematics import spatial as rotation
+from flexure_sim.engine.kinematics import quaternion as rotation
 from flexure_sim.engine.mechanism.loader import mechanism_from_dict
 from flexure_sim.engine.mechanism.parts import Drive as PlanarDrive
 from flexure_sim.engine.mechanism.parts import Fixed, SineRate

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from flexure_sim.engine.hinges import spatial_stiffness as stiffness
-from flexure_sim.engine.kinematics import spatial as rotation
+from flexure_sim.engine.kinematics import quaternion as rotation
 from flexure_sim.engine.laws.spatial import SpatialLaw
 from flexure_sim.engine.mechanism.damping_block import hinge_damping
 from flexure_sim.engine.mechanism.loader import COINCIDENCE_TOLERANCE

@@ -2,7 +2,7 @@
 Spatial mechanisms as plain data: bodies, hinges, constraints, drives and outputs in 3-D.
 
 Constants only, as ``engine.mechanism`` (the state lives in ``data.State``). Coordinates per
-body (``kinematics.spatial``, ``solver.spatial_chain``): (x, y, z, rx, ry, rz) = position of
+body (``kinematics.quaternion``, ``solver.spatial_chain``): (x, y, z, rx, ry, rz) = position of
 the body frame (its mass
 centre) in the root frame ``stage`` (REP-103) and the rotation vector from its rest
 orientation, in body coordinates; velocities (vx, vy, vz) in the root frame and the angular

@@ -1,10 +1,10 @@
 """
 Generalized forces of a spatial mechanism: hinges, gyroscopic terms, applied forces.
 
-Coordinates, six per body in body order (``kinematics.spatial``): z = (p, phi), p the body frame's
-origin (its mass centre) in the root frame, phi its rotation vector from the rest orientation
-R0 (R = R0 Exp(phi)); velocities w = (v, omega), v = dp/dt in the root frame and omega the
-angular velocity in body coordinates (quasi-velocities: the mass matrix is constant,
+Coordinates, six per body in body order (``kinematics.quaternion``): z = (p, phi), p the body
+frame's origin (its mass centre) in the root frame, phi its rotation vector from the rest
+orientation R0 (R = R0 Exp(phi)); velocities w = (v, omega), v = dp/dt in the root frame and
+omega the angular velocity in body coordinates (quasi-velocities: the mass matrix is constant,
 M = diag(m I, I_b) with I_b the inertia tensor in body coordinates), and dz/dt = (v,
 Jr^-1(phi) omega).
 
@@ -27,9 +27,9 @@ Jacobians are the hyper-dual evaluations of this same code.
 from __future__ import annotations
 
 from flexure_sim.engine.kinematics.generic import buffer, generic, real_part, revalidate
-from flexure_sim.engine.kinematics.spatial import cross, matrix_of, phi_rate, qconj_mul, qmul
-from flexure_sim.engine.kinematics.spatial import quaternion_exp, rotate, rotate_back
-from flexure_sim.engine.kinematics.spatial import rotation_vector
+from flexure_sim.engine.kinematics.quaternion import cross, matrix_of, phi_rate, qconj_mul, qmul
+from flexure_sim.engine.kinematics.quaternion import quaternion_exp, rotate, rotate_back
+from flexure_sim.engine.kinematics.quaternion import rotation_vector
 from flexure_sim.engine.laws.spatial import law_terms
 
 

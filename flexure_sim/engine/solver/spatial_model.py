@@ -20,7 +20,7 @@ from typing import Optional
 import numpy as np
 
 from flexure_sim.engine.kinematics import generic
-from flexure_sim.engine.kinematics.spatial import matrix as quaternion_matrix
+from flexure_sim.engine.kinematics.quaternion import matrix as quaternion_matrix
 from flexure_sim.engine.mechanism.parts import Fixed
 from flexure_sim.engine.mechanism.spatial_loader import drive_coordinates
 from flexure_sim.engine.mechanism.spatial_parts import Drive, Mechanism
@@ -238,7 +238,7 @@ class SpatialModel:
         return z, w, u
 
     def check_range(self, z: np.ndarray) -> None:
-        """Raise SolverError if a body turned beyond |phi| = pi (``kinematics.spatial``)."""
+        """Raise SolverError if a body turned beyond |phi| = pi (``kinematics.quaternion``)."""
         phi = np.linalg.norm(z.reshape(-1, 6)[:, 3:], axis=1)
         if np.any(phi > np.pi) or not np.all(np.isfinite(z)):
             i = int(np.argmax(np.where(np.isfinite(phi), phi, np.inf)))

@@ -5,7 +5,7 @@ The planar ``solver.simulation.Simulation``'s shape, so that the node and the to
 either: ``step``, ``snapshot``, ``set_command``, ``reset``, ``static``, ``static_gain`` and the
 ``state``/``stats`` attributes; the linear model and modes are ``analysis.spatial_linear``'s.
 A state's z holds six coordinates per body (position, rotation vector from rest:
-``kinematics.spatial``) and v the quasi-velocities (root-frame velocity, body-frame angular
+``kinematics.quaternion``) and v the quasi-velocities (root-frame velocity, body-frame angular
 velocity: ``solver.spatial_chain``).
 """
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import Optional, Union
 
 import numpy as np
 
-from flexure_sim.engine.kinematics import spatial as rotation
+from flexure_sim.engine.kinematics import quaternion as rotation
 from flexure_sim.engine.mechanism.spatial_parts import Mechanism
 from flexure_sim.engine.solver import spatial_integrator as dynamics
 from flexure_sim.engine.solver import spatial_statics as statics

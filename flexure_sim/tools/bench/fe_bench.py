@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flexure_sim.engine.hinges.fe import model
+from flexure_sim.engine.hinges.fe import fe_model as model
 from flexure_sim.engine.hinges.fe.solves import DEFAULT_RESOLUTION
 from flexure_sim.engine.mechanism.loader import ConfigError, mechanism_from_dict
 from flexure_sim.engine.mechanism.yaml_files import read_yaml

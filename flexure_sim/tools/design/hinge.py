@@ -31,7 +31,7 @@ import numpy as np
 from flexure_sim.engine.fitting.least_squares import wrench_errors
 from flexure_sim.engine.fitting.wrench_data import WrenchData, write_wrench_csv
 from flexure_sim.engine.hinges import materials
-from flexure_sim.engine.hinges.fe import model as fe_model
+from flexure_sim.engine.hinges.fe import fe_model
 from flexure_sim.engine.hinges.fe import report as fe_report
 from flexure_sim.engine.hinges.fe.samples import wrench_samples, working_box
 from flexure_sim.engine.hinges.fe.shapes import SHAPES

@@ -12,7 +12,7 @@ from typing import Any, Mapping, Optional
 
 import numpy as np
 
-from flexure_sim.engine.hinges.fe import closed_forms, convergence, model
+from flexure_sim.engine.hinges.fe import closed_forms, convergence, fe_model as model
 from flexure_sim.engine.hinges.fe.shapes import ratios_of, shape
 from flexure_sim.engine.hinges.fe.solves import DEFAULT_RESOLUTION, Case, solve
 

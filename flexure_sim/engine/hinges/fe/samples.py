@@ -22,7 +22,7 @@ import numpy as np
 
 from flexure_sim.engine.hinges.fe.large import LargeDeflection
 from flexure_sim.engine.hinges.fe.mesh import mesh_profile
-from flexure_sim.engine.hinges.fe.model import _LEAF_ORDER, _LEAF_SIGN, plane_of
+from flexure_sim.engine.hinges.fe.fe_model import _LEAF_ORDER, _LEAF_SIGN, plane_of
 from flexure_sim.engine.hinges.fe.shapes import profile, ratios_of, shape
 from flexure_sim.engine.hinges.fe.solves import DEFAULT_RESOLUTION, Case, solve
 
