@@ -86,7 +86,7 @@ def _source_controller(tmp_path, domain: int, params: dict) -> NodeProcess:
 
 def test_a_nan_setpoint_or_measurement_is_refused_and_the_loop_recovers(tmp_path):
     """
-    NaN / inf on either topic: a WARN naming the topic and value, the last command repeated.
+    A NaN or inf on either topic: a WARN naming the topic and value, the last command repeated.
 
     The commands answering the good measurements equal the PI law stepped by hand over the good
     measurements only (u = kp e + I, I += ki T e; no notch, limits far away): nothing of the
