@@ -141,3 +141,20 @@ def test_a_non_finite_or_non_numeric_start_parameter_is_refused_by_name(tmp_path
     last = result.stderr.strip().splitlines()[-1]
     assert last.startswith(f"pi_controller: error: invalid parameters: {name} must be "), last
     assert "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize("name, value", [("measurement_topic", "a b"),
+                                         ("setpoint_topic", "/9x"), ("command_topic", "x//y")])
+def test_an_invalid_topic_name_is_refused_naming_the_parameter(tmp_path, name, value):
+    result = subprocess.run(
+        [sys.executable, "-m", "flexure_sim.node.apps.pi_controller", "--ros-args",
+         "-p", f"{name}:={value}"],
+        env=node_env(next_domain_id(), PYTHONPATH=str(ROOT),
+                     ROS_LOG_DIR=str(tmp_path / "ros_log")),
+        capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert lines[-1].startswith(
+        f"pi_controller: error: invalid parameter {name}: {value!r} is not a valid topic "
+        "name ("), result.stderr
+    assert "Exception" not in result.stderr

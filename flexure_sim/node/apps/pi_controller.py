@@ -38,10 +38,12 @@ from __future__ import annotations
 import math
 import sys
 import time
-from typing import Any, Optional
+from contextlib import contextmanager
+from typing import Any, Iterator, Optional
 
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.duration import Duration
+from rclpy.exceptions import InvalidTopicNameException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64, UInt64
@@ -85,6 +87,17 @@ WARN_PERIOD = 1.0
 
 class StartupError(FlexureSimError, RuntimeError):
     """The controller cannot start (one line on stderr, exit code 1)."""
+
+
+@contextmanager
+def topic_parameter(name: str, values: dict[str, Any]) -> Iterator[None]:
+    """Turn rclpy's InvalidTopicNameException into a StartupError naming the parameter."""
+    try:
+        yield
+    except InvalidTopicNameException as exc:
+        reason = str(exc).splitlines()[0].removeprefix("Invalid topic name: ").rstrip(":")
+        raise StartupError(f"invalid parameter {name}: {values[name]!r} is not a valid "
+                           f"topic name ({reason})") from exc
 
 
 def parameter_problem(values: dict[str, Any]) -> str:
@@ -139,13 +152,16 @@ class PIControllerNode(Node):
         self.handshake = bool(values["handshake"])
         path = values["trace_path"]
         self.trace = open(path, "w") if path else None  # noqa: SIM115
-        self.command_pub = self.create_publisher(Float64, values["command_topic"], QOS)
+        with topic_parameter("command_topic", values):
+            self.command_pub = self.create_publisher(Float64, values["command_topic"], QOS)
         self.answered_pub = (self.create_publisher(UInt64, "~/answered", QOS)
                              if self.handshake else None)
-        self.measurement_sub = self.create_subscription(
-            Float64, values["measurement_topic"], self.on_measurement, NEWEST)
-        self.setpoint_sub = self.create_subscription(
-            Float64, values["setpoint_topic"], self.on_setpoint, QOS)
+        with topic_parameter("measurement_topic", values):
+            self.measurement_sub = self.create_subscription(
+                Float64, values["measurement_topic"], self.on_measurement, NEWEST)
+        with topic_parameter("setpoint_topic", values):
+            self.setpoint_sub = self.create_subscription(
+                Float64, values["setpoint_topic"], self.on_setpoint, QOS)
         self.create_service(Trigger, "~/reset", self.on_reset)
         self.add_on_set_parameters_callback(self.validate)
         self.add_post_set_parameters_callback(self.apply)
