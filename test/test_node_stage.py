@@ -757,3 +757,30 @@ def test_fourbar_runs_without_drive_topics(tmp_path, domain, peer):
         and "/bodies/link2/pose" in log.topics
         and "/drive/displacement" not in log.topics
     )
+
+
+def test_reset_restarts_the_pacing_counters_with_ticks(tmp_path, domain, peer):
+    """After ``~/reset`` missed_ticks, paced_ticks, slips count the new run, like ticks."""
+    node = start(tmp_path, domain, peer, time_mode="realtime", publish_rate=200.0, record=False)
+    try:
+        peer.subscribe("/diagnostics", DiagnosticArray)
+        peer.wait_for_publishers(["/diagnostics"], timeout=60)
+        peer.spin_until(lambda: len(peer.received["/diagnostics"]) > 0
+                        and int(latest_diagnostics(peer)["paced_ticks"]) >= 100, 60,
+                        "100 paced ticks")
+        before = latest_diagnostics(peer)
+        assert peer.call(Trigger, "/stage_node/reset").success
+        n = len(peer.received["/diagnostics"])
+        # The first report of the new run: fewer ticks than the old run had already run.
+        peer.spin_until(lambda: any(
+            int(diagnostics_values(m)["ticks"]) < int(before["ticks"])
+            for m in peer.messages("/diagnostics")[n:]), 60, "diagnostics of the new run")
+        after = next(d for d in map(diagnostics_values, peer.messages("/diagnostics")[n:])
+                     if int(d["ticks"]) < int(before["ticks"]))
+    finally:
+        stop_cleanly(node)
+    paced = int(after["paced_ticks"])
+    assert paced < int(before["paced_ticks"])
+    assert paced <= int(after["ticks"]) + int(after["merged_ticks"]) + 1
+    assert int(after["missed_ticks"]) <= paced
+    assert int(after["slips"]) <= paced

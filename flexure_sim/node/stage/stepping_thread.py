@@ -380,7 +380,12 @@ class SteppingLoop:
         self._log.info(f"publish_rate {rate:g} Hz: {self.n_steps} engine steps per tick")
 
     def reset(self) -> None:
-        """Back to t = 0 and the initial command (stepping thread); counters are kept."""
+        """
+        Back to t = 0 and the initial command (stepping thread).
+
+        The run's counters (ticks, the pacer's missed/paced ticks, slips, lateness) restart;
+        the command and engine counters count over the node's life.
+        """
         self.sim.reset()
         if self.sensor is not None:
             self.sensor.reset()
@@ -392,4 +397,6 @@ class SteppingLoop:
             self.intake.discard()  # sent before the reset: discarded
         self.runs += 1
         self.ticks = 0
+        if self.pacer is not None:
+            self.pacer.reset_stats()
         self.restart_clocks()
