@@ -19,7 +19,8 @@ from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Float64
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Bool, Float64
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
@@ -784,3 +785,25 @@ def test_reset_restarts_the_pacing_counters_with_ticks(tmp_path, domain, peer):
     assert paced <= int(after["ticks"]) + int(after["merged_ticks"]) + 1
     assert int(after["missed_ticks"]) <= paced
     assert int(after["slips"]) <= paced
+
+
+def test_ready_is_latched_true_once_the_loop_runs(tmp_path, domain, peer):
+    """
+    ``~/ready`` (transient local): a driver subscribing late still gets ``true``.
+
+    Subscribed only after the node's diagnostics show ticks: the message was published before
+    this reader existed, so it arrives only because it is latched.
+    """
+    node = start(tmp_path, domain, peer, record=False)
+    try:
+        peer.subscribe("/diagnostics", DiagnosticArray)
+        peer.spin_until(lambda: len(peer.received["/diagnostics"]) > 0
+                        and int(latest_diagnostics(peer)["ticks"]) > 0, 60, "ticks")
+        latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                             reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        peer.subscribe("/stage_node/ready", Bool, qos=latched)
+        peer.spin_until(lambda: len(peer.received["/stage_node/ready"]) > 0, 60, "ready")
+    finally:
+        stop_cleanly(node)
+    assert [m.data for m in peer.messages("/stage_node/ready")] == [True]

@@ -20,6 +20,8 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, Trigger
 
 from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism, resolve_mechanism_path
@@ -51,6 +53,11 @@ from flexure_sim.node.stage.stepping_thread import RELINEARIZE_TOL, SteppingLoop
 
 NODE_NAME = "stage_node"
 
+
+#: ``~/ready``: reliable, transient local, the last message kept (a latched topic).
+READY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 #: How a parameter's expected type is named in start-up errors.
 _TYPE_NAMES = {float: "double (a number)", int: "integer", bool: "bool (true or false)",
@@ -157,7 +164,10 @@ class StageNode(LiveParameters, Node):
         # full passes, which would otherwise pause the stepping loop for milliseconds.
         gc.collect()
         gc.freeze()
-        loop.start(self._stepping_ended, self._stepping_failed)
+        # Latched: a driver that subscribes later still gets it (docs/controller_guide.md).
+        ready = self.create_publisher(Bool, "~/ready", READY_QOS)
+        loop.start(self._stepping_ended, self._stepping_failed,
+                   lambda: ready.publish(Bool(data=True)))
 
     def _declare_parameters(self) -> dict[str, Any]:
         """
