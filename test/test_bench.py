@@ -5,6 +5,7 @@ import pytest
 from flexure_sim.tools.bench import engine_bench as bench_engine
 from flexure_sim.engine.mechanism.loader import load_mechanism
 from flexure_sim.engine.solver.simulation import DEFAULT_STEP
+from reference_figures import FIRST_MODE_HZ, STAGE_GAIN, STAGE_INPUT
 
 
 @pytest.fixture(scope="module")
@@ -16,7 +17,7 @@ def test_shipped_step_is_accurate_to_1e_6_against_the_reference(stage_run):
     assert stage_run["max_rel_error"] < 1e-6
     assert stage_run["reference_rel_error_estimate"] < 1e-8
     # A third of the way, then settled on the static answer (the run is a real step response).
-    assert stage_run["output_final"] == pytest.approx(27.628 * 1.35e-6, rel=1e-4)
+    assert stage_run["output_final"] == pytest.approx(STAGE_GAIN * STAGE_INPUT, rel=1e-4)
 
 
 def test_reference_is_confirmed_by_an_independent_integrator(stage_run):
@@ -40,7 +41,7 @@ def test_error_grows_with_the_step_as_second_order():
 
 def test_static_sweep_figures():
     res = bench_engine.bench_static_sweep(levels=50)
-    assert res["gain_at_full_stroke"] == pytest.approx(27.63, rel=1e-3)
+    assert res["gain_at_full_stroke"] == pytest.approx(STAGE_GAIN, rel=1e-3)
     assert res["newton_iterations"] < 6 * 50
 
 
@@ -51,7 +52,7 @@ def test_analyses_benchmark_runs_modes_frf_at_1000_frequencies_and_4_outputs_to_
 
     res = bench_analyses()
     assert res["frequencies"] == 1000
-    assert res["first_mode_hz"] == pytest.approx(300.6, rel=1e-3)
+    assert res["first_mode_hz"] == pytest.approx(FIRST_MODE_HZ, rel=1e-3)
     assert res["sensitivity_parameters"] == len(set(SENSITIVITY_PARAMETERS)) == 20
     assert res["sensitivity_outputs"] == len(OUTPUTS) == 4
     assert res["modes_frf_wall_s"] > 0 and res["sensitivity_wall_s"] > 0

@@ -6,6 +6,7 @@ import sys
 import pytest
 
 from conftest import ROOT
+from reference_figures import JOINT_A_COMPRESSION, STAGE_GAIN, STAGE_INPUT
 
 
 def run(*args):
@@ -22,9 +23,9 @@ def test_static_json():
     p = run("simulate", "microstage", "--drive", "step:1.35e-6", "--static", "--json")
     assert p.returncode == 0, p.stderr
     out = json.loads(p.stdout)
-    assert out["gain"] == pytest.approx(27.63, rel=1e-3)
-    assert out["output_displacement"] == pytest.approx(27.63 * 1.35e-6, rel=1e-3)
-    assert out["joint_a_compression"] == pytest.approx(192.2e-9, rel=1e-3)
+    assert out["gain"] == pytest.approx(STAGE_GAIN, rel=1e-3)
+    assert out["output_displacement"] == pytest.approx(STAGE_GAIN * STAGE_INPUT, rel=1e-3)
+    assert out["joint_a_compression"] == pytest.approx(JOINT_A_COMPRESSION, rel=1e-3)
     assert set(out["hinges"]) == set("abcdefg")
     assert out["wall_s"] > 0
 
@@ -50,7 +51,7 @@ def test_mechanism_without_drive_reports_hinge_deflections():
 
 def test_table_output_and_errors(tmp_path):
     p = run("simulate", "microstage", "--drive", "step:1.35e-6", "--static")
-    assert p.returncode == 0 and "gain:" in p.stdout and "27.6" in p.stdout
+    assert p.returncode == 0 and "gain:" in p.stdout and f"{STAGE_GAIN:.1f}" in p.stdout
     bad = tmp_path / "broken.yaml"
     bad.write_text("name: x\nbodies: []\n")
     p = run("simulate", str(bad))

@@ -24,9 +24,8 @@ DOCS = [ROOT / "README.md", ROOT / "BENCHMARKS.md", *sorted((ROOT / "docs").glob
 LINK = re.compile(r"!?\[(?:[^\]\\]|\\.)*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")
 #: A URL scheme (http:, https:, mailto:, ...): not a file of the repository.
 SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*:")
-#: The pages checked for development history. BENCHMARKS.md is rewritten to current figures on
-#: the node branch; it joins this list when that lands.
-HISTORY_DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+#: The pages checked for development history.
+HISTORY_DOCS = [ROOT / "README.md", ROOT / "BENCHMARKS.md", *sorted((ROOT / "docs").glob("*.md"))]
 #: Phrases that tell a development history rather than describe the product.
 HISTORY = re.compile(r"\b(this stop|previous stop|stops? ago|until this stop|an earlier stop|"
                      r"issue \d+)\b", re.IGNORECASE)

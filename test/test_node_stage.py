@@ -30,6 +30,7 @@ from flexure_sim.engine.solver.simulation import Simulation
 from flexure_sim.node.stage.cpu_latency import DEVICE, latency_in_effect
 
 from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id, thread_stats
+from reference_figures import STAGE_GAIN
 
 STEP = 1.35e-6
 STAGE_TOPICS = (
@@ -137,7 +138,7 @@ def test_step_response_settles_to_the_engines_static_gain_and_compression(
         gain = peer.last("/output/displacement").data / STEP
         engine_gain = engine_static.output / STEP
         assert gain == pytest.approx(engine_gain, rel=1e-4)
-        assert gain == pytest.approx(27.628, rel=1e-4)
+        assert gain == pytest.approx(STAGE_GAIN, rel=1e-4)
         assert peer.last("/hinges/a/compression").data == pytest.approx(
             engine_static.compression, rel=1e-4
         )

@@ -24,6 +24,7 @@ from flexure_sim.engine.analysis.study import load_study, study_from_dict
 from flexure_sim.tools.run import response_metrics
 from flexure_sim.tools.design import sweep_run as sweep, sweep_summary
 from flexure_sim.tools.design.sweep_outputs import OUTPUTS, evaluate_batch
+from reference_figures import JOINT_A_COMPRESSION, STAGE_GAIN
 
 ROOT = Path(__file__).resolve().parent.parent
 STAGE_STUDY = ROOT / "config" / "studies" / "stage_tolerance.yaml"
@@ -62,8 +63,8 @@ def test_nominal_stage_outputs_match_the_reference_figures():
     """
     cols = evaluate_batch(_grid([2.5e-4]), 0, 1)
     assert cols["status"] == ["ok"]
-    assert cols["gain"][0] == pytest.approx(27.628, rel=1e-4)
-    assert cols["compression"][0] == pytest.approx(192.2e-9, rel=1e-3)
+    assert cols["gain"][0] == pytest.approx(STAGE_GAIN, rel=1e-4)
+    assert cols["compression"][0] == pytest.approx(JOINT_A_COMPRESSION, rel=1e-3)
     sim, du = Simulation(load_mechanism("microstage")), 1e-9
     U = [sim.static(1.35e-6 + s * du).snapshot.potential_energy for s in (1, -1)]
     dU = U[0] - U[1]
@@ -275,7 +276,7 @@ def test_a_design_that_fails_is_recorded_and_the_study_goes_on(tmp_path):
     assert table["sample"] == [0, 1, 2]
     assert table["status"] == ["ok", "failed", "ok"]
     assert "stiffness_models.notch.h: must be positive" in table["error"][1]
-    assert math.isnan(table["gain"][1]) and table["gain"][0] == pytest.approx(27.628, rel=1e-4)
+    assert math.isnan(table["gain"][1]) and table["gain"][0] == pytest.approx(STAGE_GAIN, rel=1e-4)
     assert not (tmp_path / "out.parquet.parts").exists()
     about = json.loads(pq.read_schema(tmp_path / "out.parquet").metadata[b"flexure_sim.study"])
     assert about["units"] == {"gain": ""} and about["samples"] == 3 and about["seed"] is None

@@ -33,6 +33,7 @@ from flexure_sim.tools.run.plot import figure_title
 from flexure_sim.node.apps.replay import _message_class
 
 from node_harness import ROOT, NodeProcess, Peer, diagnostics_values, next_domain_id, node_env
+from reference_figures import STAGE_GAIN
 
 LEVELS_UM = (0.5, 1.0, 1.5, 2.0, 0.0)
 RATE = 2000.0
@@ -107,7 +108,7 @@ def test_analyse_gives_the_gain_of_the_live_run_and_of_the_engines_statics(capsy
         )  # applied at the tick after it was sent
         assert s["gain"] == pytest.approx(seen["gain"], rel=1e-4)
         assert s["gain"] == pytest.approx(s["static_gain"], rel=1e-6)
-        assert s["gain"] == pytest.approx(27.628, rel=1e-4)
+        assert s["gain"] == pytest.approx(STAGE_GAIN, rel=1e-4)
         assert s["output"] == pytest.approx(seen["output"], rel=1e-9, abs=1e-15)
         static = sim.static(s["applied_input"]).snapshot
         assert s["joint_a_compression"] == pytest.approx(static.compression, rel=1e-5, abs=1e-14)
@@ -116,7 +117,7 @@ def test_analyse_gives_the_gain_of_the_live_run_and_of_the_engines_statics(capsy
         assert abs(s["peak_drive_force"]) >= abs(s["drive_force"])
         assert set(s["peak_wrench"]) == set("abcdefg")
     code, out, _ = flexure_sim(capsys, "analyse", path)
-    assert code == 0 and "27.628" in out
+    assert code == 0 and f"{STAGE_GAIN:.3f}" in out
 
 
 def test_info_shows_the_mechanism_and_the_nodes_parameters(capsys, recorded):

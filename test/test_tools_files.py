@@ -28,9 +28,9 @@ from flexure_sim.tools.run.plot import figure_title
 from flexure_sim.tools.run.runlog import RunError, find_namespace
 
 from tools_fixtures import DEMO_LEVELS, live_gains, record_long_run, record_stage_run
+from reference_figures import JOINT_A_COMPRESSION, STAGE_GAIN, STAGE_INPUT
 
 ROOT = Path(__file__).resolve().parent.parent
-STAGE_GAIN = 27.628
 
 
 def flexure_sim(capsys, *args: str) -> tuple[int, str, str]:
@@ -117,11 +117,12 @@ def test_analyse_gives_the_live_gains_and_the_engines_static_gain(capsys, stage)
         assert 1e-3 < s["settling_time"] < 5e-3 and 0 <= s["overshoot"] < 0.01
         assert set(s["peak_wrench"]) == set("abcdefg")
     # Joint-a compression and drive force at 2 um: the engine's statics, scaled (linear stage).
-    assert steps[3]["joint_a_compression"] == pytest.approx(2e-6 / 1.35e-6 * 192.2e-9, rel=2e-3)
+    assert steps[3]["joint_a_compression"] == pytest.approx(
+        2e-6 / STAGE_INPUT * JOINT_A_COMPRESSION, rel=2e-3)
     assert steps[3]["peak_drive_force"] >= steps[3]["drive_force"] > 0
     code, out, _ = flexure_sim(capsys, "analyse", path)
     assert code == 0
-    assert "27.628" in out and "joint-a compr. [nm]" in out and "peak hinge load" in out
+    assert f"{STAGE_GAIN:.3f}" in out and "joint-a compr. [nm]" in out and "peak hinge load" in out
 
 
 def test_analyse_finds_the_steps_in_the_drive_input_when_the_command_was_not_recorded(

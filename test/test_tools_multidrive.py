@@ -23,6 +23,7 @@ from flexure_sim.tools.run.plot import figure_title
 
 from multidrive_fixtures import record_drives_run
 from test_node_multidrive import LEAF_ROTOR
+from reference_figures import STAGE_GAIN
 
 U = 1e-6
 #: x steps at 10 ms, y at 60 ms, each held 50 ms (fifty actuator time constants).
@@ -328,7 +329,7 @@ def test_one_drive_with_two_outputs_keeps_the_drives_topics_and_gets_a_column(ca
     expected = [[snap.outputs["x"] / 1e-6], [snap.outputs["yaw"] / 1e-6]]
     np.testing.assert_allclose(result["gain_matrix"]["matrix"], expected, rtol=1e-6,
                                atol=1e-6 * abs(expected[0][0]))
-    assert result["gain_matrix"]["matrix"][0][0] == pytest.approx(27.628, rel=1e-4)
+    assert result["gain_matrix"]["matrix"][0][0] == pytest.approx(STAGE_GAIN, rel=1e-4)
 
 
 def _volts_copy(src, dst, volts_per_metre: float) -> None:

@@ -25,6 +25,7 @@ from std_msgs.msg import Float64
 from flexure_sim.engine.mechanism.loader import load_mechanism, resolve_mechanism_path
 from flexure_sim.recording import McapRecorder
 from flexure_sim.engine.solver.simulation import Simulation
+from reference_figures import STAGE_GAIN
 
 #: The demo profile of the main job (m): up to the stage's full stroke and back.
 DEMO_LEVELS = (0.5e-6, 1.0e-6, 1.5e-6, 2.0e-6, 0.0)
@@ -248,7 +249,7 @@ def record_long_run(path: Path, seconds: float, publish_rate: float = 1000.0,
     period_ns = round(1e9 / publish_rate)
     ticks = round(seconds * publish_rate)
     ticks_per_step = round(step_every * publish_rate)
-    tau, gain = 0.5e-3, 27.628
+    tau, gain = 0.5e-3, STAGE_GAIN
     decay = math.exp(-1.0 / (publish_rate * tau))
     u, target, count = 0.0, 0.0, 0
     pose, wrench, deflection = PoseStamped(), WrenchStamped(), TransformStamped()

@@ -26,7 +26,7 @@ try:  # Numba is a declared dependency; the fallback keeps the engine importable
 except ImportError:  # pragma: no cover - exercised only where Numba is missing
     HAVE_NUMBA = False
 
-    def njit(*args, **kwargs):
+    def njit(*args, **kwargs):  # type: ignore[no-redef]  # the stand-in without Numba
         if args and callable(args[0]):
             return args[0]
         return lambda f: f
@@ -48,8 +48,11 @@ def kernel_sources(module_file: str) -> list[Path]:
             continue
         seen[path] = None
         for node in ast.walk(ast.parse(path.read_bytes())):
-            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith(_PACKAGE):
-                stem = _ROOT.joinpath(*node.module.split("."))
+            if not isinstance(node, ast.ImportFrom):
+                continue
+            module = node.module or ""
+            if module.startswith(_PACKAGE):
+                stem = _ROOT.joinpath(*module.split("."))
                 todo.append(stem.with_suffix(".py"))
                 todo.append(stem / "__init__.py")
                 todo.extend(stem / f"{alias.name}.py" for alias in node.names)
@@ -94,7 +97,7 @@ def revalidate(dispatchers: Iterable, module_file: str) -> None:
     for dispatcher in dispatchers:
         cache = getattr(dispatcher, "_cache", None)
         path = getattr(cache, "cache_path", None)
-        if path is None:
+        if cache is None or path is None:
             continue
         func = dispatcher.py_func
         stamp = Path(path) / f"{func.__module__}.{func.__qualname__}.sources-sha256"

@@ -114,7 +114,8 @@ class _Variant:
     """One design (real, or with two variables seeded) and its equilibria, solved on demand."""
 
     def __init__(self, design, hyper: bool):
-        self.design, self.hyper, self._z = design, hyper, {}
+        self.design, self.hyper = design, hyper
+        self._z: dict[int, Any] = {}
 
     def z(self, state: _State):
         if id(state) not in self._z:
@@ -261,8 +262,9 @@ class Evaluation:
         out = {}
         for col, x in raw.items():
             if isinstance(x, dict):
-                parts = {h: [float(hd.real(p)), np.zeros(n) if gradients else None]
-                         for h, p in x.items()}
+                parts: dict[str, list[Any]] = {
+                    h: [float(hd.real(p)), np.zeros(n) if gradients else None]
+                    for h, p in x.items()}
                 out[col] = Value(EXTREMES[col](p[0] for p in parts.values()) if parts
                                  else float("nan"), np.zeros(n) if gradients else None, parts)
             else:
@@ -277,12 +279,14 @@ class Evaluation:
                 for col, x in self.compute(variant, name).items():
                     items = x.items() if isinstance(x, dict) else [(None, x)]
                     for h, val in items:
-                        parts = hd.parts_of(val)
+                        seeded = hd.parts_of(val)
                         target = out[col].gradient if h is None else out[col].parts[h][1]
+                        assert target is not None  # gradients asked for: zeros above
                         for slot, k in zip((1, 2), pair):
-                            target[k] = float(parts[slot])
+                            target[k] = float(seeded[slot])
         for col, v in out.items():
             if col in STROKES:
+                assert v.gradient is not None  # gradients asked for: zeros above
                 v.gradient = -v.gradient / self._stroke_slope(col)
             if v.parts:
                 best = min if EXTREMES[col] is min else max

@@ -44,7 +44,7 @@ frequency response is G(i w) = C (i w I - A)^-1 B + D.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
@@ -146,7 +146,7 @@ class LinearModel:
     stiffness: np.ndarray = field(repr=False)
     mass: np.ndarray = field(repr=False)
     free: np.ndarray = field(repr=False)
-    damping: np.ndarray = field(repr=False, default=None)
+    damping: np.ndarray = field(repr=False)
     drive_names: tuple = ()
     lags: tuple = ()
     B1: Optional[np.ndarray] = None
@@ -285,10 +285,10 @@ def linearize(sim: Simulation, u=None, wrenches: bool = True,
     if wrenches:
         Jz, Jv = wrench_jacobians(mech, z)
         for k, hinge in enumerate(mech.hinges):
-            for c, comp in enumerate(WRENCH_COMPONENTS):
-                rows.add(f"hinges.{hinge.name}.{comp}", Jz[k, c] @ Zx + Jv[k, c] @ Vx,
-                         Jv[k, c] @ Vc + Jz[k, c] @ Zu, Jv[k, c] @ Vu, np.zeros(m),
-                         float(snap.wrenches[k, c]))
+            for w, comp in enumerate(WRENCH_COMPONENTS):
+                rows.add(f"hinges.{hinge.name}.{comp}", Jz[k, w] @ Zx + Jv[k, w] @ Vx,
+                         Jv[k, w] @ Vc + Jz[k, w] @ Zu, Jv[k, w] @ Vu, np.zeros(m),
+                         float(snap.wrenches[k, w]))
     state_names = (
         [_coord(mech, k) for k in F]
         + [_coord(mech, k, rate=True) for k in F]
@@ -319,7 +319,8 @@ class _Outputs:
     def arrays(self, n: int) -> tuple:
         """Return C, D, D1, D2 and y0 as arrays."""
         k, m = len(self._rows), self.m
-        parts = list(zip(*self._rows)) if self._rows else [[], [], [], [], []]
+        parts: list[Sequence[Any]] = (list(zip(*self._rows)) if self._rows
+                                      else [[], [], [], [], []])
         return (np.array(parts[0], dtype=float).reshape(k, n),
                 *(np.array(p, dtype=float).reshape(k, m) for p in parts[1:4]),
                 np.array(parts[4], dtype=float))

@@ -115,6 +115,7 @@ def _frf_chunk(model: LinearModel, f: np.ndarray, rows: list, k: int) -> np.ndar
     x = np.concatenate([z, s[:, None] * z, U], axis=1)
     G = model.C[rows] @ x.T + model.D[rows][:, [k]]
     if model.D1 is not None:
+        assert model.D2 is not None, "linearize gives D1 and D2 together"
         G = G + model.D1[rows][:, [k]] * s + model.D2[rows][:, [k]] * (s * s)
     return G
 

@@ -210,10 +210,14 @@ def _minimize(problem: Problem, x0: np.ndarray, history: list, fun, jac, cons, c
             options={"maxiter": st.max_iterations, "ftol": tol})
     nonlinear = ([scipy.optimize.NonlinearConstraint(cons, 0.0, np.inf, jac=cons_jac)]
                  if problem.components else [])
+
+    def record(xk, state) -> bool:
+        history.append(np.array(xk))
+        return False  # True would stop trust-constr
     return scipy.optimize.minimize(
         fun, x0, jac=jac, method="trust-constr", bounds=bounds, constraints=nonlinear,
         hess=scipy.optimize.BFGS(),
-        callback=lambda xk, state: history.append(np.array(xk)) and False,
+        callback=record,
         options={"maxiter": st.max_iterations, "gtol": tol, "xtol": tol})
 
 
@@ -367,9 +371,9 @@ def report(problem: Problem, xs: np.ndarray, status: str, message: str, history:
     names = [v.name for v in st.variables]
     sens = {col: dict(zip(names, map(float, v.gradient))) for col, v in values.items()}
     trail = []
-    for k, x in enumerate(history):
+    for iteration, x in enumerate(history):
         vals = problem.evaluate(x, False)
-        trail.append({"iteration": k, "x": problem.physical(x).tolist(),
+        trail.append({"iteration": iteration, "x": problem.physical(x).tolist(),
                       "objective": vals[st.objective].value,
                       "violation": problem.violation(x),
                       "values": {c: vals[c].value for c in vals}})

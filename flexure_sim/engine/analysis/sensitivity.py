@@ -53,7 +53,7 @@ precision, like the hyper-dual parts).
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 import scipy.linalg
@@ -170,8 +170,11 @@ class Sensitivity:
                 tangents[d] = self.tangent(design, z, d)
             out[key] = (tangents[d] * model.output_matrix[o]).sum()
         if "gain" in which:
-            i = mech.body_index(mech.output.body)
-            axis = np.array(mech.output.axis)
+            output = mech.output
+            if output is None:
+                raise ParameterError(f"gain: mechanism {mech.name!r} names no output body")
+            i = mech.body_index(output.body)
+            axis = np.array(output.axis)
             out["gain"] = (
                 (z[3 * i] - self.sim.z0[3 * i]) * axis[0]
                 + (z[3 * i + 1] - self.sim.z0[3 * i + 1]) * axis[1]
@@ -181,6 +184,9 @@ class Sensitivity:
             # of stiffness minus the far side's, along the drive axis. The frames' positions
             # carry the design parameters; the centre's offset from the frame origin is the
             # model's (zero for the diagonal notch and leaf stiffness).
+            if mech.compression_hinge is None:
+                raise ParameterError(
+                    f"compression: mechanism {mech.name!r} names no compression hinge")
             k = mech.hinge_index(mech.compression_hinge)
             h = mech.hinges[k]
             frames = {mech.body_index(h.b.body): (h.b, design.cb[k]),
@@ -321,7 +327,7 @@ def sensitivities(
     if "gain" in of and mech.output is None and not (mech.drives and mech.all_outputs):
         raise ParameterError(f"gain: mechanism {mech.name!r} names no output body")
     of = _expand(mech, of)
-    seen = {}
+    seen: dict[Any, str] = {}
     for p in wrt:
         params.check(p)
         steps = params.resolve(p)[0]
@@ -344,8 +350,8 @@ def sensitivities(
     base = params.design()
     res = sens.outputs(base, hd.HyperDual(sens.z), of)
     values = {k: float(hd.real(res[k])) for k in of}
-    gradient = {o: {} for o in of}
-    second = {o: {} for o in of}
+    gradient: dict[str, dict[str, float]] = {o: {} for o in of}
+    second: dict[str, dict[str, float]] = {o: {} for o in of}
     for p in wrt:
         design = params.design({p: hd.HyperDual(params.value(p), 1.0, 1.0, 0.0)})
         res = sens.outputs(design, sens.equilibrium(design), of)
@@ -362,7 +368,8 @@ def sensitivities(
         )
         for o, v in sens.outputs(design, sens.equilibrium(design), of).items():
             second[o][f"{p}|{q}"] = float(v.d)
-    u0 = sens.u if np.ndim(sens.u) == 0 else dict(zip(model.drives.names, sens.u.tolist()))
+    u0 = (dict(zip(model.drives.names, sens.u.tolist())) if isinstance(sens.u, np.ndarray)
+          else sens.u)
     result = {"input": u0, "values": values, "gradient": gradient, "second": second}
     if hessian:
         result["hessian"] = {o: [[second[o][f"{p}|{q}" if i <= j else f"{q}|{p}"]

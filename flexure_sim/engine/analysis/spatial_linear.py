@@ -16,6 +16,7 @@ equilibrium), and M the full mass matrix (inertia tensors included).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 import scipy.linalg
@@ -34,7 +35,7 @@ _RATE = {"x": "vx", "y": "vy", "z": "vz", "rx": "wx", "ry": "wy", "rz": "wz"}
 class SpatialLinearModel(LinearModel):
     """``LinearModel`` with the full free mass matrix (``mass`` holds its diagonal)."""
 
-    mass_matrix: np.ndarray = None
+    mass_matrix: Optional[np.ndarray] = None
 
 
 def mass_matrix(model: SpatialModel) -> np.ndarray:
@@ -49,7 +50,7 @@ def mass_matrix(model: SpatialModel) -> np.ndarray:
 
 
 def linearize(model: SpatialModel, u=None, wrenches: bool = True,
-              equilibrium: SpatialStatic = None) -> SpatialLinearModel:
+              equilibrium: Optional[SpatialStatic] = None) -> SpatialLinearModel:
     """Return the exact linear model about the equilibrium at drive inputs u (module doc)."""
     names = model.drive_names
     st = equilibrium or static(model, np.zeros(len(names)) if u is None else u)
@@ -82,8 +83,8 @@ def linearize(model: SpatialModel, u=None, wrenches: bool = True,
         out_names.append(name), rows.append(row), ds.append(d), y0.append(value)
 
     Q0, *_, wrench0, _, _, _ = model.terms(st.z, w0, command)
-    for name, c in zip(model.output_names, model.output_matrix):
-        add(name, c @ Zx[:, :m], np.zeros(nd), float(c @ (st.z - model.z0)))
+    for name, out_row in zip(model.output_names, model.output_matrix):
+        add(name, out_row @ Zx[:, :m], np.zeros(nd), float(out_row @ (st.z - model.z0)))
     for a, k in enumerate(model.displacement_index):
         dk = model.D_rows[a]
         row = -(dk @ dQ[P, :m])

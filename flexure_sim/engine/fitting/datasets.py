@@ -236,7 +236,8 @@ def error_table(
         "unknowns": [],
     }
     for N in orders:
-        row, trow = [], []
+        row: list[Optional[float]] = []
+        trow: list[Optional[float]] = []
         unknowns = None
         for size in sizes:
             try:

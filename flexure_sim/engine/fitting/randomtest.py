@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -26,7 +26,17 @@ from flexure_sim.engine.fitting.wrench_data import WrenchData
 
 #: Ranges of randomtest.sce. th_dist reads "%pi/4"; alpha_dist is printed "5lpi/4", which
 #: we read as %pi/4 (the other reading, 5 %pi/4, is a parameter of randomtest_data).
-RANDOMTEST = {"n_config": 17, "order": 4, "th_dist": math.pi / 4, "alpha_dist": math.pi / 4}
+class RandomtestRanges(TypedDict):
+    """The constants of randomtest.sce: configurations, polynomial order, angle ranges (rad)."""
+
+    n_config: int
+    order: int
+    th_dist: float
+    alpha_dist: float
+
+
+RANDOMTEST: RandomtestRanges = {"n_config": 17, "order": 4, "th_dist": math.pi / 4,
+                                "alpha_dist": math.pi / 4}
 
 
 def randomtest_data(rng: np.random.Generator, n_config: int = 17, alpha_dist: float = math.pi / 4,

@@ -125,6 +125,8 @@ def table(entries: Iterable[tuple[str, StressGeometry, tuple]]) -> dict:
         u = utilisations(g, amplitude, mean)
         ug, k = worst(u["goodman"])
         us, _ = worst(u["soderberg"])
+        if g.sigma_e is None or g.cycles is None:
+            raise ValueError(f"hinge {name}: no fatigue strength sigma_e at a number of cycles")
         out[name] = {"amplitude": float(amplitude[k]), "mean": float(mean[k]),
                      "goodman": _factor(float(ug)), "soderberg": _factor(float(us)),
                      "sigma_e": float(g.sigma_e), "cycles": float(g.cycles),
@@ -154,7 +156,7 @@ def no_fatigue_advice(mechanism: "Mechanism") -> Optional[str]:
     lacking = [h for h in mechanism.hinges if h.stress is not None and not h.stress.has_fatigue]
     if not lacking:
         return None
-    keys = [k for k in dict.fromkeys(h.stress.key for h in lacking) if k]
+    keys = [k for k in dict.fromkeys(h.stress.key for h in lacking if h.stress is not None) if k]
     names = ", ".join(h.name for h in lacking)
     return (f"hinge{'s' if len(lacking) > 1 else ''} {names}: "
             + missing_strength("fatigue strength", " and ".join(keys)))
@@ -206,8 +208,9 @@ def static_report(sim, lower, upper) -> dict:
     mech = sim.mechanism
     hinges = between(mech, sim.static(lower).snapshot.wrenches,
                      sim.static(upper).snapshot.wrenches)
-    out = {"cycle": [_jsonable(lower), _jsonable(upper)], "hinges": hinges, "critical": {},
-           "infinite_life": {}, "note": no_fatigue_advice(mech)}
+    out: dict[str, Any] = {"cycle": [_jsonable(lower), _jsonable(upper)], "hinges": hinges,
+                           "critical": {}, "infinite_life": {},
+                           "note": no_fatigue_advice(mech)}
     for criterion in CRITERIA:
         found = critical(hinges, criterion)
         out["critical"][criterion] = (None if found is None

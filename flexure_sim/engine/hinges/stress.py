@@ -301,7 +301,7 @@ def no_yield_advice(mechanism: "Mechanism") -> Optional[str]:
     lacking = [h for h in mechanism.hinges if h.stress is not None and h.stress.sigma_y is None]
     if not lacking:
         return None
-    keys = list(dict.fromkeys(h.stress.key for h in lacking))
+    keys = list(dict.fromkeys(h.stress.key for h in lacking if h.stress is not None))
     names = ", ".join(h.name for h in lacking)
     return f"hinge{'s' if len(lacking) > 1 else ''} {names}: " + missing_strength(
         "yield strength", " and ".join(k for k in keys if k))

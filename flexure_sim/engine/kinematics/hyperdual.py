@@ -287,7 +287,8 @@ def parts_of(x) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Return (a, b, c, d) of x broadcast to a common shape (zeros for a plain number)."""
     x = _lift(x)
     s = x.shape
-    return tuple(np.broadcast_to(p, s) for p in (x.a, x.b, x.c, x.d))
+    a, b, c, d = (np.broadcast_to(p, s) for p in (x.a, x.b, x.c, x.d))
+    return a, b, c, d
 
 
 def from_objects(values: Iterable) -> HyperDual:

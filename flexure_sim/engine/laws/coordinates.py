@@ -23,6 +23,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from typing import Optional
+
 import numpy as np
 
 from flexure_sim.errors import as_array
@@ -102,12 +104,12 @@ class CoordinateMap:
     """
     Law coordinates c(r) with first and second derivatives with respect to r.
 
-    c: (n, k); dc: (n, k, 3) = dc/dr; d2c: (n, k, 3, 3) = d2c/dr2.
+    c: (n, k); dc: (n, k, 3) = dc/dr; d2c: (n, k, 3, 3) = d2c/dr2, None when not asked for.
     """
 
     c: np.ndarray
     dc: np.ndarray
-    d2c: np.ndarray
+    d2c: Optional[np.ndarray]
 
 
 def _map(fn, fn_second, alpha, p, second: bool) -> CoordinateMap:

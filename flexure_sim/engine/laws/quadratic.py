@@ -33,7 +33,7 @@ arguments of another shape raise a ValueError naming the argument.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, Sequence
+from typing import Literal, Optional, Protocol, Sequence, overload
 
 import numpy as np
 
@@ -57,14 +57,24 @@ class LawEvaluation:
     energy (n,); grad (n, 3) = dU/dr; hess (n, 3, 3) = d2U/dr2;
     damping (n, 3, 3) = C_r, the matrix of the dissipation D = 1/2 r_dot^T C_r r_dot;
     damping_force (n, 3) = C_r r_dot; damping_force_dr (n, 3, 3) = d(C_r r_dot)/dr at fixed
-    r_dot (exact, from the second derivatives of the coordinate map).
+    r_dot (exact, from the second derivatives of the coordinate map). hess, damping and
+    damping_force_dr are None when ``LawBatch.evaluate`` is asked for no Jacobian.
     """
 
     energy: np.ndarray
     grad: np.ndarray
+    hess: Optional[np.ndarray]
+    damping: Optional[np.ndarray]
+    damping_force: np.ndarray
+    damping_force_dr: Optional[np.ndarray]
+
+
+@dataclass(frozen=True)
+class LawJacobians(LawEvaluation):
+    """A `LawEvaluation` with its derivatives (``LawBatch.evaluate(..., jacobian=True)``)."""
+
     hess: np.ndarray
     damping: np.ndarray
-    damping_force: np.ndarray
     damping_force_dr: np.ndarray
 
 
@@ -86,7 +96,13 @@ class HingePower:
 class HingeLaw(Protocol):
     """What the solver needs of a hinge law."""
 
-    coordinates: str
+    @property
+    def coordinates(self) -> str:
+        """Name the law coordinates c(r): "twistor" or "twist"."""
+
+    @property
+    def B(self) -> np.ndarray:
+        """Return the damping matrix (3, 3), moment first, in the hinge frame (eq. 4.40)."""
 
     def potential(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """U(c), dU/dc, d2U/dc2 for c of shape (m, k) (rows are configurations)."""
@@ -186,8 +202,17 @@ class LawBatch:
         self.quadratic = all(isinstance(law, QuadraticLaw) for law in laws)
         # One law at many states (LawPower) evaluates its potential once, on every row.
         self.single = bool(laws) and all(law is laws[0] for law in laws)
-        self.W = np.stack([law.metric() for law in laws]) if self.quadratic else None
+        self.W = (np.stack([law.metric() for law in laws if isinstance(law, QuadraticLaw)])
+                  if self.quadratic else None)
         self.C = np.stack([law.dissipation_matrix() for law in laws])
+
+    @overload
+    def evaluate(self, alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray,
+                 jacobian: Literal[True] = ...) -> LawJacobians: ...
+
+    @overload
+    def evaluate(self, alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray,
+                 jacobian: bool) -> LawEvaluation: ...
 
     def evaluate(
         self, alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray, jacobian: bool = True
@@ -206,7 +231,7 @@ class LawBatch:
                              f"got {len(alpha)}")
         cmap = self._map(alpha, p, second=jacobian)
         c, dc = cmap.c, cmap.dc
-        if self.quadratic:
+        if self.W is not None:  # self.quadratic
             Uc = np.einsum("nij,nj->ni", self.W, c)
             energy = 0.5 * np.einsum("ni,ni->n", c, Uc)
             Ucc = self.W
@@ -225,6 +250,7 @@ class LawBatch:
         if not jacobian:
             return LawEvaluation(energy, grad, None, None, damping_force, None)
         d2c = cmap.d2c
+        assert d2c is not None  # asked for with second=jacobian
         hess = np.einsum("nki,nkl,nlj->nij", dc, Ucc, dc) + np.einsum("nk,nkij->nij", Uc, d2c)
         CJ = np.einsum("nkl,nlj->nkj", self.C, dc)
         damping = np.einsum("nki,nkj->nij", dc, CJ)
@@ -232,7 +258,7 @@ class LawBatch:
         damping_force_dr = np.einsum("nk,nkij->nij", w, d2c) + np.einsum(
             "nki,nkj->nij", CJ, d2c_rdot
         )
-        return LawEvaluation(energy, grad, hess, damping, damping_force, damping_force_dr)
+        return LawJacobians(energy, grad, hess, damping, damping_force, damping_force_dr)
 
     def power(self, alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray) -> HingePower:
         """
@@ -249,7 +275,7 @@ class LawBatch:
 
 def evaluate(
     laws: Sequence[HingeLaw], alpha: np.ndarray, p: np.ndarray, rdot: np.ndarray
-) -> LawEvaluation:
+) -> LawJacobians:
     """Evaluate n hinges sharing one coordinate type, with all derivatives (see LawBatch)."""
     return LawBatch(laws).evaluate(alpha, p, rdot, jacobian=True)
 

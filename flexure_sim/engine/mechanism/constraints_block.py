@@ -31,8 +31,8 @@ def _sensor(ctx: _Ctx, raw: Any, output: Any) -> SensorSpec:
     _no_unknown(ctx, "sensor", spec, {"noise_rms", "resolution", "bandwidth", "latency", "seed"})
     if output is None:
         raise ctx.fail("sensor", "needs an output (the sensor reads output/displacement)")
-    values = {k: _number(ctx, f"sensor.{k}", spec[k], nonnegative=True)
-              for k in ("noise_rms", "resolution", "bandwidth") if k in spec}
+    values: dict[str, Any] = {k: _number(ctx, f"sensor.{k}", spec[k], nonnegative=True)
+                              for k in ("noise_rms", "resolution", "bandwidth") if k in spec}
     for k in ("latency", "seed"):
         if k in spec:
             v = spec[k]
@@ -117,7 +117,7 @@ def _constraints(ctx, raw, by_name) -> list:
         if kind == "fixed":
             _no_unknown(ctx, key, spec, {"type", "body"})
             c: Any = Fixed(body)
-            coords = (0, 1, 2)
+            coords: tuple[int, ...] = (0, 1, 2)
         elif kind in ("drive", "force"):
             _no_unknown(ctx, key, spec, {"type", "name", "body", "axis", "response_time",
                                          "stroke", "slew_rate", "actuator"})

@@ -250,8 +250,11 @@ def _shape(ctx: _Ctx, key: str, spec: Any) -> tuple[tuple[float, float], ...]:
     raw = spec["polygon"]
     if not isinstance(raw, list) or len(raw) < 3:
         raise ctx.fail(f"{key}.polygon", "expected a list of at least 3 points [x, y]")
-    points = tuple(tuple(_vector(ctx, f"{key}.polygon[{i}]", v, (2,))) for i, v in enumerate(raw))
-    return points
+    points = []
+    for i, v in enumerate(raw):
+        x, y = _vector(ctx, f"{key}.polygon[{i}]", v, (2,))
+        points.append((x, y))
+    return tuple(points)
 
 
 def _frame(ctx: _Ctx, key: str, spec: Any, by_name: dict[str, Body]) -> Frame:

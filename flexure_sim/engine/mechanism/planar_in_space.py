@@ -82,13 +82,17 @@ def _body(body, thickness: float) -> Body:
     Izz = body.inertia
     Ixy = 0.5 * Izz + body.mass * thickness**2 / 12.0
     inertia = ((Ixy, 0.0, 0.0), (0.0, Ixy, 0.0), (0.0, 0.0, Izz))
-    return Body(body.name, body.mass, inertia, (x, y, 0.0),
-                tuple(float(c) for c in rotation.quaternion_of_rpy(0.0, 0.0, theta)))
+    return Body(body.name, body.mass, inertia, (x, y, 0.0), _about_z(theta))
+
+
+def _about_z(angle: float) -> tuple[float, float, float, float]:
+    """Return the unit quaternion (w, x, y, z) of a rotation by ``angle`` about z."""
+    w, qx, qy, qz = (float(c) for c in rotation.quaternion_of_rpy(0.0, 0.0, angle))
+    return w, qx, qy, qz
 
 
 def _frame(frame) -> Frame:
-    return Frame(frame.body, (*frame.position, 0.0),
-                 tuple(float(c) for c in rotation.quaternion_of_rpy(0.0, 0.0, frame.angle)))
+    return Frame(frame.body, (*frame.position, 0.0), _about_z(frame.angle))
 
 
 def _constraint(ctx: Ctx, i: int, c):
@@ -105,6 +109,6 @@ def _constraint(ctx: Ctx, i: int, c):
     if coordinate == "rz" and c.kind == "displacement":
         raise ctx.fail(f"{key}.axis", "a displacement drive on theta (a prescribed rotation with "
                        "the body's other rotations free) is not supported in 3-D")
-    axis = (*c.axis, 0.0) if coordinate is None else (1.0, 0.0, 0.0)
-    return Drive(c.body, tuple(float(a) for a in axis), c.response_time, c.stroke,
+    ax, ay, az = (float(a) for a in ((*c.axis, 0.0) if coordinate is None else (1.0, 0.0, 0.0)))
+    return Drive(c.body, (ax, ay, az), c.response_time, c.stroke,
                  c.slew_rate, c.name, coordinate, c.kind)

@@ -91,7 +91,7 @@ def _spatial(ctx: Ctx, data: dict) -> Mechanism:
     raw = require(ctx, "", data, "bodies")
     if not isinstance(raw, list) or not raw:
         raise ctx.fail("bodies", "expected a non-empty list of bodies")
-    bodies = []
+    bodies: list[Body] = []
     for i, spec in enumerate(raw):
         bodies.append(_body(ctx, f"bodies[{i}]", spec, {b.name for b in bodies}))
     by_name = {b.name: b for b in bodies}
@@ -190,9 +190,15 @@ def _body(ctx: Ctx, key: str, spec: Any, seen: set) -> Body:
         inertia = np.diag(vector(ctx, f"{key}.inertia", raw, (3,)))
     check_spd(ctx, f"{key}.inertia", inertia, "inertia")
     pose = vector(ctx, f"{key}.pose", spec.get("pose", [0.0, 0.0, 0.0]), (3, 6))
-    q = rotation.quaternion_of_rpy(*(pose[3:] if len(pose) == 6 else (0.0, 0.0, 0.0)))
+    x, y, z = pose[:3]
     return Body(bname, mass, tuple(tuple(float(v) for v in row) for row in inertia),
-                tuple(pose[:3]), tuple(float(c) for c in q))
+                (x, y, z), _quaternion(pose[3:] if len(pose) == 6 else (0.0, 0.0, 0.0)))
+
+
+def _quaternion(rpy) -> tuple[float, float, float, float]:
+    """Return the unit quaternion (w, x, y, z) of roll, pitch, yaw ``rpy``."""
+    w, qx, qy, qz = (float(c) for c in rotation.quaternion_of_rpy(*rpy))
+    return w, qx, qy, qz
 
 
 def _frame(ctx: Ctx, key: str, spec: Any, by_name: dict) -> Frame:
@@ -201,7 +207,8 @@ def _frame(ctx: Ctx, key: str, spec: Any, by_name: dict) -> Frame:
     body = body_ref(ctx, f"{key}.body", spec, by_name)
     at = vector(ctx, f"{key}.at", require(ctx, key, spec, "at"), (3,))
     rpy = vector(ctx, f"{key}.rpy", spec.get("rpy", [0.0, 0.0, 0.0]), (3,))
-    return Frame(body, tuple(at), tuple(float(c) for c in rotation.quaternion_of_rpy(*rpy)))
+    x, y, z = at
+    return Frame(body, (x, y, z), _quaternion(rpy))
 
 
 def frame_at_rest(frame: Frame, body: Body) -> tuple[np.ndarray, np.ndarray]:

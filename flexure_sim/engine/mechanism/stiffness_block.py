@@ -12,7 +12,7 @@ fe_block.py; also with ``material`` and the strengths); and ``matrix`` (K: 3x3, 
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -29,7 +29,7 @@ from flexure_sim.engine.mechanism.values import shown as _shown
 from flexure_sim.engine.mechanism.values import vector as _vector
 from flexure_sim.engine.hinges.stress import StressGeometry
 
-_STIFFNESS_KEYS: dict[str, tuple[Callable[..., np.ndarray], tuple[str, ...]]] = (
+_STIFFNESS_KEYS: Mapping[str, tuple[Callable[..., np.ndarray], tuple[str, ...]]] = (
     stiffness_models.MODELS)
 
 

@@ -13,7 +13,7 @@ frames, masses -- with derivative parts, by the same code that builds it from a 
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from typing import Any, Mapping, cast
 
 import numpy as np
 
@@ -38,7 +38,8 @@ class Ctx:
 def number(ctx: Ctx, key: str, value: Any, *, positive=False, nonnegative=False) -> float:
     if isinstance(value, HyperDual) and value.shape == ():  # module docstring
         number(ctx, key, float(value.a.real), positive=positive, nonnegative=nonnegative)
-        return value
+        # The seeded scalar stands for the float through every formula of the build.
+        return cast(float, value)
     if isinstance(value, str):
         # PyYAML (YAML 1.1) reads 69.0e9 (no exponent sign) as a string: accept it.
         try:

@@ -13,6 +13,7 @@ exact (second derivatives of r(z) and of the law coordinates, no finite differen
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal, overload
 
 import numpy as np
 
@@ -47,6 +48,18 @@ class HingeForces:
     wrench_b: np.ndarray
 
 
+#: Stands for the per-hinge Jacobian blocks when they are not asked for (never written).
+_NO_JACOBIAN = np.empty((0, 3, 3))
+
+
+@dataclass(frozen=True)
+class HingeJacobians(HingeForces):
+    """`HingeForces` with the exact Jacobians (``Assembly.forces(..., jacobian=True)``)."""
+
+    dQ_dz: np.ndarray
+    dQ_dv: np.ndarray
+
+
 class Assembly:
     """Precomputed hinge geometry of a mechanism; evaluates hinge forces at a state."""
 
@@ -75,9 +88,9 @@ class Assembly:
         # S[a, h, j] = 1 where global coordinate a is local coordinate j of hinge h.
         n, N = len(hinges), 3 * self.n_bodies
         self.scatter = np.zeros((N, n, 6))
-        for h in range(n):
+        for k in range(n):
             for j in range(6):
-                self.scatter[self.dofs[h, j], h, j] += 1.0
+                self.scatter[self.dofs[k, j], k, j] += 1.0
         self._scatter_flat = self.scatter.reshape(N, 6 * n)
         # Compiled path (kernels.quadratic_forces) when every law is quadratic.
         self.compiled = all(isinstance(h.law, QuadraticLaw) for h in hinges)
@@ -87,7 +100,8 @@ class Assembly:
                 [kernels.TWISTOR if o else kernels.TWIST for o in offset], dtype=np.int64
             )
             self._W = np.ascontiguousarray(
-                [h.law.metric()[o:, o:] for h, o in zip(hinges, offset)]
+                [h.law.metric()[o:, o:] for h, o in zip(hinges, offset)
+                 if isinstance(h.law, QuadraticLaw)]
             )
             self._C = np.ascontiguousarray(
                 [h.law.dissipation_matrix()[o:, o:] for h, o in zip(hinges, offset)]
@@ -174,6 +188,12 @@ class Assembly:
         hf = self.forces(z, v)
         return hf.Q, hf.r, hf.wrench_b, float(hf.energy.sum()), float(hf.dissipation.sum())
 
+    @overload
+    def forces(self, z: np.ndarray, v: np.ndarray, jacobian: Literal[True]) -> HingeJacobians: ...
+
+    @overload
+    def forces(self, z: np.ndarray, v: np.ndarray, jacobian: bool = False) -> HingeForces: ...
+
     def forces(self, z: np.ndarray, v: np.ndarray, jacobian: bool = False) -> HingeForces:
         """Hinge forces at coordinates z and velocities v (both length 3 n_bodies)."""
         r, dr, d2 = self.relative(z, second=jacobian)
@@ -184,7 +204,8 @@ class Assembly:
         energy = np.empty(n)
         grad = np.empty((n, 3))
         fdamp = np.empty((n, 3))
-        hess = Cr = fdamp_dr = None
+        # d2U/dr2, C_r and d(C_r r_dot)/dr: allocated and filled when the Jacobian is asked for
+        hess = Cr = fdamp_dr = _NO_JACOBIAN
         if jacobian:
             hess, Cr, fdamp_dr = np.empty((n, 3, 3)), np.empty((n, 3, 3)), np.empty((n, 3, 3))
         for idx, batch in self.groups:
@@ -209,4 +230,6 @@ class Assembly:
             dQ_dv = -self._assemble(C_local)
         dissipation = np.einsum("ni,ni->n", fdamp, rdot)
         wrench_b = -wrench_on_element(r[:, 0], total)
-        return HingeForces(Q, dQ_dz, dQ_dv, r, rdot, energy, dissipation, wrench_b)
+        if dQ_dz is not None and dQ_dv is not None:
+            return HingeJacobians(Q, dQ_dz, dQ_dv, r, rdot, energy, dissipation, wrench_b)
+        return HingeForces(Q, None, None, r, rdot, energy, dissipation, wrench_b)

@@ -29,14 +29,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Iterator, Optional
+from typing import TYPE_CHECKING, Iterator, Optional, TypeVar, Union
 
 import numpy as np
 
 from flexure_sim.engine.actuators.piezo import PiezoSpec
 from flexure_sim.engine.actuators.piezo_steps import Actuators
+from flexure_sim.engine.mechanism import spatial_parts
 from flexure_sim.engine.mechanism.parts import Drive, Mechanism
 from flexure_sim.engine.solver.programs import PIECE_WIDTH, hold
+
+if TYPE_CHECKING:  # partition.py imports this module
+    from flexure_sim.engine.solver.partition import Partition
+
+#: A drive of a planar or a spatial mechanism (mechanism/parts.py, spatial_parts.py): a
+#: ``DriveTable`` holds either.
+AnyDrive = Union[Drive, spatial_parts.Drive]
+_Mechanism = TypeVar("_Mechanism", Mechanism, spatial_parts.Mechanism)
 
 
 def stacked(drive) -> bool:
@@ -78,13 +87,15 @@ class Actuated:
 def actuated(drives: "DriveTable") -> tuple[Actuated, ...]:
     """Return the drives of the table whose actuator block is not the identity."""
     order = list(drives.order)
-    out, offset = [], 0
+    out: list[Actuated] = []
+    offset = 0
     for k, d in enumerate(drives):
-        if d.kind != "displacement" or transparent(d.actuator):
+        spec = d.actuator
+        if d.kind != "displacement" or transparent(spec):
             continue
-        size = d.actuator.size
-        out.append(Actuated(k, order.index(k), d.actuator, slice(offset, offset + size),
-                            stacked(d)))
+        assert spec is not None, "transparent(None) is True"
+        size = spec.size
+        out.append(Actuated(k, order.index(k), spec, slice(offset, offset + size), stacked(d)))
         offset += size
     return tuple(out)
 
@@ -110,13 +121,10 @@ class DriveTable:
     ``kernel_command``).
     """
 
-    def __init__(self, mechanism: Mechanism, part, z0: Optional[np.ndarray] = None) -> None:
-        self._drives: tuple[Drive, ...] = tuple(mechanism.drives)
-        drives = self._drives
-        # ``z0``: the rest coordinates (default: a planar mechanism's poses; the spatial
-        # engine's 6 per body: ``spatial_model``).
-        if z0 is None:
-            z0 = np.array([b.pose for b in mechanism.bodies], dtype=float).ravel()
+    def __init__(self, mechanism: _Mechanism, part: Partition, z0: np.ndarray) -> None:
+        # ``z0``: the model's rest coordinates (3 per body, or the spatial engine's 6).
+        drives = tuple(mechanism.drives)
+        self._drives: tuple[AnyDrive, ...] = drives
         n, N = len(drives), len(z0)
         self.names: tuple[str, ...] = tuple(d.name for d in drives)
         self.directions = np.array([d.direction(mechanism) for d in drives]).reshape(n, N)
@@ -176,10 +184,10 @@ class DriveTable:
     def __len__(self) -> int:
         return len(self._drives)
 
-    def __iter__(self) -> Iterator[Drive]:
+    def __iter__(self) -> Iterator[AnyDrive]:
         return iter(self._drives)
 
-    def __getitem__(self, k: int) -> Drive:
+    def __getitem__(self, k: int) -> AnyDrive:
         return self._drives[k]
 
     def __bool__(self) -> bool:

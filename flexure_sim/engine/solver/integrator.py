@@ -67,6 +67,7 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
         # How the program coordinates' displacement and velocity force dv_F/dt.
         nF, pc = len(part.free), model.program_index
         forcing = np.zeros((m, 2 * len(pc)))
+        assert tangent is not None, "model.energy: taken above"
         dz, dv = tangent.free_by_prescribed
         forcing[nF:2 * nF, :len(pc)] = dz[:, pc] / model.mass_free[:, None]
         forcing[nF:2 * nF, len(pc):] = dv[:, pc] / model.mass_free[:, None]
@@ -115,6 +116,8 @@ def moved_too_far(model: Model, data: Data, z: np.ndarray) -> bool:
     tol = model.relinearize_tol
     if tol is None:
         return False
+    if data.lin is None:  # none yet: one is due
+        return True
     moved = np.abs(z - data.lin.z)
     moved[0::3] /= model.length_scale
     moved[1::3] /= model.length_scale
@@ -123,6 +126,7 @@ def moved_too_far(model: Model, data: Data, z: np.ndarray) -> bool:
 
 def _advance(model: Model, data: Data, n, y, t, rows, held, F0, aux0, ye):
     lin = data.lin
+    assert lin is not None  # step() linearizes before it advances
     common = (n, y, t, model.dt, rows, held, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,
               model.atol, model.max_iterations, model.relinearize_after, F0, aux0, ye,
               lin.emats)
@@ -242,6 +246,7 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     if not np.isfinite(y).all():
         raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
     if model.compiled:  # Model.unpack, compiled: a few us less per call
+        assert model.kernel_args is not None, "a compiled model has them"
         z, v = kernel_coordinates(y, t, command, model.kernel_args[:12])
         nF = len(model.part.free)
         u = y[2 * nF:2 * nF + model.drives.n_lags].copy()

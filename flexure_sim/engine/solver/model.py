@@ -101,12 +101,12 @@ class Model:
             self.damping = damping_matrix(mechanism.damping, self.mass, -rest.dQ_dz,
                                           self.part.free)
         #: Every drive, by kind, and the kernel's drive constants (``drives.DriveTable``).
-        self.drives = DriveTable(mechanism, self.part)
+        self.drives = DriveTable(mechanism, self.part, self.z0)
         self._check_lags()
         #: The single drive of a mechanism with one displacement drive and no other (the
         #: scalar interfaces: linear model, stroke limit), else None.
         self.drive: Optional[Drive] = (
-            self.drives[0] if len(self.drives) == 1 and len(self.drives.displacement) == 1
+            mechanism.drives[0] if len(self.drives) == 1 and len(self.drives.displacement) == 1
             else None)
         self.motion = self._motion_arrays()
         #: The prescribed coordinates (indices into ``part.prescribed``) that the prescribed
@@ -339,5 +339,5 @@ class Model:
         """
         if self.compression is None:
             return None
-        (i_drive, c_drive), (i_far, c_far), axis = self.compression
-        return float(compression_of(z, self.z0, i_drive, *c_drive, i_far, *c_far, *axis))
+        (i_drive, (cdx, cdy)), (i_far, (cfx, cfy)), (ax, ay) = self.compression
+        return float(compression_of(z, self.z0, i_drive, cdx, cdy, i_far, cfx, cfy, ax, ay))

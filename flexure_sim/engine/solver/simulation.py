@@ -137,7 +137,7 @@ class Simulation:
             s.command = values
             return
         now = drives.state_inputs(s.u, s.command, s.programs, s.t)
-        programs = [None] * len(drives)
+        programs: list[Optional[Program]] = [None] * len(drives)
         for k in drives.prescribed:
             if values[k] != now[k]:
                 programs[k] = Program("step", values[k] - now[k], start=s.t,

@@ -62,6 +62,8 @@ def moved_too_far(model: SpatialModel, data: Data, z: np.ndarray) -> bool:
     tol = model.relinearize_tol
     if tol is None:
         return False
+    if data.lin is None:  # none yet: one is due
+        return True
     moved = np.abs(z - data.lin.z).reshape(-1, 6)
     moved[:, :3] /= model.length_scale
     return bool(np.max(moved) > tol)
@@ -93,6 +95,7 @@ def step(model: SpatialModel, data: Data, n: int = 1) -> None:
             linearize(model, data, y, t, command)
             fresh = True
         lin = data.lin
+        assert lin is not None  # linearized just above when there was none
         chunk = 1 if model.relinearize_tol is not None else remaining
         y, F0, aux0, ye, command, _, _, steps, iterations, status = kernels.advance(
             chunk, y, t, dt, rows, command, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,

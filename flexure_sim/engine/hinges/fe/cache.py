@@ -96,7 +96,8 @@ def load(key: dict, layout: dict[str, tuple[int, ...]]) -> Optional[dict[str, np
     return values
 
 
-def _bad(path: Path, problem: str) -> None:
+def _bad(path: Path, problem: str) -> Optional[dict[str, np.ndarray]]:
+    """Warn that the entry at ``path`` is bad and return None: ``load``'s answer for it."""
     warnings.warn(f"finite-element cache entry {path} {problem}: recomputing it",
                   CacheWarning, stacklevel=3)
     return None

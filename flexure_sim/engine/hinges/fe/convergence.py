@@ -51,9 +51,9 @@ def study(case: Case, levels: tuple[int, int, int] | None = None) -> dict:
     out = {"levels": list(levels), "stiffness": stiff, "peak": peak,
            "seconds": [r.seconds for r in results]}
     for name, values in (("stiffness", stiff), ("peak", peak)):
-        order, limit = zip(*(richardson(*values[:, j]) for j in range(3)))
+        order, limits = zip(*(richardson(*values[:, j]) for j in range(3)))
         at = levels.index(n) if n in levels else 2
-        limit = np.array(limit)
+        limit = np.array(limits)
         error = np.abs(values[at] - limit) / np.abs(limit)
         # Without an order, bound the error by the last change as well.
         error = np.where(np.isnan(order), error + np.abs(values[2] - values[1]) / np.abs(limit),

@@ -74,8 +74,8 @@ def plane_of(name: str, values: Mapping[str, Any], plane: str = "auto") -> str:
 
 
 def _parts(x) -> tuple[float, float, float, float]:
-    a, b, c, d = hd.parts_of(x)
-    return tuple(float(np.asarray(p)) for p in (a, b, c, d))
+    a, b, c, d = (float(np.asarray(p)) for p in hd.parts_of(x))
+    return a, b, c, d
 
 
 def _evaluate(case: Case, ratios, nu) -> np.ndarray:

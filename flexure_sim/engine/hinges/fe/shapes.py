@@ -32,6 +32,8 @@ lengths to it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Mapping
+
 import numpy as np
 
 from flexure_sim.errors import FlexureSimError
@@ -133,7 +135,7 @@ def profile(name: str, ratios: tuple[float, ...]) -> Profile:
     raise ShapeError(f"unknown hinge shape {name!r} ({', '.join(SHAPES)})")
 
 
-def ratios_of(name: str, values: dict) -> tuple[float, ...]:
+def ratios_of(name: str, values: Mapping[str, Any]) -> tuple[float, ...]:
     """Return the ratios (plain floats) of a shape's lengths to its reference length."""
     lengths = shape(name).lengths
     ell = float(values[lengths[0]])

@@ -102,7 +102,7 @@ _LAYOUT = {"compliance": (3, 3), "peak": (3,), "peak_at": (3, 2), "fibres": (-1,
 
 
 def _result(values: dict, seconds: float) -> Result:
-    return Result(*(values[k] for k in _LAYOUT), seconds)
+    return Result(**{k: values[k] for k in _LAYOUT}, seconds=seconds)
 
 
 def solve(case: Case, target: Optional[tuple[tuple[float, ...], float]] = None) -> Result:
@@ -126,6 +126,7 @@ def solve(case: Case, target: Optional[tuple[tuple[float, ...], float]] = None) 
     if target is not None:
         prof, nu = profile(case.shape, tuple(target[0])), float(target[1])
         m = morph(m, base, prof)
+        assert at is not None  # the base case's, solved above
         at = moved(at, base, prof)
     sol = solve_mesh(m, prof.half, nu, case.plane, at)
     values = {k: getattr(sol, k) for k in _LAYOUT}
