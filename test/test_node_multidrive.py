@@ -410,7 +410,10 @@ def test_a_per_drive_parameter_typo_or_wrong_type_stops_start_up_naming_it(
         tmp_path, domain, override, expected):
     node = NodeProcess(tmp_path, domain, extra_args=[
         "--ros-args", "-p", "mechanism:=xy_stage", "-p", "record:=false", "-p", override])
-    rc = node.wait(60)
+    try:
+        rc = node.wait(60)
+    finally:
+        node.kill()  # a node that accepted the override runs on: never left behind
     assert rc == 1, node.stderr
     assert node.stderr.strip().splitlines()[-1] == expected
     assert "Traceback" not in node.stderr
