@@ -204,15 +204,16 @@ class Peer:
         self.watch: Optional[NodeProcess] = None
 
     # ---------------------------------------------------------------- topics
-    def subscribe(self, topic: str, msg_type: type, depth: int = 1000) -> None:
-        """Keep every message (decoded, raw bytes) received on ``topic``."""
+    def subscribe(self, topic: str, msg_type: type, depth: int = 1000,
+                  qos: Optional[QoSProfile] = None) -> None:
+        """Keep every message (decoded, raw bytes) received on ``topic`` (``qos``: reliable)."""
         self._types[topic] = msg_type
         store = self.received[topic]
 
         def callback(data: bytes) -> None:
             store.append((deserialize_message(data, msg_type), data))
 
-        self.node.create_subscription(msg_type, topic, callback, reliable(depth), raw=True)
+        self.node.create_subscription(msg_type, topic, callback, qos or reliable(depth), raw=True)
 
     def messages(self, topic: str) -> list[Any]:
         return [m for m, _ in self.received[topic]]

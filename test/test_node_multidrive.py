@@ -393,3 +393,27 @@ def test_ticks_with_new_commands_on_several_drives_reach_the_step_by_step_states
     np.testing.assert_array_equal(sim.state.z, ref.state.z)
     np.testing.assert_array_equal(sim.state.v, ref.state.v)
     np.testing.assert_array_equal(sim.state.command, applied)
+
+
+@pytest.mark.parametrize("override, expected", [
+    ("drives.z.slew_rate:=1.0",
+     "stage_node: error: invalid parameter drives.z.slew_rate: no such parameter; the drives are "
+     "x, y, each with drives.<name>.{stroke_min, stroke_max, slew_rate}"),
+    ("drives.x.slew_rat:=1.0",
+     "stage_node: error: invalid parameter drives.x.slew_rat: no such parameter; the drives are "
+     "x, y, each with drives.<name>.{stroke_min, stroke_max, slew_rate}"),
+    ("drives.x.stroke_max:=abc",
+     "stage_node: error: invalid parameter drives.x.stroke_max: expected a double (a number), "
+     "got string 'abc'"),
+])
+def test_a_per_drive_parameter_typo_or_wrong_type_stops_start_up_naming_it(
+        tmp_path, domain, override, expected):
+    node = NodeProcess(tmp_path, domain, extra_args=[
+        "--ros-args", "-p", "mechanism:=xy_stage", "-p", "record:=false", "-p", override])
+    try:
+        rc = node.wait(60)
+    finally:
+        node.kill()  # a node that accepted the override runs on: never left behind
+    assert rc == 1, node.stderr
+    assert node.stderr.strip().splitlines()[-1] == expected
+    assert "Traceback" not in node.stderr

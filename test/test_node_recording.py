@@ -10,12 +10,14 @@ after ~3 s of recording.
 from __future__ import annotations
 
 import contextlib
+import shutil
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from std_srvs.srv import SetBool
 
 from flexure_sim.node.record.process import MAX_BACKLOG_ENV, WRITE_DELAY_ENV
 from flexure_sim.recording import read_log
@@ -167,3 +169,47 @@ def test_full_disk_is_one_error_line_no_traceback_and_the_node_goes_on(
     stamps = tick_stamps(log, "/bodies/poses")
     assert not log.complete and len(stamps) > 10
     assert stamps == list(range(stamps[0], stamps[-1] + 1, PERIOD_NS))
+
+
+@pytest.mark.parametrize("layout", ["mcap file", "bag directory"])
+def test_record_true_after_a_full_disk_starts_a_new_file_once_space_is_free(
+        tmp_path, domain_peer, full_disk, layout):
+    """The recorder stopped on ENOSPC; space freed, ``~/record true`` records to a new file."""
+    domain, peer = domain_peer
+    cwd = tmp_path / "node"
+    params = dict(time_mode="realtime", sim_step=5e-4, publish_rate=200.0)
+    if layout == "mcap file":
+        params["record_path"] = str(full_disk / "run.mcap")
+    else:
+        params["record_dir"] = str(full_disk)
+    node = NodeProcess(cwd, domain, params)
+    peer.watch = node
+    peer.subscribe("/diagnostics", DiagnosticArray)
+
+    def failed() -> bool:
+        last = peer.last("/diagnostics")
+        return last is not None and last.status[0].level == DiagnosticStatus.ERROR
+
+    try:
+        peer.wait_for_publishers(["/diagnostics"])
+        peer.spin_until(failed, 60, "diagnostics reporting the recording failure")
+        for old in full_disk.iterdir():  # space is free again
+            shutil.rmtree(old) if old.is_dir() else old.unlink()
+        answer = peer.call(SetBool, "/stage_node/record", SetBool.Request(data=True))
+        assert answer.success, answer.message
+        new = Path(answer.message.removeprefix("recording to "))
+        assert new.parent == full_disk, answer.message
+        n = len(peer.received["/diagnostics"])
+        peer.spin_until(lambda: any(
+            diagnostics_values(m)["recording"] == "true"
+            and int(diagnostics_values(m)["recorded_messages"]) > 0
+            for m in peer.messages("/diagnostics")[n:]), 60, "the new recording")
+        answer = peer.call(SetBool, "/stage_node/record", SetBool.Request(data=False))
+        assert answer.success, answer.message
+    finally:
+        peer.watch = None
+        assert node.stop() == 0, node.stderr
+    log = read_log(new)
+    assert log.complete
+    stamps = tick_stamps(log, "/bodies/poses")
+    assert stamps and stamps == list(range(stamps[0], stamps[-1] + 1, PERIOD_NS))

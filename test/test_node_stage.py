@@ -19,7 +19,8 @@ from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Float64
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Bool, Float64
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
@@ -758,3 +759,52 @@ def test_fourbar_runs_without_drive_topics(tmp_path, domain, peer):
         and "/bodies/link2/pose" in log.topics
         and "/drive/displacement" not in log.topics
     )
+
+
+def test_reset_restarts_the_pacing_counters_with_ticks(tmp_path, domain, peer):
+    """After ``~/reset`` missed_ticks, paced_ticks, slips count the new run, like ticks."""
+    node = start(tmp_path, domain, peer, time_mode="realtime", publish_rate=200.0, record=False)
+    try:
+        peer.subscribe("/diagnostics", DiagnosticArray)
+        peer.wait_for_publishers(["/diagnostics"], timeout=60)
+        peer.spin_until(lambda: len(peer.received["/diagnostics"]) > 0
+                        and int(latest_diagnostics(peer)["paced_ticks"]) >= 100, 60,
+                        "100 paced ticks")
+        before = latest_diagnostics(peer)
+        assert peer.call(Trigger, "/stage_node/reset").success
+        n = len(peer.received["/diagnostics"])
+        # The first report of the new run: fewer ticks than the old run had already run.
+        peer.spin_until(lambda: any(
+            int(diagnostics_values(m)["ticks"]) < int(before["ticks"])
+            for m in peer.messages("/diagnostics")[n:]), 60, "diagnostics of the new run")
+        after = next(d for d in map(diagnostics_values, peer.messages("/diagnostics")[n:])
+                     if int(d["ticks"]) < int(before["ticks"]))
+    finally:
+        stop_cleanly(node)
+    paced = int(after["paced_ticks"])
+    assert paced < int(before["paced_ticks"])
+    assert paced <= int(after["ticks"]) + int(after["merged_ticks"]) + 1
+    assert int(after["missed_ticks"]) <= paced
+    assert int(after["slips"]) <= paced
+
+
+def test_ready_is_latched_true_once_the_loop_runs(tmp_path, domain, peer):
+    """
+    ``~/ready`` (transient local): a driver subscribing late still gets ``true``.
+
+    Subscribed only after the node's diagnostics show ticks: the message was published before
+    this reader existed, so it arrives only because it is latched.
+    """
+    node = start(tmp_path, domain, peer, record=False)
+    try:
+        peer.subscribe("/diagnostics", DiagnosticArray)
+        peer.spin_until(lambda: len(peer.received["/diagnostics"]) > 0
+                        and int(latest_diagnostics(peer)["ticks"]) > 0, 60, "ticks")
+        latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                             reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        peer.subscribe("/stage_node/ready", Bool, qos=latched)
+        peer.spin_until(lambda: len(peer.received["/stage_node/ready"]) > 0, 60, "ready")
+    finally:
+        stop_cleanly(node)
+    assert [m.data for m in peer.messages("/stage_node/ready")] == [True]

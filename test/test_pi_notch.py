@@ -85,3 +85,19 @@ def test_bad_configurations_are_refused_with_the_reason(config, problem):
     assert problem in config.problem()
     with pytest.raises(ValueError, match=problem):
         PIController(config)
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_a_non_finite_input_is_refused_and_leaves_integral_and_notch_untouched(bad):
+    from flexure_sim.control.pi_notch import NonFiniteInput
+
+    config = PIConfig(0.005, 10.0, T, -1.0, 1.0, notch_frequency=300.6, notch_damping=0.1)
+    law, fresh = PIController(config), PIController(config)
+    good = [(2e-5, 0.0), (2e-5, 1e-6), (2e-5, 3e-6), (2e-5, 4e-6)]
+    answers = [law.update(*good[0])]
+    with pytest.raises(NonFiniteInput, match="measurement"):
+        law.update(2e-5, bad)
+    with pytest.raises(NonFiniteInput, match="setpoint"):
+        law.update(bad, 1e-6)
+    answers += [law.update(*s) for s in good[1:]]
+    assert answers == [fresh.update(*s) for s in good]

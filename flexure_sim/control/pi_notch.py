@@ -23,6 +23,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from flexure_sim.errors import FlexureSimError
+
 
 @dataclass(frozen=True)
 class PIConfig:
@@ -45,20 +47,13 @@ class PIConfig:
 
     def problem(self) -> str:
         """Why this configuration cannot be used ("" if it can)."""
-        if not all(
-            math.isfinite(v)
-            for v in (
-                self.kp,
-                self.ki,
-                self.period,
-                self.u_min,
-                self.u_max,
-                self.notch_frequency,
-                self.notch_damping,
-                self.notch_depth,
-            )
-        ):
-            return "every gain and limit must be finite"
+        for name, value in (("kp", self.kp), ("ki", self.ki), ("period", self.period),
+                            ("command_min", self.u_min), ("command_max", self.u_max),
+                            ("notch_frequency", self.notch_frequency),
+                            ("notch_damping", self.notch_damping),
+                            ("notch_depth", self.notch_depth)):
+            if not math.isfinite(value):
+                return f"{name} must be finite, got {value!r}"
         if self.period <= 0.0:
             return f"period must be positive, got {self.period!r}"
         if self.kp < 0.0 or self.ki < 0.0:
@@ -77,6 +72,10 @@ class PIConfig:
 
 
 Coefficients = tuple[float, float, float]
+
+
+class NonFiniteInput(FlexureSimError, ValueError):
+    """A setpoint or measurement is NaN or infinite (refused; the state is untouched)."""
 
 
 def notch_coefficients(frequency: float, damping: float, depth: float,
@@ -134,8 +133,21 @@ class PIController:
         if self.notch is not None:
             self.notch.reset()
 
+    def rest_command(self) -> float:
+        """Return the command at rest (zero, clipped into the limits)."""
+        return min(max(0.0, self.config.u_min), self.config.u_max)
+
     def update(self, setpoint: float, measurement: float) -> float:
-        """Return the command for this sample, given the setpoint and the measurement (m)."""
+        """
+        Return the command for this sample, given the setpoint and the measurement (m).
+
+        A non-finite setpoint or measurement raises `NonFiniteInput` before any state changes:
+        the integral and the notch never hold a NaN, so the next finite sample gives a finite
+        command.
+        """
+        for name, value in (("setpoint", setpoint), ("measurement", measurement)):
+            if not math.isfinite(value):
+                raise NonFiniteInput(f"{name} {value!r} is not finite")
         c = self.config
         f = setpoint - measurement
         if self.notch is not None:

@@ -13,6 +13,10 @@ measurements (docs/controller_guide.md). The measurement
 subscription keeps only the newest reading (reliable, keep last 1): in real time a
 controller that fell behind skips stale readings rather than answering them ever later.
 
+A non-finite setpoint is refused (the setpoint stays), a non-finite measurement is answered
+with the last command; both with a throttled WARN naming the topic and the value, the law's
+state untouched (`PIController.update` refuses before changing it).
+
 ``handshake`` (lockstep drivers): after each command the node waits until every matched
 reliable subscriber (the stage) has acknowledged it (`Publisher.wait_for_all_acked`), then
 publishes the number of measurements answered so far on ``~/answered`` (std_msgs/UInt64). A
@@ -31,12 +35,15 @@ publish in ns, `time.time_ns`) for the benchmark's command-to-applied latency.
 """
 from __future__ import annotations
 
+import math
 import sys
 import time
-from typing import Any, Optional
+from contextlib import contextmanager
+from typing import Any, Iterator, Optional
 
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.duration import Duration
+from rclpy.exceptions import InvalidTopicNameException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64, UInt64
@@ -44,7 +51,7 @@ from std_srvs.srv import Trigger
 
 from flexure_sim import topics
 from flexure_sim.console import quiet_pipe
-from flexure_sim.control.pi_notch import PIConfig, PIController
+from flexure_sim.control.pi_notch import NonFiniteInput, PIConfig, PIController
 from flexure_sim.errors import FlexureSimError
 
 #: (name, default, description) of every parameter; all can be changed live except the
@@ -74,10 +81,36 @@ PARAMETERS: tuple[tuple[str, Any, str], ...] = (
 READ_ONLY = {"measurement_topic", "setpoint_topic", "command_topic", "handshake", "trace_path"}
 #: How long `handshake` waits for the acknowledgement of one command, s.
 ACK_TIMEOUT = 10.0
+#: At most one warning about refused (non-finite) inputs per topic in this many seconds.
+WARN_PERIOD = 1.0
 
 
 class StartupError(FlexureSimError, RuntimeError):
     """The controller cannot start (one line on stderr, exit code 1)."""
+
+
+@contextmanager
+def topic_parameter(name: str, values: dict[str, Any]) -> Iterator[None]:
+    """Turn rclpy's InvalidTopicNameException into a StartupError naming the parameter."""
+    try:
+        yield
+    except InvalidTopicNameException as exc:
+        reason = str(exc).splitlines()[0].removeprefix("Invalid topic name: ").rstrip(":")
+        raise StartupError(f"invalid parameter {name}: {values[name]!r} is not a valid "
+                           f"topic name ({reason})") from exc
+
+
+def parameter_problem(values: dict[str, Any]) -> str:
+    """Why these parameter values cannot be used ("" if they can), naming the parameter."""
+    for name in ("kp", "ki", "period", "command_min", "command_max", "notch_frequency",
+                 "notch_damping", "notch_depth", "setpoint"):
+        try:
+            value = float(values[name])
+        except (TypeError, ValueError):
+            return f"{name} must be a number, got {values[name]!r}"
+        if not math.isfinite(value):
+            return f"{name} must be finite, got {value!r}"
+    return config_from(values).problem()
 
 
 def config_from(values: dict[str, Any]) -> PIConfig:
@@ -109,24 +142,26 @@ class PIControllerNode(Node):
                 description=text, read_only=name in READ_ONLY,
                 dynamic_typing=isinstance(default, float)))
         values = self.values()
-        try:
-            problem = config_from(values).problem()
-        except (TypeError, ValueError) as exc:
-            problem = f"a gain or limit is not a number ({exc})"
+        problem = parameter_problem(values)
         if problem:
             raise StartupError(f"invalid parameters: {problem}")
         self.law = PIController(config_from(values))
         self.setpoint = float(values["setpoint"])
+        self.command = self.law.rest_command()  # the last command published (held on refusal)
         self.answered = 0
         self.handshake = bool(values["handshake"])
         path = values["trace_path"]
         self.trace = open(path, "w") if path else None  # noqa: SIM115
-        self.command_pub = self.create_publisher(Float64, values["command_topic"], QOS)
+        with topic_parameter("command_topic", values):
+            self.command_pub = self.create_publisher(Float64, values["command_topic"], QOS)
         self.answered_pub = (self.create_publisher(UInt64, "~/answered", QOS)
                              if self.handshake else None)
-        self.create_subscription(Float64, values["measurement_topic"], self.on_measurement,
-                                 NEWEST)
-        self.create_subscription(Float64, values["setpoint_topic"], self.on_setpoint, QOS)
+        with topic_parameter("measurement_topic", values):
+            self.measurement_sub = self.create_subscription(
+                Float64, values["measurement_topic"], self.on_measurement, NEWEST)
+        with topic_parameter("setpoint_topic", values):
+            self.setpoint_sub = self.create_subscription(
+                Float64, values["setpoint_topic"], self.on_setpoint, QOS)
         self.create_service(Trigger, "~/reset", self.on_reset)
         self.add_on_set_parameters_callback(self.validate)
         self.add_post_set_parameters_callback(self.apply)
@@ -142,10 +177,7 @@ class PIControllerNode(Node):
 
     def validate(self, params: list[Any]) -> Any:
         values = {**self.values(), **{p.name: p.value for p in params}}
-        try:
-            problem = config_from(values).problem()
-        except (TypeError, ValueError) as exc:
-            problem = str(exc)
+        problem = parameter_problem(values)
         return SetParametersResult(successful=not problem, reason=problem)
 
     def apply(self, params: list[Any]) -> None:
@@ -163,17 +195,33 @@ class PIControllerNode(Node):
         Answer count to 0, setpoint to the parameter (with the stage's ~/reset: a new run).
         """
         self.law.reset()
+        self.command = self.law.rest_command()
         self.answered = 0
         self.setpoint = float(self.get_parameter("setpoint").value)
         response.success, response.message = True, "controller reset"
         return response
 
     def on_setpoint(self, msg: Any) -> None:
-        self.setpoint = float(msg.data)
+        value = float(msg.data)
+        if not math.isfinite(value):
+            # One call site per topic: rclpy throttles per call site.
+            self.get_logger().warn(
+                f"refused a non-finite value {value!r} on {self.setpoint_sub.topic_name}: "
+                f"the setpoint stays {self.setpoint!r}", throttle_duration_sec=WARN_PERIOD)
+            return
+        self.setpoint = value
 
     def on_measurement(self, msg: Any) -> None:
         y = float(msg.data)
-        u = self.law.update(self.setpoint, y)
+        try:
+            u = self.command = self.law.update(self.setpoint, y)
+        except NonFiniteInput:
+            # Still one answer per measurement (lockstep drivers count them): the last command,
+            # the law's state untouched.
+            u = self.command
+            self.get_logger().warn(
+                f"refused a non-finite value {y!r} on {self.measurement_sub.topic_name}: "
+                f"the last command {u!r} is repeated", throttle_duration_sec=WARN_PERIOD)
         self.command_pub.publish(Float64(data=u))
         wall = time.time_ns()
         self.answered += 1

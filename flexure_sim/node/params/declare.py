@@ -75,3 +75,25 @@ def coerce_integer_overrides(node: Any) -> None:
         per_drive = name.startswith("drives.") and name.rpartition(".")[2] in LIMIT_KEYS
         if (name in floats or per_drive) and p.type_ == Parameter.Type.INTEGER:
             overrides[name] = Parameter(name, Parameter.Type.DOUBLE, float(p.value))
+
+
+def undeclared_drive_overrides(node: Any, drive_names: list[str], single: bool) -> str:
+    """
+    Why a ``-p drives.<name>.<key>:=...`` override does not apply ("" if every one does).
+
+    ROS ignores overrides of parameters never declared: a typo in a drive's name or key would
+    leave the limit at its default without a word, so it is refused naming the drives.
+    """
+    overrides = getattr(node, "_parameter_overrides", None)
+    if not isinstance(overrides, dict):
+        return ""
+    for name in sorted(overrides):
+        if name.startswith("drives.") and not node.has_parameter(name):
+            if single:
+                return (f"{name}: this mechanism has a single drive, whose limits are "
+                        f"{', '.join(LIMIT_KEYS)} (no drives.<name>.*)")
+            if not drive_names:
+                return f"{name}: this mechanism has no drive"
+            return (f"{name}: no such parameter; the drives are {', '.join(drive_names)}, "
+                    f"each with drives.<name>.{{{', '.join(LIMIT_KEYS)}}}")
+    return ""

@@ -119,6 +119,10 @@ class Pacer:
         self._t0 = self._clock()
         self._k = 0
 
+    def reset_stats(self) -> None:
+        """Restart the counters (a new run: `~/reset`); the schedule is kept."""
+        self.stats = PacingStats()
+
     def set_period(self, period: float) -> None:
         """Change the period from the next tick on (re-anchors at the current deadline)."""
         if not period > 0:

@@ -20,6 +20,8 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, Trigger
 
 from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism, resolve_mechanism_path
@@ -28,7 +30,9 @@ from flexure_sim.engine.solver.simulation import Simulation
 from flexure_sim.recording import RecordingError
 from flexure_sim.node.publish import interface as itf
 from flexure_sim.node.inputs.command_intake import intake_for
-from flexure_sim.node.params.declare import coerce_integer_overrides, declare
+from flexure_sim.node.params.declare import (
+    coerce_integer_overrides, declare, undeclared_drive_overrides,
+)
 from flexure_sim.node.publish.diagnostics import DiagnosticsPort
 from flexure_sim.node.publish import display as dsp
 from flexure_sim.node.inputs.drive_bank import (
@@ -48,6 +52,16 @@ from flexure_sim.node.stage.loop_parts import LoopParts, LoopSettings
 from flexure_sim.node.stage.stepping_thread import RELINEARIZE_TOL, SteppingLoop
 
 NODE_NAME = "stage_node"
+
+
+#: ``~/ready``: reliable, transient local, the last message kept (a latched topic).
+READY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+#: How a parameter's expected type is named in start-up errors.
+_TYPE_NAMES = {float: "double (a number)", int: "integer", bool: "bool (true or false)",
+               str: "string"}
 
 
 class StartupError(FlexureSimError, RuntimeError):
@@ -150,7 +164,10 @@ class StageNode(LiveParameters, Node):
         # full passes, which would otherwise pause the stepping loop for milliseconds.
         gc.collect()
         gc.freeze()
-        loop.start(self._stepping_ended, self._stepping_failed)
+        # Latched: a driver that subscribes later still gets it (docs/controller_guide.md).
+        ready = self.create_publisher(Bool, "~/ready", READY_QOS)
+        loop.start(self._stepping_ended, self._stepping_failed,
+                   lambda: ready.publish(Bool(data=True)))
 
     def _declare_parameters(self) -> dict[str, Any]:
         """
@@ -169,11 +186,18 @@ class StageNode(LiveParameters, Node):
                                 if named else "the mechanism has no drive")
         self._specs = {s.name: s for s in (in_command_units(specs, drive) if drive else specs)
                        + drive_parameter_specs(named)}
-        try:
-            for spec in list(self._specs.values())[1:]:
+        for spec in list(self._specs.values())[1:]:
+            try:
                 declare(self, spec)
-        except ParameterException as exc:
-            raise StartupError(f"invalid parameter: {exc}") from exc
+            except ParameterException as exc:
+                given = self._parameter_overrides.get(spec.name)
+                got = (f"got {given.type_.name.lower()} {given.value!r}" if given is not None
+                       else str(exc))
+                raise StartupError(f"invalid parameter {spec.name}: expected a "
+                                   f"{_TYPE_NAMES[spec.type]}, {got}") from exc
+        unknown = undeclared_drive_overrides(self, [d.name for d in named], drive is not None)
+        if unknown:
+            raise StartupError(f"invalid parameter {unknown}")
         values = self._values()
         self._probe = StrokeProbe(self.mechanism, float(values["sim_step"]))
         own = {"stroke_min": defaults[0], "stroke_max": defaults[1]} if defaults else {}

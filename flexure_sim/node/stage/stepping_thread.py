@@ -132,14 +132,16 @@ class SteppingLoop:
             Diagnostics(self, parts.diagnostics) if parts.diagnostics is not None else None)
 
     # ------------------------------------------------------------------ thread
-    def start(self, on_end: Any, on_failure: Any) -> None:
+    def start(self, on_end: Any, on_failure: Any, on_running: Any = None) -> None:
         """
         Run the loop in its own thread.
 
-        ``on_end(ok)`` is called when it ends; ``on_failure(exc)`` first if it raised: it reports
+        ``on_running()`` is called once, just before the first tick (the node's ``~/ready``);
+        ``on_end(ok)`` when it ends; ``on_failure(exc)`` first if it raised: it reports
         and returns whether that is a failure (False: the node was shutting down anyway).
         """
         self._on_end, self._on_failure = on_end, on_failure
+        self._on_running = on_running
         self._thread = threading.Thread(target=self._run, name="stage-stepping", daemon=True)
         self._thread.start()
 
@@ -176,6 +178,8 @@ class SteppingLoop:
                 pacer.start()
             self.restart_clocks()
             requests = self.requests
+            if self._on_running is not None:
+                self._on_running()
             while not self._stop.is_set():
                 if requests and requests.serve() and pacer is not None:
                     pacer.reanchor()
@@ -380,7 +384,12 @@ class SteppingLoop:
         self._log.info(f"publish_rate {rate:g} Hz: {self.n_steps} engine steps per tick")
 
     def reset(self) -> None:
-        """Back to t = 0 and the initial command (stepping thread); counters are kept."""
+        """
+        Back to t = 0 and the initial command (stepping thread).
+
+        The run's counters (ticks, the pacer's missed/paced ticks, slips, lateness) restart;
+        the command and engine counters count over the node's life.
+        """
         self.sim.reset()
         if self.sensor is not None:
             self.sensor.reset()
@@ -392,4 +401,6 @@ class SteppingLoop:
             self.intake.discard()  # sent before the reset: discarded
         self.runs += 1
         self.ticks = 0
+        if self.pacer is not None:
+            self.pacer.reset_stats()
         self.restart_clocks()
