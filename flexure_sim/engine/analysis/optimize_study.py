@@ -36,7 +36,7 @@ from typing import Any, Optional
 import numpy as np
 
 from flexure_sim.engine.analysis import design_outputs
-from flexure_sim.engine.analysis.study import StudyError, _base_mechanism, _read
+from flexure_sim.engine.analysis.study import StudyError, _read, study_head
 from flexure_sim.engine.analysis.study_checks import (
     check_outputs, drive_input, number, spec_paths,
 )
@@ -139,17 +139,7 @@ def load_optimize_study(path: str | Path) -> OptimizeStudy:
 def optimize_study_from_dict(data: Any, source: str,
                              base_dir: Optional[Path] = None) -> OptimizeStudy:
     """Validate a parsed optimisation study (module docstring)."""
-    def fail(key: str, problem: str) -> StudyError:
-        return StudyError(f"{source}: {key}: {problem}")
-
-    if not isinstance(data, dict):
-        raise StudyError(f"{source}: the study must be a mapping, got {type(data).__name__}")
-    unknown = sorted(set(data) - _TOP_KEYS)
-    if unknown:
-        raise fail(unknown[0], f"unknown key (allowed: {', '.join(sorted(_TOP_KEYS))})")
-    if "mechanism" not in data:
-        raise fail("mechanism", "missing required key (a built-in name or a YAML path)")
-    mech_path, base = _base_mechanism(data["mechanism"], base_dir, fail)
+    fail, mech_path, base = study_head(data, source, _TOP_KEYS, base_dir)
     try:
         mech = mechanism_from_dict(base, source=str(mech_path))
         Parameters(str(mech_path), data=base).twistor  # the laws the sensitivities cover

@@ -171,20 +171,32 @@ def load_study(path: str | Path, output_names: Iterable[str]) -> Study:
     return study_from_dict(data, str(path), output_names, base_dir=path.parent)
 
 
-def study_from_dict(data: Any, source: str, output_names: Iterable[str],
-                    base_dir: Optional[Path] = None) -> Study:
-    """Validate a parsed study document (see the module docstring)."""
+def study_head(data: Any, source: str, top_keys: set,
+               base_dir: Optional[Path]) -> tuple[Any, Path, dict]:
+    """
+    Check what every study file starts with: a mapping of ``top_keys`` naming its mechanism.
+
+    Returns (fail, the mechanism's path, its parsed document); ``fail(key, problem)`` builds
+    the StudyError naming the file and key (sweeps here, optimisation in optimize_study.py).
+    """
     def fail(key: str, problem: str) -> StudyError:
         return StudyError(f"{source}: {key}: {problem}")
 
     if not isinstance(data, dict):
         raise StudyError(f"{source}: the study must be a mapping, got {type(data).__name__}")
-    unknown = sorted(set(data) - _TOP_KEYS)
+    unknown = sorted(set(data) - top_keys)
     if unknown:
-        raise fail(unknown[0], f"unknown key (allowed: {', '.join(sorted(_TOP_KEYS))})")
+        raise fail(unknown[0], f"unknown key (allowed: {', '.join(sorted(top_keys))})")
     if "mechanism" not in data:
         raise fail("mechanism", "missing required key (a built-in name or a YAML path)")
     mech_path, base = _base_mechanism(data["mechanism"], base_dir, fail)
+    return fail, mech_path, base
+
+
+def study_from_dict(data: Any, source: str, output_names: Iterable[str],
+                    base_dir: Optional[Path] = None) -> Study:
+    """Validate a parsed study document (see the module docstring)."""
+    fail, mech_path, base = study_head(data, source, _TOP_KEYS, base_dir)
     outputs = _outputs(data.get("outputs"), set(output_names), fail)
     raw = data.get("parameters")
     if not isinstance(raw, list) or not raw:
