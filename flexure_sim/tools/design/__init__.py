@@ -5,6 +5,8 @@ The designer's commands: modes, frf, linearize, sensitivity, sweep, fit, piezo-l
   7).
 - ``linear_commands``: ``flexure-sim modes | frf | linearize``: the linear analyses
   (engine/analysis/linear.py).
+- ``linear_export``: ``flexure-sim linearize -o FILE``: the linear model written as .npz, .mat
+  or .json.
 - ``linear_plots``: The figures and tables of ``flexure-sim modes | frf``
   (tools/design/linear_commands.py).
 - ``piezo_loop``: ``flexure-sim piezo-loop``: the hysteresis loop of a drive's piezo
