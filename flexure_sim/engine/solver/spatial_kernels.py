@@ -86,7 +86,14 @@ def spatial_rhs(y, t, command, args):
     return out[:m], out[m:]
 
 
-#: The complex step (module docstring of ``kinematics.generic``): small enough that its square
+@njit(cache=True)
+def terms(z, w, command, first_force, constants, Q, zdot, deflection, wrench, power, report):
+    """Return ``spatial_chain.terms`` on floats, compiled (the reports' entry from Python)."""
+    return chain.terms(z, w, command, first_force, constants, Q, zdot, deflection, wrench,
+                       power, report)
+
+
+#: The complex step (module docstring of ``kinematics.scalar``): small enough that its square
 #: is lost against every value (1e-80), large enough that h times any derivative stays far
 #: from underflow.
 COMPLEX_STEP = 1e-40
@@ -145,4 +152,4 @@ def _bind():
 advance = _bind()
 
 # Numba keys a cache on its function's file: flush when any source of these kernels changes.
-jit.revalidate([spatial_rhs, complex_step, no_switch_work, advance], __file__)
+jit.revalidate([spatial_rhs, terms, complex_step, no_switch_work, advance], __file__)
