@@ -170,6 +170,22 @@ def cross(a, b):
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
+@formula
+def twistor_translation(sigma, xi, p):
+    """
+    Return x = 1/2 (sigma p + p x xi): the dual part's vector of the unit dual quaternion.
+
+    Of the displacement (R, p) with rotation quaternion (sigma, xi): q_d = 1/2 p q_r
+    (``laws.spatial``). Restricted to the plane (xi = (0, 0, xi_z), p = (p1, p2, 0)) it is
+    the planar twistor's x = 1/2 (sigma I - xi J) p (dissertation eq. 2.178, whose twistor
+    (sigma, xi, x1, x2) is the planar restriction of the dual quaternion), term by term in the
+    same floating-point operations.
+    """
+    pxi = cross(p, xi)
+    return (0.5 * (sigma * p[0] + pxi[0]), 0.5 * (sigma * p[1] + pxi[1]),
+            0.5 * (sigma * p[2] + pxi[2]))
+
+
 @formula(inline=False)
 def rotation_vector(q):
     """Return the rotation vector (t in [0, 2 pi)) of a unit quaternion (w, x, y, z)."""

@@ -53,6 +53,7 @@ import numpy as np
 
 from flexure_sim.engine.kinematics.scalar import formula
 from flexure_sim.engine.kinematics.quaternion import angle_factor, cross, jr_coefficient
+from flexure_sim.engine.kinematics.quaternion import twistor_translation
 from flexure_sim.errors import as_array
 
 #: Law coordinate types (the ``law`` of a hinge), as in the planar engine.
@@ -65,10 +66,8 @@ def dual_quaternion(qr, p):
     """Return sigma, xi, sigma_0, x of the displacement (R(qr), p) (module docstring)."""
     sigma = qr[0]
     xi = (qr[1], qr[2], qr[3])
-    pxi = cross(p, xi)
-    x = (0.5 * (sigma * p[0] + pxi[0]), 0.5 * (sigma * p[1] + pxi[1]),
-         0.5 * (sigma * p[2] + pxi[2]))
-    return sigma, xi, -0.5 * (p[0] * xi[0] + p[1] * xi[1] + p[2] * xi[2]), x
+    return (sigma, xi, -0.5 * (p[0] * xi[0] + p[1] * xi[1] + p[2] * xi[2]),
+            twistor_translation(sigma, xi, p))
 
 
 @formula(inline=False)
