@@ -136,19 +136,22 @@ class Drive:
         return direction(mech, self.body, self.axis, self.coordinate)
 
 
-def direction(mech: "Mechanism", body: str, axis, coordinate: Optional[str]) -> np.ndarray:
+def direction(mech, body: str, axis, coordinate: Optional[str],
+              names: tuple = COORDINATE_NAMES) -> np.ndarray:
     """
     Return the direction of a body's axis or coordinate.
 
-    e in the 3 n_bodies coordinates of a body's axis (unit vector in the root frame) or of one of
-    its coordinates (x, y, theta).
+    e in the len(names) n_bodies coordinates (``names``: a body's coordinates, translations
+    first; the planar (x, y, theta) or the spatial six) of a body's axis (unit vector in the
+    root frame, one entry per translation) or of one of its coordinates.
     """
-    e = np.zeros(3 * len(mech.bodies))
+    k = len(names)
+    e = np.zeros(k * len(mech.bodies))
     i = mech.body_index(body)
     if coordinate is not None:
-        e[3 * i + COORDINATE_NAMES.index(coordinate)] = 1.0
+        e[k * i + names.index(coordinate)] = 1.0
     else:
-        e[3 * i:3 * i + 2] = axis
+        e[k * i:k * i + len(axis)] = axis
     return e
 
 
@@ -203,8 +206,37 @@ class Output:
         return direction(mech, self.body, self.axis, self.coordinate)
 
 
+class Lookup:
+    """Look-ups by name shared by the planar and the spatial ``Mechanism``."""
+
+    name: str
+    bodies: tuple
+    hinges: tuple
+    constraints: tuple
+    drive_type: type
+
+    def body_index(self, name: str) -> int:
+        """Index of a body by name (ValueError naming it if unknown)."""
+        for i, body in enumerate(self.bodies):
+            if body.name == name:
+                return i
+        raise ValueError(f"unknown body {name!r} in mechanism {self.name!r}")
+
+    def hinge_index(self, name: str) -> int:
+        """Index of a hinge by name (ValueError naming it if unknown)."""
+        for i, hinge in enumerate(self.hinges):
+            if hinge.name == name:
+                return i
+        raise ValueError(f"unknown hinge {name!r} in mechanism {self.name!r}")
+
+    @property
+    def drives(self) -> tuple:
+        """Every drive constraint, in the order of the constraints."""
+        return tuple(c for c in self.constraints if isinstance(c, self.drive_type))
+
+
 @dataclass(frozen=True)
-class Mechanism:
+class Mechanism(Lookup):
     """
     A planar flexure mechanism.
 
@@ -231,30 +263,14 @@ class Mechanism:
     #: by ``damping_models.damping_matrix``), besides the hinges' own; None: hinges only.
     damping: Optional[DampingSpec] = None
 
-    def body_index(self, name: str) -> int:
-        """Index of a body by name (ValueError naming it if unknown)."""
-        for i, body in enumerate(self.bodies):
-            if body.name == name:
-                return i
-        raise ValueError(f"unknown body {name!r} in mechanism {self.name!r}")
-
-    def hinge_index(self, name: str) -> int:
-        """Index of a hinge by name (ValueError naming it if unknown)."""
-        for i, hinge in enumerate(self.hinges):
-            if hinge.name == name:
-                return i
-        raise ValueError(f"unknown hinge {name!r} in mechanism {self.name!r}")
+    #: The class of its drive constraints (``Lookup.drives``).
+    drive_type = Drive
 
     @property
     def drive(self) -> Optional[Drive]:
         """Return the drive constraint, if the mechanism has one."""
         drives = self.drives
         return drives[0] if drives else None
-
-    @property
-    def drives(self) -> tuple[Drive, ...]:
-        """Every drive constraint, in the order of the constraints."""
-        return tuple(c for c in self.constraints if isinstance(c, Drive))
 
     @property
     def all_outputs(self) -> tuple[Output, ...]:

@@ -16,7 +16,8 @@ from typing import Optional, Union
 import numpy as np
 
 from flexure_sim.engine.laws.spatial import SpatialLaw
-from flexure_sim.engine.mechanism.parts import Fixed
+from flexure_sim.engine.mechanism import parts
+from flexure_sim.engine.mechanism.parts import Fixed, Lookup
 
 #: Names of a body's six coordinates; ``theta`` (a planar file's) is ``rz``.
 COORDINATE_NAMES = ("x", "y", "z", "rx", "ry", "rz")
@@ -111,21 +112,15 @@ class Output:
 
 
 def direction(mech: "Mechanism", body: str, axis, coordinate: Optional[str]) -> np.ndarray:
-    """Return the direction of a body's root axis or of one of its coordinates."""
-    e = np.zeros(6 * len(mech.bodies))
-    i = mech.body_index(body)
-    if coordinate is not None:
-        e[6 * i + COORDINATE_NAMES.index(coordinate)] = 1.0
-    else:
-        e[6 * i:6 * i + 3] = axis
-    return e
+    """Return the direction of a body's root axis or of one of its six coordinates."""
+    return parts.direction(mech, body, axis, coordinate, COORDINATE_NAMES)
 
 
 Constraint = Union[Fixed, Drive]
 
 
 @dataclass(frozen=True)
-class Mechanism:
+class Mechanism(Lookup):
     """
     A spatial flexure mechanism (``space: 3d``, or a planar file opened in 3-D).
 
@@ -143,26 +138,10 @@ class Mechanism:
     metadata: dict = field(default_factory=dict)
     planar: object = None
 
-    def body_index(self, name: str) -> int:
-        """Index of a body by name (ValueError naming it if unknown)."""
-        for i, body in enumerate(self.bodies):
-            if body.name == name:
-                return i
-        raise ValueError(f"unknown body {name!r} in mechanism {self.name!r}")
-
-    def hinge_index(self, name: str) -> int:
-        """Index of a hinge by name (ValueError naming it if unknown)."""
-        for i, hinge in enumerate(self.hinges):
-            if hinge.name == name:
-                return i
-        raise ValueError(f"unknown hinge {name!r} in mechanism {self.name!r}")
+    #: The class of its drive constraints (``parts.Lookup.drives``).
+    drive_type = Drive
 
     @property
     def all_outputs(self) -> tuple[Output, ...]:
         """Return the outputs (as the planar ``Mechanism.all_outputs``)."""
         return self.outputs
-
-    @property
-    def drives(self) -> tuple[Drive, ...]:
-        """Every drive, in the order of the constraints."""
-        return tuple(c for c in self.constraints if isinstance(c, Drive))
