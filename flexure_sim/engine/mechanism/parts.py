@@ -89,7 +89,32 @@ class Fixed:
 
 
 @dataclass(frozen=True)
-class Drive:
+class DriveFields:
+    """What a planar and a spatial drive both are (``Drive``, ``spatial_parts.Drive``)."""
+
+    body: str
+    axis: tuple
+    response_time: float
+    stroke: tuple[float, float]
+    slew_rate: float
+    name: str = "drive"
+    coordinate: Optional[str] = None
+    kind: str = "displacement"
+    actuator: Optional[PiezoSpec] = None
+    #: A body's coordinate names, translations first (``direction``).
+    coordinate_names = COORDINATE_NAMES
+
+    def direction(self, mech) -> np.ndarray:
+        """
+        Return the drive's direction e in the body coordinates of ``mech``.
+
+        The input is e . (z - z0) and a force drive's generalized force is e f (virtual work).
+        """
+        return direction(mech, self.body, self.axis, self.coordinate, self.coordinate_names)
+
+
+@dataclass(frozen=True)
+class Drive(DriveFields):
     """
     The driven input.
 
@@ -116,24 +141,7 @@ class Drive:
     None without one (docs/mechanism_file.md, "Piezo actuator").
     """
 
-    body: str
     axis: tuple[float, float]
-    response_time: float
-    stroke: tuple[float, float]
-    slew_rate: float
-    name: str = "drive"
-    coordinate: Optional[str] = None
-    kind: str = "displacement"
-    actuator: Optional[PiezoSpec] = None
-
-    def direction(self, mech: "Mechanism") -> np.ndarray:
-        """
-        Return the drive's direction e in the 3 n_bodies coordinates.
-
-        The drive's direction e in the 3 n_bodies coordinates: the input is e . (z - z0) and a
-        force drive's generalized force is e f (virtual work).
-        """
-        return direction(mech, self.body, self.axis, self.coordinate)
 
 
 def direction(mech, body: str, axis, coordinate: Optional[str],
@@ -184,7 +192,23 @@ Constraint = Union[Fixed, Drive, SineRate]
 
 
 @dataclass(frozen=True)
-class Output:
+class OutputFields:
+    """What a planar and a spatial output both are (``Output``, ``spatial_parts.Output``)."""
+
+    body: str
+    axis: tuple
+    name: str = "output"
+    coordinate: Optional[str] = None
+    #: A body's coordinate names, translations first (``direction``).
+    coordinate_names = COORDINATE_NAMES
+
+    def direction(self, mech) -> np.ndarray:
+        """Return the output's direction c in the body coordinates: the output is c . (z - z0)."""
+        return direction(mech, self.body, self.axis, self.coordinate, self.coordinate_names)
+
+
+@dataclass(frozen=True)
+class Output(OutputFields):
     """
     The displacement reported as an output.
 
@@ -192,18 +216,7 @@ class Output:
     of the body (``coordinate``: x, y or theta) from rest.
     """
 
-    body: str
     axis: tuple[float, float]
-    name: str = "output"
-    coordinate: Optional[str] = None
-
-    def direction(self, mech: "Mechanism") -> np.ndarray:
-        """
-        Return the output's direction c in the 3 n_bodies coordinates.
-
-        c in the 3 n_bodies coordinates: the output is c . (z - z0).
-        """
-        return direction(mech, self.body, self.axis, self.coordinate)
 
 
 class Lookup:

@@ -11,13 +11,11 @@ velocity (wx, wy, wz) in body coordinates.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional, Union
+from typing import Union
 
-import numpy as np
 
 from flexure_sim.engine.laws.spatial import SpatialLaw
-from flexure_sim.engine.mechanism import parts
-from flexure_sim.engine.mechanism.parts import Fixed, Lookup
+from flexure_sim.engine.mechanism.parts import DriveFields, Fixed, Lookup, OutputFields
 
 #: Names of a body's six coordinates; ``theta`` (a planar file's) is ``rz``.
 COORDINATE_NAMES = ("x", "y", "z", "rx", "ry", "rz")
@@ -69,7 +67,7 @@ class Hinge:
 
 
 @dataclass(frozen=True)
-class Drive:
+class Drive(DriveFields):
     """
     A drive: a displacement drive prescribes its body's displacement along ``axis``.
 
@@ -81,39 +79,18 @@ class Drive:
     coordinate, or a torque about the root axis of a rotation coordinate (rx, ry, rz).
     """
 
-    body: str
     axis: tuple[float, float, float]
-    response_time: float
-    stroke: tuple[float, float]
-    slew_rate: float
-    name: str = "drive"
-    coordinate: Optional[str] = None
-    kind: str = "displacement"
     #: A piezo actuator block: not supported in 3-D (always None; ``drives.DriveTable`` reads it).
     actuator: None = None
-
-    def direction(self, mech: "Mechanism") -> np.ndarray:
-        """Return e in the 6 n_bodies coordinates: the input is e . (z - z0)."""
-        return direction(mech, self.body, self.axis, self.coordinate)
+    coordinate_names = COORDINATE_NAMES
 
 
 @dataclass(frozen=True)
-class Output:
+class Output(OutputFields):
     """A body's displacement along a root ``axis``, or one of its coordinates, from rest."""
 
-    body: str
     axis: tuple[float, float, float]
-    name: str = "output"
-    coordinate: Optional[str] = None
-
-    def direction(self, mech: "Mechanism") -> np.ndarray:
-        """Return c in the 6 n_bodies coordinates: the output is c . (z - z0)."""
-        return direction(mech, self.body, self.axis, self.coordinate)
-
-
-def direction(mech: "Mechanism", body: str, axis, coordinate: Optional[str]) -> np.ndarray:
-    """Return the direction of a body's root axis or of one of its six coordinates."""
-    return parts.direction(mech, body, axis, coordinate, COORDINATE_NAMES)
+    coordinate_names = COORDINATE_NAMES
 
 
 Constraint = Union[Fixed, Drive]
