@@ -56,3 +56,23 @@ def test_analyses_benchmark_runs_modes_frf_at_1000_frequencies_and_4_outputs_to_
     assert res["sensitivity_parameters"] == len(set(SENSITIVITY_PARAMETERS)) == 20
     assert res["sensitivity_outputs"] == len(OUTPUTS) == 4
     assert res["modes_frf_wall_s"] > 0 and res["sensitivity_wall_s"] > 0
+
+
+def test_spatial_accuracy_ladder_halves_the_step_until_the_target(monkeypatch):
+    """``spatial_bench.at_accuracy``: stops at the first step within the target, else None."""
+    from flexure_sim.engine.mechanism.spatial_loader import load_spatial
+    from flexure_sim.engine.solver.spatial_simulation import SpatialSimulation
+    from flexure_sim.tools.bench import spatial_bench
+
+    monkeypatch.setattr(spatial_bench, "DURATION", 2e-3)
+    monkeypatch.setattr(spatial_bench, "HALVINGS", 1)
+    tip = load_spatial("tiptilt_stage")
+    args = ((lambda h: SpatialSimulation(tip, dt=h)), [1e-5, 0.0, 0.0], 1e-4,
+            (lambda s: s.model.output_values(s.state.z)[0]))
+    none = spatial_bench.at_accuracy(*args, target=0.0)
+    assert none["reached"] is None and [r["dt"] for r in none["steps"]] == [1e-4, 5e-5]
+    first, second = (r["max_rel_error"] for r in none["steps"])
+    assert second < first  # a smaller step is more accurate
+    reached = spatial_bench.at_accuracy(*args, target=0.5 * (first + second))
+    assert [r["dt"] for r in reached["steps"]] == [1e-4, 5e-5]
+    assert reached["reached"] == reached["steps"][-1]

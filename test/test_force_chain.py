@@ -200,8 +200,8 @@ print(json.dumps(out))
 EDITS = [
     ("kinematics/relative.py", "    alpha = thB + phib - beta\n",
      "    alpha = 1.01 * (thB + phib - beta)\n"),
-    ("laws/coordinates.py", "    x1 = 0.5 * (sg * p1 + xi * p2)\n",
-     "    x1 = 0.502 * (sg * p1 + xi * p2)\n"),
+    ("kinematics/quaternion.py", "    return (0.5 * (sigma * p[0] + pxi[0]),",
+     "    return (0.502 * (sigma * p[0] + pxi[0]),"),
     ("laws/coordinates.py", "    c = (alpha, f * p1 + half * p2, f * p2 - half * p1)\n",
      "    c = (alpha, 1.003 * f * p1 + half * p2, f * p2 - half * p1)\n"),
     ("kinematics/planar.py", "    return (where(small, 1.0 - a2 / 12.0",

@@ -295,7 +295,7 @@ def test_a_bad_study_file_gets_one_line_naming_the_key(tmp_path):
     assert res.stderr.strip().splitlines() == [
         f"flexure-sim sweep: error: {study}: sample: unknown key (allowed: batch_size, "
         "description, "
-        "input, mechanism, name, outputs, parameters, samples, seed, step)"]
+        "input, mechanism, name, outputs, parameters, samples, seed, space, step)"]
 
 
 @pytest.mark.slow

@@ -41,13 +41,15 @@ class Modes:
     modal_damping: np.ndarray
 
 
-def modes(model: LinearModel) -> Modes:
+def modes(model: LinearModel, mass_matrix: Optional[np.ndarray] = None) -> Modes:
     """
     Return undamped modes and damped poles.
 
-    Undamped modes: the generalised eigenproblem K phi = w^2 M phi; damped poles: eig A.
+    Undamped modes: the generalised eigenproblem K phi = w^2 M phi, M diagonal (``model.mass``)
+    or ``mass_matrix`` (a spatial model's); damped poles: eig A.
     """
-    w2, shapes = natural_modes(model.stiffness, model.mass)
+    w2, shapes = natural_modes(model.stiffness,
+                               model.mass if mass_matrix is None else mass_matrix)
     poles = np.linalg.eigvals(model.A)
     poles = poles[np.lexsort((poles.imag, np.abs(poles)))]
     mag = np.abs(poles)

@@ -19,9 +19,9 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
-import scipy.linalg
 
 from flexure_sim.engine.analysis.linear import LinearModel
+from flexure_sim.engine.analysis import linear_response
 from flexure_sim.engine.analysis.linear_response import Modes
 from flexure_sim.engine.mechanism.spatial_parts import COORDINATE_NAMES
 from flexure_sim.engine.solver.spatial_model import SpatialModel
@@ -124,17 +124,7 @@ def linearize(model: SpatialModel, u=None, wrenches: bool = True,
 
 def modes(lin: SpatialLinearModel) -> Modes:
     """Return the undamped modes, with the full mass matrix, and the damped poles."""
-    w2, shapes = scipy.linalg.eigh(lin.stiffness, lin.mass_matrix)
-    if np.any(w2 <= 0):
-        raise ValueError("the tangent stiffness is not positive definite at this equilibrium "
-                         f"(smallest eigenvalue {w2.min():.3g})")
-    poles = np.linalg.eigvals(lin.A)
-    poles = poles[np.lexsort((poles.imag, np.abs(poles)))]
-    mag = np.abs(poles)
-    zeta = np.where(mag > 0, -poles.real / np.where(mag > 0, mag, 1.0), 1.0)
-    omega = np.sqrt(w2)
-    modal = np.einsum("ik,ij,jk->k", shapes, lin.damping, shapes) / (2.0 * omega)
-    return Modes(omega / (2 * np.pi), shapes, lin.free, poles, mag / (2 * np.pi), zeta, modal)
+    return linear_response.modes(lin, lin.mass_matrix)
 
 
 def out_of_plane_shares(lin: SpatialLinearModel, md: Modes) -> np.ndarray:

@@ -12,6 +12,8 @@ document, and the outputs wanted (see docs/sweeps.md)::
                                      # several drives: {x: 1.0e-6, y: 0.0}
                                      # (analysis/study_checks.py)
     outputs: [gain, compression, drive_force]
+    space: 3d                        # optional: each design in 3-D (the spatial engine);
+                                     # default: the mechanism's own (3d for a space: 3d file)
     step: {duration: 0.05, dt: 1.0e-4, band: 0.02}   # dynamic run of settling_time/overshoot
     parameters:
       - {path: hinges.a.stiffness.h, normal: {std: 5.0e-6}}              # mean: the base value
@@ -46,10 +48,10 @@ from flexure_sim.engine.mechanism.loader import (
     ConfigError, mechanism_from_dict, resolve_mechanism_path,
 )
 from flexure_sim.engine.mechanism.doc_paths import apply
-from flexure_sim.engine.mechanism.parts import Mechanism
+from flexure_sim.engine.mechanism.spatial_loader import spatial_from_dict
 from flexure_sim.engine.analysis.study_checks import (
-    Channels, DriveInput, check_defined, check_outputs, drive_input, number as _number,
-    spec_paths,
+    Channels, DriveInput, check_defined, check_outputs, check_space, drive_input,
+    number as _number, spec_paths, study_space,
 )
 from flexure_sim.engine.analysis.study_size import Batches, Range, built, check_fits
 from flexure_sim.engine.mechanism.yaml_files import read_yaml
@@ -62,7 +64,7 @@ RESERVED_COLUMNS = ("sample", "status", "error")
 DEFAULT_STEP = {"duration": 0.05, "dt": 1.0e-4, "band": 0.02}
 
 _TOP_KEYS = {"name", "description", "mechanism", "samples", "seed", "batch_size", "input",
-             "step", "outputs", "parameters"}
+             "step", "outputs", "parameters", "space"}
 _PARAM_KEYS = {"name", "path", "paths", "offset", "values", "range", "normal", "uniform"}
 _SOURCES = ("values", "range", "normal", "uniform")
 
@@ -115,6 +117,8 @@ class Study:
     input: Optional[DriveInput]
     step: dict
     channels: Channels = Channels()
+    #: Which engine builds and analyses each design: ``2d`` (planar) or ``3d`` (spatial).
+    space: str = "2d"
 
     @property
     def grid_shape(self) -> tuple[int, ...]:
@@ -147,8 +151,15 @@ class Study:
             for p, v in zip(self.parameters, values)
             for path, base, through in zip(p.paths, p.base, p.through)])
 
-    def mechanism(self, values: Sequence[float]) -> Mechanism:
-        """Build (and validate) the mechanism of one design; ConfigError if it is invalid."""
+    def mechanism(self, values: Sequence[float]):
+        """
+        Build (and validate) the mechanism of one design; ConfigError if it is invalid.
+
+        A planar ``Mechanism``, or with ``space`` 3d a ``spatial_parts.Mechanism`` (a 3-D file,
+        or a planar one opened in 3-D with its out-of-plane freedoms).
+        """
+        if self.space == "3d":
+            return spatial_from_dict(self.design(values), source=self.mechanism_source)
         return mechanism_from_dict(self.design(values), source=self.mechanism_source)
 
     def fingerprint(self) -> str:
@@ -226,14 +237,16 @@ def study_from_dict(data: Any, source: str, output_names: Iterable[str],
         mechanism_source=str(mech_path), base=base, parameters=tuple(params),
         outputs=outputs, monte_carlo=monte_carlo, samples=samples, seed=seed,
         batch_size=batch, input=None, step=_step(data.get("step"), fail),
+        space=study_space(data.get("space"), base, fail),
     )
     try:
         base_mech = study.mechanism([0.0 if p.offset else p.base[0] for p in params])
     except ConfigError as exc:
         raise fail("mechanism", f"the base mechanism does not load: {exc}") from None
-    if base_mech.drive is None:  # every output is a response to the drive input
+    if not base_mech.drives:  # every output is a response to the drive input
         raise fail("mechanism", f"{base_mech.name!r} has no drive constraint: the outputs are "
                    "responses to the drive input")
+    check_space(outputs, study.space, fail)
     check_outputs(outputs, base_mech, fail)
     study = replace(study, channels=Channels.of(base_mech))
     check_fits(study, fail)

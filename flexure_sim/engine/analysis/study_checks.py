@@ -161,6 +161,40 @@ def _within(drive, value: float, key: str, fail) -> float:
     return value
 
 
+#: Outputs the spatial engine gives (``space: 3d``), and those only it gives.
+SPATIAL_OUTPUTS = ("gain", "output_displacement", "drive_force", "first_mode",
+                   "first_mode_damping", "first_out_of_plane_mode", "settling_time", "overshoot")
+ONLY_SPATIAL = ("first_out_of_plane_mode",)
+
+
+def study_space(raw: Any, base: dict, fail) -> str:
+    """
+    Return the study's engine: its ``space`` key, else the mechanism's own (3d for a 3-D file).
+
+    ``space: 2d`` cannot open a 3-D file; ``space: 3d`` opens a planar one with its
+    out-of-plane freedoms.
+    """
+    own = "3d" if "space" in base else "2d"
+    if raw is None:
+        return own
+    if raw not in ("2d", "3d"):
+        raise fail("space", f"expected 2d or 3d, got {raw!r}")
+    if raw == "2d" and own == "3d":
+        raise fail("space", "2d: the mechanism is a 3-D file (space: 3d)")
+    return raw
+
+
+def check_space(outputs: tuple[str, ...], space: str, fail) -> None:
+    """Refuse the outputs the study's engine (``space``) does not give, naming the output."""
+    for name in outputs:
+        if space == "3d" and name not in SPATIAL_OUTPUTS:
+            raise fail("outputs", f"{name}: not available in 3-D (space: 3d gives "
+                       f"{', '.join(SPATIAL_OUTPUTS)})")
+        if space == "2d" and name in ONLY_SPATIAL:
+            raise fail("outputs", f"{name}: out-of-plane modes need the spatial engine; give "
+                       "the study space: 3d")
+
+
 def check_outputs(outputs: tuple[str, ...], mech: Mechanism, fail) -> None:
     """Refuse the outputs ``mech`` cannot give (module doc), naming the output."""
     drives = mech.drives

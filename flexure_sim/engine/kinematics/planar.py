@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from flexure_sim.errors import as_array
+from flexure_sim.engine.kinematics.quaternion import exp_coefficients, twistor_translation
 from flexure_sim.engine.kinematics.scalar import formula, real, where
 
 #: sk(1), the 2x2 generator of planar rotations (eq. 2.93): J @ [x, y] = [-y, x].
@@ -138,7 +139,8 @@ def twistor_from_displacement(R: np.ndarray, p: np.ndarray) -> Twistor:
     sigma = sqrt(tr R + 2) / 2 >= 0; xi from the antisymmetric part of R when sigma > 0.1,
     else xi = sqrt(1/2 - tr(R)/4) with the sign of (R21 - R12) and then sigma = (R21 - R12)
     / (4 xi) (the numerically careful branches of Section 2.8, with sigma recomputed so it
-    keeps full precision near alpha = pi); x = (sigma I - sk(xi)) p / 2.
+    keeps full precision near alpha = pi); x = (sigma I - sk(xi)) p / 2
+    (``quaternion.twistor_translation``).
     """
     R, p = as_array("R", R, (2, 2)), as_array("p", p, (2,))
     tr = R[0, 0] + R[1, 1]
@@ -153,7 +155,7 @@ def twistor_from_displacement(R: np.ndarray, p: np.ndarray) -> Twistor:
         # Near alpha = pi, sqrt(tr + 2) loses half the digits; sin(alpha) = 2 sigma xi
         # gives sigma to full precision (and sigma >= 0, as xi has the sign of m21).
         sigma = m21 / (2.0 * xi)
-    x = 0.5 * (sigma * np.eye(2) - xi * J) @ p
+    x = twistor_translation(sigma, (0.0, 0.0, xi), (p[0], p[1], 0.0))
     return Twistor(float(sigma), float(xi), float(x[0]), float(x[1]))
 
 
@@ -170,18 +172,15 @@ def displacement_from_twistor(q: Twistor) -> tuple[np.ndarray, np.ndarray]:
 
 
 def twistor_from_twist(d: np.ndarray) -> Twistor:
-    """Twistor of a twist: (cos(tau/2), sin(tau/2)/tau * (tau, t1, t2)) (eqs. 2.132-2.135)."""
+    """
+    Twistor of a twist: (cos(tau/2), sin(tau/2)/tau * (tau, t1, t2)) (eqs. 2.132-2.135).
+
+    The exponential of the dual vector tau + eps t, so its coefficients are those of the
+    quaternion exponential (``quaternion.exp_coefficients``, with their series near 0).
+    """
     d = as_array("d", d, (3,))
-    k = half_sine_ratio(d[0])
-    return Twistor(float(np.cos(0.5 * d[0])), float(k * d[0]), float(k * d[1]), float(k * d[2]))
-
-
-def half_sine_ratio(alpha):
-    """s(alpha) = sin(alpha/2) / alpha, with its series near 0 (s(0) = 1/2)."""
-    alpha = np.asarray(alpha, dtype=float)
-    small = np.abs(alpha) < _SMALL_ANGLE
-    a = np.where(small, 1.0, alpha)
-    return np.where(small, 0.5 - alpha**2 / 48.0, np.sin(0.5 * a) / a)
+    a, k = exp_coefficients(float(d[0]) ** 2)
+    return Twistor(float(a), float(k * d[0]), float(k * d[1]), float(k * d[2]))
 
 
 # ------------------------------------------------------------------ frames / adjoint

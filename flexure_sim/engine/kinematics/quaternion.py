@@ -21,15 +21,16 @@ beyond it (``solver.spatial_model.SpatialModel.check_range``). Planar motion abo
 orientation's z
 axis keeps phi = (0, 0, theta - theta0) exactly.
 
-The scalar functions below are ``generic``: compiled for the stepping kernel and evaluated on
-hyper-dual numbers for exact Jacobians. Near t = 0 each uses its Taylor series in s = t^2
-(coefficients from the series of cos, sin and (t/2) cot(t/2)), so every one is smooth there.
+The scalar functions below are formulas on a generic scalar (``kinematics.scalar``): compiled
+for the stepping kernel and evaluated on hyper-dual numbers for exact Jacobians. Near t = 0
+each uses its Taylor series in s = t^2 (coefficients from the series of cos, sin and
+(t/2) cot(t/2)), so every one is smooth there.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from flexure_sim.engine.kinematics.generic import generic, real_part, revalidate
+from flexure_sim.engine.kinematics.scalar import formula, real
 
 #: Below this t^2 the exponential's coefficients come from their series (truncation < 1e-20).
 EXP_SERIES = 1e-2
@@ -46,10 +47,10 @@ _C_SERIES = (1.0 / 12.0, 1.0 / 720.0, 1.0 / 30240.0, 1.0 / 1209600.0, 1.0 / 4790
              77683.0 / 14101100039391805440000.0)
 
 
-@generic
+@formula(inline=False)
 def exp_coefficients(s):
     """Return (cos(t/2), sin(t/2)/t) for s = t^2: the quaternion Exp(phi) = (a, b phi)."""
-    if real_part(s) < EXP_SERIES:
+    if real(s) < EXP_SERIES:
         c4 = -1.0 / 46080.0 + s / 10321920.0
         s4 = -1.0 / 645120.0 + s / 185794560.0
         cosine = 1.0 + s * (-1.0 / 8.0 + s * (1.0 / 384.0 + s * c4))
@@ -59,7 +60,7 @@ def exp_coefficients(s):
     return np.cos(0.5 * t), np.sin(0.5 * t) / t
 
 
-@generic
+@formula(inline=False)
 def jr_coefficient(s):
     """
     Return c(s) and dc/ds, c = 1/t^2 - (1 + cos t)/(2 t sin t) of Jr^-1 (module docstring).
@@ -67,7 +68,7 @@ def jr_coefficient(s):
     c = (1 - f)/s with f = (t/2) cot(t/2); dc/ds = -(1 - f)/s^2 - f'(t)/(2 t s),
     f'(t) = cot(t/2)/2 - t/(4 sin^2(t/2)).
     """
-    if real_part(s) < JR_SERIES:
+    if real(s) < JR_SERIES:
         c = 0.0 * s
         dc = 0.0 * s
         for k in range(10, -1, -1):
@@ -83,7 +84,7 @@ def jr_coefficient(s):
     return (1.0 - f) / s, -(1.0 - f) / (s * s) - df / (2.0 * t * s)
 
 
-@generic
+@formula(inline=False)
 def angle_factor(m, sigma):
     """
     Return G = t / sin(t/2) of a unit quaternion (sigma, v), m = |v|^2, t = 2 atan2(|v|, sigma).
@@ -91,13 +92,13 @@ def angle_factor(m, sigma):
     The rotation vector of the quaternion is G v (t in [0, 2 pi)). Near m = 0 (sigma > 0)
     G = 2 asin(n)/n = 2 + m/3 + 3 m^2/20 + 5 m^3/56 + ..., n = sqrt(m).
     """
-    if real_part(m) < ANGLE_SERIES and real_part(sigma) > 0.0:
+    if real(m) < ANGLE_SERIES and real(sigma) > 0.0:
         return 2.0 + m * (1.0 / 3.0 + m * (3.0 / 20.0 + m * (5.0 / 56.0)))
     n = np.sqrt(m)
     return 2.0 * half_angle(n, sigma) / n
 
 
-@generic
+@formula(inline=False)
 def half_angle(n, sigma):
     """
     Return atan2(n, sigma) for n >= 0, in [0, pi], through arctan only.
@@ -106,14 +107,14 @@ def half_angle(n, sigma):
     elsewhere: each branch is analytic, so the complex step and hyper-dual numbers pass it
     (NumPy's arctan2 takes neither complex numbers nor a branch-free derivative).
     """
-    if abs(real_part(sigma)) >= real_part(n):
-        if real_part(sigma) > 0.0:
+    if abs(real(sigma)) >= real(n):
+        if real(sigma) > 0.0:
             return np.arctan(n / sigma)
         return np.arctan(n / sigma) + np.pi
     return 0.5 * np.pi - np.arctan(sigma / n)
 
 
-@generic
+@formula(inline=False)
 def qmul(a, b):
     """Hamilton product a b of quaternions given as 4-tuples (w, x, y, z)."""
     return (a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
@@ -122,7 +123,7 @@ def qmul(a, b):
             a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0])
 
 
-@generic
+@formula(inline=False)
 def qconj_mul(a, b):
     """Return conj(a) b: the rotation of b relative to a."""
     return (a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3],
@@ -131,14 +132,14 @@ def qconj_mul(a, b):
             a[0] * b[3] - a[1] * b[2] + a[2] * b[1] - a[3] * b[0])
 
 
-@generic
+@formula(inline=False)
 def quaternion_exp(phi0, phi1, phi2):
     """Return the quaternion of Exp(phi): (cos(t/2), sin(t/2)/t phi) (module docstring)."""
     a, b = exp_coefficients(phi0 * phi0 + phi1 * phi1 + phi2 * phi2)
     return a, b * phi0, b * phi1, b * phi2
 
 
-@generic
+@formula(inline=False)
 def matrix_of(q):
     """Return the rotation matrix of a unit quaternion, rows first, as a 9-tuple."""
     w, x, y, z = q
@@ -147,7 +148,7 @@ def matrix_of(q):
             2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y))
 
 
-@generic
+@formula(inline=False)
 def rotate(R, v):
     """Return R v for a 9-tuple matrix R and a 3-tuple v."""
     return (R[0] * v[0] + R[1] * v[1] + R[2] * v[2],
@@ -155,7 +156,7 @@ def rotate(R, v):
             R[6] * v[0] + R[7] * v[1] + R[8] * v[2])
 
 
-@generic
+@formula(inline=False)
 def rotate_back(R, v):
     """Return R^T v for a 9-tuple matrix R and a 3-tuple v."""
     return (R[0] * v[0] + R[3] * v[1] + R[6] * v[2],
@@ -163,20 +164,36 @@ def rotate_back(R, v):
             R[2] * v[0] + R[5] * v[1] + R[8] * v[2])
 
 
-@generic
+@formula(inline=False)
 def cross(a, b):
     """Return a x b of 3-tuples."""
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-@generic
+@formula
+def twistor_translation(sigma, xi, p):
+    """
+    Return x = 1/2 (sigma p + p x xi): the dual part's vector of the unit dual quaternion.
+
+    Of the displacement (R, p) with rotation quaternion (sigma, xi): q_d = 1/2 p q_r
+    (``laws.spatial``). Restricted to the plane (xi = (0, 0, xi_z), p = (p1, p2, 0)) it is
+    the planar twistor's x = 1/2 (sigma I - xi J) p (dissertation eq. 2.178, whose twistor
+    (sigma, xi, x1, x2) is the planar restriction of the dual quaternion), term by term in the
+    same floating-point operations.
+    """
+    pxi = cross(p, xi)
+    return (0.5 * (sigma * p[0] + pxi[0]), 0.5 * (sigma * p[1] + pxi[1]),
+            0.5 * (sigma * p[2] + pxi[2]))
+
+
+@formula(inline=False)
 def rotation_vector(q):
     """Return the rotation vector (t in [0, 2 pi)) of a unit quaternion (w, x, y, z)."""
     g = angle_factor(q[1] * q[1] + q[2] * q[2] + q[3] * q[3], q[0])
     return g * q[1], g * q[2], g * q[3]
 
 
-@generic
+@formula(inline=False)
 def phi_rate(phi, omega):
     """Return dphi/dt = Jr^-1(phi) omega = omega + phi x omega / 2 + c phi x (phi x omega)."""
     c = jr_coefficient(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])[0]
@@ -217,7 +234,3 @@ def vector_of_quaternion(q) -> np.ndarray:
     if q[0] < 0.0:
         q = -q
     return np.array(rotation_vector(tuple(q)))
-
-
-# Numba keys a cache on its function's file only: flush when an imported source changed.
-revalidate(globals(), __file__)

@@ -4,7 +4,9 @@ Law coordinates c(r) of a hinge's relative displacement r = (alpha, p1, p2), wit
 A hinge law is a potential in law coordinates (engine/laws/quadratic.py):
 
 - twistor: c = (sigma, xi, x1, x2) (eqs. 2.132-2.135): sigma = cos(alpha/2), xi = sin(alpha/2),
-  x = 1/2 R(-alpha/2) p (eq. 2.178), R(-alpha/2) = [[sigma, xi], [-xi, sigma]]. From
+  x = 1/2 R(-alpha/2) p (eq. 2.178), R(-alpha/2) = [[sigma, xi], [-xi, sigma]]: the unit dual
+  quaternion's x restricted to the plane (``quaternion.twistor_translation``, the one
+  definition of it for both engines). From
   d/dalpha R(-alpha/2) = -1/2 J R(-alpha/2): dx/dalpha = -1/2 J x, dx/dp = 1/2 R(-alpha/2) --
   the virtual displacement map of eq. 4.27 written in r; d2x/dalpha2 = -1/4 x,
   d2x/dalpha dp = -1/4 J R(-alpha/2).
@@ -29,6 +31,7 @@ import numpy as np
 
 from flexure_sim.errors import as_array
 from flexure_sim.engine.kinematics.planar import half_cot
+from flexure_sim.engine.kinematics.quaternion import twistor_translation
 from flexure_sim.engine.kinematics.scalar import formula, stacked
 
 
@@ -37,8 +40,7 @@ def twistor(alpha, p1, p2):
     """Return (sigma, xi, x1, x2) of r = (alpha, p1, p2) and their derivatives dc/dr."""
     half = 0.5 * alpha
     sg, xi = np.cos(half), np.sin(half)
-    x1 = 0.5 * (sg * p1 + xi * p2)
-    x2 = 0.5 * (-xi * p1 + sg * p2)
+    x1, x2, _ = twistor_translation(sg, (0.0, 0.0, xi), (p1, p2, 0.0))
     hs, hx = 0.5 * sg, 0.5 * xi
     nhx = -hx
     dc = ((nhx, 0.0, 0.0),

@@ -42,8 +42,8 @@ The wrench body B exerts on the element (frame b coordinates, moment about b's o
 m_b = Lambda^T (W c + C c_dot) (eqs. 3.53, 4.35, 4.40); the hinge exerts -m_b on B. Energy and
 power as the planar laws report them (``laws.quadratic``): U, the conservative power
 P_c = -dU/dt = -m_elastic . delta_dot (what the elastic wrenches deliver to the bodies) and the
-dissipated power P_d = c_dot^T C c_dot >= 0. The functions on scalars are ``generic``
-(compiled, and evaluated on hyper-dual numbers for Jacobians).
+dissipated power P_d = c_dot^T C c_dot >= 0. The functions on scalars are formulas on
+a generic scalar (``kinematics.scalar``: compiled, and evaluated on hyper-dual numbers).
 """
 from __future__ import annotations
 
@@ -51,8 +51,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexure_sim.engine.kinematics.generic import generic, revalidate
+from flexure_sim.engine.kinematics.scalar import formula
 from flexure_sim.engine.kinematics.quaternion import angle_factor, cross, jr_coefficient
+from flexure_sim.engine.kinematics.quaternion import twistor_translation
 from flexure_sim.errors import as_array
 
 #: Law coordinate types (the ``law`` of a hinge), as in the planar engine.
@@ -60,18 +61,16 @@ TWISTOR, TWIST = 0, 1
 KINDS = {"twistor": TWISTOR, "twist": TWIST}
 
 
-@generic
+@formula(inline=False)
 def dual_quaternion(qr, p):
     """Return sigma, xi, sigma_0, x of the displacement (R(qr), p) (module docstring)."""
     sigma = qr[0]
     xi = (qr[1], qr[2], qr[3])
-    pxi = cross(p, xi)
-    x = (0.5 * (sigma * p[0] + pxi[0]), 0.5 * (sigma * p[1] + pxi[1]),
-         0.5 * (sigma * p[2] + pxi[2]))
-    return sigma, xi, -0.5 * (p[0] * xi[0] + p[1] * xi[1] + p[2] * xi[2]), x
+    return (sigma, xi, -0.5 * (p[0] * xi[0] + p[1] * xi[1] + p[2] * xi[2]),
+            twistor_translation(sigma, xi, p))
 
 
-@generic
+@formula(inline=False)
 def _twistor_rate(sigma, xi, sigma0, x, dw, dv):
     """Return Lambda (dw, dv) for the twistor coordinates (module docstring)."""
     a = cross(xi, dw)
@@ -84,7 +83,7 @@ def _twistor_rate(sigma, xi, sigma0, x, dw, dv):
             0.5 * (sigma * dv[2] + b[2] + sigma0 * dw[2] + e[2]))
 
 
-@generic
+@formula(inline=False)
 def _twistor_wrench(sigma, xi, sigma0, x, g):
     """Return Lambda^T g for the twistor coordinates: moment, then force."""
     g1 = (g[0], g[1], g[2])
@@ -99,7 +98,7 @@ def _twistor_wrench(sigma, xi, sigma0, x, g):
             0.5 * (sigma * g2[2] - e[2]))
 
 
-@generic
+@formula(inline=False)
 def _jr_inverse(w, c, u):
     """Return u + w x u / 2 + c w x (w x u) (A u of the module docstring)."""
     a = cross(w, u)
@@ -108,7 +107,7 @@ def _jr_inverse(w, c, u):
             u[2] + 0.5 * a[2] + c * b[2])
 
 
-@generic
+@formula(inline=False)
 def _jr_inverse_t(w, c, u):
     """Return A^T u = u - w x u / 2 + c w x (w x u)."""
     a = cross(w, u)
@@ -117,7 +116,7 @@ def _jr_inverse_t(w, c, u):
             u[2] - 0.5 * a[2] + c * b[2])
 
 
-@generic
+@formula(inline=False)
 def _jr_inverse_dual(w, v, c, dc, u, sign):
     """
     Return B u (sign 1) or B^T u (sign -1), B the dual part of Jr^-1(w + eps v).
@@ -136,7 +135,7 @@ def _jr_inverse_dual(w, v, c, dc, u, sign):
             0.5 * sign * vu[2] + c * (a[2] + b[2]) + k * e[2])
 
 
-@generic
+@formula(inline=False)
 def _matvec(M, h, c):
     """Return M[h] c for a stack of 6x6 matrices M and a 6-tuple c."""
     return (M[h, 0, 0] * c[0] + M[h, 0, 1] * c[1] + M[h, 0, 2] * c[2] + M[h, 0, 3] * c[3]
@@ -153,7 +152,7 @@ def _matvec(M, h, c):
             + M[h, 5, 4] * c[4] + M[h, 5, 5] * c[5])
 
 
-@generic
+@formula(inline=False)
 def law_terms(kind, qr, p, dw, dv, W, C, h):
     """
     Return (c, c_dot, m_b, m_elastic) of hinge h: coordinates, rates and wrenches (6-tuples).
@@ -188,7 +187,7 @@ def law_terms(kind, qr, p, dw, dv, W, C, h):
     return c, cdot, _twist_wrench(w, v, cs, dcs, g), _twist_wrench(w, v, cs, dcs, e)
 
 
-@generic
+@formula(inline=False)
 def _twist_wrench(w, v, cs, dcs, g):
     """Return Lambda^T g = (A^T g1 + B^T g2, A^T g2) for the twist coordinates."""
     g1 = (g[0], g[1], g[2])
@@ -263,7 +262,3 @@ class SpatialLaw:
     def potential_energy(self, quaternion, p) -> float:
         """Return U (J) at the deflection (R(quaternion), p)."""
         return self.evaluate(quaternion, p).energy
-
-
-# Numba keys a cache on its function's file only: flush when an imported source changed.
-revalidate(globals(), __file__)

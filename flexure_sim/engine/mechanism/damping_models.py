@@ -81,10 +81,11 @@ def natural_modes(stiffness: np.ndarray, mass: np.ndarray) -> tuple[np.ndarray, 
     """
     Return omega^2 (ascending) and M-orthonormal shapes of K phi = omega^2 M phi.
 
-    ``mass``: the diagonal of M. ValueError if K is not positive definite (a mechanism
-    that can move without deforming a hinge has no modes of its own).
+    ``mass``: the diagonal of M, or M (a spatial mechanism's, with its inertia tensors).
+    ValueError if K is not positive definite (a mechanism that can move without deforming a
+    hinge has no modes of its own).
     """
-    w2, shapes = scipy.linalg.eigh(stiffness, np.diag(mass))
+    w2, shapes = scipy.linalg.eigh(stiffness, np.diag(mass) if np.ndim(mass) == 1 else mass)
     if np.any(w2 <= 0):
         raise ValueError(
             "the tangent stiffness is not positive definite at this equilibrium "

@@ -28,10 +28,11 @@ def coordinate_unit(coordinate: Optional[str], force: bool = False) -> str:
     """
     Return the SI unit of a displacement (or force) along an axis, or about theta.
 
-    m along an axis, rad about theta; N and N m for a force (the units of drive inputs and
-    outputs, docs/mechanism_file.md, "Several drives and outputs; the XY stage").
+    m along an axis, rad about theta (or a spatial rx, ry, rz); N and N m for a force (the
+    units of drive inputs and outputs, docs/mechanism_file.md, "Several drives and outputs; the
+    XY stage").
     """
-    if coordinate == "theta":
+    if coordinate in ("theta", "rx", "ry", "rz"):
         return "N m" if force else "rad"
     return "N" if force else "m"
 
@@ -89,7 +90,32 @@ class Fixed:
 
 
 @dataclass(frozen=True)
-class Drive:
+class DriveFields:
+    """What a planar and a spatial drive both are (``Drive``, ``spatial_parts.Drive``)."""
+
+    body: str
+    axis: tuple
+    response_time: float
+    stroke: tuple[float, float]
+    slew_rate: float
+    name: str = "drive"
+    coordinate: Optional[str] = None
+    kind: str = "displacement"
+    actuator: Optional[PiezoSpec] = None
+    #: A body's coordinate names, translations first (``direction``).
+    coordinate_names = COORDINATE_NAMES
+
+    def direction(self, mech) -> np.ndarray:
+        """
+        Return the drive's direction e in the body coordinates of ``mech``.
+
+        The input is e . (z - z0) and a force drive's generalized force is e f (virtual work).
+        """
+        return direction(mech, self.body, self.axis, self.coordinate, self.coordinate_names)
+
+
+@dataclass(frozen=True)
+class Drive(DriveFields):
     """
     The driven input.
 
@@ -116,39 +142,25 @@ class Drive:
     None without one (docs/mechanism_file.md, "Piezo actuator").
     """
 
-    body: str
     axis: tuple[float, float]
-    response_time: float
-    stroke: tuple[float, float]
-    slew_rate: float
-    name: str = "drive"
-    coordinate: Optional[str] = None
-    kind: str = "displacement"
-    actuator: Optional[PiezoSpec] = None
-
-    def direction(self, mech: "Mechanism") -> np.ndarray:
-        """
-        Return the drive's direction e in the 3 n_bodies coordinates.
-
-        The drive's direction e in the 3 n_bodies coordinates: the input is e . (z - z0) and a
-        force drive's generalized force is e f (virtual work).
-        """
-        return direction(mech, self.body, self.axis, self.coordinate)
 
 
-def direction(mech: "Mechanism", body: str, axis, coordinate: Optional[str]) -> np.ndarray:
+def direction(mech, body: str, axis, coordinate: Optional[str],
+              names: tuple = COORDINATE_NAMES) -> np.ndarray:
     """
     Return the direction of a body's axis or coordinate.
 
-    e in the 3 n_bodies coordinates of a body's axis (unit vector in the root frame) or of one of
-    its coordinates (x, y, theta).
+    e in the len(names) n_bodies coordinates (``names``: a body's coordinates, translations
+    first; the planar (x, y, theta) or the spatial six) of a body's axis (unit vector in the
+    root frame, one entry per translation) or of one of its coordinates.
     """
-    e = np.zeros(3 * len(mech.bodies))
+    k = len(names)
+    e = np.zeros(k * len(mech.bodies))
     i = mech.body_index(body)
     if coordinate is not None:
-        e[3 * i + COORDINATE_NAMES.index(coordinate)] = 1.0
+        e[k * i + names.index(coordinate)] = 1.0
     else:
-        e[3 * i:3 * i + 2] = axis
+        e[k * i:k * i + len(axis)] = axis
     return e
 
 
@@ -181,7 +193,23 @@ Constraint = Union[Fixed, Drive, SineRate]
 
 
 @dataclass(frozen=True)
-class Output:
+class OutputFields:
+    """What a planar and a spatial output both are (``Output``, ``spatial_parts.Output``)."""
+
+    body: str
+    axis: tuple
+    name: str = "output"
+    coordinate: Optional[str] = None
+    #: A body's coordinate names, translations first (``direction``).
+    coordinate_names = COORDINATE_NAMES
+
+    def direction(self, mech) -> np.ndarray:
+        """Return the output's direction c in the body coordinates: the output is c . (z - z0)."""
+        return direction(mech, self.body, self.axis, self.coordinate, self.coordinate_names)
+
+
+@dataclass(frozen=True)
+class Output(OutputFields):
     """
     The displacement reported as an output.
 
@@ -189,22 +217,40 @@ class Output:
     of the body (``coordinate``: x, y or theta) from rest.
     """
 
-    body: str
     axis: tuple[float, float]
-    name: str = "output"
-    coordinate: Optional[str] = None
 
-    def direction(self, mech: "Mechanism") -> np.ndarray:
-        """
-        Return the output's direction c in the 3 n_bodies coordinates.
 
-        c in the 3 n_bodies coordinates: the output is c . (z - z0).
-        """
-        return direction(mech, self.body, self.axis, self.coordinate)
+class Lookup:
+    """Look-ups by name shared by the planar and the spatial ``Mechanism``."""
+
+    name: str
+    bodies: tuple
+    hinges: tuple
+    constraints: tuple
+    drive_type: type
+
+    def body_index(self, name: str) -> int:
+        """Index of a body by name (ValueError naming it if unknown)."""
+        for i, body in enumerate(self.bodies):
+            if body.name == name:
+                return i
+        raise ValueError(f"unknown body {name!r} in mechanism {self.name!r}")
+
+    def hinge_index(self, name: str) -> int:
+        """Index of a hinge by name (ValueError naming it if unknown)."""
+        for i, hinge in enumerate(self.hinges):
+            if hinge.name == name:
+                return i
+        raise ValueError(f"unknown hinge {name!r} in mechanism {self.name!r}")
+
+    @property
+    def drives(self) -> tuple:
+        """Every drive constraint, in the order of the constraints."""
+        return tuple(c for c in self.constraints if isinstance(c, self.drive_type))
 
 
 @dataclass(frozen=True)
-class Mechanism:
+class Mechanism(Lookup):
     """
     A planar flexure mechanism.
 
@@ -231,30 +277,14 @@ class Mechanism:
     #: by ``damping_models.damping_matrix``), besides the hinges' own; None: hinges only.
     damping: Optional[DampingSpec] = None
 
-    def body_index(self, name: str) -> int:
-        """Index of a body by name (ValueError naming it if unknown)."""
-        for i, body in enumerate(self.bodies):
-            if body.name == name:
-                return i
-        raise ValueError(f"unknown body {name!r} in mechanism {self.name!r}")
-
-    def hinge_index(self, name: str) -> int:
-        """Index of a hinge by name (ValueError naming it if unknown)."""
-        for i, hinge in enumerate(self.hinges):
-            if hinge.name == name:
-                return i
-        raise ValueError(f"unknown hinge {name!r} in mechanism {self.name!r}")
+    #: The class of its drive constraints (``Lookup.drives``).
+    drive_type = Drive
 
     @property
     def drive(self) -> Optional[Drive]:
         """Return the drive constraint, if the mechanism has one."""
         drives = self.drives
         return drives[0] if drives else None
-
-    @property
-    def drives(self) -> tuple[Drive, ...]:
-        """Every drive constraint, in the order of the constraints."""
-        return tuple(c for c in self.constraints if isinstance(c, Drive))
 
     @property
     def all_outputs(self) -> tuple[Output, ...]:

@@ -11,12 +11,11 @@ velocity (wx, wy, wz) in body coordinates.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional, Union
+from typing import Union
 
-import numpy as np
 
 from flexure_sim.engine.laws.spatial import SpatialLaw
-from flexure_sim.engine.mechanism.parts import Fixed
+from flexure_sim.engine.mechanism.parts import DriveFields, Fixed, Lookup, OutputFields
 
 #: Names of a body's six coordinates; ``theta`` (a planar file's) is ``rz``.
 COORDINATE_NAMES = ("x", "y", "z", "rx", "ry", "rz")
@@ -68,7 +67,7 @@ class Hinge:
 
 
 @dataclass(frozen=True)
-class Drive:
+class Drive(DriveFields):
     """
     A drive: a displacement drive prescribes its body's displacement along ``axis``.
 
@@ -80,52 +79,25 @@ class Drive:
     coordinate, or a torque about the root axis of a rotation coordinate (rx, ry, rz).
     """
 
-    body: str
     axis: tuple[float, float, float]
-    response_time: float
-    stroke: tuple[float, float]
-    slew_rate: float
-    name: str = "drive"
-    coordinate: Optional[str] = None
-    kind: str = "displacement"
     #: A piezo actuator block: not supported in 3-D (always None; ``drives.DriveTable`` reads it).
     actuator: None = None
-
-    def direction(self, mech: "Mechanism") -> np.ndarray:
-        """Return e in the 6 n_bodies coordinates: the input is e . (z - z0)."""
-        return direction(mech, self.body, self.axis, self.coordinate)
+    coordinate_names = COORDINATE_NAMES
 
 
 @dataclass(frozen=True)
-class Output:
+class Output(OutputFields):
     """A body's displacement along a root ``axis``, or one of its coordinates, from rest."""
 
-    body: str
     axis: tuple[float, float, float]
-    name: str = "output"
-    coordinate: Optional[str] = None
-
-    def direction(self, mech: "Mechanism") -> np.ndarray:
-        """Return c in the 6 n_bodies coordinates: the output is c . (z - z0)."""
-        return direction(mech, self.body, self.axis, self.coordinate)
-
-
-def direction(mech: "Mechanism", body: str, axis, coordinate: Optional[str]) -> np.ndarray:
-    """Return the direction of a body's root axis or of one of its coordinates."""
-    e = np.zeros(6 * len(mech.bodies))
-    i = mech.body_index(body)
-    if coordinate is not None:
-        e[6 * i + COORDINATE_NAMES.index(coordinate)] = 1.0
-    else:
-        e[6 * i:6 * i + 3] = axis
-    return e
+    coordinate_names = COORDINATE_NAMES
 
 
 Constraint = Union[Fixed, Drive]
 
 
 @dataclass(frozen=True)
-class Mechanism:
+class Mechanism(Lookup):
     """
     A spatial flexure mechanism (``space: 3d``, or a planar file opened in 3-D).
 
@@ -143,26 +115,10 @@ class Mechanism:
     metadata: dict = field(default_factory=dict)
     planar: object = None
 
-    def body_index(self, name: str) -> int:
-        """Index of a body by name (ValueError naming it if unknown)."""
-        for i, body in enumerate(self.bodies):
-            if body.name == name:
-                return i
-        raise ValueError(f"unknown body {name!r} in mechanism {self.name!r}")
-
-    def hinge_index(self, name: str) -> int:
-        """Index of a hinge by name (ValueError naming it if unknown)."""
-        for i, hinge in enumerate(self.hinges):
-            if hinge.name == name:
-                return i
-        raise ValueError(f"unknown hinge {name!r} in mechanism {self.name!r}")
+    #: The class of its drive constraints (``parts.Lookup.drives``).
+    drive_type = Drive
 
     @property
     def all_outputs(self) -> tuple[Output, ...]:
         """Return the outputs (as the planar ``Mechanism.all_outputs``)."""
         return self.outputs
-
-    @property
-    def drives(self) -> tuple[Drive, ...]:
-        """Every drive, in the order of the constraints."""
-        return tuple(c for c in self.constraints if isinstance(c, Drive))

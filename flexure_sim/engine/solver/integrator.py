@@ -20,6 +20,7 @@ own (``step_energy``).
 from __future__ import annotations
 
 import math
+from typing import Callable, NamedTuple
 
 import numpy as np
 import scipy.linalg
@@ -111,16 +112,21 @@ def _shifted_phi1(A: np.ndarray, expA: np.ndarray, h: float, tau: float) -> np.n
     return h * scipy.linalg.expm(aug)[:m, m:]
 
 
-def moved_too_far(model: Model, data: Data, z: np.ndarray) -> bool:
-    """Whether z is further than ``relinearize_tol`` from the linearization's z."""
+def moved_too_far(model: Model, data: Data, z: np.ndarray, per_body: int = 3,
+                  translations: int = 2) -> bool:
+    """
+    Whether z is further than ``relinearize_tol`` from the linearization's z.
+
+    Translations (the first ``translations`` of each body's ``per_body`` coordinates: the
+    planar x, y; the spatial x, y, z) count relative to ``model.length_scale``, rotations in rad.
+    """
     tol = model.relinearize_tol
     if tol is None:
         return False
     if data.lin is None:  # none yet: one is due
         return True
-    moved = np.abs(z - data.lin.z)
-    moved[0::3] /= model.length_scale
-    moved[1::3] /= model.length_scale
+    moved = np.abs(z - data.lin.z).reshape(-1, per_body)
+    moved[:, :translations] /= model.length_scale
     return bool(np.max(moved) > tol)
 
 
@@ -213,36 +219,9 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
         dissipated, work = s.dissipated, s.drive_work + jump_work(model, s, command)
     else:
         dissipated = work = math.nan
-    remaining = int(n)
-    fresh = settled = False
-    while remaining > 0:
-        ahead = rows[min(int(n) - remaining, len(rows) - 1):]
-        if data.lin is None or (model.relinearize_tol is not None
-                                and moved_too_far(model, data, model.unpack(y, t, command)[0])):
-            linearize(model, data, y, t, ahead[0])
-            fresh = True
-        chunk = 1 if model.relinearize_tol is not None else remaining
-        y, F0, aux0, ye, command, dd, dw, steps, iterations, status = _advance(
-            model, data, chunk, y, t, ahead, command, F0, aux0, ye)
-        dissipated += dd
-        work += dw
-        remaining -= steps
-        k += steps
-        t = origin + k * dt
-        data.stats.steps += steps
-        data.stats.iterations += iterations
-        if status == stepping.NOT_CONTRACTING:
-            if steps == 0 and fresh:
-                if settled or not model.drives.n_lags:
-                    raise SolverError(_not_converging(model, t + dt))
-                linearize(model, data, y, t, _settled(model, y, ahead[0]))
-                settled = True
-                continue
-            data.lin = None
-        elif status == stepping.SLOW:
-            data.lin = None
-        if steps:
-            fresh = settled = False
+    y, t, k, F0, aux0, ye, command, dissipated, work = march(
+        model, data, n, (y, t, origin, k), rows, command, (F0, aux0, ye), (dissipated, work),
+        PLANAR)
     if not np.isfinite(y).all():
         raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
     if model.compiled:  # Model.unpack, compiled: a few us less per call
@@ -261,6 +240,66 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     # tick report (``tick_report.TickReport.fill_data``) while those are the state's.
     data.cache = (data.state, command.tobytes(), F0, aux0, ye, y, command, held.tobytes(),
                   s.programs)
+
+
+class Stepper(NamedTuple):
+    """What ``march`` calls that depends on the engine: planar (``PLANAR``) or spatial."""
+
+    linearize: Callable
+    advance: Callable
+    moved_too_far: Callable
+
+
+def march(model, data: Data, n: int, at: tuple, rows: np.ndarray, command: np.ndarray,
+          seed: tuple, energies: tuple, stepper: Stepper) -> tuple:
+    """
+    Take n steps from y at time t = origin + k dt: the loop of ``step``, for both engines.
+
+    ``at`` = (y, t, origin, k); ``seed`` = (F0, aux0, ye) of the step loop; ``energies`` =
+    (dissipated, work) so far. Linearizes when there is no Jacobian (or the configuration moved
+    more than ``relinearize_tol``), advances in compiled chunks, takes a fresh Jacobian when
+    the remainder iteration stops contracting or contracts slowly, and retries a step that
+    does not converge with a fresh one once where the lagged drives have settled (``step``).
+    Return (y, t, k, F0, aux0, ye, command, dissipated, work).
+    """
+    y, t, origin, k = at
+    F0, aux0, ye = seed
+    dissipated, work = energies
+    dt = model.dt
+    remaining = int(n)
+    fresh = settled = False
+    while remaining > 0:
+        ahead = rows[min(int(n) - remaining, len(rows) - 1):]
+        if data.lin is None or (model.relinearize_tol is not None and stepper.moved_too_far(
+                model, data, model.unpack(y, t, command)[0])):
+            stepper.linearize(model, data, y, t, ahead[0])
+            fresh = True
+        chunk = 1 if model.relinearize_tol is not None else remaining
+        y, F0, aux0, ye, command, dd, dw, steps, iterations, status = stepper.advance(
+            model, data, chunk, y, t, ahead, command, F0, aux0, ye)
+        dissipated += dd
+        work += dw
+        remaining -= steps
+        k += steps
+        t = origin + k * dt
+        data.stats.steps += steps
+        data.stats.iterations += iterations
+        if status == stepping.NOT_CONTRACTING:
+            if steps == 0 and fresh:
+                if settled or not model.drives.n_lags:
+                    raise SolverError(_not_converging(model, t + dt))
+                stepper.linearize(model, data, y, t, _settled(model, y, ahead[0]))
+                settled = True
+                continue
+            data.lin = None
+        elif status == stepping.SLOW:
+            data.lin = None
+        if steps:
+            fresh = settled = False
+    return y, t, k, F0, aux0, ye, command, dissipated, work
+
+
+PLANAR = Stepper(linearize, _advance, moved_too_far)
 
 
 def _settled(model: Model, y: np.ndarray, command: np.ndarray) -> np.ndarray:

@@ -3,7 +3,8 @@ The simulation facade: a shared ``Model`` (constants) and its own ``Data`` (stat
 
 ``Simulation`` keeps the public API the node, the CLI and the tools use (constructor,
 ``step``, ``snapshot``, ``set_command``, ``reset``, ``static``, ``static_sweep``, the
-``state``/``stats`` attributes) over the split engine:
+``state``/``stats`` attributes; those it shares with ``SpatialSimulation`` are
+``state.Facade``'s) over the split engine:
 
 - ``model.Model``: the mechanism prepared for stepping (partition, masses, hinge assembly,
   compiled kernel arguments) and the formulas of F(y, t), its Jacobian and the reported
@@ -25,7 +26,7 @@ import numpy as np
 
 from flexure_sim.engine.solver import actuation, statics
 from flexure_sim.engine.solver.compression import stiffness_centre
-from flexure_sim.engine.solver.state import Data, State, StepStats
+from flexure_sim.engine.solver.state import Data, Facade, State, StepStats
 from flexure_sim.engine.mechanism.parts import Mechanism
 from flexure_sim.engine.solver.model import DEFAULT_STEP, Model, SolverError
 from flexure_sim.engine.solver.programs import Program
@@ -38,7 +39,7 @@ __all__ = [
 ]
 
 
-class Simulation:
+class Simulation(Facade):
     """
     A model, one run's data, and the stepping / static solvers.
 
@@ -60,42 +61,18 @@ class Simulation:
             self.model = Model(source, dt, relinearize_tol, True if energy is None else energy)
         self.data = Data(self.model.z0, self.model.drives.n_lags, len(self.model.drives))
 
-    # The model's constants, as attributes of the simulation (read-only views).
-    mechanism = property(lambda self: self.model.mechanism)
+    # More of the model's constants, as attributes (``state.Facade`` has the common ones).
     assembly = property(lambda self: self.model.assembly)
     drive = property(lambda self: self.model.drive)
-    dt = property(lambda self: self.model.dt)
     relinearize_tol = property(lambda self: self.model.relinearize_tol)
-    z0 = property(lambda self: self.model.z0)
     mass = property(lambda self: self.model.mass)
     part = property(lambda self: self.model.part)
     length_scale = property(lambda self: self.model.length_scale)
-
-    @property
-    def state(self) -> State:
-        """Return the current state; assign a State to continue from it."""
-        return self.data.state
-
-    @state.setter
-    def state(self, value: State) -> None:
-        self.data.state = value
-
-    @property
-    def stats(self) -> StepStats:
-        """Counters of the stepping work since the last reset."""
-        return self.data.stats
-
-    @stats.setter
-    def stats(self, value: StepStats) -> None:
-        self.data.stats = value
+    snapshot_of = staticmethod(snapshot)
 
     def initial_state(self) -> State:
         """All bodies at their unstressed poses, at rest, actuator at zero, t = 0."""
         return self.data.initial_state()
-
-    def reset(self) -> None:
-        """Back to the initial state; statistics restart."""
-        self.data.reset()
 
     def step(self, n: int = 1) -> None:
         """
@@ -205,10 +182,6 @@ class Simulation:
     def static_sweep(self, inputs, t: float = 0.0, tol: float = 1e-13) -> StaticSweep:
         """Return static equilibria for many drive inputs (``statics.static_sweep``)."""
         return statics.static_sweep(self.model, inputs, t, tol)
-
-    def snapshot(self, state: Optional[State] = None) -> Snapshot:
-        """Everything the simulation reports, at ``state`` (default: the current state)."""
-        return snapshot(self.model, state or self.data.state)
 
     def hinge_compression(self, z: np.ndarray) -> Optional[float]:
         """Compression of the compression hinge at coordinates z (``Model.hinge_compression``)."""

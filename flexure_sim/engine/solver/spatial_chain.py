@@ -21,19 +21,20 @@ work with omega in body coordinates) are
 
 the spatial form of eqs. 4.34-4.39. Rigid bodies add -omega x (I_b omega) (Euler's equations),
 force drives f e on a translation (root axis e) or f R^T e on the rotation (a torque about
-the root axis e). Everything here is ``generic``: the stepping kernel compiles it, and the
-Jacobians are the hyper-dual evaluations of this same code.
+the root axis e). Everything here is a formula on a generic scalar
+(``kinematics.scalar``): the stepping kernel compiles it, and the Jacobians are the complex-step
+and hyper-dual evaluations of this same code.
 """
 from __future__ import annotations
 
-from flexure_sim.engine.kinematics.generic import buffer, generic, real_part, revalidate
+from flexure_sim.engine.kinematics.scalar import buffer, formula, real
 from flexure_sim.engine.kinematics.quaternion import cross, matrix_of, phi_rate, qconj_mul, qmul
 from flexure_sim.engine.kinematics.quaternion import quaternion_exp, rotate, rotate_back
 from flexure_sim.engine.kinematics.quaternion import rotation_vector
 from flexure_sim.engine.laws.spatial import law_terms
 
 
-@generic
+@formula(inline=False)
 def bodies(z, q0, quat, rot):
     """Fill quat (nb, 4) and rot (nb, 9) with each body's orientation R0 Exp(phi)."""
     for i in range(q0.shape[0]):
@@ -46,22 +47,22 @@ def bodies(z, q0, quat, rot):
             rot[i, k] = R[k]
 
 
-@generic
+@formula(inline=False)
 def _row9(a, i):
     return (a[i, 0], a[i, 1], a[i, 2], a[i, 3], a[i, 4], a[i, 5], a[i, 6], a[i, 7], a[i, 8])
 
 
-@generic
+@formula(inline=False)
 def _row4(a, i):
     return a[i, 0], a[i, 1], a[i, 2], a[i, 3]
 
 
-@generic
+@formula(inline=False)
 def _row3(a, i):
     return a[i, 0], a[i, 1], a[i, 2]
 
 
-@generic
+@formula(inline=False)
 def hinge(h, z, w, quat, rot, geometry, Q, deflection, wrench, power, report):
     """
     Add hinge h's generalized forces to Q; with ``report`` fill its deflection, wrench, power.
@@ -123,15 +124,15 @@ def hinge(h, z, w, quat, rot, geometry, Q, deflection, wrench, power, report):
     power[h, 2] = pd
 
 
-@generic
+@formula(inline=False)
 def _rotation_vector_of(qr):
     """Return the rotation vector of qr with the sign of the shorter rotation (|phi| <= pi)."""
-    if real_part(qr[0]) < 0.0:
+    if real(qr[0]) < 0.0:
         return rotation_vector((-qr[0], -qr[1], -qr[2], -qr[3]))
     return rotation_vector(qr)
 
 
-@generic
+@formula(inline=False)
 def _energy(M, h, c):
     """Return 1/2 c^T M[h] c."""
     s = 0.0 * c[0]
@@ -141,7 +142,7 @@ def _energy(M, h, c):
     return s
 
 
-@generic
+@formula(inline=False)
 def terms(z, w, command, first_force, constants, Q, zdot, deflection, wrench, power, report):
     """
     Fill Q (6 nb) with every generalized force at (z, w) and zdot with dz/dt.
@@ -189,7 +190,3 @@ def terms(z, w, command, first_force, constants, Q, zdot, deflection, wrench, po
             for k in range(3):
                 Q[6 * i + k] += e[k] * f
     return energy, dissipation
-
-
-# Numba keys a cache on its function's file only: flush when an imported source changed.
-revalidate(globals(), __file__)

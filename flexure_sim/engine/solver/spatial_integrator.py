@@ -7,8 +7,9 @@ earlier state (``SpatialModel.jacobian``) and re-taken only when the remainder i
 contracting (or the configuration moved by more than ``relinearize_tol``). The linearization
 (A, h phi_1, h phi_2 from the block exponential of ``integrator.phi_matrices``, one per
 independent block of A: ``phi_by_blocks``) is the planar engine's ``integrator.linearize``;
-the loop is ``step_loop``'s, compiled with the spatial right-hand side
-(``spatial_kernels.advance``). Time stays on the step grid, as there.
+the loop is the planar engine's (``integrator.march``, with its retries), its compiled part
+``step_loop``'s with the spatial right-hand side (``spatial_kernels.advance``). Time stays
+on the step grid, as there.
 """
 from __future__ import annotations
 
@@ -18,8 +19,8 @@ import numpy as np
 import scipy.sparse.csgraph
 
 from flexure_sim.engine.solver import spatial_kernels as kernels
-from flexure_sim.engine.solver import step_loop as stepping
-from flexure_sim.engine.solver.integrator import phi_matrices
+from flexure_sim.engine.solver.integrator import Stepper, march, phi_matrices
+from flexure_sim.engine.solver.integrator import moved_too_far as planar_moved_too_far
 from flexure_sim.engine.solver.model import SolverError
 from flexure_sim.engine.solver.spatial_model import SpatialModel
 from flexure_sim.engine.solver.state import Data, Linearization, State
@@ -58,15 +59,21 @@ def linearize(model: SpatialModel, data: Data, y: np.ndarray, t: float, command)
 
 
 def moved_too_far(model: SpatialModel, data: Data, z: np.ndarray) -> bool:
-    """Whether z moved further than ``relinearize_tol`` from the linearization's z."""
-    tol = model.relinearize_tol
-    if tol is None:
-        return False
-    if data.lin is None:  # none yet: one is due
-        return True
-    moved = np.abs(z - data.lin.z).reshape(-1, 6)
-    moved[:, :3] /= model.length_scale
-    return bool(np.max(moved) > tol)
+    """Whether z moved further than ``relinearize_tol`` (``integrator.moved_too_far``)."""
+    return planar_moved_too_far(model, data, z, per_body=6, translations=3)
+
+
+def _advance(model: SpatialModel, data: Data, n, y, t, rows, held, F0, aux0, ye):
+    """Advance up to n steps in the compiled spatial loop (``spatial_kernels.advance``)."""
+    lin = data.lin
+    assert lin is not None  # march() linearizes before it advances
+    return kernels.advance(n, y, t, model.dt, rows, held, lin.A, lin.phi1, lin.phi2,
+                           model.iteration_rtol, model.atol, model.max_iterations,
+                           model.relinearize_after, F0, aux0, ye, NO_ENERGY, model.kernel_args)
+
+
+#: The planar engine's step loop (``integrator.march``) with the spatial model's pieces.
+SPATIAL = Stepper(linearize, _advance, moved_too_far)
 
 
 def step(model: SpatialModel, data: Data, n: int = 1) -> None:
@@ -79,7 +86,6 @@ def step(model: SpatialModel, data: Data, n: int = 1) -> None:
     if clock is None or clock[0] is not s:
         clock = (s, s.t, 0)
     _, origin, k = clock
-    dt = model.dt
     y, t = model.pack(s), s.t
     cache = data.cache
     if cache is not None and cache[0] is s and cache[1] == key:
@@ -87,38 +93,11 @@ def step(model: SpatialModel, data: Data, n: int = 1) -> None:
     else:
         F0, aux0 = model.rhs(y, t, command)
         ye = y
-    remaining = int(n)
-    fresh = False
-    while remaining > 0:
-        if data.lin is None or (model.relinearize_tol is not None
-                                and moved_too_far(model, data, model.unpack(y, t, command)[0])):
-            linearize(model, data, y, t, command)
-            fresh = True
-        lin = data.lin
-        assert lin is not None  # linearized just above when there was none
-        chunk = 1 if model.relinearize_tol is not None else remaining
-        y, F0, aux0, ye, command, _, _, steps, iterations, status = kernels.advance(
-            chunk, y, t, dt, rows, command, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,
-            model.atol, model.max_iterations, model.relinearize_after, F0, aux0, ye, NO_ENERGY,
-            model.kernel_args)
-        remaining -= steps
-        k += steps
-        t = origin + k * dt
-        data.stats.steps += steps
-        data.stats.iterations += iterations
-        if status == stepping.NOT_CONTRACTING:
-            if steps == 0 and fresh:
-                raise SolverError(
-                    f"step to t = {t + dt:.6g} s did not converge even with a fresh Jacobian; "
-                    f"reduce the step ({dt:g} s)")
-            data.lin = None
-        elif status == stepping.SLOW:
-            data.lin = None
-        if steps:
-            fresh = False
+    y, t, k, F0, aux0, ye, command, _, _ = march(
+        model, data, n, (y, t, origin, k), rows, command, (F0, aux0, ye), (0.0, 0.0), SPATIAL)
     z, w, u = model.unpack(y, t, command)
     if not np.all(np.isfinite(y)):
-        raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
+        raise SolverError(f"non-finite state at t = {t:.6g} s (step {model.dt:g} s)")
     model.check_range(z)
     data.state = State(t, z, w, model.state_u(u), s.command, math.nan, math.nan)
     data.clock = (data.state, origin, k)

@@ -1,9 +1,8 @@
 """
 The spatial engine's compiled stepping: F(y, t) of a spatial mechanism, and the loop that steps it.
 
-F(y, t) for y = (z_F, w_F, u) (``spatial_model.SpatialModel``): the prescribed coordinates and
-their
-rates from the drives (``motion.prescribed_motion``, the planar engine's), the generalized
+F(y, t) for y = (z_F, w_F, u) (``spatial_model.SpatialModel``): the coordinates, the prescribed
+ones and their rates from the drives (``motion.coordinates``, the planar engine's), the generalized
 forces and coordinate rates of ``spatial_chain.terms``, and
 
     dz_F/dt = (dz/dt)_F,    dw_F/dt = (M^-1 Q)_F,    du/dt = (command - u) / tau,
@@ -24,7 +23,7 @@ from flexure_sim.engine import jit
 from flexure_sim.engine.jit import njit
 from flexure_sim.engine.solver import spatial_chain as chain
 from flexure_sim.engine.solver import step_loop as stepping
-from flexure_sim.engine.solver.motion import prescribed_motion
+from flexure_sim.engine.solver.motion import coordinates
 from flexure_sim.engine.solver.step_energy import AUX_LOAD
 
 
@@ -47,18 +46,10 @@ def spatial_rhs(y, t, command, args):
     nF = free.shape[0]
     nd = tau.shape[0]
     u = y[2 * nF:2 * nF + nd]
-    zP, vP, aP = prescribed_motion(t, u, command, tau, zP0, D, sine_index, sine_amp, sine_w,
-                                   sine_phase, Dp, first_program)
     nb = inverse_mass.shape[0]
     N = 6 * nb
-    z = np.empty(N)
-    w = np.empty(N)
-    for i in range(nF):
-        z[free[i]] = y[i]
-        w[free[i]] = y[nF + i]
-    for i in range(prescribed.shape[0]):
-        z[prescribed[i]] = zP[i]
-        w[prescribed[i]] = vP[i]
+    z, w, _ = coordinates(y, t, command, free, prescribed, N, tau, zP0, D, sine_index, sine_amp,
+                          sine_w, sine_phase, Dp, first_program)
     Q = np.empty(N)
     zdot = np.empty(N)
     none = np.empty((0, 6))
@@ -86,7 +77,14 @@ def spatial_rhs(y, t, command, args):
     return out[:m], out[m:]
 
 
-#: The complex step (module docstring of ``kinematics.generic``): small enough that its square
+@njit(cache=True)
+def terms(z, w, command, first_force, constants, Q, zdot, deflection, wrench, power, report):
+    """Return ``spatial_chain.terms`` on floats, compiled (the reports' entry from Python)."""
+    return chain.terms(z, w, command, first_force, constants, Q, zdot, deflection, wrench,
+                       power, report)
+
+
+#: The complex step (module docstring of ``kinematics.scalar``): small enough that its square
 #: is lost against every value (1e-80), large enough that h times any derivative stays far
 #: from underflow.
 COMPLEX_STEP = 1e-40
@@ -145,4 +143,4 @@ def _bind():
 advance = _bind()
 
 # Numba keys a cache on its function's file: flush when any source of these kernels changes.
-jit.revalidate([spatial_rhs, complex_step, no_switch_work, advance], __file__)
+jit.revalidate([spatial_rhs, terms, complex_step, no_switch_work, advance], __file__)

@@ -10,7 +10,7 @@ exactly.
 
 Exact Jacobians: the same ``spatial_chain.terms`` the kernel compiles, evaluated on complex
 numbers one seed at a time (the complex step, ``spatial_kernels.complex_step``) or on
-hyper-dual numbers seeded along all the state's directions at once (``kinematics.generic``),
+hyper-dual numbers seeded along all the state's directions at once (``kinematics.scalar``),
 gives dQ/dy and d(dz/dt)/dy to rounding.
 """
 from __future__ import annotations
@@ -19,7 +19,7 @@ from typing import Optional
 
 import numpy as np
 
-from flexure_sim.engine.kinematics import generic
+from flexure_sim.engine.kinematics import scalar
 from flexure_sim.engine.kinematics.quaternion import matrix as quaternion_matrix
 from flexure_sim.engine.mechanism.parts import Fixed
 from flexure_sim.engine.mechanism.spatial_loader import drive_coordinates
@@ -261,9 +261,9 @@ class SpatialModel:
         N = self.n_coordinates
         Q, zdot = np.empty(N), np.empty(N)
         out = np.empty((nh, 6)), np.empty((nh, 6)), np.empty((nh, 3))
-        energy, diss = chain.terms(np.asarray(z, dtype=float), np.asarray(w, dtype=float),
-                                   command, self.first_force, self.constants, Q, zdot, *out,
-                                   True)
+        energy, diss = kernels.terms(np.asarray(z, dtype=float), np.asarray(w, dtype=float),
+                                     command, self.first_force, self.constants, Q, zdot, *out,
+                                     True)
         return (Q, zdot, *out, float(energy), float(diss))
 
     def derivatives(self, z, w, command, Zx: np.ndarray, Wx: np.ndarray,
@@ -273,7 +273,7 @@ class SpatialModel:
 
         Zx (N, m), Wx (N, m): dz/ds and dw/ds; Cx (n_command, m): d(kernel command)/ds. The
         compiled ``spatial_kernels.complex_step`` of ``spatial_chain.terms``;
-        ``derivatives_hyperdual`` gives the same from the interpreted binding.
+        ``derivatives_hyperdual`` gives the same from hyper-dual numbers.
         """
         command = np.asarray(self.kernel_command(0.0 if command is None else command),
                              dtype=float)
@@ -287,24 +287,23 @@ class SpatialModel:
     def derivatives_hyperdual(self, z, w, command, Zx: np.ndarray, Wx: np.ndarray,
                               Cx: Optional[np.ndarray] = None):
         """
-        Return what ``derivatives`` returns, from hyper-dual numbers (the interpreted binding).
+        Return what ``derivatives`` returns, from hyper-dual numbers (the formula in Python).
 
         About 100 times slower than the complex step; the two agree to rounding (a test).
         """
         m = Zx.shape[1]
-        ns = generic.interpreted(chain)
         command = self.kernel_command(0.0 if command is None else command)
-        cmd = (generic.seeded(command, Cx) if Cx is not None
+        cmd = (scalar.seeded(command, Cx) if Cx is not None
                else np.array(command, dtype=object))
         nh = len(self.mechanism.hinges)
         N = self.n_coordinates
-        Q, zdot = generic.zeros(N), generic.zeros(N)
-        wrench = generic.zeros((nh, 6))
-        ns.terms(generic.seeded(z, Zx), generic.seeded(w, Wx), cmd, self.first_force,
-                 self.constants, Q, zdot, generic.zeros((nh, 6)), wrench, generic.zeros((nh, 3)),
-                 True)
-        return (generic.derivatives_of(Q, m), generic.derivatives_of(zdot, m),
-                generic.derivatives_of(wrench, m))
+        Q, zdot = scalar.zeros(N), scalar.zeros(N)
+        wrench = scalar.zeros((nh, 6))
+        chain.terms(scalar.seeded(z, Zx), scalar.seeded(w, Wx), cmd, self.first_force,
+                    self.constants, Q, zdot, scalar.zeros((nh, 6)), wrench,
+                    scalar.zeros((nh, 3)), True)
+        return (scalar.derivatives_of(Q, m), scalar.derivatives_of(zdot, m),
+                scalar.derivatives_of(wrench, m))
 
     def accelerations(self, Q: np.ndarray) -> np.ndarray:
         """Return M^-1 Q (every body; also for a stack of columns Q (N, m))."""

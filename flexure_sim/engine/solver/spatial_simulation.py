@@ -3,10 +3,10 @@ The spatial simulation facade: a shared ``SpatialModel`` (constants) and its own
 
 The planar ``solver.simulation.Simulation``'s shape, so that the node and the tools can drive
 either: ``step``, ``snapshot``, ``set_command``, ``reset``, ``static``, ``static_gain`` and the
-``state``/``stats`` attributes; the linear model and modes are ``analysis.spatial_linear``'s.
-A state's z holds six coordinates per body (position, rotation vector from rest:
-``kinematics.quaternion``) and v the quasi-velocities (root-frame velocity, body-frame angular
-velocity: ``solver.spatial_chain``).
+``state``/``stats`` attributes (those both have are ``state.Facade``'s); the linear model and
+modes are ``analysis.spatial_linear``'s. A state's z holds six coordinates per body (position,
+rotation vector from rest: ``kinematics.quaternion``) and v the quasi-velocities (root-frame
+velocity, body-frame angular velocity: ``solver.spatial_chain``).
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from flexure_sim.engine.solver import spatial_integrator as dynamics
 from flexure_sim.engine.solver import spatial_statics as statics
 from flexure_sim.engine.solver.model import DEFAULT_STEP
 from flexure_sim.engine.solver.spatial_model import SpatialModel
-from flexure_sim.engine.solver.state import Data, State, StepStats
+from flexure_sim.engine.solver.state import Data, Facade, State
 
 
 @dataclass(frozen=True)
@@ -79,7 +79,7 @@ def snapshot(model: SpatialModel, s: State, inputs=None) -> SpatialSnapshot:
         dict(zip(model.output_names, model.output_values(s.z).tolist())))
 
 
-class SpatialSimulation:
+class SpatialSimulation(Facade):
     """A spatial model, one run's data, and the stepping, static and linear solvers."""
 
     def __init__(self, source: Union[Mechanism, SpatialModel], dt: float = DEFAULT_STEP,
@@ -94,27 +94,7 @@ class SpatialSimulation:
             self.model = SpatialModel(source, dt, relinearize_tol)
         self.data = Data(self.model.z0, self.model.n_actuators, len(self.model.drives))
 
-    mechanism = property(lambda self: self.model.mechanism)
-    dt = property(lambda self: self.model.dt)
-    z0 = property(lambda self: self.model.z0)
-
-    @property
-    def state(self) -> State:
-        """Return the current state; assign a State to continue from it."""
-        return self.data.state
-
-    @state.setter
-    def state(self, value: State) -> None:
-        self.data.state = value
-
-    @property
-    def stats(self) -> StepStats:
-        """Counters of the stepping work since the last reset."""
-        return self.data.stats
-
-    def reset(self) -> None:
-        """Back to the initial state (rest poses, at rest, drives at 0, t = 0)."""
-        self.data.reset()
+    snapshot_of = staticmethod(snapshot)
 
     def step(self, n: int = 1) -> None:
         """Advance n fixed steps with the drives' commands held (``spatial_integrator.step``)."""
@@ -125,10 +105,6 @@ class SpatialSimulation:
         if not self.model.drives:
             raise ValueError(f"mechanism {self.model.mechanism.name!r} has no drive")
         self.data.state.command = self.model.drive_inputs(command)
-
-    def snapshot(self, state: Optional[State] = None) -> SpatialSnapshot:
-        """Everything the simulation reports, at ``state`` (default: the current state)."""
-        return snapshot(self.model, state or self.data.state)
 
     def static(self, u, tol: float = 1e-13) -> statics.SpatialStatic:
         """Return the static equilibrium with the drives at u (``spatial_statics.static``)."""

@@ -8,7 +8,7 @@ read the model and update the data.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Optional
+from typing import Any, Optional
 
 import numpy as np
 
@@ -114,3 +114,45 @@ class Data:
         self.lin = None
         self.cache = None
         self.clock = None
+
+
+class Facade:
+    """
+    What ``Simulation`` and ``SpatialSimulation`` share: a model (constants), its data (state).
+
+    The subclass sets ``model`` and ``data`` and gives ``snapshot_of(model, state)``.
+    """
+
+    model: Any
+    data: Data
+
+    # The model's constants, as attributes of the simulation (read-only views).
+    mechanism = property(lambda self: self.model.mechanism)
+    dt = property(lambda self: self.model.dt)
+    z0 = property(lambda self: self.model.z0)
+
+    @property
+    def state(self) -> State:
+        """Return the current state; assign a State to continue from it."""
+        return self.data.state
+
+    @state.setter
+    def state(self, value: State) -> None:
+        self.data.state = value
+
+    @property
+    def stats(self) -> StepStats:
+        """Counters of the stepping work since the last reset."""
+        return self.data.stats
+
+    @stats.setter
+    def stats(self, value: StepStats) -> None:
+        self.data.stats = value
+
+    def reset(self) -> None:
+        """Back to the initial state (rest poses, at rest, drives at 0, t = 0), counters 0."""
+        self.data.reset()
+
+    def snapshot(self, state: Optional[State] = None):
+        """Everything the simulation reports, at ``state`` (default: the current state)."""
+        return self.snapshot_of(self.model, state or self.data.state)

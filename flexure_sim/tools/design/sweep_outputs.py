@@ -22,9 +22,10 @@ from typing import Callable, Optional, Sequence, Union
 
 import numpy as np
 
-from flexure_sim.engine.analysis import linear
+from flexure_sim.engine.analysis import linear, spatial_linear
 from flexure_sim.engine.mechanism.parts import Mechanism
 from flexure_sim.engine.solver.simulation import Simulation, StaticResult
+from flexure_sim.engine.solver.spatial_simulation import SpatialSimulation
 from flexure_sim.engine.hinges import fatigue
 from flexure_sim.engine.hinges.stress import peak_ratio, stress_table, stroke_limit
 from flexure_sim.engine.analysis.study import Study
@@ -48,7 +49,10 @@ class Design:
     def __init__(self, mechanism: Mechanism, study: Study):
         self.mechanism = mechanism
         self.study = study
-        self.sim = Simulation(mechanism, dt=study.step["dt"])
+        #: ``space: 3d``: the spatial engine (``SpatialSimulation``) builds every result.
+        self.spatial = study.space == "3d"
+        self.sim = (SpatialSimulation(mechanism, dt=study.step["dt"]) if self.spatial
+                    else Simulation(mechanism, dt=study.step["dt"]))
         drives = mechanism.drives
         if not drives:
             raise ValueError(f"mechanism {mechanism.name!r} has no drive")
@@ -63,13 +67,15 @@ class Design:
         self._static: Optional[StaticResult] = None
         self._step = None
         self._modes: Optional[linear.Modes] = None
+        self._linear: Optional[spatial_linear.SpatialLinearModel] = None
         self._rest: Optional[StaticResult] = None
         self._fatigue: Optional[dict] = None
 
     def static(self) -> StaticResult:
-        """Return static equilibrium at the study's drive input."""
+        """Return static equilibrium at the study's drive input (its ``snapshot`` in 3-D)."""
         if self._static is None:
-            self._static = self.sim.static(self.input)
+            self._static = (SpatialStatic.at(self.sim, self.input) if self.spatial
+                            else self.sim.static(self.input))
         return self._static
 
     def rest(self) -> StaticResult:
@@ -92,7 +98,12 @@ class Design:
 
         As ``flexure-sim modes --input`` computes them (engine/analysis/linear.py).
         """
-        if self._modes is None:
+        if self._modes is None and self.spatial:
+            model = self.sim.model
+            self._linear = spatial_linear.linearize(model, model.drive_inputs(self.input),
+                                                    wrenches=False)
+            self._modes = spatial_linear.modes(self._linear)
+        elif self._modes is None:
             self._modes = linear.modes(linear.linearize(self.sim, self.input, wrenches=False,
                                                         static=self.static()))
         return self._modes
@@ -123,17 +134,42 @@ class Design:
         return self._step
 
 
-def output_displacement(sim: Simulation) -> float:
+def output_displacement(sim) -> float:
     """
-    Output body's displacement from rest along the output axis (m).
+    Output body's displacement from rest along the output axis (m), planar or spatial.
 
     It is that of the current state (Snapshot.output without the rest of the snapshot, for sampling
     every step).
     """
-    mech = sim.mechanism
-    if mech.output is None:
-        raise ValueError(f"mechanism {mech.name!r} names no output body")
-    return float(sim.model.output_displacement(sim.state.z))
+    value = sim.model.output_displacement(sim.state.z)
+    if value is None:
+        raise ValueError(f"mechanism {sim.mechanism.name!r} names no output body")
+    return value
+
+
+@dataclass(frozen=True)
+class SpatialStatic:
+    """The static figures of a 3-D design the outputs read (as ``StaticResult.snapshot``)."""
+
+    snapshot: "SpatialStatic.Figures"
+
+    @dataclass(frozen=True)
+    class Figures:
+        """output (the first output's displacement), outputs, drive_force(s), compression."""
+
+        output: Optional[float]
+        outputs: dict
+        drive_force: float
+        drive_forces: np.ndarray
+        compression: None = None
+
+    @classmethod
+    def at(cls, sim: SpatialSimulation, value) -> "SpatialStatic":
+        """Return the figures of the static equilibrium at the drive input ``value``."""
+        snap = sim.static_snapshot(sim.model.drive_inputs(value))
+        first = next(iter(snap.outputs.values()), None)
+        return cls(cls.Figures(first, snap.outputs, float(snap.drive_forces[0]),
+                               snap.drive_forces))
 
 
 @dataclass(frozen=True)
@@ -250,6 +286,14 @@ def _first_mode(d: Design) -> Values:
 @output("first_mode_damping", "", "modal damping ratio of the first mode (as flexure-sim modes)")
 def _first_mode_damping(d: Design) -> Values:
     return float(d.modes().modal_damping[0])
+
+
+@output("first_out_of_plane_mode", "Hz", "lowest natural frequency whose mode moves mostly "
+        "out of the plane (z, rx, ry carry over half its kinetic energy; space: 3d)")
+def _first_out_of_plane_mode(d: Design) -> Values:
+    md = d.modes()
+    out = np.flatnonzero(spatial_linear.out_of_plane_shares(d._linear, md) > 0.5)
+    return float(md.frequencies[out[0]]) if len(out) else None
 
 
 @output("peak_stress_ratio", "", "largest hinge stress / yield strength at the input (no "
