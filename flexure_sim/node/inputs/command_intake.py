@@ -126,10 +126,10 @@ class CommandIntake:
                           clamped)
         channel = self.channel
         if malformed:
-            bad = set(malformed)
-            rejected = self.rejected_channel
-            self._record([(rejected, pack_uint8_array(data)) if k in bad else (channel, data)
-                          for k, data in enumerate(commands)], stamp)
+            unreadable = set(malformed)
+            elsewhere = self.rejected_channel
+            self._record([(elsewhere, pack_uint8_array(data)) if k in unreadable
+                          else (channel, data) for k, data in enumerate(commands)], stamp)
         else:
             self._record([(channel, data) for data in commands], stamp)
         self.count += len(commands)
