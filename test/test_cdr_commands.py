@@ -15,7 +15,7 @@ import struct
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Float64
 
 from flexure_sim.engine.mechanism.loader import load_mechanism
@@ -147,3 +147,13 @@ def test_the_node_applies_xcdr2_commands_and_refuses_garbage_without_nan(tmp_pat
     inputs = [m.data for m in peer.messages("/drive/input")]
     assert not any(math.isnan(x) for x in inputs)
     assert "unknown CDR encapsulation ff fe" in node.stderr
+
+
+@pytest.mark.parametrize("data", [b"", b"\x00\x01", bytes(range(13)), b"\xff" * 64])
+def test_the_rejected_payload_record_is_what_rclpy_serializes_for_a_uint8_multi_array(data):
+    """The node records a payload it cannot read as a UInt8MultiArray holding it."""
+    from std_msgs.msg import UInt8MultiArray
+
+    packed = cdr.pack_uint8_array(data)
+    assert packed == serialize_message(UInt8MultiArray(data=list(data)))
+    assert bytes(deserialize_message(packed, UInt8MultiArray).data) == data

@@ -27,7 +27,7 @@ def test_defaults_are_valid_and_give_ten_steps_per_tick():
     read_only = {s.name for s in parameter_specs() if s.read_only}
     assert read_only == {"mechanism", "sim_step", "time_mode", "stepping_nice",
                          "stepping_priority", "cpu_latency_us", "command_reliability",
-                         "frame_prefix"}
+                         "command_depth", "frame_prefix"}
     assert values["command_reliability"] == "reliable"
 
 
@@ -85,6 +85,8 @@ def test_steps_per_tick(rate, step, n):
     (dict(merge_late_ticks=-1), "merge_late_ticks"),
     (dict(merge_late_ticks=2.0), "merge_late_ticks"),
     (dict(command_reliability="sometimes"), "command_reliability"),
+    (dict(command_depth=0), "command_depth"),
+    (dict(command_depth=1.5), "command_depth"),
 ])
 def test_invalid_values_are_refused_with_the_reason(changes, word):
     values = {**defaults(), **changes}

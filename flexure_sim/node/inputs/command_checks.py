@@ -76,7 +76,8 @@ class CommandCounters:
     clamped: finite but outside the stroke; rejected: NaN or +-Inf, and malformed ones;
     malformed: payloads that are not a Float64 in an encoding the node reads (`cdr`);
     rate_limited: accepted commands the actuator could not reach within one publish period
-    at its slew rate (so the engine sees a ramp).
+    at its slew rate (so the engine sees a ramp); lost: commands a publisher sent that the
+    node never took (not in received; `command_loss`).
     """
 
     received: int = 0
@@ -85,6 +86,7 @@ class CommandCounters:
     rejected: int = 0
     malformed: int = 0
     rate_limited: int = 0
+    lost: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}

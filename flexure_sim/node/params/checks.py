@@ -79,7 +79,7 @@ def range_problem(spec: ParamSpec, value: Any) -> Optional[str]:
 
 #: Numeric parameters whose whole check is their declared type and range (`range_problem`).
 _RANGED = ("wake_spin", "merge_late_ticks", "stepping_nice", "stepping_priority",
-           "cpu_latency_us", "display_rate", "display_scale", "record_max_bytes",
+           "cpu_latency_us", "command_depth", "display_rate", "display_scale", "record_max_bytes",
            "record_max_duration")
 #: Largest wake_spin, as a fraction of the tick period, with a real-time stepping thread.
 FIFO_MAX_SPIN_FRACTION = 0.5

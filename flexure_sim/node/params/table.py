@@ -18,6 +18,9 @@ MAX_PUBLISH_RATE = 10000.0
 MAX_SIM_STEP = 1e-2
 #: Values of ``command_reliability``.
 COMMAND_RELIABILITIES = ("reliable", "best_effort")
+#: Default of ``command_depth``: one second of a 10 kHz command flood, so ticks down to 1 Hz
+#: (fast mode) or a one-second stall lose nothing of it (docs/node.md, "Drive commands").
+COMMAND_DEPTH = 10000
 #: Values of ``record_format``.
 RECORD_FORMATS = ("bag", "mcap")
 #: Default of ``wake_spin``: see its description and docs/node.md, "Time" (BENCHMARKS.md).
@@ -114,6 +117,12 @@ TABLE: tuple[tuple[Any, ...], ...] = (
      "heard) or best_effort (reliable and best-effort publishers alike; a command lost on the "
      "wire is not resent). A publisher that does not match gets a warning and a diagnostics "
      "count. Read-only."),
+    ("command_depth", COMMAND_DEPTH, int, "commands", True, 1, 1000000,
+     "History depth of each drive command subscription: commands that wait for the next tick "
+     "(the stepping thread takes them all, up to this many, at each tick). When more arrive "
+     "between two ticks the middleware replaces the oldest; the node counts those from the "
+     "gaps in the publishers' sequence numbers (diagnostics commands_lost, a warning). "
+     "Read-only."),
     ("frame_prefix", "", str, "", True, None, None,
      "Put in front of every frame id the node publishes (root stage, body and hinge frames; "
      "headers, child frames, markers, TF), e.g. stage1/, so two stages can share one TF tree "

@@ -289,3 +289,19 @@ def _deserialize(data: bytes, name: str) -> float:
         return float(deserialize_message(bytes(data), Float64).data)
     except Exception as exc:  # noqa: BLE001 - rclpy raises RMWError or others on bad bytes
         raise ValueError(f"{name}: not a Float64 ({type(exc).__name__})") from None
+
+
+#: Type of the recording channel of the command payloads the node rejected as malformed.
+REJECTED_TYPE = "std_msgs/msg/UInt8MultiArray"
+_UINT8_ARRAY_HEAD = struct.Struct("<4sIII")
+
+
+def pack_uint8_array(data: bytes) -> bytes:
+    """
+    Return a std_msgs/UInt8MultiArray (empty layout) whose ``data`` is ``data``, as CDR_LE.
+
+    The layout's ``dim`` sequence (count 0) and ``data_offset`` (0), then the byte sequence:
+    how the node records a command payload it could not read, so that every ROS reader decodes
+    the channel and finds the received bytes verbatim in ``data``.
+    """
+    return _UINT8_ARRAY_HEAD.pack(CDR_LE, 0, 0, len(data)) + data

@@ -159,6 +159,9 @@ class Diagnostics:
             level, notes = itf.WARN, notes + [f"{new['rejected']} commands rejected"]
         if new.get("clamped"):
             level, notes = itf.WARN, notes + [f"{new['clamped']} commands clamped"]
+        lost = sum(v for k, v in new.items() if k == "lost" or k.endswith("_lost"))
+        if lost:
+            level, notes = itf.WARN, notes + [f"{lost} commands lost before a tick took them"]
         if new.get("rate_limited"):
             notes.append(f"{new['rate_limited']} commands rate-limited")
         extra_values: list[tuple[str, Any]] = []

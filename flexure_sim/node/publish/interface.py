@@ -40,6 +40,8 @@ from flexure_sim.node.publish.cdr import (
     ClockPacker, Float64Packer, StampedPacker, packing_applies, split_stamp,
 )
 from flexure_sim.node.inputs.drive_kind import command_kind, coordinate_unit, units
+# Default depth of the drive command subscription (parameter command_depth).
+from flexure_sim.node.params.table import COMMAND_DEPTH
 from flexure_sim.node.publish.reference_messages import (  # noqa: F401 (re-exported)
     reference_messages, yaw_quaternion,
 )
@@ -49,8 +51,6 @@ TIME_MODES = ("realtime", "fast", "lockstep")
 CLOCK_MODES = ("fast", "lockstep")
 #: Depth of every published stream.
 QUEUE_DEPTH = 100
-#: Depth of the drive command subscription (commands waiting for the next tick).
-COMMAND_DEPTH = 1000
 
 
 def _reliable_volatile(depth: int) -> QoSProfile:
@@ -63,17 +63,18 @@ def stream_qos() -> QoSProfile:
     return _reliable_volatile(QUEUE_DEPTH)
 
 
-def command_qos(reliability: str = "reliable") -> QoSProfile:
+def command_qos(reliability: str = "reliable", depth: int = COMMAND_DEPTH) -> QoSProfile:
     """
     Return the QoS of the drive command subscription.
 
     ``reliability`` (``reliable``: only reliable publishers match; ``best_effort``: reliable and
-    best-effort ones), keep last `COMMAND_DEPTH`, volatile.
+    best-effort ones), keep last ``depth`` (parameter ``command_depth``), volatile.
 
     The reader is emptied once per tick (`polled`), so it must hold a tick's worth of
-    commands: 1000 is a 1 MHz stream at 1 kHz ticks, or 200 ms of a 5 kHz stream at 5 Hz.
+    commands: the default 10000 is 1 s of a 10 kHz stream (ticks down to 1 Hz, or a stall of
+    the node of up to 1 s); what it cannot hold is counted (`command_loss`).
     """
-    qos = _reliable_volatile(COMMAND_DEPTH)
+    qos = _reliable_volatile(depth)
     if reliability == "best_effort":
         qos.reliability = ReliabilityPolicy.BEST_EFFORT
     elif reliability != "reliable":

@@ -23,7 +23,7 @@ whole tick. If rclpy changes ``take_message``, test_node_polled.py fails.
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Optional
 
 from rclpy.callback_groups import CallbackGroup
 from rclpy.exceptions import InvalidHandle
@@ -51,11 +51,14 @@ def never_called(_message: Any) -> None:
     """
 
 
-def take_raw(subscription: Subscription, limit: int) -> list[bytes]:
+def take_raw(subscription: Subscription, limit: int,
+             numbers: Optional[list[Optional[int]]] = None) -> list[bytes]:
     """
     Up to ``limit`` serialized messages waiting in ``subscription``'s reader.
 
     Oldest first (the rest stay for the next call). Empty once the node is being destroyed.
+    ``numbers``: a list to which each message's publication sequence number is appended (from
+    the message info ``take_message`` returns with it; None where the middleware has none).
     """
     taken: list[bytes] = []
     try:
@@ -67,6 +70,8 @@ def take_raw(subscription: Subscription, limit: int) -> list[bytes]:
                 if item is None:
                     break
                 taken.append(item[0])
+                if numbers is not None:
+                    numbers.append(item[1].get("publication_sequence_number"))
     except InvalidHandle:
         pass
     return taken

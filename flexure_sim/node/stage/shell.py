@@ -29,7 +29,8 @@ from flexure_sim.errors import FlexureSimError
 from flexure_sim.engine.solver.simulation import Simulation
 from flexure_sim.recording import RecordingError
 from flexure_sim.node.publish import interface as itf
-from flexure_sim.node.inputs.command_intake import intake_for
+from flexure_sim.node.inputs.command_intake import REJECTED_SUFFIX, intake_for
+from flexure_sim.node.publish.cdr import REJECTED_TYPE
 from flexure_sim.node.params.declare import (
     coerce_integer_overrides, declare, undeclared_drive_overrides,
 )
@@ -120,18 +121,22 @@ class StageNode(LiveParameters, Node):
             event_callbacks=watch.publisher_callbacks(diagnostics.name))
         self._diag_topic = diag_pub.topic_name
         # Recording channels: the tick topics in publishing order, diagnostics, commands, the
-        # display's topics.
+        # display's topics, the commands' malformed payloads (`_start_recording`).
+        depth = values["command_depth"]
         self._command_subs = [self.create_subscription(
-            spec.msg_type, spec.name, never_called, itf.command_qos(values["command_reliability"]),
+            spec.msg_type, spec.name, never_called,
+            itf.command_qos(values["command_reliability"], depth),
             raw=True, callback_group=PolledGroup()) for spec in self.interface.commands]
         command_topics = [sub.topic_name for sub in self._command_subs]
+        display, self._display_topics, self._tf_static_pub = dsp.build_display(
+            self, values, qos, watch, len(tick_pubs) + 1 + len(command_topics))
         throttle = WarningThrottle(1.0)
         drive = self.mechanism.drive if not self._named else None
         intake = intake_for(self._command_subs, drive_filter, self._named, len(tick_pubs) + 1,
                             self.session.write, self._log, throttle,
-                            units(drive)[0] if drive else "m")
-        display, self._display_topics, self._tf_static_pub = dsp.build_display(
-            self, values, qos, watch, len(tick_pubs) + 1 + len(command_topics))
+                            units(drive)[0] if drive else "m",
+                            len(tick_pubs) + 1 + len(command_topics) + len(self._display_topics),
+                            depth)
 
         def check_graph() -> None:  # by the stepping thread, not on an executor timer
             for topic in command_topics:
@@ -285,10 +290,12 @@ class StageNode(LiveParameters, Node):
         topics = [(name, spec.type_name, qos)
                   for name, spec in zip(self._tick_names, self.interface.tick_topics)]
         topics.append((self._diag_topic, self.interface.diagnostics.type_name, qos))
+        command_qos = itf.command_qos(values["command_reliability"], values["command_depth"])
         for sub, spec in zip(self._command_subs, self.interface.commands):
-            topics.append((sub.topic_name, spec.type_name,
-                           itf.command_qos(values["command_reliability"])))
+            topics.append((sub.topic_name, spec.type_name, command_qos))
         topics += self._display_topics
+        topics += [(sub.topic_name + REJECTED_SUFFIX, REJECTED_TYPE, command_qos)
+                   for sub in self._command_subs]
         loop = self.loop
         node = self.get_fully_qualified_name()
         metadata = run_metadata(values, self.mechanism, self.mechanism_path, self.interface, node,
