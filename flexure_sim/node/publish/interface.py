@@ -25,7 +25,6 @@ from typing import Any, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseStamped, TransformStamped, WrenchStamped
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
@@ -40,6 +39,9 @@ from flexure_sim.node.publish.cdr import (
     ClockPacker, Float64Packer, StampedPacker, packing_applies, split_stamp,
 )
 from flexure_sim.node.inputs.drive_kind import command_kind, coordinate_unit, units
+from flexure_sim.node.publish.qos_profiles import (  # noqa: F401 (re-exported)
+    COMMAND_DEPTH, QUEUE_DEPTH, command_qos, stream_qos,
+)
 from flexure_sim.node.publish.reference_messages import (  # noqa: F401 (re-exported)
     reference_messages, yaw_quaternion,
 )
@@ -47,40 +49,6 @@ from flexure_sim.node.publish.reference_messages import (  # noqa: F401 (re-expo
 TIME_MODES = ("realtime", "fast", "lockstep")
 #: Modes in which the node publishes /clock (simulated time is not wall time).
 CLOCK_MODES = ("fast", "lockstep")
-#: Depth of every published stream.
-QUEUE_DEPTH = 100
-#: Depth of the drive command subscription (commands waiting for the next tick).
-COMMAND_DEPTH = 1000
-
-
-def _reliable_volatile(depth: int) -> QoSProfile:
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-
-
-def stream_qos() -> QoSProfile:
-    """Return the QoS of every published topic: reliable, keep last `QUEUE_DEPTH`, volatile."""
-    return _reliable_volatile(QUEUE_DEPTH)
-
-
-def command_qos(reliability: str = "reliable") -> QoSProfile:
-    """
-    Return the QoS of the drive command subscription.
-
-    ``reliability`` (``reliable``: only reliable publishers match; ``best_effort``: reliable and
-    best-effort ones), keep last `COMMAND_DEPTH`, volatile.
-
-    The reader is emptied once per tick (`polled`), so it must hold a tick's worth of
-    commands: 1000 is a 1 MHz stream at 1 kHz ticks, or 200 ms of a 5 kHz stream at 5 Hz.
-    """
-    qos = _reliable_volatile(COMMAND_DEPTH)
-    if reliability == "best_effort":
-        qos.reliability = ReliabilityPolicy.BEST_EFFORT
-    elif reliability != "reliable":
-        raise ValueError(f"reliability: expected reliable or best_effort, got {reliability!r}")
-    return qos
-
-
 def check_names(mechanism: Mechanism) -> None:
     """Raise ValueError if the mechanism's body and hinge names give clashing frame ids."""
     seen: dict[str, str] = {ROOT_FRAME: "the root frame"}

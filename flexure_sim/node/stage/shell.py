@@ -29,6 +29,7 @@ from flexure_sim.errors import FlexureSimError
 from flexure_sim.engine.solver.simulation import Simulation
 from flexure_sim.recording import RecordingError
 from flexure_sim.node.publish import interface as itf
+from flexure_sim.node.publish.qos_profiles import command_qos, stream_qos
 from flexure_sim.node.inputs.command_intake import intake_for
 from flexure_sim.node.params.declare import (
     coerce_integer_overrides, declare, undeclared_drive_overrides,
@@ -109,7 +110,7 @@ class StageNode(LiveParameters, Node):
         self.interface = self._interface(values)
         sim, drive_filter = self._simulation(values)
         self.qos_watch = watch = QosWatch(self._log, values["command_reliability"])
-        qos = itf.stream_qos()
+        qos = stream_qos()
         tick_pubs = [self.create_publisher(t.msg_type, t.name, qos,
                                            event_callbacks=watch.publisher_callbacks(t.name))
                      for t in self.interface.tick_topics]
@@ -122,7 +123,7 @@ class StageNode(LiveParameters, Node):
         # Recording channels: the tick topics in publishing order, diagnostics, commands, the
         # display's topics.
         self._command_subs = [self.create_subscription(
-            spec.msg_type, spec.name, never_called, itf.command_qos(values["command_reliability"]),
+            spec.msg_type, spec.name, never_called, command_qos(values["command_reliability"]),
             raw=True, callback_group=PolledGroup()) for spec in self.interface.commands]
         command_topics = [sub.topic_name for sub in self._command_subs]
         throttle = WarningThrottle(1.0)
@@ -281,13 +282,13 @@ class StageNode(LiveParameters, Node):
     # ======================================================= stepping-thread work
     def _start_recording(self) -> Path:
         values = self._values()
-        qos = itf.stream_qos()
+        qos = stream_qos()
         topics = [(name, spec.type_name, qos)
                   for name, spec in zip(self._tick_names, self.interface.tick_topics)]
         topics.append((self._diag_topic, self.interface.diagnostics.type_name, qos))
         for sub, spec in zip(self._command_subs, self.interface.commands):
             topics.append((sub.topic_name, spec.type_name,
-                           itf.command_qos(values["command_reliability"])))
+                           command_qos(values["command_reliability"])))
         topics += self._display_topics
         loop = self.loop
         node = self.get_fully_qualified_name()
