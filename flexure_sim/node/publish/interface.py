@@ -49,6 +49,8 @@ from flexure_sim.node.publish.reference_messages import (  # noqa: F401 (re-expo
 TIME_MODES = ("realtime", "fast", "lockstep")
 #: Modes in which the node publishes /clock (simulated time is not wall time).
 CLOCK_MODES = ("fast", "lockstep")
+
+
 def check_names(mechanism: Mechanism) -> None:
     """Raise ValueError if the mechanism's body and hinge names give clashing frame ids."""
     seen: dict[str, str] = {ROOT_FRAME: "the root frame"}
