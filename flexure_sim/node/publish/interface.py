@@ -30,6 +30,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from flexure_sim.engine.mechanism.parts import Mechanism
+from flexure_sim.engine.mechanism.spatial_parts import Mechanism as SpatialMechanism
 from flexure_sim import topics
 from flexure_sim.topics import ROOT_FRAME, Frames, hinge_frame, hinge_frame_a
 from flexure_sim.node.publish.diagnostics_msg import (  # noqa: F401 (re-exported)
@@ -103,7 +104,7 @@ def _along(text: str, item: Any) -> str:
     """``text`` with the axis or coordinate of a drive or output."""
     if item.coordinate is not None:
         return f"{text}, coordinate {item.coordinate}"
-    return f"{text} along ({item.axis[0]:g}, {item.axis[1]:g})"
+    return f"{text} along ({', '.join(f'{a:g}' for a in item.axis)})"
 
 
 class StageInterface:
@@ -134,16 +135,19 @@ class StageInterface:
         hinges = [h.name for h in mech.hinges]
         self.body_names = bodies
         self.hinge_names = hinges
-        self.has_drive = mech.drive is not None and len(mech.drives) == 1 \
-            and mech.drive.kind == "displacement"
+        # A planar mechanism's ``drive`` is its first drive; a spatial one has no such key.
+        drive = mech.drives[0] if mech.drives else None
+        self.has_drive = drive is not None and len(mech.drives) == 1 \
+            and drive.kind == "displacement"
         #: The named drives (several, or a force drive): topics per drive; else empty.
         self.drives = () if self.has_drive else mech.drives
         outputs = mech.all_outputs
         self.has_output = len(outputs) == 1
         #: The named outputs when there are several: a topic each; else empty.
         self.outputs = outputs if len(outputs) > 1 else ()
-        self.has_sensor = self.has_output and mech.sensor is not None
-        self.compression_hinge: Optional[str] = mech.compression_hinge if self.has_drive else None
+        self.has_sensor = self.has_output and getattr(mech, "sensor", None) is not None
+        self.compression_hinge: Optional[str] = (getattr(mech, "compression_hinge", None)
+                                                 if self.has_drive else None)
 
         specs: list[TopicSpec] = []
         if self.publishes_clock:
@@ -198,8 +202,9 @@ class StageInterface:
                     f"({fr.hinge_a(h.name)}); translation (p_x, p_y, 0), yaw alpha",
                 )
             )
-        #: The drives whose full wrench is published (every drive; a WrenchStamped each).
-        self.wrench_drives = tuple(mech.drives)
+        #: The drives whose full wrench is published (every drive, a WrenchStamped each; none
+        #: in 3-D: the spatial snapshot reports no drive wrench).
+        self.wrench_drives = () if isinstance(mech, SpatialMechanism) else tuple(mech.drives)
         for d in self.wrench_drives:
             specs.append(_spec(
                 f"drive_wrench:{d.name}",
@@ -259,7 +264,7 @@ class StageInterface:
                     Float64,
                     "N",
                     "",
-                    f"force the actuator applies to the driven body {mech.drive.body} along the "
+                    f"force the actuator applies to the driven body {drive.body} along the "
                     "drive axis",
                 )
             )
@@ -273,7 +278,7 @@ class StageInterface:
         self.diagnostics = _spec("diagnostics", topics.DIAGNOSTICS, DiagnosticArray, "", "",
                                  "real-time factor, step times, solver work, command counters")
         self.command: Optional[TopicSpec] = None
-        if self.has_drive and command_kind(mech.drive) == "voltage":
+        if self.has_drive and command_kind(drive) == "voltage":
             self.command = _spec("command", topics.COMMAND_VOLTAGE, Float64, "V", "",
                                  "drive command (subscribed): the piezo actuator's voltage")
         elif self.has_drive:

@@ -25,11 +25,17 @@ from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, Trigger
 
 from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism, resolve_mechanism_path
+from flexure_sim.engine.mechanism.spatial_loader import is_spatial, load_spatial
+from flexure_sim.engine.mechanism.spatial_parts import Mechanism as SpatialMechanism
+from flexure_sim.engine.solver.spatial_simulation import SpatialSimulation
 from flexure_sim.errors import FlexureSimError
 from flexure_sim.engine.solver.simulation import Simulation
 from flexure_sim.recording import RecordingError
 from flexure_sim.node.publish import interface as itf
 from flexure_sim.node.publish.qos_profiles import command_qos, stream_qos
+from flexure_sim.node.publish.spatial_display import SpatialDisplay
+from flexure_sim.node.publish.spatial_messages import SpatialInterface
+from flexure_sim.node.stage.spatial_report import SpatialReport
 from flexure_sim.node.inputs.command_intake import intake_for
 from flexure_sim.node.params.declare import (
     coerce_integer_overrides, declare, undeclared_drive_overrides,
@@ -44,7 +50,7 @@ from flexure_sim.node.inputs.command_checks import CommandFilter, WarningThrottl
 from flexure_sim.node.stage.engine_guard import StrokeProbe
 from flexure_sim.node.stage.pacing import set_threads_nice
 from flexure_sim.node.params.live import LiveParameters
-from flexure_sim.node.params.table import parameter_specs
+from flexure_sim.node.params.table import SPACES, parameter_specs
 from flexure_sim.node.stage.polled import PolledGroup, never_called
 from flexure_sim.node.stage.qos_watch import QosWatch
 from flexure_sim.node.stage.requests import REQUEST_TIMEOUT_S
@@ -69,18 +75,30 @@ class StartupError(FlexureSimError, RuntimeError):
     """The node cannot start (bad mechanism, invalid parameters, recording impossible)."""
 
 
-def load(mechanism_arg: Any) -> tuple[Any, Path]:
+def load(mechanism_arg: Any, space: Any = "auto") -> tuple[Any, Path]:
     """
     Return the mechanism named by the ``mechanism`` parameter and its file.
 
-    StartupError with the loader's one-line message (file: key: problem) if it does not load.
+    ``space`` (the parameter): ``auto`` loads a ``space: 3d`` file into the spatial engine and
+    a planar file into the planar one, ``3d`` opens a planar file in space, ``2d`` refuses a
+    3-D file. StartupError with the loader's one-line message (file: key: problem) if it does
+    not load.
     """
     if not isinstance(mechanism_arg, str) or not mechanism_arg.strip():
         raise StartupError("parameter mechanism: expected a built-in name or a YAML path, got "
                            f"{mechanism_arg!r}")
+    if space not in SPACES:
+        raise StartupError(f"invalid parameters: space: expected one of {', '.join(SPACES)}, "
+                           f"got {space!r}")
     try:
-        mech = load_mechanism(mechanism_arg)
+        spatial = space == "3d" or is_spatial(mechanism_arg)
+        if spatial and space == "2d":
+            raise StartupError(f"{mechanism_arg}: a 3-D mechanism (space: 3d) cannot run with "
+                               "space 2d; use space auto or 3d")
+        mech = load_spatial(mechanism_arg) if spatial else load_mechanism(mechanism_arg)
         path = resolve_mechanism_path(mechanism_arg).resolve()
+    except StartupError:
+        raise
     except ConfigError as exc:
         raise StartupError(str(exc)) from exc
     except Exception as exc:  # noqa: BLE001 - whatever the loader lets through: one line
@@ -127,12 +145,14 @@ class StageNode(LiveParameters, Node):
             raw=True, callback_group=PolledGroup()) for spec in self.interface.commands]
         command_topics = [sub.topic_name for sub in self._command_subs]
         throttle = WarningThrottle(1.0)
-        drive = self.mechanism.drive if not self._named else None
+        drive = self._drive if not self._named else None
         intake = intake_for(self._command_subs, drive_filter, self._named, len(tick_pubs) + 1,
                             self.session.write, self._log, throttle,
                             units(drive)[0] if drive else "m")
+        drawn = (SpatialDisplay(self.mechanism, self.interface.frames,
+                                float(values["display_scale"])) if self.spatial else None)
         display, self._display_topics, self._tf_static_pub = dsp.build_display(
-            self, values, qos, watch, len(tick_pubs) + 1 + len(command_topics))
+            self, values, qos, watch, len(tick_pubs) + 1 + len(command_topics), drawn)
 
         def check_graph() -> None:  # by the stepping thread, not on an executor timer
             for topic in command_topics:
@@ -141,6 +161,7 @@ class StageNode(LiveParameters, Node):
             LoopSettings.from_values(values), sim, self.interface, tick_pubs, self.session,
             self._log, filter=drive_filter, intake=intake, display=display, throttle=throttle,
             graph_check=check_graph if command_topics else None,
+            report=SpatialReport(sim) if self.spatial else None,
             diagnostics=DiagnosticsPort(diag_pub, len(tick_pubs), self.get_name(),
                                         self.mechanism.name, watch.diagnostics))
         self.loop = loop = SteppingLoop(parts)
@@ -177,17 +198,24 @@ class StageNode(LiveParameters, Node):
         StartupError names what is wrong.
         """
         coerce_integer_overrides(self)
-        declare(self, parameter_specs()[0])
-        self.mechanism, self.mechanism_path = load(self.get_parameter("mechanism").value)
+        first = parameter_specs()[:2]  # mechanism and space: what to load
+        for spec in first:
+            declare(self, spec)
+        self.mechanism, self.mechanism_path = load(self.get_parameter("mechanism").value,
+                                                   self.get_parameter("space").value)
+        #: True: the spatial engine runs (a ``space: 3d`` file, or ``space:=3d``).
+        self.spatial = isinstance(self.mechanism, SpatialMechanism)
+        #: The first drive (a planar mechanism's ``drive``), None without one.
+        self._drive = self.mechanism.drives[0] if self.mechanism.drives else None
         #: The named drives (several, or a force drive; `drive_bank`), else the single drive.
         self._named = named = named_drives(self.mechanism)
-        drive = self.mechanism.drive if not named else None
+        drive = self._drive if not named else None
         defaults = command_limits(drive) if drive else None
         specs = parameter_specs(defaults, "each drive has its own drives.<name>.* limits"
                                 if named else "the mechanism has no drive")
         self._specs = {s.name: s for s in (in_command_units(specs, drive) if drive else specs)
                        + drive_parameter_specs(named)}
-        for spec in list(self._specs.values())[1:]:
+        for spec in list(self._specs.values())[len(first):]:
             try:
                 declare(self, spec)
             except ParameterException as exc:
@@ -200,7 +228,8 @@ class StageNode(LiveParameters, Node):
         if unknown:
             raise StartupError(f"invalid parameter {unknown}")
         values = self._values()
-        self._probe = StrokeProbe(self.mechanism, float(values["sim_step"]))
+        self._probe = StrokeProbe(self.mechanism, float(values["sim_step"]),
+                                  SpatialSimulation if self.spatial else Simulation)
         own = {"stroke_min": defaults[0], "stroke_max": defaults[1]} if defaults else {}
         own.update({s.name: s.default for s in drive_parameter_specs(named)})
         problem = self._problem(values, {**values, **own})
@@ -209,16 +238,22 @@ class StageNode(LiveParameters, Node):
         return values
 
     def _interface(self, values: dict[str, Any]) -> itf.StageInterface:
+        kind = SpatialInterface if self.spatial else itf.StageInterface
         try:
-            return itf.StageInterface(self.mechanism, values["time_mode"], values["frame_prefix"])
+            return kind(self.mechanism, values["time_mode"], values["frame_prefix"])
         except ValueError as exc:
             raise StartupError(str(exc)) from exc
 
-    def _simulation(self, values: dict[str, Any]) -> tuple[Simulation, Any]:
+    def _simulation(self, values: dict[str, Any]) -> tuple[Any, Any]:
         """Build the simulation, stepped once and reset (warm), and the drives' command filter."""
-        # No energy bookkeeping: the node publishes no energies (Model.energy).
-        sim = Simulation(self.mechanism, dt=float(values["sim_step"]),
-                         relinearize_tol=RELINEARIZE_TOL, energy=False)
+        # No energy bookkeeping: the node publishes no energies (Model.energy; none in 3-D).
+        sim: Any
+        if self.spatial:
+            sim = SpatialSimulation(self.mechanism, dt=float(values["sim_step"]),
+                                    relinearize_tol=RELINEARIZE_TOL)
+        else:
+            sim = Simulation(self.mechanism, dt=float(values["sim_step"]),
+                             relinearize_tol=RELINEARIZE_TOL, energy=False)
         try:
             # Warm up (compiled kernels, first Jacobian) before the first paced tick.
             sim.step(1)
@@ -227,7 +262,7 @@ class StageNode(LiveParameters, Node):
         except Exception as exc:  # noqa: BLE001 - the engine's own message, at start-up
             raise StartupError(
                 f"the engine failed its first step: {type(exc).__name__}: {exc}") from exc
-        drive = self.mechanism.drive if not self._named else None
+        drive = self._drive if not self._named else None
         drive_filter: Any = None
         if drive is not None:
             drive_filter = CommandFilter(self._limits(values))
@@ -294,6 +329,7 @@ class StageNode(LiveParameters, Node):
         node = self.get_fully_qualified_name()
         metadata = run_metadata(values, self.mechanism, self.mechanism_path, self.interface, node,
                                 loop.n_steps, RELINEARIZE_TOL, loop.runs, loop.sim.state.t)
+        metadata["space"] = "3d" if self.spatial else "2d"  # the engine that ran
         return self.session.start(values, self.mechanism.name, node, topics, metadata,
                                   lossless=self.time_mode != "realtime")
 

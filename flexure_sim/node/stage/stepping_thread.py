@@ -85,12 +85,15 @@ class SteppingLoop:
         #: What each tick publishes, in one compiled call (engine), and its messages packed in
         #: another (`tick_frame`; None: `interface.encode` from a snapshot, where the packed
         #: layouts do not apply).
-        self.report = TickReport(sim.model)
+        #: True: a mechanism in space, reported by its snapshot (`LoopParts.report`).
+        self.spatial = parts.report is not None
+        self.report = parts.report if self.spatial else TickReport(sim.model)
         self.reported = False
         self.frame = (tick_frame.TickFrame(interface, self.report.index)
-                      if interface.packed and tick_frame.APPLIES else None)
+                      if interface.packed and tick_frame.APPLIES and not self.spatial else None)
         self._output_at = self.report.index["outputs"].start
-        self.report.fill_data(sim.data)  # loads the compiled kernels before the first tick
+        self._data = None if self.spatial else sim.data
+        self.report.fill_data(self._data)  # loads the compiled kernels before the first tick
         if self.frame is not None:
             self.frame.pack(self.report.values, 0.0, 0)
         #: The output's sensor (``output/measured``), sampled once per published tick.
@@ -294,7 +297,7 @@ class SteppingLoop:
                 self._merged_periods(span - 1)
             self._advance_engine()
             t2 = perf()
-            values = report.fill_data(sim.data)
+            values = report.fill_data(self._data)
             if not report.finite:
                 raise SolverError(f"non-finite result at t = {sim.state.t:.9g} s")
         except Exception as exc:  # noqa: BLE001 - any engine failure: hold, report, go on
@@ -324,7 +327,8 @@ class SteppingLoop:
             for pub, (start, end) in zip(publishers, layout.spans):
                 pub.publish(body[start:end])
         else:
-            payloads = self.interface.encode(sim.snapshot(), stamp, measured, monitor)
+            snap = report.last_snapshot if self.spatial else sim.snapshot()
+            payloads = self.interface.encode(snap, stamp, measured, monitor)
             channels = range(len(payloads)) if monitor else self.interface.control_indices
             t4 = perf()
             if session.current is not None:
