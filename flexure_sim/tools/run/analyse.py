@@ -137,16 +137,18 @@ def static_gains(run: Run, steps: list[analysis.StepMetrics]) -> tuple[dict[int,
             {},
             f"no static comparison: cannot load the run's mechanism ({run.mechanism_problem})",
         )
-    if mech.drive is None or mech.output is None:
+    if not mech.drives or not mech.all_outputs:
         return {}, f"no static comparison: mechanism {mech.name} has no drive or no output"
-    from flexure_sim.engine.solver.simulation import Simulation, SolverError
+    from flexure_sim.engine.solver.simulation import SolverError
+    from flexure_sim.tools.run.run_engine import RunEngine
 
-    sim = Simulation(mech)
+    sim = RunEngine(mech)
+    first = sim.output_names[0]
     outputs: dict[float, float] = {}
 
     def out(u: float) -> float:
         if u not in outputs:
-            outputs[u] = 0.0 if u == 0.0 else float(sim.static(u).snapshot.output)
+            outputs[u] = 0.0 if u == 0.0 else float(sim.static_outputs(u)[first])
         return outputs[u]
 
     gains = {}
