@@ -200,11 +200,14 @@ def analyse_run(run: Run, band: float = DEFAULT_BAND, static: bool = True) -> di
         d["static_gain"] = gains.get(m.index)
         out.append(d)
     mech = run.mechanism()
-    peaks, problem = (stress_peaks(run, out, mech) if mech is not None
-                      else ({}, f"no hinge stress: {run.mechanism_problem}"))
+    # The spatial engine's hinges carry no stress model: no stress or fatigue of a 3-D run.
+    stressed = mech is not None and all(hasattr(h, "stress") for h in mech.hinges)
+    peaks, problem = (stress_peaks(run, out, mech) if stressed else (
+        {}, f"no hinge stress: {run.mechanism_problem}" if mech is None else
+        "no hinge stress: the spatial engine has no hinge stress model"))
     if problem and out:
         notes.append(problem)
-    lives, whole, problem = (fatigue_of_steps(run, out, mech) if mech is not None
+    lives, whole, problem = (fatigue_of_steps(run, out, mech) if stressed
                              else ({}, None, ""))
     if problem and out:
         notes.append(problem)
