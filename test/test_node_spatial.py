@@ -190,6 +190,17 @@ def test_tiptilt_node_settles_at_the_engines_statics_and_analyse_gives_its_stati
     assert error < 1e-6
     units = {p["output"]: p["unit"] for p in result["pairs"]}
     assert units["tip"] == "rad/m" and units["piston"] == "m/m"
+    # plot: the drives and outputs, and the hinge wrenches with all six components.
+    assert main(["plot", str(path), "-o", str(tmp_path / "plots")]) == 0
+    written = capsys.readouterr().out
+    for figure in ("drives_outputs.png", "drive_forces.png", "hinge_wrenches.png"):
+        assert figure in written and (tmp_path / "plots" / figure).stat().st_size > 0
+    # Diagnostics of the 3-D node: OK, every tick's engine steps counted.
+    status = bag["/diagnostics"][-1][1].status[0]
+    values = {kv.key: kv.value for kv in status.values}
+    assert status.level == 0 and status.hardware_id == "tiptilt_stage"
+    assert int(values["engine_steps"]) == 500 * int(values["ticks"])
+    assert values["hinge_colour"] == "|wrench| / peak" and values["engine_failures"] == "0"
 
 
 @pytest.mark.slow
@@ -269,3 +280,60 @@ def test_spatial_messages_pack_as_rclpy_serializes_them():
     wrench = itf.messages(snap, 0)[names.index("hinges/guide1/wrench")].wrench
     assert wrench.torque.x != 0.0 and wrench.torque.y != 0.0 and wrench.force.z != 0.0
     assert itf.messages(snap, 0)[1].header.frame_id == "s1/stage"
+
+
+@pytest.mark.parametrize("space, words", [
+    ("2d", ("tiptilt_stage", "space 2d", "space auto or 3d")),
+    ("4d", ("space", "expected one of auto, 2d, 3d", "'4d'")),
+])
+def test_a_space_the_mechanism_cannot_run_in_stops_start_up_naming_it(tmp_path, domain, space,
+                                                                      words):
+    node = NodeProcess(tmp_path / "node", domain, {"mechanism": "tiptilt_stage",
+                                                   "space": space, "record": False})
+    rc = node.wait(120)
+    lines = [line for line in node.stderr.splitlines() if line.strip()]
+    assert rc == 1 and len(lines) == 1 and "Traceback" not in node.stderr, node.stderr
+    assert lines[0].startswith("stage_node: error: ")
+    for word in words:
+        assert word in lines[0], (word, lines[0])
+
+
+def test_tf_chain_through_the_bodies_gives_each_hinges_deflection():
+    """
+    TF in 3-D: stage -> body -> hinge frames, composed here with SciPy.
+
+    At a deflected static state, frame a (through body A) and frame b (through body B) differ
+    by the hinge's deflection the engine reports, and every fixed body is on /tf_static.
+    """
+    from flexure_sim.engine.mechanism.spatial_loader import load_spatial
+    from flexure_sim.engine.solver.spatial_simulation import SpatialSimulation
+    from flexure_sim.node.publish.spatial_display import SpatialDisplay
+    from flexure_sim.topics import Frames
+
+    mech = load_spatial("tiptilt_stage")
+    snap = SpatialSimulation(mech).static_snapshot({"p1": 1e-5, "p2": 3e-6, "p3": 0.0})
+    display = SpatialDisplay(mech, Frames("t/"), 1.0)
+    static, moving = display.static(), display.moving(snap)
+    assert [t.child for t in moving] == ["t/platform", "t/cap1", "t/cap2", "t/cap3"]
+    assert [t.child for t in static if t.parent == "t/stage"] == ["t/base"]
+    tree = {t.child: t for t in static + moving}
+    assert len(tree) == len(static) + len(moving)
+
+    def in_root(frame: str) -> tuple[np.ndarray, Rotation]:
+        p, r = np.zeros(3), Rotation.identity()
+        while frame != "t/stage":
+            t = tree[frame]
+            step = Rotation.from_quat(t.rotation)
+            p, r = np.array(t.translation) + step.apply(p), step * r
+            frame = t.parent
+        return p, r
+
+    largest = 0.0
+    for h, hinge in enumerate(mech.hinges):
+        pa, ra = in_root(f"t/hinge_{hinge.name}_a")
+        pb, rb = in_root(f"t/hinge_{hinge.name}")
+        phi, p = snap.deflections[h, :3], snap.deflections[h, 3:]
+        assert np.max(np.abs(ra.inv().apply(pb - pa) - p)) < 1e-15
+        assert np.max(np.abs((ra.inv() * rb).as_rotvec() - phi)) < 1e-12
+        largest = max(largest, float(np.max(np.abs(phi))))
+    assert largest > 1e-5  # the hinges are deflected: the check has something to find

@@ -6,8 +6,9 @@ received since the last tick (`command_intake`), advances the engine by round(1 
 (publish_rate * sim_step)) steps, reports the state in one compiled call (the engine's
 ``tick_report``), packs every message into one recorder frame in another (`tick_frame`), hands
 that frame to the recorder and publishes slices of it: the bytes recorded are the bytes
-published. The loop is built from its parts (`LoopParts`, made by ``shell.StageNode``) and its
-settings (`LoopSettings`, the node's parameters), all in one `LoopParts`.
+published. A mechanism in space is reported by its snapshot and packed by its interface
+(`LoopParts.report`: ``spatial_report``). The loop is built from its parts (`LoopParts`, made
+by ``shell.StageNode``) and its settings (`LoopSettings`, the node's parameters).
 
 Real-time mode paces ticks with absolute deadlines of a steady clock (`pacing.Pacer`; with
 ``merge_late_ticks`` a loop that many ticks late merges them into one that steps the engine
@@ -31,6 +32,7 @@ from flexure_sim.node.publish.diagnostics import Diagnostics
 from flexure_sim.node.publish.display import display_every
 from flexure_sim.node.stage.cpu_latency import request_cpu_latency
 from flexure_sim.node.stage.engine_guard import EngineHold
+from flexure_sim.node.stage.engine_steps import advance
 from flexure_sim.node.stage.loop_parts import LoopParts
 from flexure_sim.node.stage.overrun import OverrunWatch
 from flexure_sim.node.stage.pacing import Pacer, set_thread_fifo, set_thread_nice
@@ -235,33 +237,8 @@ class SteppingLoop:
         return True, f"t = {self.sim.state.t:.9g} s"
 
     def _advance_engine(self) -> None:
-        """Take the tick's engine steps, following the drive filter's ramp."""
-        sim = self.sim
-        filt = self.filter
-        if filt is None:
-            sim.step(self.n_steps)
-            return
-        if filt.begin_tick(self.n_steps * self.dt) and self.intake is not None:
-            self.intake.warn_rate_limited()
-        if filt.settled:
-            if filt.differs(sim.state.command):
-                sim.set_command(filt.applied)
-            sim.step(self.n_steps)
-        else:
-            # Step by step only while the ramp lasts: once the applied target reaches the
-            # command, the rest of the tick is one compiled call (the same states as one step
-            # at a time). A controller's new command every tick is usually within one step's
-            # slew, so a tick is then one set_command and one step(n), not n of each (which
-            # cost ~0.25 ms of Python per tick and made real-time ticks late).
-            dt = self.dt
-            remaining = self.n_steps
-            while remaining:
-                sim.set_command(filt.advance(dt))
-                if filt.settled:
-                    sim.step(remaining)
-                    break
-                sim.step(1)
-                remaining -= 1
+        """Take the tick's engine steps, following the drive filter's ramp (`engine_steps`)."""
+        advance(self.sim, self.filter, self.intake, self.n_steps, self.dt)
 
     def _merged_periods(self, count: int) -> None:
         """
