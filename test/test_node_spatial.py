@@ -74,7 +74,7 @@ def read_bag(path) -> dict[str, list]:
 
 
 def before(series: list, t: float):
-    """The last message of ``series`` logged before time ``t`` (ns)."""
+    """Return the last message of ``series`` logged before time ``t`` (ns)."""
     return [m for time, m in series if time < t][-1]
 
 

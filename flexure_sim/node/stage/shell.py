@@ -179,7 +179,8 @@ class StageNode(LiveParameters, Node):
         self.add_post_set_parameters_callback(self._apply_parameters)
         rec = self.session.current
         self._log.info(
-            f"mechanism {self.mechanism.name} ({self.mechanism_path}), {loop.time_mode} mode, "
+            f"mechanism {self.mechanism.name} ({self.mechanism_path})"
+            f"{', spatial engine (3-D)' if self.spatial else ''}, {loop.time_mode} mode, "
             f"{loop.rate:g} Hz x {loop.n_steps} engine steps of {loop.dt:g} s, "
             f"{len(tick_pubs)} topics per tick, recording {rec.path if rec else 'off'}")
         # Everything built so far lives as long as the node: keep it out of the collector's
