@@ -228,6 +228,11 @@ def test_a_planar_stage_in_3d_under_its_in_plane_drive_has_no_out_of_plane_motio
     finally:
         assert node.stop(signal.SIGINT) == 0, node.stderr
     bag = read_bag(node.cwd / "micro3d.mcap")
+    # The spatial engine ran (the planar one publishes the drive's wrench and the compression).
+    assert "spatial engine (3-D)" in node.stderr
+    assert "/drive/wrench" not in bag and "/hinges/a/compression" not in bag
+    from flexure_sim.recording import read_log
+    assert read_log(node.cwd / "micro3d.mcap").metadata["flexure_sim"]["space"] == "3d"
     planar = Simulation(load_mechanism("microstage")).static(u).snapshot
     names = [f"body{i}" for i in range(1, 7)]
     for i, b in enumerate(names):
