@@ -5,10 +5,10 @@ The planar node reports a tick in one compiled call (``engine.solver.tick_report
 it in another (``publish.tick_frame``). A mechanism in space is reported through
 ``SpatialSimulation.snapshot`` (the engine's one definition of every reported number) and
 packed by ``publish.spatial_messages`` in a few array operations: for the tip-tilt stage
-(5 bodies, 6 hinges, 3 drives, 3 outputs: 28 messages a tick) about 60 us for the snapshot
-and 0.1 ms for the packing on the development machine (``flexure-sim bench``-style figures are
-in docs/node.md, "Mechanisms in space"), next to about 1.3 ms for the ten engine steps of a
-1 ms tick.
+(5 bodies, 6 hinges, 3 drives, 3 outputs: 28 messages a tick) ~57 us for the snapshot and
+~25 us for the packing, next to ~60 us for the ten engine steps of a 1 ms tick (measured in
+one process; docs/node.md, "Mechanisms in space"), where the planar stage's compiled report
+and packing take ~4 us.
 
 `SpatialReport` offers what the loop uses of ``TickReport``: ``fill_data`` (the report of
 the current state, here the snapshot), ``finite``, ``values`` and ``index`` (the outputs and
