@@ -201,7 +201,7 @@ class StageNode(LiveParameters, Node):
         coerce_integer_overrides(self)
         first = parameter_specs()[:2]  # mechanism and space: what to load
         for spec in first:
-            declare(self, spec)
+            self._declare_checked(spec)
         self.mechanism, self.mechanism_path = load(self.get_parameter("mechanism").value,
                                                    self.get_parameter("space").value)
         #: True: the spatial engine runs (a ``space: 3d`` file, or ``space:=3d``).
@@ -217,14 +217,7 @@ class StageNode(LiveParameters, Node):
         self._specs = {s.name: s for s in (in_command_units(specs, drive) if drive else specs)
                        + drive_parameter_specs(named)}
         for spec in list(self._specs.values())[len(first):]:
-            try:
-                declare(self, spec)
-            except ParameterException as exc:
-                given = self._parameter_overrides.get(spec.name)
-                got = (f"got {given.type_.name.lower()} {given.value!r}" if given is not None
-                       else str(exc))
-                raise StartupError(f"invalid parameter {spec.name}: expected a "
-                                   f"{_TYPE_NAMES[spec.type]}, {got}") from exc
+            self._declare_checked(spec)
         unknown = undeclared_drive_overrides(self, [d.name for d in named], drive is not None)
         if unknown:
             raise StartupError(f"invalid parameter {unknown}")
@@ -237,6 +230,17 @@ class StageNode(LiveParameters, Node):
         if problem:
             raise StartupError(f"invalid parameters: {problem}")
         return values
+
+    def _declare_checked(self, spec: Any) -> None:
+        """Declare one parameter; StartupError naming it if its override has the wrong type."""
+        try:
+            declare(self, spec)
+        except ParameterException as exc:
+            given = self._parameter_overrides.get(spec.name)
+            got = (f"got {given.type_.name.lower()} {given.value!r}" if given is not None
+                   else str(exc))
+            raise StartupError(f"invalid parameter {spec.name}: expected a "
+                               f"{_TYPE_NAMES[spec.type]}, {got}") from exc
 
     def _interface(self, values: dict[str, Any]) -> itf.StageInterface:
         kind = SpatialInterface if self.spatial else itf.StageInterface
