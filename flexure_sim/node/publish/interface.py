@@ -14,7 +14,8 @@ Conventions (docs/node.md):
 - frames: root ``stage``; one frame per body, named after it; per hinge ``hinge_<name>``
   (its frame b, on body B) and ``hinge_<name>_a`` (its frame a, on body A), each with the
   node's ``frame_prefix`` in front (`topics.Frames`, the one place they are made). No leading
-  slashes. Planar poses become 3D poses with z = 0 and a yaw-only quaternion.
+  slashes. Planar poses become 3D poses with z = 0 and a yaw-only quaternion (a mechanism in
+  space: `spatial_messages.SpatialInterface`, the same table with 3-D content).
 - all topic names are relative (namespaces and remapping apply), except ``/clock``.
 """
 from __future__ import annotations
