@@ -176,6 +176,12 @@ def test_tiptilt_node_settles_at_the_engines_statics_and_analyse_gives_its_stati
     expected_at = vec(platform.position) + r_platform.apply(mech.hinges[0].b.position)
     assert np.max(np.abs(at - expected_at)) < 1e-12
     assert {mk.header.frame_id for mk in markers} == {"stage"}
+    # The platform's outline: a star from its origin out to each of its hinge frames and back.
+    (star,) = [mk for mk in markers if mk.ns == "bodies" and mk.text == "platform"]
+    points = np.array([vec(p) for p in star.points])
+    assert np.max(np.abs(points[0::2] - vec(platform.position))) < 1e-12
+    tips = vec(platform.position) + r_platform.apply([h.b.position for h in mech.hinges])
+    assert points.shape == (13, 3) and np.max(np.abs(points[1::2] - tips)) < 1e-12
     # analyse: the gain matrix from the recording's steps is the engine's exact static gain.
     from flexure_sim.cli import main
     assert main(["analyse", str(path), "--json"]) == 0

@@ -46,10 +46,6 @@ def _xyzw(wxyz: Any) -> tuple[float, float, float, float]:
     return x, y, z, w
 
 
-def _rotation(wxyz: Any) -> Rotation:
-    return Rotation.from_quat(_xyzw(wxyz))
-
-
 class SpatialDisplay:
     """Markers and TF of one spatial mechanism (module docstring); the `display.Display` API."""
 
@@ -64,39 +60,52 @@ class SpatialDisplay:
         bodies = mechanism.bodies
         self._index = {b.name: i for i, b in enumerate(bodies)}
         self._rest = np.array([b.position for b in bodies], dtype=float).reshape(-1, 3)
-        self._r0 = [_rotation(b.quaternion) for b in bodies]
+        self._r0 = Rotation.from_quat([_xyzw(b.quaternion) for b in bodies])
         self.fixed = {c.body for c in mechanism.constraints if isinstance(c, Fixed)}
-        #: Per body, the points of its star in body coordinates (origin, hinge point, ...).
-        self._stars = []
-        for b in bodies:
-            points = [(0.0, 0.0, 0.0)]
+        # Every drawn point in its body's coordinates with its body's index, so that one
+        # vectorised rotation places all of them: each body's star (origin, out to a hinge
+        # frame, back, ...), then each hinge's frame b.
+        local: list = []
+        owner: list = []
+        self._splits = []
+        for i, b in enumerate(bodies):
+            local.append((0.0, 0.0, 0.0))
             for h in mechanism.hinges:
                 for frame in (h.a, h.b):
                     if frame.body == b.name:
-                        points += [tuple(frame.position), (0.0, 0.0, 0.0)]
-            self._stars.append(np.array(points, dtype=float))
-        self._hinge_points = [(self._index[h.b.body], np.array(h.b.position, dtype=float))
-                              for h in mechanism.hinges]
+                        local += [tuple(frame.position), (0.0, 0.0, 0.0)]
+            owner += [i] * (len(local) - len(owner))
+            self._splits.append(len(local))
+        for h in mechanism.hinges:
+            local.append(tuple(h.b.position))
+            owner.append(self._index[h.b.body])
+        self._local = np.array(local, dtype=float).reshape(-1, 3)
+        self._owner = np.array(owner, dtype=int)
         self._drives = []
         for d in mechanism.drives:
             axis = _AXES.get(d.coordinate[-1], d.axis) if d.coordinate else d.axis
             self._drives.append((self._index[d.body], np.array(axis, dtype=float)))
         self._peak = 0.0
 
-    def _placed(self, snap: Any) -> tuple[np.ndarray, list[Rotation]]:
-        """Return the drawn positions (n, 3) and orientations of the bodies (magnified)."""
+    def placed(self, snap: Any) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Return the drawn body positions (n, 3) and every drawn point (root frame, magnified).
+
+        The points: each body's star, then each hinge's frame b (the order of `specs`).
+        """
         s = self.scale
         positions = self._rest + s * (np.asarray(snap.positions, dtype=float) - self._rest)
         phi = np.asarray(snap.rotations, dtype=float).reshape(-1, 3)
-        turns = Rotation.from_rotvec(s * phi)
-        return positions, [r0 * turns[i] for i, r0 in enumerate(self._r0)]
+        rotations = self._r0 * Rotation.from_rotvec(s * phi)
+        owner = self._owner
+        return positions, positions[owner] + rotations[owner].apply(self._local)
 
     def specs(self, snap: Any) -> list[MarkerSpec]:
         """Return the markers of the snapshot ``snap`` as plain data (`marker_cdr` packs them)."""
-        positions, rotations = self._placed(snap)
+        positions, points = self.placed(snap)
+        parts = np.split(points, self._splits)
         out = []
-        for k, (body, star) in enumerate(zip(self.mechanism.bodies, self._stars)):
-            pts = positions[k] + rotations[k].apply(star)
+        for k, (body, pts) in enumerate(zip(self.mechanism.bodies, parts[:-1])):
             out.append(MarkerSpec("bodies", k, 4, body.name, _IDENTITY, (LINE_WIDTH_M, 0.0, 0.0),
                                   BODY_RGBA, [tuple(p) for p in pts.tolist()]))
         w = np.asarray(snap.wrenches, dtype=float).reshape(-1, 6)
@@ -105,9 +114,8 @@ class SpatialDisplay:
         self._peak = max(self._peak, float(loads.max(initial=0.0)))
         ratios = loads / self._peak if self._peak > 0 else np.zeros_like(loads)
         size = HINGE_DISC_M[0]
-        for k, (hinge, (i, local), ratio) in enumerate(zip(
-                self.mechanism.hinges, self._hinge_points, ratios.tolist())):
-            x, y, z = (positions[i] + rotations[i].apply(local)).tolist()
+        for k, (hinge, (x, y, z), ratio) in enumerate(zip(
+                self.mechanism.hinges, parts[-1].tolist(), ratios.tolist())):
             out.append(MarkerSpec("hinges", k, SPHERE, hinge.name, (x, y, z, 0.0, 0.0, 0.0, 1.0),
                                   (size, size, size), load_colour(ratio), []))
         forces = np.asarray(snap.drive_forces, dtype=float)
