@@ -27,7 +27,7 @@ def test_defaults_are_valid_and_give_ten_steps_per_tick():
     read_only = {s.name for s in parameter_specs() if s.read_only}
     assert read_only == {"mechanism", "sim_step", "time_mode", "stepping_nice",
                          "stepping_priority", "cpu_latency_us", "command_reliability",
-                         "command_depth", "frame_prefix"}
+                         "command_depth", "frame_prefix", "space"}
     assert values["command_reliability"] == "reliable"
 
 

@@ -11,7 +11,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64
 
-from flexure_sim.node.publish.interface import command_qos
+from flexure_sim.node.publish.qos_profiles import command_qos
 from flexure_sim.node.stage.polled import PolledGroup, take_raw
 
 

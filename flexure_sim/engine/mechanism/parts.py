@@ -28,9 +28,9 @@ def coordinate_unit(coordinate: Optional[str], force: bool = False) -> str:
     """
     Return the SI unit of a displacement (or force) along an axis, or about theta.
 
-    m along an axis, rad about theta (or a spatial rx, ry, rz); N and N m for a force (the
-    units of drive inputs and outputs, docs/mechanism_file.md, "Several drives and outputs; the
-    XY stage").
+    m along an axis, rad about theta (and about a spatial body's rx, ry, rz: docs/spatial.md);
+    N and N m for a force (the units of drive inputs and outputs, docs/mechanism_file.md,
+    "Several drives and outputs; the XY stage").
     """
     if coordinate in ("theta", "rx", "ry", "rz"):
         return "N m" if force else "rad"

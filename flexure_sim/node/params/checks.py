@@ -17,7 +17,7 @@ from flexure_sim.node.inputs.command_checks import limits_problem
 from flexure_sim.node.publish.interface import TIME_MODES
 from flexure_sim.node.params.table import (
     COMMAND_RELIABILITIES, DIVISION_TOLERANCE, MAX_PUBLISH_RATE, MAX_SIM_STEP, RECORD_FORMATS,
-    ParamSpec, parameter_specs,
+    SPACES, ParamSpec, parameter_specs,
 )
 
 
@@ -93,6 +93,8 @@ def validate(values: Mapping[str, Any]) -> Optional[str]:
         return problem
     if values["time_mode"] not in TIME_MODES:
         return f"time_mode: expected one of {', '.join(TIME_MODES)}, got {values['time_mode']!r}"
+    if values.get("space", "auto") not in SPACES:
+        return f"space: expected one of {', '.join(SPACES)}, got {values['space']!r}"
     problem = limits_problem(values["stroke_min"], values["stroke_max"], values["slew_rate"])
     if problem:
         return problem

@@ -19,7 +19,7 @@ from rclpy.parameter import Parameter
 from flexure_sim.node.inputs.drive_bank import LIMIT_KEYS
 from flexure_sim.node.publish.interface import TIME_MODES
 from flexure_sim.node.params.table import (
-    COMMAND_RELIABILITIES, RECORD_FORMATS, ParamSpec, parameter_specs,
+    COMMAND_RELIABILITIES, RECORD_FORMATS, SPACES, ParamSpec, parameter_specs,
 )
 
 _TYPE_CODES = {
@@ -32,6 +32,7 @@ _CONSTRAINTS = {
     "time_mode": f"one of {', '.join(TIME_MODES)}",
     "command_reliability": f"one of {', '.join(COMMAND_RELIABILITIES)}",
     "record_format": f"one of {', '.join(RECORD_FORMATS)}",
+    "space": f"one of {', '.join(SPACES)}",
     "sim_step": "> 0 and divides 1/publish_rate",
     "slew_rate": "> 0",
     "stroke_min": "stroke_min <= stroke_max; the engine must find a static equilibrium there",

@@ -21,6 +21,8 @@ COMMAND_RELIABILITIES = ("reliable", "best_effort")
 #: Default of ``command_depth``: one second of a 10 kHz command flood, so ticks down to 1 Hz
 #: (fast mode) or a one-second stall lose nothing of it (docs/node.md, "Drive commands").
 COMMAND_DEPTH = 10000
+#: Values of ``space``.
+SPACES = ("auto", "2d", "3d")
 #: Values of ``record_format``.
 RECORD_FORMATS = ("bag", "mcap")
 #: Default of ``wake_spin``: see its description and docs/node.md, "Time" (BENCHMARKS.md).
@@ -60,8 +62,12 @@ _DRIVE = (DRIVE_MIN, DRIVE_MAX, DRIVE_SLEW)
 #: unit, read-only, low, high, description). docs/node.md, "Parameters", is this table for users.
 TABLE: tuple[tuple[Any, ...], ...] = (
     ("mechanism", "microstage", str, "", True, None, None,
-     "Built-in mechanism name (microstage, fourbar_cantilever, fourbar_mixed) or path of a "
-     "mechanism YAML file."),
+     "Built-in mechanism name (microstage, fourbar_cantilever, fourbar_mixed, tiptilt_stage) "
+     "or path of a mechanism YAML file."),
+    ("space", "auto", str, "", True, None, None,
+     "auto: the mechanism file's own engine (planar, or the spatial engine for a file with "
+     "space: 3d); 3d: a planar file opened in space, with its out-of-plane freedoms (poses, "
+     "wrenches, markers and TF in 3-D); 2d: planar (refused for a space: 3d file). Read-only."),
     ("publish_rate", 1000.0, float, "Hz", False, 1.0, MAX_PUBLISH_RATE,
      "Ticks per second: each tick advances the simulation by 1/publish_rate s and publishes "
      "every topic once (diagnostics at ~10 Hz). 1/publish_rate must be a whole multiple of "

@@ -98,7 +98,8 @@ class Diagnostics:
         #: The hinges with a yield strength (indices, names): their stress ratios are in the
         #: tick report.
         self._stress = [(k, h.name) for k, h in enumerate(hinges)
-                        if h.stress is not None and h.stress.sigma_y is not None]
+                        if getattr(h, "stress", None) is not None
+                        and h.stress.sigma_y is not None]  # no stress data in 3-D
         self.window = self.new_window()
 
     def stress_ratio(self) -> tuple[list[tuple[str, Any]], list[str], int]:

@@ -179,6 +179,14 @@ class Display:
                                  ratios)
         return self.packer.pack(specs, stamp_ns)
 
+    def moving(self, report: Any) -> list[Transform]:
+        """Return the transforms of the moving bodies at the tick report ``report``."""
+        return moving_transforms(self.mechanism, self.frames, report.poses)
+
+    def static(self) -> list[Transform]:
+        """Return the transforms that never change (`static_transforms`)."""
+        return static_transforms(self.mechanism, self.frames)
+
 
 class DisplayOutput:
     """
@@ -210,16 +218,14 @@ class DisplayOutput:
         tf = None
         if self._tf_pub is not None:
             d = self.display
-            tf = tf_message(moving_transforms(d.mechanism, d.frames, report.poses), stamp,
-                            self._tf_class)
+            tf = tf_message(d.moving(report), stamp, self._tf_class)
         session = self._session
         if session.current is not None:
             if tf is not None:
                 from rclpy.serialization import serialize_message
                 items.append((self._channels[1], serialize_message(tf)))
                 if self._recorded_static is not session.current:
-                    static = tf_message(static_transforms(d.mechanism, d.frames), stamp,
-                                        self._tf_class)
+                    static = tf_message(d.static(), stamp, self._tf_class)
                     items.append((self._channels[2], serialize_message(static)))
                     self._recorded_static = session.current
             session.write(items, stamp)
@@ -241,9 +247,12 @@ class DisplayOutput:
 
 
 def build_display(node: Any, values: Any, qos: QoSProfile, watch: Any,
-                  first_channel: int) -> tuple[DisplayOutput, list, Any]:
+                  first_channel: int, display: Any = None) -> tuple[DisplayOutput, list, Any]:
     """
     Create the stage node's markers publisher, and TF publishers where tf2_msgs is importable.
+
+    ``display``: what draws the mechanism (default: a planar `Display` of ``node.mechanism``;
+    ``spatial_display.SpatialDisplay`` for a mechanism in space).
 
     Returns the display output for the stepping loop (recording channels from
     ``first_channel`` on), the recorded display topics, (resolved name, type name, QoS) in
@@ -252,7 +261,8 @@ def build_display(node: Any, values: Any, qos: QoSProfile, watch: Any,
     from visualization_msgs.msg import MarkerArray
 
     frames = node.interface.frames
-    display = Display(node.mechanism, frames, float(values["display_scale"]))
+    if display is None:
+        display = Display(node.mechanism, frames, float(values["display_scale"]))
     pub = node.create_publisher(MarkerArray, MARKERS.name, qos,
                                 event_callbacks=watch.publisher_callbacks(MARKERS.name))
     recorded = [(pub.topic_name, MARKERS.type_name, qos)]
@@ -264,8 +274,8 @@ def build_display(node: Any, values: Any, qos: QoSProfile, watch: Any,
     else:
         tf_pub = node.create_publisher(tf_class, TF.name, tf_qos())
         static_pub = node.create_publisher(tf_class, TF_STATIC.name, tf_static_qos())
-        static_pub.publish(tf_message(static_transforms(node.mechanism, frames),
-                                      node.get_clock().now().nanoseconds, tf_class))
+        static_pub.publish(tf_message(display.static(), node.get_clock().now().nanoseconds,
+                                      tf_class))
         recorded += [(tf_pub.topic_name, TF.type_name, tf_qos()),
                      (static_pub.topic_name, TF_STATIC.type_name, tf_static_qos())]
     channels = list(range(first_channel, first_channel + len(recorded)))

@@ -14,7 +14,8 @@ Conventions (docs/node.md):
 - frames: root ``stage``; one frame per body, named after it; per hinge ``hinge_<name>``
   (its frame b, on body B) and ``hinge_<name>_a`` (its frame a, on body A), each with the
   node's ``frame_prefix`` in front (`topics.Frames`, the one place they are made). No leading
-  slashes. Planar poses become 3D poses with z = 0 and a yaw-only quaternion.
+  slashes. Planar poses become 3D poses with z = 0 and a yaw-only quaternion (a mechanism in
+  space: `spatial_messages.SpatialInterface`, the same table with 3-D content).
 - all topic names are relative (namespaces and remapping apply), except ``/clock``.
 """
 from __future__ import annotations
@@ -25,12 +26,12 @@ from typing import Any, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseStamped, TransformStamped, WrenchStamped
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from flexure_sim.engine.mechanism.parts import Mechanism
+from flexure_sim.engine.mechanism.spatial_parts import Mechanism as SpatialMechanism
 from flexure_sim import topics
 from flexure_sim.topics import ROOT_FRAME, Frames, hinge_frame, hinge_frame_a
 from flexure_sim.node.publish.diagnostics_msg import (  # noqa: F401 (re-exported)
@@ -40,8 +41,9 @@ from flexure_sim.node.publish.cdr import (
     ClockPacker, Float64Packer, StampedPacker, packing_applies, split_stamp,
 )
 from flexure_sim.node.inputs.drive_kind import command_kind, coordinate_unit, units
-# Default depth of the drive command subscription (parameter command_depth).
-from flexure_sim.node.params.table import COMMAND_DEPTH
+from flexure_sim.node.publish.qos_profiles import (  # noqa: F401 (re-exported)
+    COMMAND_DEPTH, QUEUE_DEPTH, command_qos, stream_qos,
+)
 from flexure_sim.node.publish.reference_messages import (  # noqa: F401 (re-exported)
     reference_messages, yaw_quaternion,
 )
@@ -49,37 +51,6 @@ from flexure_sim.node.publish.reference_messages import (  # noqa: F401 (re-expo
 TIME_MODES = ("realtime", "fast", "lockstep")
 #: Modes in which the node publishes /clock (simulated time is not wall time).
 CLOCK_MODES = ("fast", "lockstep")
-#: Depth of every published stream.
-QUEUE_DEPTH = 100
-
-
-def _reliable_volatile(depth: int) -> QoSProfile:
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-
-
-def stream_qos() -> QoSProfile:
-    """Return the QoS of every published topic: reliable, keep last `QUEUE_DEPTH`, volatile."""
-    return _reliable_volatile(QUEUE_DEPTH)
-
-
-def command_qos(reliability: str = "reliable", depth: int = COMMAND_DEPTH) -> QoSProfile:
-    """
-    Return the QoS of the drive command subscription.
-
-    ``reliability`` (``reliable``: only reliable publishers match; ``best_effort``: reliable and
-    best-effort ones), keep last ``depth`` (parameter ``command_depth``), volatile.
-
-    The reader is emptied once per tick (`polled`), so it must hold a tick's worth of
-    commands: the default 10000 is 1 s of a 10 kHz stream (ticks down to 1 Hz, or a stall of
-    the node of up to 1 s); what it cannot hold is counted (`command_loss`).
-    """
-    qos = _reliable_volatile(depth)
-    if reliability == "best_effort":
-        qos.reliability = ReliabilityPolicy.BEST_EFFORT
-    elif reliability != "reliable":
-        raise ValueError(f"reliability: expected reliable or best_effort, got {reliability!r}")
-    return qos
 
 
 def check_names(mechanism: Mechanism) -> None:
@@ -134,7 +105,7 @@ def _along(text: str, item: Any) -> str:
     """``text`` with the axis or coordinate of a drive or output."""
     if item.coordinate is not None:
         return f"{text}, coordinate {item.coordinate}"
-    return f"{text} along ({item.axis[0]:g}, {item.axis[1]:g})"
+    return f"{text} along ({', '.join(f'{a:g}' for a in item.axis)})"
 
 
 class StageInterface:
@@ -165,16 +136,19 @@ class StageInterface:
         hinges = [h.name for h in mech.hinges]
         self.body_names = bodies
         self.hinge_names = hinges
-        self.has_drive = mech.drive is not None and len(mech.drives) == 1 \
-            and mech.drive.kind == "displacement"
+        # A planar mechanism's ``drive`` is its first drive; a spatial one has no such key.
+        drive = mech.drives[0] if mech.drives else None
+        self.has_drive = drive is not None and len(mech.drives) == 1 \
+            and drive.kind == "displacement"
         #: The named drives (several, or a force drive): topics per drive; else empty.
         self.drives = () if self.has_drive else mech.drives
         outputs = mech.all_outputs
         self.has_output = len(outputs) == 1
         #: The named outputs when there are several: a topic each; else empty.
         self.outputs = outputs if len(outputs) > 1 else ()
-        self.has_sensor = self.has_output and mech.sensor is not None
-        self.compression_hinge: Optional[str] = mech.compression_hinge if self.has_drive else None
+        self.has_sensor = self.has_output and getattr(mech, "sensor", None) is not None
+        self.compression_hinge: Optional[str] = (getattr(mech, "compression_hinge", None)
+                                                 if self.has_drive else None)
 
         specs: list[TopicSpec] = []
         if self.publishes_clock:
@@ -229,8 +203,9 @@ class StageInterface:
                     f"({fr.hinge_a(h.name)}); translation (p_x, p_y, 0), yaw alpha",
                 )
             )
-        #: The drives whose full wrench is published (every drive; a WrenchStamped each).
-        self.wrench_drives = tuple(mech.drives)
+        #: The drives whose full wrench is published (every drive, a WrenchStamped each; none
+        #: in 3-D: the spatial snapshot reports no drive wrench).
+        self.wrench_drives = () if isinstance(mech, SpatialMechanism) else tuple(mech.drives)
         for d in self.wrench_drives:
             specs.append(_spec(
                 f"drive_wrench:{d.name}",
@@ -290,7 +265,7 @@ class StageInterface:
                     Float64,
                     "N",
                     "",
-                    f"force the actuator applies to the driven body {mech.drive.body} along the "
+                    f"force the actuator applies to the driven body {drive.body} along the "
                     "drive axis",
                 )
             )
@@ -304,7 +279,7 @@ class StageInterface:
         self.diagnostics = _spec("diagnostics", topics.DIAGNOSTICS, DiagnosticArray, "", "",
                                  "real-time factor, step times, solver work, command counters")
         self.command: Optional[TopicSpec] = None
-        if self.has_drive and command_kind(mech.drive) == "voltage":
+        if self.has_drive and command_kind(drive) == "voltage":
             self.command = _spec("command", topics.COMMAND_VOLTAGE, Float64, "V", "",
                                  "drive command (subscribed): the piezo actuator's voltage")
         elif self.has_drive:

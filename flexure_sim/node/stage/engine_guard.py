@@ -36,9 +36,11 @@ class StrokeProbe:
     check builds the probe (tens of milliseconds).
     """
 
-    def __init__(self, mechanism: Mechanism, dt: float) -> None:
+    def __init__(self, mechanism: Mechanism, dt: float, simulation: Any = Simulation) -> None:
         self._mechanism = mechanism
         self._dt = dt
+        #: The engine's simulation class (``Simulation``, or ``SpatialSimulation`` in 3-D).
+        self._simulation = simulation
         self._sim: Optional[Simulation] = None
         self._known: dict[tuple, Optional[str]] = {}
 
@@ -55,15 +57,15 @@ class StrokeProbe:
         key = (drive, value)
         if key not in self._known:
             if self._sim is None:
-                self._sim = Simulation(self._mechanism, dt=self._dt)
-            one = next((d for d in self._mechanism.drives if d.name == drive),
-                       self._mechanism.drive)
+                self._sim = self._simulation(self._mechanism, dt=self._dt)
+            drives = self._mechanism.drives
+            one = next((d for d in drives if d.name == drive), drives[0] if drives else None)
             held = value
             if command_kind(one) == "voltage":
                 held = float(nominal_displacement(one.actuator, value))
             inputs: Any = held
             if drive is not None:
-                inputs = {d: (held if d == drive else 0.0) for d in self._sim.model.drives.names}
+                inputs = {d.name: (held if d.name == drive else 0.0) for d in drives}
             try:
                 self._sim.static(inputs)
                 self._known[key] = None

@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Optional, Sequence
 
-from flexure_sim.engine.solver.simulation import Simulation
 from flexure_sim.node.inputs.command_checks import WarningThrottle
 from flexure_sim.node.publish.diagnostics import DiagnosticsPort
 from flexure_sim.node.record.session import RecordingSession
@@ -58,11 +57,13 @@ class LoopParts:
     drive); ``diagnostics``: where the diagnostics go (None: none); ``display``: markers and
     TF (``display.DisplayOutput``, None: none); ``graph_check``: a check of the ROS graph run
     between ticks every GRAPH_CHECK_PERIOD_S (``qos_watch``); ``throttle``: the warnings'
-    rate limit, shared with the intake.
+    rate limit, shared with the intake; ``report``: None for the planar engine (the loop
+    builds its compiled ``TickReport``), a ``spatial_report.SpatialReport`` for a mechanism
+    in space.
     """
 
     settings: LoopSettings
-    sim: Simulation
+    sim: Any  # a Simulation, or a SpatialSimulation with a SpatialReport as ``report``
     interface: Any
     publishers: Sequence[Any]
     session: RecordingSession
@@ -73,3 +74,4 @@ class LoopParts:
     display: Any = None
     graph_check: Optional[Callable[[], Any]] = None
     throttle: WarningThrottle = field(default_factory=lambda: WarningThrottle(1.0))
+    report: Any = None

@@ -25,12 +25,19 @@ from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, Trigger
 
 from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism, resolve_mechanism_path
+from flexure_sim.engine.mechanism.spatial_loader import is_spatial, load_spatial
+from flexure_sim.engine.mechanism.spatial_parts import Mechanism as SpatialMechanism
+from flexure_sim.engine.solver.spatial_simulation import SpatialSimulation
 from flexure_sim.errors import FlexureSimError
 from flexure_sim.engine.solver.simulation import Simulation
 from flexure_sim.recording import RecordingError
 from flexure_sim.node.publish import interface as itf
-from flexure_sim.node.inputs.command_intake import REJECTED_SUFFIX, intake_for
 from flexure_sim.node.publish.cdr import REJECTED_TYPE
+from flexure_sim.node.publish.qos_profiles import command_qos, stream_qos
+from flexure_sim.node.publish.spatial_display import SpatialDisplay
+from flexure_sim.node.publish.spatial_messages import SpatialInterface
+from flexure_sim.node.stage.spatial_report import SpatialReport
+from flexure_sim.node.inputs.command_intake import REJECTED_SUFFIX, intake_for
 from flexure_sim.node.params.declare import (
     coerce_integer_overrides, declare, undeclared_drive_overrides,
 )
@@ -44,7 +51,7 @@ from flexure_sim.node.inputs.command_checks import CommandFilter, WarningThrottl
 from flexure_sim.node.stage.engine_guard import StrokeProbe
 from flexure_sim.node.stage.pacing import set_threads_nice
 from flexure_sim.node.params.live import LiveParameters
-from flexure_sim.node.params.table import parameter_specs
+from flexure_sim.node.params.table import SPACES, parameter_specs
 from flexure_sim.node.stage.polled import PolledGroup, never_called
 from flexure_sim.node.stage.qos_watch import QosWatch
 from flexure_sim.node.stage.requests import REQUEST_TIMEOUT_S
@@ -69,18 +76,30 @@ class StartupError(FlexureSimError, RuntimeError):
     """The node cannot start (bad mechanism, invalid parameters, recording impossible)."""
 
 
-def load(mechanism_arg: Any) -> tuple[Any, Path]:
+def load(mechanism_arg: Any, space: Any = "auto") -> tuple[Any, Path]:
     """
     Return the mechanism named by the ``mechanism`` parameter and its file.
 
-    StartupError with the loader's one-line message (file: key: problem) if it does not load.
+    ``space`` (the parameter): ``auto`` loads a ``space: 3d`` file into the spatial engine and
+    a planar file into the planar one, ``3d`` opens a planar file in space, ``2d`` refuses a
+    3-D file. StartupError with the loader's one-line message (file: key: problem) if it does
+    not load.
     """
     if not isinstance(mechanism_arg, str) or not mechanism_arg.strip():
         raise StartupError("parameter mechanism: expected a built-in name or a YAML path, got "
                            f"{mechanism_arg!r}")
+    if space not in SPACES:
+        raise StartupError(f"invalid parameters: space: expected one of {', '.join(SPACES)}, "
+                           f"got {space!r}")
     try:
-        mech = load_mechanism(mechanism_arg)
+        spatial = space == "3d" or is_spatial(mechanism_arg)
+        if spatial and space == "2d":
+            raise StartupError(f"{mechanism_arg}: a 3-D mechanism (space: 3d) cannot run with "
+                               "space 2d; use space auto or 3d")
+        mech = load_spatial(mechanism_arg) if spatial else load_mechanism(mechanism_arg)
         path = resolve_mechanism_path(mechanism_arg).resolve()
+    except StartupError:
+        raise
     except ConfigError as exc:
         raise StartupError(str(exc)) from exc
     except Exception as exc:  # noqa: BLE001 - whatever the loader lets through: one line
@@ -110,7 +129,7 @@ class StageNode(LiveParameters, Node):
         self.interface = self._interface(values)
         sim, drive_filter = self._simulation(values)
         self.qos_watch = watch = QosWatch(self._log, values["command_reliability"])
-        qos = itf.stream_qos()
+        qos = stream_qos()
         tick_pubs = [self.create_publisher(t.msg_type, t.name, qos,
                                            event_callbacks=watch.publisher_callbacks(t.name))
                      for t in self.interface.tick_topics]
@@ -125,13 +144,15 @@ class StageNode(LiveParameters, Node):
         depth = values["command_depth"]
         self._command_subs = [self.create_subscription(
             spec.msg_type, spec.name, never_called,
-            itf.command_qos(values["command_reliability"], depth),
+            command_qos(values["command_reliability"], depth),
             raw=True, callback_group=PolledGroup()) for spec in self.interface.commands]
         command_topics = [sub.topic_name for sub in self._command_subs]
+        drawn = (SpatialDisplay(self.mechanism, self.interface.frames,
+                                float(values["display_scale"])) if self.spatial else None)
         display, self._display_topics, self._tf_static_pub = dsp.build_display(
-            self, values, qos, watch, len(tick_pubs) + 1 + len(command_topics))
+            self, values, qos, watch, len(tick_pubs) + 1 + len(command_topics), drawn)
         throttle = WarningThrottle(1.0)
-        drive = self.mechanism.drive if not self._named else None
+        drive = self._drive if not self._named else None
         intake = intake_for(self._command_subs, drive_filter, self._named, len(tick_pubs) + 1,
                             self.session.write, self._log, throttle,
                             units(drive)[0] if drive else "m",
@@ -145,6 +166,7 @@ class StageNode(LiveParameters, Node):
             LoopSettings.from_values(values), sim, self.interface, tick_pubs, self.session,
             self._log, filter=drive_filter, intake=intake, display=display, throttle=throttle,
             graph_check=check_graph if command_topics else None,
+            report=SpatialReport(sim) if self.spatial else None,
             diagnostics=DiagnosticsPort(diag_pub, len(tick_pubs), self.get_name(),
                                         self.mechanism.name, watch.diagnostics))
         self.loop = loop = SteppingLoop(parts)
@@ -162,7 +184,8 @@ class StageNode(LiveParameters, Node):
         self.add_post_set_parameters_callback(self._apply_parameters)
         rec = self.session.current
         self._log.info(
-            f"mechanism {self.mechanism.name} ({self.mechanism_path}), {loop.time_mode} mode, "
+            f"mechanism {self.mechanism.name} ({self.mechanism_path})"
+            f"{', spatial engine (3-D)' if self.spatial else ''}, {loop.time_mode} mode, "
             f"{loop.rate:g} Hz x {loop.n_steps} engine steps of {loop.dt:g} s, "
             f"{len(tick_pubs)} topics per tick, recording {rec.path if rec else 'off'}")
         # Everything built so far lives as long as the node: keep it out of the collector's
@@ -181,30 +204,31 @@ class StageNode(LiveParameters, Node):
         StartupError names what is wrong.
         """
         coerce_integer_overrides(self)
-        declare(self, parameter_specs()[0])
-        self.mechanism, self.mechanism_path = load(self.get_parameter("mechanism").value)
+        first = parameter_specs()[:2]  # mechanism and space: what to load
+        for spec in first:
+            self._declare_checked(spec)
+        self.mechanism, self.mechanism_path = load(self.get_parameter("mechanism").value,
+                                                   self.get_parameter("space").value)
+        #: True: the spatial engine runs (a ``space: 3d`` file, or ``space:=3d``).
+        self.spatial = isinstance(self.mechanism, SpatialMechanism)
+        #: The first drive (a planar mechanism's ``drive``), None without one.
+        self._drive = self.mechanism.drives[0] if self.mechanism.drives else None
         #: The named drives (several, or a force drive; `drive_bank`), else the single drive.
         self._named = named = named_drives(self.mechanism)
-        drive = self.mechanism.drive if not named else None
+        drive = self._drive if not named else None
         defaults = command_limits(drive) if drive else None
         specs = parameter_specs(defaults, "each drive has its own drives.<name>.* limits"
                                 if named else "the mechanism has no drive")
         self._specs = {s.name: s for s in (in_command_units(specs, drive) if drive else specs)
                        + drive_parameter_specs(named)}
-        for spec in list(self._specs.values())[1:]:
-            try:
-                declare(self, spec)
-            except ParameterException as exc:
-                given = self._parameter_overrides.get(spec.name)
-                got = (f"got {given.type_.name.lower()} {given.value!r}" if given is not None
-                       else str(exc))
-                raise StartupError(f"invalid parameter {spec.name}: expected a "
-                                   f"{_TYPE_NAMES[spec.type]}, {got}") from exc
+        for spec in list(self._specs.values())[len(first):]:
+            self._declare_checked(spec)
         unknown = undeclared_drive_overrides(self, [d.name for d in named], drive is not None)
         if unknown:
             raise StartupError(f"invalid parameter {unknown}")
         values = self._values()
-        self._probe = StrokeProbe(self.mechanism, float(values["sim_step"]))
+        self._probe = StrokeProbe(self.mechanism, float(values["sim_step"]),
+                                  SpatialSimulation if self.spatial else Simulation)
         own = {"stroke_min": defaults[0], "stroke_max": defaults[1]} if defaults else {}
         own.update({s.name: s.default for s in drive_parameter_specs(named)})
         problem = self._problem(values, {**values, **own})
@@ -212,17 +236,34 @@ class StageNode(LiveParameters, Node):
             raise StartupError(f"invalid parameters: {problem}")
         return values
 
-    def _interface(self, values: dict[str, Any]) -> itf.StageInterface:
+    def _declare_checked(self, spec: Any) -> None:
+        """Declare one parameter; StartupError naming it if its override has the wrong type."""
         try:
-            return itf.StageInterface(self.mechanism, values["time_mode"], values["frame_prefix"])
+            declare(self, spec)
+        except ParameterException as exc:
+            given = self._parameter_overrides.get(spec.name)
+            got = (f"got {given.type_.name.lower()} {given.value!r}" if given is not None
+                   else str(exc))
+            raise StartupError(f"invalid parameter {spec.name}: expected a "
+                               f"{_TYPE_NAMES[spec.type]}, {got}") from exc
+
+    def _interface(self, values: dict[str, Any]) -> itf.StageInterface:
+        kind = SpatialInterface if self.spatial else itf.StageInterface
+        try:
+            return kind(self.mechanism, values["time_mode"], values["frame_prefix"])
         except ValueError as exc:
             raise StartupError(str(exc)) from exc
 
-    def _simulation(self, values: dict[str, Any]) -> tuple[Simulation, Any]:
+    def _simulation(self, values: dict[str, Any]) -> tuple[Any, Any]:
         """Build the simulation, stepped once and reset (warm), and the drives' command filter."""
-        # No energy bookkeeping: the node publishes no energies (Model.energy).
-        sim = Simulation(self.mechanism, dt=float(values["sim_step"]),
-                         relinearize_tol=RELINEARIZE_TOL, energy=False)
+        # No energy bookkeeping: the node publishes no energies (Model.energy; none in 3-D).
+        sim: Any
+        if self.spatial:
+            sim = SpatialSimulation(self.mechanism, dt=float(values["sim_step"]),
+                                    relinearize_tol=RELINEARIZE_TOL)
+        else:
+            sim = Simulation(self.mechanism, dt=float(values["sim_step"]),
+                             relinearize_tol=RELINEARIZE_TOL, energy=False)
         try:
             # Warm up (compiled kernels, first Jacobian) before the first paced tick.
             sim.step(1)
@@ -231,7 +272,7 @@ class StageNode(LiveParameters, Node):
         except Exception as exc:  # noqa: BLE001 - the engine's own message, at start-up
             raise StartupError(
                 f"the engine failed its first step: {type(exc).__name__}: {exc}") from exc
-        drive = self.mechanism.drive if not self._named else None
+        drive = self._drive if not self._named else None
         drive_filter: Any = None
         if drive is not None:
             drive_filter = CommandFilter(self._limits(values))
@@ -286,20 +327,21 @@ class StageNode(LiveParameters, Node):
     # ======================================================= stepping-thread work
     def _start_recording(self) -> Path:
         values = self._values()
-        qos = itf.stream_qos()
+        qos = stream_qos()
         topics = [(name, spec.type_name, qos)
                   for name, spec in zip(self._tick_names, self.interface.tick_topics)]
         topics.append((self._diag_topic, self.interface.diagnostics.type_name, qos))
-        command_qos = itf.command_qos(values["command_reliability"], values["command_depth"])
+        commands = command_qos(values["command_reliability"], values["command_depth"])
         for sub, spec in zip(self._command_subs, self.interface.commands):
-            topics.append((sub.topic_name, spec.type_name, command_qos))
+            topics.append((sub.topic_name, spec.type_name, commands))
         topics += self._display_topics
-        topics += [(sub.topic_name + REJECTED_SUFFIX, REJECTED_TYPE, command_qos)
+        topics += [(sub.topic_name + REJECTED_SUFFIX, REJECTED_TYPE, commands)
                    for sub in self._command_subs]
         loop = self.loop
         node = self.get_fully_qualified_name()
         metadata = run_metadata(values, self.mechanism, self.mechanism_path, self.interface, node,
                                 loop.n_steps, RELINEARIZE_TOL, loop.runs, loop.sim.state.t)
+        metadata["space"] = "3d" if self.spatial else "2d"  # the engine that ran
         return self.session.start(values, self.mechanism.name, node, topics, metadata,
                                   lossless=self.time_mode != "realtime")
 

@@ -32,8 +32,8 @@ SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 USAGE = """usage: stage_node [--ros-args -p NAME:=VALUE ...]
 
-Simulates a planar flexure mechanism (default: the built-in micropositioning stage) and
-publishes its state; see docs/node.md for topics, frames and QoS.
+Simulates a flexure mechanism, planar or in space (default: the built-in micropositioning
+stage) and publishes its state; see docs/node.md for topics, frames and QoS.
 
 parameters:
 """

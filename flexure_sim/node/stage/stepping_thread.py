@@ -6,8 +6,9 @@ received since the last tick (`command_intake`), advances the engine by round(1 
 (publish_rate * sim_step)) steps, reports the state in one compiled call (the engine's
 ``tick_report``), packs every message into one recorder frame in another (`tick_frame`), hands
 that frame to the recorder and publishes slices of it: the bytes recorded are the bytes
-published. The loop is built from its parts (`LoopParts`, made by ``shell.StageNode``) and its
-settings (`LoopSettings`, the node's parameters), all in one `LoopParts`.
+published. A mechanism in space is reported by its snapshot and packed by its interface
+(`LoopParts.report`: ``spatial_report``). The loop is built from its parts (`LoopParts`, made
+by ``shell.StageNode``) and its settings (`LoopSettings`, the node's parameters).
 
 Real-time mode paces ticks with absolute deadlines of a steady clock (`pacing.Pacer`; with
 ``merge_late_ticks`` a loop that many ticks late merges them into one that steps the engine
@@ -31,6 +32,7 @@ from flexure_sim.node.publish.diagnostics import Diagnostics
 from flexure_sim.node.publish.display import display_every
 from flexure_sim.node.stage.cpu_latency import request_cpu_latency
 from flexure_sim.node.stage.engine_guard import EngineHold
+from flexure_sim.node.stage.engine_steps import advance
 from flexure_sim.node.stage.loop_parts import LoopParts
 from flexure_sim.node.stage.overrun import OverrunWatch
 from flexure_sim.node.stage.pacing import Pacer, set_thread_fifo, set_thread_nice
@@ -85,12 +87,15 @@ class SteppingLoop:
         #: What each tick publishes, in one compiled call (engine), and its messages packed in
         #: another (`tick_frame`; None: `interface.encode` from a snapshot, where the packed
         #: layouts do not apply).
-        self.report = TickReport(sim.model)
+        #: True: a mechanism in space, reported by its snapshot (`LoopParts.report`).
+        self.spatial = parts.report is not None
+        self.report = parts.report if self.spatial else TickReport(sim.model)
         self.reported = False
         self.frame = (tick_frame.TickFrame(interface, self.report.index)
-                      if interface.packed and tick_frame.APPLIES else None)
+                      if interface.packed and tick_frame.APPLIES and not self.spatial else None)
         self._output_at = self.report.index["outputs"].start
-        self.report.fill_data(sim.data)  # loads the compiled kernels before the first tick
+        self._data = None if self.spatial else sim.data
+        self.report.fill_data(self._data)  # loads the compiled kernels before the first tick
         if self.frame is not None:
             self.frame.pack(self.report.values, 0.0, 0)
         #: The output's sensor (``output/measured``), sampled once per published tick.
@@ -232,33 +237,8 @@ class SteppingLoop:
         return True, f"t = {self.sim.state.t:.9g} s"
 
     def _advance_engine(self) -> None:
-        """Take the tick's engine steps, following the drive filter's ramp."""
-        sim = self.sim
-        filt = self.filter
-        if filt is None:
-            sim.step(self.n_steps)
-            return
-        if filt.begin_tick(self.n_steps * self.dt) and self.intake is not None:
-            self.intake.warn_rate_limited()
-        if filt.settled:
-            if filt.differs(sim.state.command):
-                sim.set_command(filt.applied)
-            sim.step(self.n_steps)
-        else:
-            # Step by step only while the ramp lasts: once the applied target reaches the
-            # command, the rest of the tick is one compiled call (the same states as one step
-            # at a time). A controller's new command every tick is usually within one step's
-            # slew, so a tick is then one set_command and one step(n), not n of each (which
-            # cost ~0.25 ms of Python per tick and made real-time ticks late).
-            dt = self.dt
-            remaining = self.n_steps
-            while remaining:
-                sim.set_command(filt.advance(dt))
-                if filt.settled:
-                    sim.step(remaining)
-                    break
-                sim.step(1)
-                remaining -= 1
+        """Take the tick's engine steps, following the drive filter's ramp (`engine_steps`)."""
+        advance(self.sim, self.filter, self.intake, self.n_steps, self.dt)
 
     def _merged_periods(self, count: int) -> None:
         """
@@ -294,7 +274,7 @@ class SteppingLoop:
                 self._merged_periods(span - 1)
             self._advance_engine()
             t2 = perf()
-            values = report.fill_data(sim.data)
+            values = report.fill_data(self._data)
             if not report.finite:
                 raise SolverError(f"non-finite result at t = {sim.state.t:.9g} s")
         except Exception as exc:  # noqa: BLE001 - any engine failure: hold, report, go on
@@ -324,7 +304,8 @@ class SteppingLoop:
             for pub, (start, end) in zip(publishers, layout.spans):
                 pub.publish(body[start:end])
         else:
-            payloads = self.interface.encode(sim.snapshot(), stamp, measured, monitor)
+            snap = report.last_snapshot if self.spatial else sim.snapshot()
+            payloads = self.interface.encode(snap, stamp, measured, monitor)
             channels = range(len(payloads)) if monitor else self.interface.control_indices
             t4 = perf()
             if session.current is not None:

@@ -137,16 +137,18 @@ def static_gains(run: Run, steps: list[analysis.StepMetrics]) -> tuple[dict[int,
             {},
             f"no static comparison: cannot load the run's mechanism ({run.mechanism_problem})",
         )
-    if mech.drive is None or mech.output is None:
+    if not mech.drives or not mech.all_outputs:
         return {}, f"no static comparison: mechanism {mech.name} has no drive or no output"
-    from flexure_sim.engine.solver.simulation import Simulation, SolverError
+    from flexure_sim.engine.solver.simulation import SolverError
+    from flexure_sim.tools.run.run_engine import RunEngine
 
-    sim = Simulation(mech)
+    sim = RunEngine(mech)
+    first = sim.output_names[0]
     outputs: dict[float, float] = {}
 
     def out(u: float) -> float:
         if u not in outputs:
-            outputs[u] = 0.0 if u == 0.0 else float(sim.static(u).snapshot.output)
+            outputs[u] = 0.0 if u == 0.0 else float(sim.static_outputs(u)[first])
         return outputs[u]
 
     gains = {}
@@ -198,11 +200,14 @@ def analyse_run(run: Run, band: float = DEFAULT_BAND, static: bool = True) -> di
         d["static_gain"] = gains.get(m.index)
         out.append(d)
     mech = run.mechanism()
-    peaks, problem = (stress_peaks(run, out, mech) if mech is not None
-                      else ({}, f"no hinge stress: {run.mechanism_problem}"))
+    # The spatial engine's hinges carry no stress model: no stress or fatigue of a 3-D run.
+    stressed = mech is not None and all(hasattr(h, "stress") for h in mech.hinges)
+    peaks, problem = (stress_peaks(run, out, mech) if stressed else (
+        {}, f"no hinge stress: {run.mechanism_problem}" if mech is None else
+        "no hinge stress: the spatial engine has no hinge stress model"))
     if problem and out:
         notes.append(problem)
-    lives, whole, problem = (fatigue_of_steps(run, out, mech) if mech is not None
+    lives, whole, problem = (fatigue_of_steps(run, out, mech) if stressed
                              else ({}, None, ""))
     if problem and out:
         notes.append(problem)

@@ -52,10 +52,11 @@ def static_comparison(run: Run, steps: list[DriveStep], drives: list[str],
     if mech is None:
         return None, f"no static comparison: cannot load the run's mechanism " \
                      f"({run.mechanism_problem})"
-    from flexure_sim.engine.solver.simulation import Simulation, SolverError
+    from flexure_sim.engine.solver.simulation import SolverError
+    from flexure_sim.tools.run.run_engine import RunEngine
 
-    sim = Simulation(mech)
-    names, onames = list(sim.model.drives.names), list(sim.model.output_names)
+    sim = RunEngine(mech)
+    names, onames = list(sim.drive_names), list(sim.output_names)
     if sorted(names) != sorted(drives) or sorted(onames) != sorted(outputs):
         return None, (f"no static comparison: the recorded mechanism's drives ({', '.join(names)})"
                       f" and outputs ({', '.join(onames)}) are not the run's")
@@ -70,7 +71,7 @@ def static_comparison(run: Run, steps: list[DriveStep], drives: list[str],
     def solve(u: dict[str, float]) -> dict:
         key = tuple(u[d] for d in names)
         if key not in cache:
-            cache[key] = dict(sim.static({d: u[d] for d in names}).snapshot.outputs)
+            cache[key] = sim.static_outputs({d: u[d] for d in names})
         return cache[key]
 
     try:

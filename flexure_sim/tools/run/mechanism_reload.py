@@ -19,12 +19,17 @@ def load_recorded_mechanism(meta: dict[str, str]) -> tuple[Any, str]:
     (mechanism, '') or (None, why not).
 
     Tried in order: the YAML text stored in the metadata (what actually ran), the file at the
-    recorded path, the built-in of the recorded name.
+    recorded path, the built-in of the recorded name. A run of the spatial engine (``space``
+    ``3d`` in the metadata) is loaded as a spatial mechanism (a planar file opened in 3-D).
     """
     from flexure_sim.engine.mechanism.loader import (
         ConfigError, load_mechanism, mechanism_from_dict,
     )
+    from flexure_sim.engine.mechanism.spatial_loader import load_spatial, spatial_from_dict
 
+    spatial = meta.get("space") == "3d"
+    from_dict = spatial_from_dict if spatial else mechanism_from_dict
+    load = load_spatial if spatial else load_mechanism
     problems = []
     path = meta.get("mechanism_path", "")
     name = meta.get("mechanism_name") or meta.get("mechanism") or ""
@@ -35,7 +40,7 @@ def load_recorded_mechanism(meta: dict[str, str]) -> tuple[Any, str]:
         try:
             import yaml
 
-            return mechanism_from_dict(yaml.safe_load(text), source=path or "<recorded YAML>"), ""
+            return from_dict(yaml.safe_load(text), source=path or "<recorded YAML>"), ""
         except ConfigError as exc:
             problems.append(f"recorded YAML: {exc}")
         except Exception as exc:  # noqa: BLE001 - yaml.YAMLError and whatever bad text raises
@@ -44,7 +49,7 @@ def load_recorded_mechanism(meta: dict[str, str]) -> tuple[Any, str]:
         if not candidate:
             continue
         try:
-            return load_mechanism(candidate), ""
+            return load(candidate), ""
         except (ConfigError, OSError, ValueError) as exc:
             problems.append(str(exc))
     return None, "; ".join(problems)

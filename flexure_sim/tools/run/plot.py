@@ -10,7 +10,8 @@ Figures (those the run's topics allow):
 - ``joint_<h>.png``     "Joint <h> displacement on <body A> and <body B>": x-displacement of
   the compression hinge's frames on its two bodies, and their difference, the compression
   (cf. Figure 6.4);
-- ``hinge_wrenches.png`` "Hinge wrenches": moment and force components of every hinge;
+- ``hinge_wrenches.png`` "Hinge wrenches": moment and force components of every hinge (all
+  six of a run of the spatial engine);
 - ``drive_force.png``   "Drive force": the force the actuator applies;
 - ``body_poses.png``    "Body poses" (runs without a drive, e.g. the four-bars).
 
@@ -240,11 +241,15 @@ def plot_run(run: Run, out_dir: Path, dpi: int = 120,
             save(fig, f"joint_{hinge}", title)
 
     # ---- hinge wrenches
-    wrenches = run.wrenches()
+    wrenches = run.wrenches(every_component=True)
     if wrenches:
-        fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 8))
-        labels = ("moment [mN·m]", "force $f_x$ [N]", "force $f_y$ [N]")
-        factors = (1e3, 1.0, 1.0)
+        six = next(iter(wrenches.values())).values.shape[1] == 6
+        fig, axes = plt.subplots(6 if six else 3, 1, sharex=True, figsize=(8, 12 if six else 8))
+        labels: tuple[str, ...] = ("moment [mN·m]", "force $f_x$ [N]", "force $f_y$ [N]")
+        if six:
+            labels = ("moment $m_z$ [mN·m]", "force $f_x$ [N]", "force $f_y$ [N]",
+                      "moment $m_x$ [mN·m]", "moment $m_y$ [mN·m]", "force $f_z$ [N]")
+        factors = (1e3, 1.0, 1.0, 1e3, 1e3, 1.0)
         for name, w in wrenches.items():
             for k, ax in enumerate(axes):
                 ax.plot(tx(w.t), w.values[:, k] * factors[k], label=f"hinge {name}")

@@ -170,13 +170,20 @@ class Run:
         topic = self.compression_topic()
         return topic.split("/")[1] if topic else None
 
-    def wrenches(self) -> dict[str, Series]:
+    def wrenches(self, every_component: bool = False) -> dict[str, Series]:
+        """
+        Return each hinge's wrench series: (moment z, f_x, f_y).
+
+        ``every_component``: of a run of the spatial engine, then (moment x, moment y, f_z)
+        too (``series``).
+        """
         out = {}
         for h in self.hinge_names():
             rel = hinge_wrench(h)
             if self.has(rel):
                 t, values, _ = self._raw(rel, "geometry_msgs/msg/WrenchStamped")
-                out[h] = Series(self.timebase.seconds(t), values)
+                out[h] = Series(self.timebase.seconds(t),
+                                values if every_component else values[:, :3])
         return out
 
     def poses(self) -> dict[str, Series]:
@@ -339,13 +346,15 @@ def load_run(
     if reader.summary_ok:  # topics known before the pass: read only this stage's
         ns = find_namespace(reader, namespace)
     builders: dict[str, SeriesBuilder] = {}
+    # A run of the spatial engine: hinge wrenches with all six components (`series`).
+    spatial = reader.metadata.get(METADATA_NAME, {}).get("space") == "3d"
 
     def select(topic: TopicInfo) -> bool:
         if not SeriesBuilder.supports(topic.type) or not _wanted(topic.name, ns, poses):
             return False
         if topic.name == CLOCK and topic.type != CLOCK_TYPE:
             return False
-        builders[topic.name] = SeriesBuilder(topic.type)
+        builders[topic.name] = SeriesBuilder(topic.type, spatial)
         return True
 
     for m in reader.messages(select):

@@ -6,7 +6,9 @@ per time stamp and per value, no decoded message objects), and become NumPy arra
 end. What is taken from each message type (SI units, angles in rad):
 
 - ``std_msgs/msg/Float64``: ``data``;
-- ``geometry_msgs/msg/WrenchStamped``: (moment z, f_x, f_y);
+- ``geometry_msgs/msg/WrenchStamped``: (moment z, f_x, f_y), and of a run of the spatial
+  engine (`SeriesBuilder` ``spatial``) then (moment x, moment y, f_z): six columns whose first
+  three are the planar ones;
 - ``geometry_msgs/msg/PoseStamped``: (x, y, yaw);
 - ``geometry_msgs/msg/PoseArray``: (x, y, yaw) of every pose, rows of varying length;
 - ``rosgraph_msgs/msg/Clock``: the clock value in ns (exact, int64).
@@ -59,6 +61,11 @@ def _wrench(m: Any) -> tuple[float, float, float]:
     return m.wrench.torque.z, m.wrench.force.x, m.wrench.force.y
 
 
+def _wrench6(m: Any) -> tuple[float, ...]:
+    w = m.wrench
+    return w.torque.z, w.force.x, w.force.y, w.torque.x, w.torque.y, w.force.z
+
+
 #: Message type -> (values per message, extractor); None: rows of varying length.
 EXTRACTORS: dict[str, tuple[Optional[int], Callable[[Any], Any]]] = {
     FLOAT64: (1, lambda m: (m.data,)),
@@ -71,7 +78,7 @@ EXTRACTORS: dict[str, tuple[Optional[int], Callable[[Any], Any]]] = {
 class SeriesBuilder:
     """Appends (log time, values) of one topic's messages; `arrays` gives NumPy arrays."""
 
-    def __init__(self, type_name: str) -> None:
+    def __init__(self, type_name: str, spatial: bool = False) -> None:
         self.type = type_name
         self.times = array("q")
         if type_name == CLOCK_TYPE:
@@ -81,7 +88,8 @@ class SeriesBuilder:
                 lambda m: (m.clock.sec * 1_000_000_000 + m.clock.nanosec,)
             )
         else:
-            self.width, self._get = EXTRACTORS[type_name]
+            self.width, self._get = (6, _wrench6) if spatial and type_name == WRENCH else (
+                EXTRACTORS[type_name])
             self.values = array("d")
         self.lengths = array("q")  # values per row, for rows of varying length
 
