@@ -2,7 +2,8 @@
 The QoS profiles of the stage node's topics (docs/node.md, "QoS").
 
 Every published stream is reliable, keep last `QUEUE_DEPTH`, volatile; the drive command
-subscriptions keep ``command_depth`` (default `COMMAND_DEPTH`) and are reliable or best-effort (``command_reliability``).
+subscriptions keep ``command_depth`` (default `COMMAND_DEPTH`) and are reliable or
+best-effort (``command_reliability``).
 """
 from __future__ import annotations
 
