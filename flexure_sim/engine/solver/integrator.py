@@ -25,7 +25,6 @@ import numpy as np
 import scipy.linalg
 
 from flexure_sim.engine.solver import step_energy, step_loop as stepping
-from flexure_sim.engine.solver.motion import kernel_coordinates
 from flexure_sim.engine.solver.state import Data, Linearization, State
 from flexure_sim.engine.solver.model import Model, SolverError
 
@@ -124,15 +123,16 @@ def moved_too_far(model: Model, data: Data, z: np.ndarray) -> bool:
     return bool(np.max(moved) > tol)
 
 
-def _advance(model: Model, data: Data, n, y, t, rows, held, F0, aux0, ye):
+def _advance(model: Model, data: Data, n, y, t, rows, held, F0, aux0, ye, origin, k):
+    """The stepping loop's up to n steps from (y, t = origin + k dt) (``stepping.advance``)."""
     lin = data.lin
     assert lin is not None  # step() linearizes before it advances
     common = (n, y, t, model.dt, rows, held, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,
               model.atol, model.max_iterations, model.relinearize_after, F0, aux0, ye,
               lin.emats)
     if model.compiled:
-        return stepping.advance(*common, model.kernel_args)
-    return stepping.advance_interpreted(*common, model)
+        return stepping.advance(*common, model.kernel_args, origin, k)
+    return stepping.advance_interpreted(*common, model, origin, k)
 
 
 def jump_work(model: Model, s: State, command) -> float:
@@ -192,6 +192,7 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
         command = np.ascontiguousarray(command, dtype=float)
         key = command.tobytes()
     rows = command.reshape(1, -1) if rows is None else np.ascontiguousarray(rows, dtype=float)
+    held = command  # the command F0 is taken under
     clock = data.clock
     if clock is None or clock[0] is not s:
         clock = (s, s.t, 0)
@@ -202,6 +203,12 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
         y = cache[5]  # model.pack(s), bit for bit: s was unpacked from it
         if cache[1] == key:
             F0, aux0, ye = cache[2:5]
+        elif model.compiled and not model.energy and np.any(cache[6] != command):
+            # A new command (a stepping node's every tick): the compiled loop takes F0 under
+            # it at its first step (it differs from the one held), the same call as here, and
+            # saves a call into compiled code. Not with the energies: the loop would count the
+            # switch's work that ``jump_work`` counts below.
+            held, F0, aux0, ye = cache[6], cache[2], cache[3], cache[4]
         else:
             F0, aux0 = model.rhs(y, t, command)
             ye = y
@@ -215,6 +222,8 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
         dissipated = work = math.nan
     remaining = int(n)
     fresh = settled = False
+    z = v = None
+    finite = True
     while remaining > 0:
         ahead = rows[min(int(n) - remaining, len(rows) - 1):]
         if data.lin is None or (model.relinearize_tol is not None
@@ -222,8 +231,9 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
             linearize(model, data, y, t, ahead[0])
             fresh = True
         chunk = 1 if model.relinearize_tol is not None else remaining
-        y, F0, aux0, ye, command, dd, dw, steps, iterations, status = _advance(
-            model, data, chunk, y, t, ahead, command, F0, aux0, ye)
+        (y, F0, aux0, ye, command, dd, dw, steps, iterations, status, z, v,
+         finite) = _advance(model, data, chunk, y, t, ahead, held, F0, aux0, ye, origin, k)
+        held = command
         dissipated += dd
         work += dw
         remaining -= steps
@@ -243,15 +253,13 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
             data.lin = None
         if steps:
             fresh = settled = False
-    if not np.isfinite(y).all():
+    if z is None:  # no step asked for
+        finite = bool(np.isfinite(y).all())
+        z, v, _ = model.unpack(y, t, command)
+    if not finite:
         raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
-    if model.compiled:  # Model.unpack, compiled: a few us less per call
-        assert model.kernel_args is not None, "a compiled model has them"
-        z, v = kernel_coordinates(y, t, command, model.kernel_args[:12])
-        nF = len(model.part.free)
-        u = y[2 * nF:2 * nF + model.drives.n_lags].copy()
-    else:
-        z, v, u = model.unpack(y, t, command)
+    nF = len(model.part.free)
+    u = y[2 * nF:2 * nF + model.drives.n_lags].copy()
     held = model.drives.held_command(command, s.command, s.programs) if s.programs else s.command
     data.state = State(t, z, v, u, held, dissipated, work, programs=s.programs)
     data.clock = (data.state, origin, k)

@@ -100,7 +100,7 @@ def step(model: SpatialModel, data: Data, n: int = 1) -> None:
         y, F0, aux0, ye, command, _, _, steps, iterations, status = kernels.advance(
             chunk, y, t, dt, rows, command, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,
             model.atol, model.max_iterations, model.relinearize_after, F0, aux0, ye, NO_ENERGY,
-            model.kernel_args)
+            model.kernel_args, origin, k)[:10]
         remaining -= steps
         k += steps
         t = origin + k * dt
