@@ -23,7 +23,7 @@ STEPS_PER_TICK = 10
 
 
 def _command(i: int, drives: int) -> np.ndarray:
-    """A closed loop's commands: a few nm apart from tick to tick (one per drive)."""
+    """Return a closed loop's commands at tick i: a few nm apart from tick to tick, per drive."""
     value = 1.0e-6 + 1e-9 * (i % 7) - 3e-9 * (i % 3)
     return np.array([value, -0.5 * value][:drives] + [0.0] * (drives - 2))
 

@@ -124,7 +124,7 @@ def moved_too_far(model: Model, data: Data, z: np.ndarray) -> bool:
 
 
 def _advance(model: Model, data: Data, n, y, t, rows, held, F0, aux0, ye, origin, k):
-    """The stepping loop's up to n steps from (y, t = origin + k dt) (``stepping.advance``)."""
+    """Run the stepping loop's up to n steps from (y, t = origin + k dt) (``stepping.advance``)."""
     lin = data.lin
     assert lin is not None  # step() linearizes before it advances
     common = (n, y, t, model.dt, rows, held, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,

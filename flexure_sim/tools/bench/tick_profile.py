@@ -53,7 +53,7 @@ class _Parts:
 
 
 def closed_loop_command(tick: int) -> float:
-    """A closed loop's new command at ``tick``: 1 um plus a few nm, different from the last."""
+    """Return a closed loop's new command at ``tick``: 1 um plus a few nm, unlike the last."""
     return 1.0e-6 + 1e-9 * (tick % 7)
 
 
