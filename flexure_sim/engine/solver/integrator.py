@@ -253,7 +253,7 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
             data.lin = None
         if steps:
             fresh = settled = False
-    if z is None:  # no step asked for
+    if z is None or v is None:  # no step asked for
         finite = bool(np.isfinite(y).all())
         z, v, _ = model.unpack(y, t, command)
     if not finite:
