@@ -2,11 +2,10 @@
 Stepping as a node ticks: a new command, then a few steps, call after call.
 
 A stepping node (``stage_node``, energy off) sets a controller's new command every tick and
-takes the tick's steps in one ``Simulation.step(n)`` call. The engine takes F at the step's
-start under the new command inside its compiled loop there (one call into compiled code per
-tick); with the energies on it takes it before the loop (where it also counts the drive's
-work). Both routes, and the same commands given as one row per step to a single call, must
-give the same states to the bit; the speed-ups of the per-call work must not change them.
+takes the tick's steps in one ``Simulation.step(n)`` call. Those states must be the ones of
+a run with the energies on and of the same commands given as one row per step to a single
+call (where the compiled loop switches command between steps), to the bit: the speed-ups of
+the per-call work must not change them.
 """
 from __future__ import annotations
 

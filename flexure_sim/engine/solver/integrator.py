@@ -192,7 +192,6 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
         command = np.ascontiguousarray(command, dtype=float)
         key = command.tobytes()
     rows = command.reshape(1, -1) if rows is None else np.ascontiguousarray(rows, dtype=float)
-    held = command  # the command F0 is taken under
     clock = data.clock
     if clock is None or clock[0] is not s:
         clock = (s, s.t, 0)
@@ -203,12 +202,6 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
         y = cache[5]  # model.pack(s), bit for bit: s was unpacked from it
         if cache[1] == key:
             F0, aux0, ye = cache[2:5]
-        elif model.compiled and not model.energy and np.any(cache[6] != command):
-            # A new command (a stepping node's every tick): the compiled loop takes F0 under
-            # it at its first step (it differs from the one held), the same call as here, and
-            # saves a call into compiled code. Not with the energies: the loop would count the
-            # switch's work that ``jump_work`` counts below.
-            held, F0, aux0, ye = cache[6], cache[2], cache[3], cache[4]
         else:
             F0, aux0 = model.rhs(y, t, command)
             ye = y
@@ -232,8 +225,7 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
             fresh = True
         chunk = 1 if model.relinearize_tol is not None else remaining
         (y, F0, aux0, ye, command, dd, dw, steps, iterations, status, z, v,
-         finite) = _advance(model, data, chunk, y, t, ahead, held, F0, aux0, ye, origin, k)
-        held = command
+         finite) = _advance(model, data, chunk, y, t, ahead, command, F0, aux0, ye, origin, k)
         dissipated += dd
         work += dw
         remaining -= steps
