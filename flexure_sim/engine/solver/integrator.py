@@ -26,7 +26,6 @@ import numpy as np
 import scipy.linalg
 
 from flexure_sim.engine.solver import step_energy, step_loop as stepping
-from flexure_sim.engine.solver.motion import kernel_coordinates
 from flexure_sim.engine.solver.state import Data, Linearization, State
 from flexure_sim.engine.solver.model import Model, SolverError
 
@@ -130,15 +129,16 @@ def moved_too_far(model: Model, data: Data, z: np.ndarray, per_body: int = 3,
     return bool(np.max(moved) > tol)
 
 
-def _advance(model: Model, data: Data, n, y, t, rows, held, F0, aux0, ye):
+def _advance(model: Model, data: Data, n, y, t, rows, held, F0, aux0, ye, origin, k):
+    """Run the stepping loop's up to n steps from (y, t = origin + k dt) (``stepping.advance``)."""
     lin = data.lin
     assert lin is not None  # step() linearizes before it advances
     common = (n, y, t, model.dt, rows, held, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,
               model.atol, model.max_iterations, model.relinearize_after, F0, aux0, ye,
               lin.emats)
     if model.compiled:
-        return stepping.advance(*common, model.kernel_args)
-    return stepping.advance_interpreted(*common, model)
+        return stepping.advance(*common, model.kernel_args, origin, k)
+    return stepping.advance_interpreted(*common, model, origin, k)
 
 
 def jump_work(model: Model, s: State, command) -> float:
@@ -219,18 +219,16 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
         dissipated, work = s.dissipated, s.drive_work + jump_work(model, s, command)
     else:
         dissipated = work = math.nan
-    y, t, k, F0, aux0, ye, command, dissipated, work = march(
+    y, t, k, F0, aux0, ye, command, dissipated, work, z, v, finite = march(
         model, data, n, (y, t, origin, k), rows, command, (F0, aux0, ye), (dissipated, work),
         PLANAR)
-    if not np.isfinite(y).all():
+    if z is None or v is None:  # no step asked for
+        finite = bool(np.isfinite(y).all())
+        z, v, _ = model.unpack(y, t, command)
+    if not finite:
         raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
-    if model.compiled:  # Model.unpack, compiled: a few us less per call
-        assert model.kernel_args is not None, "a compiled model has them"
-        z, v = kernel_coordinates(y, t, command, model.kernel_args[:12])
-        nF = len(model.part.free)
-        u = y[2 * nF:2 * nF + model.drives.n_lags].copy()
-    else:
-        z, v, u = model.unpack(y, t, command)
+    nF = len(model.part.free)
+    u = y[2 * nF:2 * nF + model.drives.n_lags].copy()
     held = model.drives.held_command(command, s.command, s.programs) if s.programs else s.command
     data.state = State(t, z, v, u, held, dissipated, work, programs=s.programs)
     data.clock = (data.state, origin, k)
@@ -260,7 +258,9 @@ def march(model, data: Data, n: int, at: tuple, rows: np.ndarray, command: np.nd
     more than ``relinearize_tol``), advances in compiled chunks, takes a fresh Jacobian when
     the remainder iteration stops contracting or contracts slowly, and retries a step that
     does not converge with a fresh one once where the lagged drives have settled (``step``).
-    Return (y, t, k, F0, aux0, ye, command, dissipated, work).
+    Return (y, t, k, F0, aux0, ye, command, dissipated, work, z, v, finite): z, v and finite
+    as the last chunk's loop returned them for y (``step_loop._advance``; None when no step
+    was asked for).
     """
     y, t, origin, k = at
     F0, aux0, ye = seed
@@ -268,6 +268,8 @@ def march(model, data: Data, n: int, at: tuple, rows: np.ndarray, command: np.nd
     dt = model.dt
     remaining = int(n)
     fresh = settled = False
+    z = v = None
+    finite = True
     while remaining > 0:
         ahead = rows[min(int(n) - remaining, len(rows) - 1):]
         if data.lin is None or (model.relinearize_tol is not None and stepper.moved_too_far(
@@ -275,8 +277,9 @@ def march(model, data: Data, n: int, at: tuple, rows: np.ndarray, command: np.nd
             stepper.linearize(model, data, y, t, ahead[0])
             fresh = True
         chunk = 1 if model.relinearize_tol is not None else remaining
-        y, F0, aux0, ye, command, dd, dw, steps, iterations, status = stepper.advance(
-            model, data, chunk, y, t, ahead, command, F0, aux0, ye)
+        (y, F0, aux0, ye, command, dd, dw, steps, iterations, status, z, v,
+         finite) = stepper.advance(model, data, chunk, y, t, ahead, command, F0, aux0, ye,
+                                   origin, k)
         dissipated += dd
         work += dw
         remaining -= steps
@@ -296,7 +299,7 @@ def march(model, data: Data, n: int, at: tuple, rows: np.ndarray, command: np.nd
             data.lin = None
         if steps:
             fresh = settled = False
-    return y, t, k, F0, aux0, ye, command, dissipated, work
+    return y, t, k, F0, aux0, ye, command, dissipated, work, z, v, finite
 
 
 PLANAR = Stepper(linearize, _advance, moved_too_far)

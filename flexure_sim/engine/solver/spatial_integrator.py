@@ -63,13 +63,14 @@ def moved_too_far(model: SpatialModel, data: Data, z: np.ndarray) -> bool:
     return planar_moved_too_far(model, data, z, per_body=6, translations=3)
 
 
-def _advance(model: SpatialModel, data: Data, n, y, t, rows, held, F0, aux0, ye):
+def _advance(model: SpatialModel, data: Data, n, y, t, rows, held, F0, aux0, ye, origin, k):
     """Advance up to n steps in the compiled spatial loop (``spatial_kernels.advance``)."""
     lin = data.lin
     assert lin is not None  # march() linearizes before it advances
     return kernels.advance(n, y, t, model.dt, rows, held, lin.A, lin.phi1, lin.phi2,
                            model.iteration_rtol, model.atol, model.max_iterations,
-                           model.relinearize_after, F0, aux0, ye, NO_ENERGY, model.kernel_args)
+                           model.relinearize_after, F0, aux0, ye, NO_ENERGY, model.kernel_args,
+                           origin, k)
 
 
 #: The planar engine's step loop (``integrator.march``) with the spatial model's pieces.
@@ -93,7 +94,7 @@ def step(model: SpatialModel, data: Data, n: int = 1) -> None:
     else:
         F0, aux0 = model.rhs(y, t, command)
         ye = y
-    y, t, k, F0, aux0, ye, command, _, _ = march(
+    y, t, k, F0, aux0, ye, command, _, _, _, _, _ = march(
         model, data, n, (y, t, origin, k), rows, command, (F0, aux0, ye), (0.0, 0.0), SPATIAL)
     z, w, u = model.unpack(y, t, command)
     if not np.all(np.isfinite(y)):

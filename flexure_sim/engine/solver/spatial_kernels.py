@@ -130,12 +130,18 @@ def no_switch_work(y, t, old, new, args):
     return 0.0
 
 
+@njit(cache=True)
+def no_coordinates(y, t, command, args):
+    """Return two empty arrays: the spatial stepping unpacks y itself (``SpatialModel.unpack``)."""
+    return np.zeros(0), np.zeros(0)
+
+
 def _bind():
     """Return ``step_loop._advance`` compiled with ``spatial_rhs``, under a name of its own."""
     code = stepping._advance.__code__.replace(co_name="_advance_spatial",
                                               co_qualname="_advance_spatial")
     space = dict(vars(stepping))
-    space.update(rhs=spatial_rhs, switch=no_switch_work)
+    space.update(rhs=spatial_rhs, switch=no_switch_work, where=no_coordinates)
     return njit(cache=True)(types.FunctionType(code, space, "_advance_spatial"))
 
 
@@ -143,4 +149,5 @@ def _bind():
 advance = _bind()
 
 # Numba keys a cache on its function's file: flush when any source of these kernels changes.
-jit.revalidate([spatial_rhs, terms, complex_step, no_switch_work, advance], __file__)
+jit.revalidate([spatial_rhs, terms, complex_step, no_switch_work, no_coordinates, advance],
+               __file__)

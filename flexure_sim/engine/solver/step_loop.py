@@ -32,7 +32,7 @@ from flexure_sim.engine import jit as kernel_cache
 from flexure_sim.engine.solver import step_energy as step_energy_module
 from flexure_sim.engine.jit import njit
 from flexure_sim.engine.solver.kernels import quadratic_forces
-from flexure_sim.engine.solver.motion import coordinates, prescribed_motion
+from flexure_sim.engine.solver.motion import coordinates, kernel_coordinates, prescribed_motion
 from flexure_sim.engine.solver.step_energy import (
     AUX_APPLIED, AUX_DISSIPATION, AUX_ENERGY, AUX_LOAD, AUX_TIMED_POWER,
 )
@@ -229,6 +229,8 @@ def _advance(
     ye,
     emats,
     args,
+    origin,
+    clock,
 ):
     """
     Up to n steps from (y, t) with F0 = F(y, t) and aux0 its energy rates, taken at ye.
@@ -239,13 +241,18 @@ def _advance(
     and the switch's work (``switch``) is added to the drive work: a piezo actuator's held
     strokes, one row per step (solver/actuation.py).
 
-    Returns (y, F, aux, ye, held, dissipated, work, steps, iterations, status): the state, its
-    F and energy rates after the steps taken (at t + steps dt; the caller keeps time), the
-    point where those rates were evaluated (the accepted y is one correction further), the
-    command they were taken under, the dissipated energy and drive work over the steps
-    (``step_energy.step_energy``, with the matrices ``emats``), and why it stopped.
-    ``rhs`` and ``switch`` are globals of the function (see the end of this module), not
-    arguments: Numba cannot cache functions that take compiled functions as arguments.
+    Returns (y, F, aux, ye, held, dissipated, work, steps, iterations, status, z, v, finite):
+    the state, its F and energy rates after the steps taken (at t + steps dt), the point where
+    those rates were evaluated (the accepted y is one correction further), the command they
+    were taken under, the dissipated energy and drive work over the steps
+    (``step_energy.step_energy``, with the matrices ``emats``), why it stopped, all coordinates
+    and velocities there (``where``; at the caller's time origin + (clock + steps) dt: t = origin
+    + clock dt, and time is kept on the step grid, not summed) and whether every entry of y is
+    finite. Taking z and v here spares the caller a second call into compiled code, which
+    unboxes every array argument again (~0.1 us each; with the kernel's arguments a call
+    costs ~3 us for the stage).
+    ``rhs``, ``switch`` and ``where`` are globals of the function (see the end of this module),
+    not arguments: Numba cannot cache functions that take compiled functions as arguments.
     """
     dissipated = 0.0
     work = 0.0
@@ -303,13 +310,19 @@ def _advance(
         if k > slow_after:
             status = SLOW
             break
-    return y, F0, aux0, ye, held, dissipated, work, steps, iterations, status
+    z, v = where(y, origin + (clock + steps) * dt, held, args)
+    finite = True
+    for i in range(y.shape[0]):
+        finite = finite and math.isfinite(y[i])
+    return (y, F0, aux0, ye, held, dissipated, work, steps, iterations, status, z, v, finite)
 
 
 #: The right-hand side the compiled loop calls (resolved when Numba compiles ``advance``).
 rhs = kernel_rhs
 #: The work of a change of the held command, likewise.
 switch = kernel_switch_work
+#: All coordinates and velocities where the loop stopped, likewise.
+where = kernel_coordinates
 
 #: The loop, compiled with the quadratic-law kernel.
 advance = njit(cache=True)(_advance)
@@ -322,6 +335,10 @@ def _interpreted_rhs(y, t, command, model):
     return model.rhs_python(y, t, command)
 
 
+def _interpreted_where(y, t, command, model):
+    return model.unpack(y, t, command)[:2]
+
+
 def _interpreted_switch_work(y, t, old, new, model):
     d = model.drives
     return switch_work(y, t, old, new, model.part.free.astype(np.int64),
@@ -332,5 +349,6 @@ def _interpreted_switch_work(y, t, old, new, model):
 #: The same loop as plain Python, calling ``Model.rhs_python`` (any hinge law); pass the
 #: Model as ``args``.
 advance_interpreted = types.FunctionType(
-    _advance.__code__, {**globals(), "rhs": _interpreted_rhs, "switch": _interpreted_switch_work},
+    _advance.__code__, {**globals(), "rhs": _interpreted_rhs,
+                        "switch": _interpreted_switch_work, "where": _interpreted_where},
     "advance_interpreted")

@@ -348,7 +348,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             print(json.dumps(out))
         else:
             for key, value in out.items():
-                print(f"{key:28s} {value:10.1f}")
+                print(f"{key:32s} {value:10.2f}")
         return 0
     modes = ("fast", "realtime") if args.mode == "both" else (args.mode,)
     results = []

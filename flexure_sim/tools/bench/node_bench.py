@@ -104,6 +104,12 @@ def print_node(nd: dict[str, Any]) -> None:
     print(f"  in-process profile: tick {p['tick_us']:.1f} us, overhead factor "
           f"{p['overhead_factor']:.2f}; the Snapshot route {p['snapshot_route_us']:.1f} us, "
           f"message-by-message packing {p['encode_route_us']:.1f} us")
+    print(f"  its engine part (a new command every tick, {p['iterations_per_step']:.2f} "
+          f"iterations a step): {p['engine_ratio']:.2f}x the per-step cost at rest "
+          f"({p['reference_iterations_per_step']:.2f}); like for like, "
+          f"{p['engine_ratio_moving']:.2f}x the ticks' own commands stepped in one call "
+          f"({p['engine_step_us_moving']:.2f} us a step; median tick "
+          f"{p['engine_median_ratio_moving']:.2f}x)")
     print(f"  fast mode: real-time factor {nd['fast_rtf']:.2f}")
     for key, r in nd["realtime"].items():
         print(f"  real time {key} alone: missed {r['missed_ticks']} of {r['paced_ticks']} "
