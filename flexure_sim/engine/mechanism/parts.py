@@ -10,7 +10,7 @@ plane, theta counter-clockwise), and velocities (vx, vy, omega) in the root fram
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional, Union
+from typing import ClassVar, Optional, Union
 
 import numpy as np
 
@@ -103,7 +103,7 @@ class DriveFields:
     kind: str = "displacement"
     actuator: Optional[PiezoSpec] = None
     #: A body's coordinate names, translations first (``direction``).
-    coordinate_names = COORDINATE_NAMES
+    coordinate_names: ClassVar[tuple[str, ...]] = COORDINATE_NAMES
 
     def direction(self, mech) -> np.ndarray:
         """
@@ -201,7 +201,7 @@ class OutputFields:
     name: str = "output"
     coordinate: Optional[str] = None
     #: A body's coordinate names, translations first (``direction``).
-    coordinate_names = COORDINATE_NAMES
+    coordinate_names: ClassVar[tuple[str, ...]] = COORDINATE_NAMES
 
     def direction(self, mech) -> np.ndarray:
         """Return the output's direction c in the body coordinates: the output is c . (z - z0)."""

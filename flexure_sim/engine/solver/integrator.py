@@ -20,7 +20,7 @@ own (``step_energy``).
 from __future__ import annotations
 
 import math
-from typing import Callable, NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
 import scipy.linalg
@@ -111,7 +111,7 @@ def _shifted_phi1(A: np.ndarray, expA: np.ndarray, h: float, tau: float) -> np.n
     return h * scipy.linalg.expm(aug)[:m, m:]
 
 
-def moved_too_far(model: Model, data: Data, z: np.ndarray, per_body: int = 3,
+def moved_too_far(model: Any, data: Data, z: np.ndarray, per_body: int = 3,
                   translations: int = 2) -> bool:
     """
     Whether z is further than ``relinearize_tol`` from the linearization's z.

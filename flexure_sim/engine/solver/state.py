@@ -8,7 +8,7 @@ read the model and update the data.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -125,6 +125,8 @@ class Facade:
 
     model: Any
     data: Data
+    #: snapshot_of(model, state): the engine's snapshot function (set by the subclass).
+    snapshot_of: Callable[..., Any]
 
     # The model's constants, as attributes of the simulation (read-only views).
     mechanism = property(lambda self: self.model.mechanism)
