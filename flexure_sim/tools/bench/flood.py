@@ -3,9 +3,11 @@ A drive-command flood from a process of its own, as a misbehaving controller wou
 
     python -m flexure_sim.tools.bench.flood --rate 10000 --duration 10 [--json]
 
-Publishes ``std_msgs/Float64`` commands on ``drive/displacement`` (reliable, keep last 1000,
-the node's command QoS) at ``--rate`` Hz for ``--duration`` s, alternating between two values
-inside the stage's stroke. It waits for the node's subscription first (up to 30 s), follows an
+Publishes ``std_msgs/Float64`` commands on ``drive/displacement`` (the node's command QoS:
+reliable, keep last ``command_depth``'s default) at ``--rate`` Hz for ``--duration`` s,
+alternating between two values inside the stage's stroke, and waits (up to ``ACK_WAIT_S``)
+until the node acknowledged them all before it quits, so that what the node did not record is
+what the node lost (counted in its ``commands_lost``), not a tail still in the publisher. It waits for the node's subscription first (up to 30 s), follows an
 absolute schedule (it catches up with bursts after a late wake-up, so the mean rate holds) and
 publishes pre-serialized bytes, so the flood itself costs as little CPU as rclpy allows.
 ``tools/bench/measure.py --flood`` runs it next to the node; ``bench --node`` reports the result.
@@ -29,6 +31,8 @@ VALUES = (1.0e-6, 1.5e-6)
 STARTED = '{"started": true}'
 #: Longest sleep between bursts (s).
 SLEEP_S = 5e-4
+#: Longest wait for the node to acknowledge the last commands (s).
+ACK_WAIT_S = 10.0
 
 
 def flood(rate: float, duration: float, topic: str = topics.COMMAND, wait_s: float = 30.0,
@@ -40,6 +44,7 @@ def flood(rate: float, duration: float, topic: str = topics.COMMAND, wait_s: flo
     """
     import rclpy
     from rclpy.context import Context
+    from rclpy.duration import Duration
     from std_msgs.msg import Float64
 
     from flexure_sim.node.publish.interface import command_qos
@@ -69,10 +74,12 @@ def flood(rate: float, duration: float, topic: str = topics.COMMAND, wait_s: flo
                 sent += 1
             time.sleep(SLEEP_S)
         wall = time.perf_counter() - t0
+        acked = publisher.wait_for_all_acked(Duration(seconds=ACK_WAIT_S))
     finally:
         node.destroy_node()
         rclpy.try_shutdown(context=context)
-    return {"rate_hz": rate, "sent": sent, "wall_s": wall, "sent_per_s": sent / wall}
+    return {"rate_hz": rate, "sent": sent, "wall_s": wall, "sent_per_s": sent / wall,
+            "all_acked": bool(acked)}
 
 
 class FloodProcess:

@@ -227,7 +227,9 @@ def run_node(
         taken = sum(n for n, _ in per_window)
         result.update(
             flood_hz=flood_hz, flood_sent_per_s=flood.get("sent_per_s"),
-            flood_sent=flood.get("sent"), commands_received=int(delta("commands_received")),
+            flood_sent=flood.get("sent"), flood_all_acked=flood.get("all_acked"),
+            commands_received=int(delta("commands_received")),
+            commands_lost=int(delta("commands_lost")),
             command_time_mean_us=(sum(n * us for n, us in per_window) / taken
                                   if taken else None))
     if record:
@@ -291,7 +293,9 @@ def _print_run(r: dict[str, Any]) -> None:
               + (f"{cost:.1f} us per command" if cost is not None else "n/a"))
         if "flood_commands_recorded" in r:
             print(f"   flood: {r['flood_sent']} commands sent in all, "
-                  f"{r['flood_commands_recorded']} recorded, {r['flood_commands_lost']} lost")
+                  f"{r['flood_commands_recorded']} recorded, {r['flood_commands_lost']} not "
+                  f"recorded; the node counted {r['commands_lost']} lost in the window "
+                  f"(all acknowledged: {r.get('flood_all_acked')})")
     if r.get("messages_received_per_s") is not None:
         print(f"   subscriber received {r['messages_received_per_s']:.0f} messages/s")
     if r["record"]:
