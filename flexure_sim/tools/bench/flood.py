@@ -7,9 +7,10 @@ Publishes ``std_msgs/Float64`` commands on ``drive/displacement`` (the node's co
 reliable, keep last ``command_depth``'s default) at ``--rate`` Hz for ``--duration`` s,
 alternating between two values inside the stage's stroke, and waits (up to ``ACK_WAIT_S``)
 until the node acknowledged them all before it quits, so that what the node did not record is
-what the node lost (counted in its ``commands_lost``), not a tail still in the publisher. It waits for the node's subscription first (up to 30 s), follows an
-absolute schedule (it catches up with bursts after a late wake-up, so the mean rate holds) and
-publishes pre-serialized bytes, so the flood itself costs as little CPU as rclpy allows.
+what the node lost (counted in its ``commands_lost``), not a tail still in the publisher.
+It waits for the node's subscription first (up to 30 s), follows an absolute schedule (it
+catches up with bursts after a late wake-up, so the mean rate holds) and publishes
+pre-serialized bytes, so the flood itself costs as little CPU as rclpy allows.
 ``tools/bench/measure.py --flood`` runs it next to the node; ``bench --node`` reports the result.
 """
 from __future__ import annotations
