@@ -216,7 +216,7 @@ def log(x):
 
 
 def tanh(x):
-    """tanh, with tanh' = 1 - tanh^2 and tanh'' = -2 tanh (1 - tanh^2)."""
+    """Hyperbolic tangent t of the real part a: its derivatives are 1 - t^2 and -2 t (1 - t^2)."""
     x = _lift(x)
     t = np.tanh(x.a)
     s = 1.0 - t * t

@@ -66,9 +66,10 @@ def opened_in_space(data: Any, source: str) -> Mechanism:
         args = [v if isinstance(v, hd.HyperDual) else float(v)
                 for v in (sspec[n] for n in names)]
         K6 = hd.asarray(formula(*args))
-        width = float(hd.real(args[names.index("t" if model == "notch" else "width")]))
+        width = args[names.index("t" if model == "notch" else "width")]
         for frame in (h.a, h.b):
-            widths[frame.body] = max(widths[frame.body], width)
+            if hd.real(width) > hd.real(widths[frame.body]):
+                widths[frame.body] = width
         law = spec.get("law", defaults.get("law", "twistor"))
         hinges.append(Hinge(h.name, _frame(h.a), _frame(h.b),
                             hinge_law(ctx, key, law, K6, spec, defaults), model))
