@@ -8,6 +8,7 @@ the tip-tilt stage's gain matrix and the microstage's first (out-of-plane) mode.
 """
 from __future__ import annotations
 
+import copy
 import json
 import subprocess
 import sys
@@ -20,8 +21,11 @@ from flexure_sim.engine.analysis import linear_response, spatial_linear
 from flexure_sim.engine.analysis import sensitivity as planar
 from flexure_sim.engine.analysis import spatial_sensitivity as spatial
 from flexure_sim.engine.mechanism.doc_paths import apply
+from flexure_sim.engine.mechanism.loader import resolve_mechanism_path
 from flexure_sim.engine.mechanism.parameters import ParameterError, Parameters
 from flexure_sim.engine.mechanism.spatial_loader import spatial_from_dict
+from flexure_sim.engine.mechanism.values import ConfigError
+from flexure_sim.engine.mechanism.yaml_files import read_yaml
 from flexure_sim.engine.solver.spatial_model import SpatialModel
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,6 +51,22 @@ def test_in_plane_gain_of_the_microstage_in_3d_equals_the_planar_engines_exact_o
     for p in wrt:
         assert three["gradient"]["gain"][p] == pytest.approx(two["gradient"]["gain"][p],
                                                              rel=1e-10)
+
+
+def test_gain_matrix_of_a_displacement_and_a_force_drive_in_3d_equals_the_planar_one():
+    """The XY stage with drive y a force (N) on piezo_y, loaded by both drives, in 3-D."""
+    path = resolve_mechanism_path("xy_stage")
+    doc = copy.deepcopy(read_yaml(path, ConfigError))
+    doc["constraints"][2] = {"type": "force", "name": "y", "body": "piezo_y", "axis": [0, 1],
+                             "response_time": 1e-3, "stroke": [-10, 10], "slew_rate": 1e3}
+    wrt = ["stiffness_models.notch.h", "stiffness_models.leaf.thickness"]
+    three = spatial.sensitivities(spatial.SpatialParameters(str(path), doc), wrt, ["gain"])
+    two = planar.sensitivities(Parameters(str(path), doc), wrt, ["gain"])
+    assert len(three["values"]) == 6 and set(three["values"]) == set(two["values"])
+    for o, v in two["values"].items():
+        assert three["values"][o] == pytest.approx(v, rel=1e-10)
+        for p in wrt:
+            assert three["gradient"][o][p] == pytest.approx(two["gradient"][o][p], rel=1e-9)
 
 
 @pytest.mark.parametrize("output", ["first_mode", "out_of_plane_mode"])
