@@ -122,6 +122,24 @@ def test_the_tiptilt_stages_gain_matrix_gradient_vs_central_differences():
                 assert exact == pytest.approx(fd[o, d], abs=1e-6 * np.max(np.abs(fd[o])))
 
 
+def test_an_entry_of_a_6x6_matrix_hinge_is_a_parameter_too():
+    """The tip-tilt stage's wires as ``model: matrix`` (their rod stiffness): the axial entry."""
+    base = spatial.SpatialParameters(TIPTILT)
+    doc = copy.deepcopy(base.data)
+    K = spatial_from_dict(base.data, TIPTILT).hinges[0].law.K
+    doc["stiffness_models"]["wire"] = {"model": "matrix", "K": K.tolist()}
+    params = spatial.SpatialParameters(TIPTILT, doc)
+    path, out = "stiffness_models.wire.K.4.4", "gain.piston.p1"
+    res = spatial.sensitivities(params, [path], [out])
+    inputs = np.array(list(res["input"].values()))
+
+    def piston(k):
+        lin = spatial_linear.linearize(_model(params, path, k), inputs, wrenches=False)
+        return linear_response.gain_matrix(lin, ["piston"])[0, 0]
+
+    assert res["gradient"][out][path] == pytest.approx(_central(piston, K[4, 4]), rel=1e-6)
+
+
 def test_3d_refuses_what_it_cannot_differentiate_by_name():
     params = spatial.SpatialParameters(TIPTILT)
     with pytest.raises(ParameterError, match="bodies.platform.mass"):

@@ -158,7 +158,7 @@ def stiffness6(ctx: Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
         if not isinstance(rows, list) or len(rows) != 6:
             raise ctx.fail(f"{key}.K", "expected a 6x6 matrix (six rows of six numbers, "
                            "rotations first)")
-        K = np.array([vector(ctx, f"{key}.K[{i}]", r, (6,)) for i, r in enumerate(rows)])
+        K = hd.asarray([vector(ctx, f"{key}.K[{i}]", r, (6,)) for i, r in enumerate(rows)])
     elif isinstance(model, str) and model in stiffness.MODELS:
         formula, names = stiffness.MODELS[model]
         no_unknown(ctx, key, spec, {"model", "sigma_y", *names})
