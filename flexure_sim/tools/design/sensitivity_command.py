@@ -103,8 +103,9 @@ def _run_spatial(args) -> int:
         print(json.dumps(res))
         return 0
     u0 = list(res["input"].values()) if isinstance(res["input"], dict) else res["input"]
+    modes = "; modes at rest" if {"first_mode", "out_of_plane_mode"} & set(res["values"]) else ""
     print(f"mechanism: {mech.name} (3-D)   static equilibrium at "
-          f"{input_text(mech, u0) if mech.drives else 'rest'}; first_mode at rest")
+          f"{input_text(mech, u0) if mech.drives else 'rest'}{modes}")
     for k, (p, v) in enumerate(res["parameters"].items(), 1):
         print(f"parameter {k}: {p} = {v:.6g}")
     for o, v in res["values"].items():
