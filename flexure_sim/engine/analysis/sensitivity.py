@@ -124,14 +124,10 @@ class Sensitivity:
         z = hd.HyperDual(
             self.z.copy(), np.zeros_like(self.z), np.zeros_like(self.z), np.zeros_like(self.z)
         )
-        F = self.free
-        for _ in range(2):  # e1, e2 parts exact after one, the e1e2 part after two
-            Q = forces(design, self.twistor, self.ia, self.ib, z).Q + self.applied
-            step = [self._solve(np.asarray(p)[F]) for p in hd.parts_of(Q)]
-            for name, dp in zip("abcd", step):
-                part = getattr(z, name)
-                part[F] += dp
-        return z
+        # e1, e2 parts exact after one iteration, the e1e2 part after two
+        return implicit_newton(
+            z, lambda z: forces(design, self.twistor, self.ia, self.ib, z).Q + self.applied,
+            self._solve, self.free, 2)
 
     def tangent(self, design, z, d: int):
         """
@@ -260,6 +256,23 @@ class Sensitivity:
             - (np.sin(th0) * c[0] + np.cos(th0) * c[1])
         )
         return dx, dy
+
+
+def implicit_newton(z, residual, solve, free, iterations: int):
+    """
+    Return z (a HyperDual, changed in place) after Newton steps with the real stiffness.
+
+    z_F <- z_F + K^-1 R_F(z) on every hyper-dual part, K = -dR_F/dz_F at the real solution
+    (``solve`` applies K^-1): the implicit function theorem dz/dp = K^-1 dR_F/dp and its
+    second-order form (module docstring). Each iteration makes one more order of the parts
+    exact; the planar and the spatial sensitivities (``analysis.spatial_sensitivity``) share it.
+    """
+    for _ in range(iterations):
+        step = [solve(np.asarray(p)[free]) for p in hd.parts_of(residual(z))]
+        for name, dp in zip("abcd", step):
+            part = getattr(z, name)
+            part[free] += dp
+    return z
 
 
 def gain_keys(mech) -> list:

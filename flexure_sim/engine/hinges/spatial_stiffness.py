@@ -41,6 +41,7 @@ from typing import Callable
 import numpy as np
 
 from flexure_sim.engine.hinges import stiffness as planar
+from flexure_sim.engine.kinematics import hyperdual as hd
 
 #: Gauss-Legendre nodes and weights on [-1, 1] for the notch integrals (module docstring).
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(64)
@@ -49,10 +50,14 @@ _ODD = np.arange(1, 400, 2, dtype=float)
 
 
 def torsion_constant(a: float, b: float) -> float:
-    """Return Saint-Venant's torsion constant J (m^4) of an a x b rectangle (module docstring)."""
-    long, short = max(a, b), min(a, b)
+    """
+    Return Saint-Venant's torsion constant J (m^4) of an a x b rectangle (module docstring).
+
+    a and b are floats or HyperDual numbers (the sides compared by their values).
+    """
+    long, short = (a, b) if hd.real(a) >= hd.real(b) else (b, a)
     ratio = short / long
-    series = np.sum(np.tanh(_ODD * np.pi / (2.0 * ratio)) / _ODD**5)
+    series = (np.tanh(_ODD * np.pi / (2.0 * ratio)) / _ODD**5).sum()
     return long * short**3 * (1.0 / 3.0 - 64.0 * ratio / np.pi**5 * series)
 
 
@@ -67,15 +72,16 @@ def out_of_plane(length, weight, thickness, width: float, E: float, nu: float):
 
     ``length``, ``weight``, ``thickness``: nodes l_i along the hinge (about its centre),
     their weights, and the in-plane thickness h(l_i); ``width``: the width out of the plane.
-    The formulas are the module docstring's.
+    The formulas are the module docstring's; every argument may be a float or a HyperDual
+    (design sensitivities, ``analysis.spatial_sensitivity``).
     """
     G = planar.shear_modulus(E, nu)
-    l, wgt, h = (np.asarray(v, dtype=float) for v in (length, weight, thickness))
-    bend = np.sum(wgt * 12.0 / (E * h * width**3))
-    shift = np.sum(wgt * l**2 * 12.0 / (E * h * width**3))
-    shear = np.sum(wgt / (cowper(nu) * G * width * h))
-    twist = np.sum(wgt / (G * np.array([torsion_constant(width, hi) for hi in h])))
-    transverse = 1.0 / np.sum(wgt * l**2 * 12.0 / (E * width * h**3))
+    l, wgt, h = (hd.asarray(v) for v in (length, weight, thickness))
+    bend = (wgt * 12.0 / (E * h * width**3)).sum()
+    shift = (wgt * l**2 * 12.0 / (E * h * width**3)).sum()
+    shear = (wgt / (cowper(nu) * G * width * h)).sum()
+    twist = (wgt / (G * hd.asarray([torsion_constant(width, h[i]) for i in range(len(h))]))).sum()
+    transverse = 1.0 / (wgt * l**2 * 12.0 / (E * width * h**3)).sum()
     return 1.0 / twist + width**2 / 12.0 * transverse, 1.0 / bend, 1.0 / (shift + shear)
 
 
@@ -105,9 +111,9 @@ def notch_stiffness(D: float, h: float, t: float, E: float, nu: float) -> np.nda
     In plane: ``hinges.stiffness.notch_stiffness`` (the dissertation's eqs. 5.27-5.33);
     out of plane: beam theory over the notch profile, width t.
     """
-    k_rz, k_x, k_y = np.diag(planar.notch_stiffness(D, h, t, E, nu))
+    k_rz, k_x, k_y = _diagonal(planar.notch_stiffness(D, h, t, E, nu))
     k_rx, k_ry, k_z = out_of_plane(*notch_profile(D, h), t, E, nu)
-    return np.diag([k_rx, k_ry, k_rz, k_x, k_y, k_z])
+    return _diag([k_rx, k_ry, k_rz, k_x, k_y, k_z])
 
 
 def cantilever_stiffness(length: float, thickness: float, width: float, E: float,
@@ -119,11 +125,11 @@ def cantilever_stiffness(length: float, thickness: float, width: float, E: float
     about y, bending about x and translation along z of the uniform profile (two-point
     Gauss-Legendre is exact for it).
     """
-    k_rz, k_x, k_y = np.diag(planar.cantilever_stiffness(length, thickness, width, E, nu))
+    k_rz, k_x, k_y = _diagonal(planar.cantilever_stiffness(length, thickness, width, E, nu))
     half = 0.5 * length
     nodes = half * np.array([-1.0, 1.0]) / np.sqrt(3.0)
     k_ry, k_rx, k_z = out_of_plane(nodes, [half, half], [thickness, thickness], width, E, nu)
-    return np.diag([k_rx, k_ry, k_rz, k_x, k_y, k_z])
+    return _diag([k_rx, k_ry, k_rz, k_x, k_y, k_z])
 
 
 def rod_stiffness(length: float, diameter: float, E: float, nu: float) -> np.ndarray:
@@ -140,7 +146,18 @@ def rod_stiffness(length: float, diameter: float, E: float, nu: float) -> np.nda
     kappa = 6.0 * (1.0 + nu) / (7.0 + 6.0 * nu)
     bend = E * inertia / length
     shift = 1.0 / (length**3 / (12.0 * E * inertia) + length / (kappa * G * area))
-    return np.diag([bend, 2.0 * G * inertia / length, bend, shift, E * area / length, shift])
+    return _diag([bend, 2.0 * G * inertia / length, bend, shift, E * area / length, shift])
+
+
+def _diagonal(M) -> list:
+    """Return the diagonal entries of a square float or HyperDual matrix."""
+    return [M[i, i] for i in range(len(M))]
+
+
+def _diag(values) -> np.ndarray:
+    """Return the diagonal matrix of ``values``: floats, or a HyperDual if any is one."""
+    return hd.asarray([[v if i == j else 0.0 for j in range(len(values))]
+                       for i, v in enumerate(values)])
 
 
 #: 6x6 stiffness models with a geometry: the formula and its arguments (the file's keys).

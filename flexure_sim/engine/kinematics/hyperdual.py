@@ -215,6 +215,14 @@ def log(x):
     return _chain(x, np.log(x.a), inv, -inv * inv)
 
 
+def tanh(x):
+    """Hyperbolic tangent t of the real part a: its derivatives are 1 - t^2 and -2 t (1 - t^2)."""
+    x = _lift(x)
+    t = np.tanh(x.a)
+    s = 1.0 - t * t
+    return _chain(x, t, s, -2.0 * t * s)
+
+
 def arctan(x):
     x = _lift(x)
     q = 1.0 / (1.0 + x.a * x.a)
@@ -260,6 +268,7 @@ _UFUNCS: dict[Any, Any] = {
     np.exp: exp,
     np.log: log,
     np.arctan: arctan,
+    np.tanh: tanh,
     np.arctan2: arctan2,
     np.absolute: absolute,
 }

@@ -51,6 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.kinematics.scalar import formula
 from flexure_sim.engine.kinematics.quaternion import angle_factor, cross, jr_coefficient
 from flexure_sim.engine.kinematics.quaternion import twistor_translation
@@ -212,7 +213,12 @@ class LawState:
 
 @dataclass(frozen=True)
 class SpatialLaw:
-    """The quadratic twistor or twist law with 6x6 stiffness K and damping B (module doc)."""
+    """
+    The quadratic twistor or twist law with 6x6 stiffness K and damping B (module doc).
+
+    K and B are float arrays, or HyperDual arrays when a design parameter is seeded
+    (``analysis.spatial_sensitivity``: such a law is read for its matrices, not evaluated).
+    """
 
     coordinates: str
     K: np.ndarray
@@ -222,8 +228,13 @@ class SpatialLaw:
         if self.coordinates not in KINDS:
             raise ValueError(f"coordinates: expected one of {', '.join(KINDS)}, "
                              f"got {self.coordinates!r}")
-        object.__setattr__(self, "K", as_array("K", self.K, (6, 6)))
-        object.__setattr__(self, "B", as_array("B", self.B, (6, 6)))
+        for key in ("K", "B"):
+            value = getattr(self, key)
+            if isinstance(value, hd.HyperDual):
+                if value.shape != (6, 6):
+                    raise ValueError(f"{key}: expected a 6x6 matrix, got shape {value.shape}")
+            else:
+                object.__setattr__(self, key, as_array(key, value, (6, 6)))
 
     @property
     def kind(self) -> int:

@@ -27,6 +27,7 @@ from __future__ import annotations
 from typing import Any
 
 from flexure_sim.engine.hinges import spatial_stiffness as stiffness
+from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.kinematics import quaternion as rotation
 from flexure_sim.engine.mechanism.loader import mechanism_from_dict
 from flexure_sim.engine.mechanism.parts import Drive as PlanarDrive
@@ -61,10 +62,14 @@ def opened_in_space(data: Any, source: str) -> Mechanism:
                            "terms: open the file in 3-D with notch or cantilever hinges, or "
                            "write a 3-D file with a 6x6 matrix")
         formula, names = stiffness.MODELS[model]
-        K6 = formula(*(float(sspec[n]) for n in names))
-        width = float(sspec["t" if model == "notch" else "width"])
+        # The planar loader checked these; HyperDual values (design sensitivities) stay so.
+        args = [v if isinstance(v, hd.HyperDual) else float(v)
+                for v in (sspec[n] for n in names)]
+        K6 = hd.asarray(formula(*args))
+        width = args[names.index("t" if model == "notch" else "width")]
         for frame in (h.a, h.b):
-            widths[frame.body] = max(widths[frame.body], width)
+            if hd.real(width) > hd.real(widths[frame.body]):
+                widths[frame.body] = width
         law = spec.get("law", defaults.get("law", "twistor"))
         hinges.append(Hinge(h.name, _frame(h.a), _frame(h.b),
                             hinge_law(ctx, key, law, K6, spec, defaults), model))

@@ -42,6 +42,7 @@ import numpy as np
 
 from flexure_sim.engine.hinges import spatial_stiffness as stiffness
 from flexure_sim.engine.kinematics import quaternion as rotation
+from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.laws.spatial import SpatialLaw
 from flexure_sim.engine.mechanism.damping_block import hinge_damping
 from flexure_sim.engine.mechanism.loader import COINCIDENCE_TOLERANCE
@@ -157,7 +158,7 @@ def stiffness6(ctx: Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
         if not isinstance(rows, list) or len(rows) != 6:
             raise ctx.fail(f"{key}.K", "expected a 6x6 matrix (six rows of six numbers, "
                            "rotations first)")
-        K = np.array([vector(ctx, f"{key}.K[{i}]", r, (6,)) for i, r in enumerate(rows)])
+        K = hd.asarray([vector(ctx, f"{key}.K[{i}]", r, (6,)) for i, r in enumerate(rows)])
     elif isinstance(model, str) and model in stiffness.MODELS:
         formula, names = stiffness.MODELS[model]
         no_unknown(ctx, key, spec, {"model", "sigma_y", *names})
@@ -166,7 +167,7 @@ def stiffness6(ctx: Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
         if "nu" in names and not 0 <= args[names.index("nu")] < 0.5:
             raise ctx.fail(f"{key}.nu", "Poisson's ratio must be in [0, 0.5)")
         with np.errstate(all="ignore"):
-            K = np.asarray(formula(*args), dtype=float)
+            K = hd.asarray(formula(*args))  # HyperDual when a design parameter is seeded
     else:
         raise ctx.fail(f"{key}.model", f"unknown stiffness model {shown(model)} ({known})")
     check_spd(ctx, key, K, "stiffness")

@@ -14,6 +14,11 @@ With several drives (config/xy_stage.yaml) ``--input`` takes one value per drive
 (``x=1e-6,y=0`` or ``1e-6,0``; default: the top of every drive's stroke) and ``gain`` means
 every ``gain.<output>.<drive>``, the static gain matrix's entries at that equilibrium (each may
 be asked for alone: ``--of gain.y.x``).
+
+In 3-D (``--space 3d``, or a ``space: 3d`` file; engine/analysis/spatial_sensitivity.py) the
+outputs are gain (the gain matrix's entries at the equilibrium, or output / input for one
+drive and one output) and first_mode (at rest), each with its exact gradient in the hinges'
+stiffness parameters (no second derivatives).
 """
 
 from __future__ import annotations
@@ -23,9 +28,11 @@ import sys
 
 from flexure_sim.engine.mechanism.loader import ConfigError
 from flexure_sim.engine.mechanism.parameters import ParameterError, Parameters
+from flexure_sim.engine.analysis import spatial_sensitivity as spatial
 from flexure_sim.engine.analysis.sensitivity import OUTPUTS, sensitivities
 from flexure_sim.engine.mechanism.stroke import check as check_stroke
 from flexure_sim.engine.solver.simulation import Simulation, SolverError
+from flexure_sim.tools.design.linear_commands import _spatial as three_d
 from flexure_sim.tools.design.linear_plots import input_text
 from flexure_sim.tools.options import parse_drive_inputs
 from flexure_sim.tools.tables import columns
@@ -33,6 +40,8 @@ from flexure_sim.tools.tables import columns
 
 def run(args) -> int:
     try:
+        if three_d(args):
+            return _run_spatial(args)
         params = Parameters(args.mechanism)
         wrt = [p for p in args.wrt.split(",") if p]
         of = [o for o in args.of.split(",") if o]
@@ -69,6 +78,43 @@ def run(args) -> int:
     return 0
 
 
+def _run_spatial(args) -> int:
+    """Print the 3-D sensitivities: values and gradients (module docstring)."""
+    params = spatial.SpatialParameters(args.mechanism)
+    wrt = [p for p in args.wrt.split(",") if p]
+    of = [o for o in args.of.split(",") if o]
+    if args.of == ",".join(OUTPUTS):
+        of = list(spatial.OUTPUTS)
+    if not wrt:
+        raise ParameterError("--wrt: give at least one parameter path")
+    value = parse_drive_inputs(args.input)
+    mech = params.mechanism
+    if value is not None and mech.drives:
+        try:
+            inputs = spatial.SpatialModel(mech).drive_inputs(value)
+        except ValueError as exc:
+            raise ParameterError(f"--input {args.input!r}: {exc}") from None
+        check_stroke(mech.drives, inputs, f"--input {args.input!r}")
+    res = spatial.sensitivities(params, wrt, of, value)
+    res["mechanism"] = mech.name
+    res["space"] = "3d"
+    res["parameters"] = {p: params.value(p) for p in wrt}
+    if args.json:
+        print(json.dumps(res))
+        return 0
+    u0 = list(res["input"].values()) if isinstance(res["input"], dict) else res["input"]
+    modes = "; modes at rest" if {"first_mode", "out_of_plane_mode"} & set(res["values"]) else ""
+    print(f"mechanism: {mech.name} (3-D)   static equilibrium at "
+          f"{input_text(mech, u0) if mech.drives else 'rest'}{modes}")
+    for k, (p, v) in enumerate(res["parameters"].items(), 1):
+        print(f"parameter {k}: {p} = {v:.6g}")
+    for o, v in res["values"].items():
+        print(f"{o} = {v:.10g}")
+        for p, d in res["gradient"][o].items():
+            print(f"  d/d {p}: {d:.10g}")
+    return 0
+
+
 def hessian_table(H) -> str:
     """Return the Hessian H[i][j] = d2/dP_i dP_j as an indented table, parameters by number."""
     header = ["d2/dPi dPj"] + [f"j={j}" for j in range(1, len(H) + 1)]
@@ -95,5 +141,9 @@ def register(subparsers) -> None:
         help="drive input (m); with several drives one per drive: NAME=VALUE,... or V1,V2,... "
         "(default: the top of each drive's stroke)"
     )
+    p.add_argument("--space", choices=("2d", "3d"), default=None,
+                   help="2d: the planar engine; 3d: the spatial engine (gain and first_mode, "
+                   "gradients in the hinges' stiffness parameters); default: 3d for a "
+                   "space: 3d file, else 2d")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=run)
