@@ -62,6 +62,9 @@ REPEATED = 1e-6
 class SpatialParameters(Parameters):
     """A mechanism file's numbers by path (``Parameters``), built in 3-D."""
 
+    #: The mechanism built in 3-D (a ``spatial_parts.Mechanism``).
+    mechanism: Any
+
     def __init__(self, name_or_path: str | Path, data: Optional[dict] = None):
         """From a built-in name or YAML path: a ``space: 3d`` file, or a planar one in 3-D."""
         source = str(name_or_path)
@@ -240,12 +243,12 @@ def sensitivities(params: SpatialParameters, wrt: Sequence[str], of: Sequence[st
         raise ParameterError(f"gain: mechanism {mech.name!r} needs a drive and an output")
     of = expand(mech, of)
     seen: dict[Any, str] = {}
-    for p in wrt:
-        params.check(p)
-        steps = params.resolve(p)[0]
+    for name in wrt:
+        params.check(name)
+        steps = params.resolve(name)[0]
         if steps in seen:
-            raise ParameterError(f"--wrt: {seen[steps]} and {p} name the same number")
-        seen[steps] = p
+            raise ParameterError(f"--wrt: {seen[steps]} and {name} name the same number")
+        seen[steps] = name
     if u is None:
         u = default_input(mech)
     try:

@@ -47,7 +47,8 @@ def opened_in_space(data: Any, source: str) -> Mechanism:
                        "(use the hinges' damping: {t_char})")
     defaults = data.get("defaults", {})
     named = data.get("stiffness_models", {})
-    hinges, widths = [], {b.name: 0.0 for b in planar.bodies}
+    hinges: list = []
+    widths: dict[str, Any] = {b.name: 0.0 for b in planar.bodies}  # float or HyperDual
     for i, (h, spec) in enumerate(zip(planar.hinges, data["hinges"])):
         key = f"hinges[{i}]"
         if not isinstance(spec.get("law", defaults.get("law", "twistor")), str):
