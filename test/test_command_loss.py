@@ -33,6 +33,17 @@ def test_gaps_of_one_publisher_are_the_numbers_skipped():
     assert counter.observe([6, 7]) == 0 and counter.lost == 2
 
 
+def test_commands_numbered_before_the_first_taken_are_counted_apart():
+    counter = SequenceGaps(lambda: 1)
+    assert counter.observe([5, 6, 9]) == 2       # joined at 5: 1..4 came before the node heard it
+    assert counter.unheard == 4
+    assert counter.observe([1, 2]) == 0          # restarted: numbered anew, nothing unheard
+    assert counter.unheard == 4 and counter.lost == 2
+    two = SequenceGaps(lambda: 2)
+    assert two.observe([1, 2, 40, 3, 41]) == 0   # B joined at 40: 39 unheard, none lost
+    assert two.unheard == 39
+
+
 def test_a_restarted_publisher_and_numbers_going_back_count_nothing():
     assert gaps([1, 2, 3, 50, 1, 2, 3]) == 46   # a publisher restarted after 50: numbered anew
     assert gaps([10, 9, 8, 7]) == 0             # never negative
@@ -115,3 +126,47 @@ def test_a_flood_beyond_the_reader_is_counted_exactly(tmp_path):
     assert [m.message.data for m in recorded] == [
         1e-8 * (p + 1) * n for p, (first, flood) in enumerate(bursts) for n in (first, flood)]
     assert "commands lost: a publisher sent 39 commands the node never took" in node.stderr
+
+
+def test_commands_sent_before_the_node_listened_are_counted_as_unheard(tmp_path):
+    """
+    Sent == recorded + lost + unheard: a publisher that sent before the node existed.
+
+    Deterministic by construction: the publisher's first commands are published before the
+    node's process starts, so no reader can have received them (a volatile writer keeps
+    nothing for late readers); the next one is acknowledged by the node's reader before the
+    step that takes it.
+    """
+    domain = next_domain_id()
+    peer = Peer(domain)
+    early = 7
+    node = None
+    try:
+        pub = peer.publisher("/drive/displacement", Float64)
+        for k in range(early):
+            pub.publish(Float64(data=1e-8 * (k + 1)))
+        node = NodeProcess(tmp_path / "node", domain, {
+            "time_mode": "lockstep", "publish_rate": 10.0, "sim_step": 1e-4,
+            "record": True, "record_path": "early.mcap"})
+        peer.watch = node
+        node.wait_for_output("topics per tick", 120)
+        peer.subscribe("/diagnostics", DiagnosticArray)
+        peer.wait_for_publishers(["/diagnostics"])
+        peer.wait_for_subscribers(pub)
+        pub.publish(Float64(data=1e-6))
+        assert pub.wait_for_all_acked(Duration(seconds=30))
+        answer = peer.call(Trigger, "/stage_node/step")
+        assert answer.success, answer.message
+        peer.spin_until(lambda: peer.last("/diagnostics") is not None
+                        and int(_diag(peer)["ticks"]) >= 1, 30, "diagnostics of tick 1")
+        d = _diag(peer)
+    finally:
+        peer.watch = None
+        peer.close()
+        rc = node.stop(signal.SIGINT) if node is not None else 0
+    assert rc == 0, node.stderr
+    recorded = read_log(node.cwd / "early.mcap").messages_on("/drive/displacement")
+    assert [m.message.data for m in recorded] == [1e-6]
+    assert int(d["commands_lost"]) == 0
+    assert int(d["commands_unheard"]) == early
+    assert len(recorded) + int(d["commands_lost"]) + int(d["commands_unheard"]) == early + 1

@@ -19,7 +19,7 @@ def test_finite_commands_inside_the_stroke_are_accepted_unchanged():
     assert f.submit(1.35e-6) is CommandStatus.ACCEPTED
     assert f.target == 1.35e-6
     assert f.counters.as_dict() == dict(received=1, accepted=1, clamped=0, rejected=0, malformed=0,
-                                        rate_limited=0, lost=0)
+                                        rate_limited=0, lost=0, unheard=0)
 
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf, float("nan"), "1e-6", None, True])

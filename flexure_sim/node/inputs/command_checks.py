@@ -77,7 +77,9 @@ class CommandCounters:
     malformed: payloads that are not a Float64 in an encoding the node reads (`cdr`);
     rate_limited: accepted commands the actuator could not reach within one publish period
     at its slew rate (so the engine sees a ramp); lost: commands a publisher sent that the
-    node never took (not in received; `command_loss`).
+    node never took (not in received; `command_loss`); unheard: commands a publisher numbered
+    before the first one the node took from it (sent before the reader matched it;
+    `command_loss`).
     """
 
     received: int = 0
@@ -87,6 +89,7 @@ class CommandCounters:
     malformed: int = 0
     rate_limited: int = 0
     lost: int = 0
+    unheard: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}

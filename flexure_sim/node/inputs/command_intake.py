@@ -136,7 +136,10 @@ class CommandIntake:
         self.time_s += time.perf_counter() - t0
 
     def _count_lost(self, numbers: list[Optional[int]]) -> None:
+        unheard = self.gaps.unheard
         lost = self.gaps.observe(numbers)
+        if self.filter is not None:
+            self.filter.counters.unheard += self.gaps.unheard - unheard
         if lost and self.filter is not None:
             self.filter.counters.lost += lost
             self.warn("lost", f"{self.label} commands lost: a publisher sent {lost} commands "

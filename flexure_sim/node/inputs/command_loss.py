@@ -24,6 +24,13 @@ is exact; with several publishers on one drive topic it is the total of the gaps
 show, and a gap of one publisher can be taken for another's. Numbers never produce a negative
 count.
 
+A new stream's first number n also says that its publisher sent n - 1 commands before the
+first one the node took (`SequenceGaps.unheard`): sent before the node's reader matched it (a
+volatile writer delivers nothing to a reader that was not there yet, the usual case when a
+controller starts publishing at once), or, when the reader overflowed before its first take,
+replaced there. They are no loss of the node's, but they are counted, so that commands
+recorded + lost + unheard = commands sent.
+
 Cost in the stepping thread: one dict look-up per command (the info comes with every take),
 one comparison per command when the next number follows on.
 """
@@ -46,6 +53,8 @@ class SequenceGaps:
         self._lasts: list[int] = []
         #: Commands lost so far.
         self.lost = 0
+        #: Commands numbered before the first one taken from each publisher (module docstring).
+        self.unheard = 0
 
     def observe(self, numbers: Sequence[Optional[int]]) -> int:
         """Account for the numbers of the commands just taken, in order; return the new losses."""
@@ -75,6 +84,8 @@ class SequenceGaps:
             k = -1  # below every stream: a publisher (re)started
         if k >= 0:
             del lasts[k]
+        else:  # a new stream: its publisher sent n - 1 commands before this one
+            self.unheard += max(n - 1, 0)
         lasts.insert(0, n)
         if len(lasts) > 1:
             if publishers is None:
