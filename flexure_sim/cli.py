@@ -217,15 +217,9 @@ def spatial(args: argparse.Namespace, path) -> bool:
     return args.space == "3d" or three_d
 
 
-def _spatial_drive(specs) -> str:
-    """Return the one ``--drive`` a 3-D run takes (``none`` without), UsageError for several."""
-    if not specs:
-        return "none"
-    if len(specs) > 1:
-        raise UsageError(f"--drive given {len(specs)} times: a 3-D mechanism takes one "
-                         "--drive step:A, step:NAME=VALUE,... or step:V1,V2,... for all its "
-                         "drives")
-    return specs[0]
+def _spatial_drive(specs) -> list:
+    """Return the ``--drive`` specs of a 3-D run (``["none"]`` without any)."""
+    return list(specs) if specs else ["none"]
 
 
 def gain_matrix(sim: Simulation) -> dict:

@@ -98,3 +98,23 @@ def test_the_planar_engine_names_a_3d_file():
     from flexure_sim.engine.mechanism.loader import ConfigError, load_mechanism
     with pytest.raises(ConfigError, match="space: a 3-D mechanism: the planar engine"):
         load_mechanism("tiptilt_stage")
+
+
+def test_drives_stepped_one_by_one_as_for_planar_mechanisms():
+    """``--drive NAME=step:V`` once per drive (others at 0) is the one-spec form's equilibrium."""
+    from flexure_sim.engine.mechanism.spatial_loader import load_spatial
+    from flexure_sim.engine.solver.spatial_simulation import SpatialSimulation
+
+    per_drive = run("simulate", "tiptilt_stage", "--drive", "p1=step:2e-6", "--drive",
+                    "p3=step:-1e-6", "--static", "--json")
+    assert per_drive.returncode == 0, per_drive.stderr
+    got = json.loads(per_drive.stdout)
+    snap = SpatialSimulation(load_spatial("tiptilt_stage")).static_snapshot(
+        np.array([2e-6, 0.0, -1e-6]))
+    assert {n: d["input"] for n, d in got["drives"].items()} == {"p1": 2e-6, "p2": 0.0,
+                                                                 "p3": -1e-6}
+    for name, value in snap.outputs.items():
+        assert got["outputs"][name] == pytest.approx(value, rel=1e-9, abs=1e-15)
+    bad = run("simulate", "tiptilt_stage", "--drive", "p1=sine:1e-6:100", "--static")
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr
+    assert "a 3-D run steps its drives" in bad.stderr

@@ -3,7 +3,8 @@
 
 Chosen by ``cli.run_simulate`` for a ``space: 3d`` file or with ``--space 3d`` (a planar file
 with its out-of-plane freedoms). ``--drive step:A`` steps a single drive; with several drives
-``step:NAME=VALUE,...`` or ``step:V1,V2,...`` (one per drive). ``--static`` solves the
+``step:NAME=VALUE,...`` or ``step:V1,V2,...`` (one per drive), or ``--drive NAME=step:V`` once
+per drive stepped (as for planar mechanisms; drives not named stay at 0). ``--static`` solves the
 equilibrium at that input and reports, besides the outputs and hinges, the exact static gain
 of every output against every drive and the stiffness each output's body sees (6x6 at its
 mass centre, the rest of the mechanism relaxed: ``spatial_statics.body_stiffness``).
@@ -24,8 +25,37 @@ REPORT_TIMES = (1e-3, 2e-3, 5e-3)
 AXES = ("x", "y", "z", "rx", "ry", "rz")
 
 
-def drive_value(spec: str, usage_error):
-    """Return the drive inputs of ``--drive`` (``none``: None)."""
+def drive_value(specs, names, usage_error):
+    """
+    Return the drive inputs of the ``--drive`` options (``none``: None).
+
+    One ``step:...`` for all drives, or ``NAME=step:V`` (or ``NAME=none``) per drive, the
+    drives not named at 0; 3-D runs step their drives (no other programs).
+    """
+    if isinstance(specs, str):
+        specs = [specs]
+    per_drive = [s.partition("=") for s in specs if s.partition("=")[0].strip() in names]
+    if per_drive:
+        if len(per_drive) != len(specs):
+            raise usage_error(f"--drive {' '.join(specs)!r}: give either NAME=step:V per drive "
+                              "or one step:... for all drives, not both")
+        inputs = dict.fromkeys(names, 0.0)
+        seen = set()
+        for name, _, program in per_drive:
+            name = name.strip()
+            if name in seen:
+                raise usage_error(f"--drive: drive {name} is given twice")
+            seen.add(name)
+            if program.strip() == "none":
+                continue
+            value = _one_step(f"{name}={program}", program, usage_error)
+            inputs[name] = value
+        return inputs
+    if len(specs) > 1:
+        raise usage_error(f"--drive given {len(specs)} times: a 3-D mechanism takes one "
+                          "--drive step:A, step:NAME=VALUE,... or step:V1,V2,... for all its "
+                          f"drives, or NAME=step:V once per drive ({', '.join(names)})")
+    spec = specs[0]
     if spec == "none":
         return None
     kind, _, value = spec.partition(":")
@@ -39,12 +69,27 @@ def drive_value(spec: str, usage_error):
     return parsed
 
 
+def _one_step(spec: str, program: str, usage_error) -> float:
+    """Return V of one drive's ``step:V`` (``spec`` as given, for the message)."""
+    kind, _, value = program.partition(":")
+    if kind.strip() != "step" or not value.strip():
+        raise usage_error(f"--drive {spec!r}: a 3-D run steps its drives: expected "
+                          "NAME=step:VALUE")
+    try:
+        parsed = float(value)
+    except ValueError:
+        raise usage_error(f"--drive {spec!r}: {value.strip()!r} is not a number") from None
+    if not np.isfinite(parsed):
+        raise usage_error(f"--drive {spec!r}: the step must be a finite number")
+    return parsed
+
+
 def run(args, path, usage_error) -> dict:
     """Run the 3-D simulation the arguments ask for; return the figures as a dict."""
     mech = load_spatial(path)
     sim = SpatialSimulation(mech, dt=args.dt, relinearize_tol=args.relinearize_tol)
     model = sim.model
-    value = drive_value(args.drive, usage_error)
+    value = drive_value(args.drive, list(model.drive_names), usage_error)
     if value is not None and not model.drives:
         raise usage_error(f"--drive: mechanism {mech.name!r} has no drive")
     try:
