@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from flexure_sim.engine.hinges import spatial_stiffness as stiffness
+from flexure_sim.engine.mechanism.fe_block import fe_stiffness6
 from flexure_sim.engine.kinematics import quaternion as rotation
 from flexure_sim.engine.laws.spatial import SpatialLaw
 from flexure_sim.engine.mechanism.damping_block import hinge_damping
@@ -150,7 +151,7 @@ def stiffness6(ctx: Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
     """Return (K 6x6, model name) of a stiffness specification, checked."""
     spec = mapping(ctx, key, spec)
     model = require(ctx, key, spec, "model")
-    known = ", ".join([*stiffness.MODELS, "matrix"])
+    known = ", ".join([*stiffness.MODELS, "fe", "matrix"])
     if model == "matrix":
         no_unknown(ctx, key, spec, {"model", "K"})
         rows = require(ctx, key, spec, "K")
@@ -158,6 +159,8 @@ def stiffness6(ctx: Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
             raise ctx.fail(f"{key}.K", "expected a 6x6 matrix (six rows of six numbers, "
                            "rotations first)")
         K = np.array([vector(ctx, f"{key}.K[{i}]", r, (6,)) for i, r in enumerate(rows)])
+    elif model == "fe":
+        K = fe_stiffness6(ctx, key, spec)
     elif isinstance(model, str) and model in stiffness.MODELS:
         formula, names = stiffness.MODELS[model]
         no_unknown(ctx, key, spec, {"model", "sigma_y", *names})
