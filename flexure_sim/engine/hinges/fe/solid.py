@@ -239,7 +239,7 @@ def dimensionless(name: str, ratios: tuple[float, ...], width: float, nu: float,
 def stiffness(name: str, values: Mapping[str, Any], E: float, nu: float,
               n: int = DEFAULT_RESOLUTION, order: int = DEFAULT_ORDER) -> np.ndarray:
     """
-    Return a ``model: fe`` hinge's 6x6 stiffness (SI, rotations first) at its frame.
+    Return a ``model: fe`` hinge's 6x6 K at its frame, SI units, rotations first.
 
     ``values``: the shape's geometry keys (shapes.SHAPES) in metres; floats only (the 3-D
     engine has no design sensitivities). K = E ell S K^ S (module docstring).
