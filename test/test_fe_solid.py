@@ -79,8 +79,8 @@ def test_out_of_plane_bending_against_lobontiu_beam_integrals():
     # and translation along z: a thin notch bends as a beam across its width.
     K = np.diag(notch3d(0.5))
     formula = np.diag(closed.notch_stiffness(4.0, 1.0, 0.5, 1.0, NU))
-    assert abs(formula[1] / K[1] - 1) < 0.08  # measured +6 %
-    assert abs(formula[5] / K[5] - 1) < 0.20  # measured +16 % (shear of a short beam)
+    assert abs(formula[1] / K[1] - 1) < 0.06  # measured +4.4 %
+    assert abs(formula[5] / K[5] - 1) < 0.15  # measured +12 % (shear of a short beam)
 
 
 def test_doubly_symmetric_notch_is_diagonal_symmetric_and_positive_definite():

@@ -23,8 +23,9 @@ A 3-D file (SI units, REP-103 axes; see config/tiptilt_stage.yaml)::
 
 ``inertia``: [Ixx, Iyy, Izz] (principal, body axes) or a 3x3 tensor, about the mass centre.
 Stiffness models: ``notch``, ``cantilever`` (6x6 from ``hinges.spatial_stiffness``), any
-``spatial_stiffness.register``-ed
-model (the finite-element hinges: ``model: fe``), and ``matrix`` with ``K`` 6x6. A drive moves
+``spatial_stiffness.register``-ed model, ``fe`` (the planar ``model: fe`` block, its 6x6 from
+the 3-D solid of ``hinges.fe.solid``: ``fe_block.fe_stiffness6``), and ``matrix`` with ``K``
+6x6. A drive moves
 its body along ``axis`` (its other coordinates held) or along one translation coordinate
 (``axis: z``: the others free); ``type: force`` applies a force along an axis or a translation
 coordinate, or a torque about a root axis (``axis: rx``). Other planar keys (sine rates,
