@@ -31,8 +31,10 @@ along the hinge frame's x axis, the neck's thickness h(l) = h + 2 r - 2 sqrt(r^2
 (r = D/2, |l| <= r) along y, the width t along z. ``cantilever`` (leaf): length along y,
 thickness along x, width along z (the planar engine's conventions). ``rod``: a round wire
 flexure (3-D files only), length along y. ``matrix``: a given
-symmetric positive definite 6x6 (``K``). Further models register in ``MODELS`` (``register``):
-the finite-element hinge models (engine/hinges/fe) give their 6x6 there as ``model: fe``.
+symmetric positive definite 6x6 (``K``). Further models with numeric keys register in
+``MODELS`` (``register``). The finite-element hinge (``model: fe``, whose block names a shape)
+is checked by the loader's fe block and gives its 6x6 from a 3-D solid (engine/hinges/fe/
+solid.py) in this frame and order, so it replaces ``notch`` or ``cantilever`` as it stands.
 """
 from __future__ import annotations
 

@@ -90,3 +90,38 @@ def fe_stiffness(ctx: Ctx, key: str, spec: dict, sigma_y,
     geometry = (None if sharp else StressGeometry(
         "fe", (*peak, tuple(tuple(row) for row in fibres)), sigma_y, **strengths))
     return hd.asarray(K), geometry
+
+
+#: Strength keys a ``model: fe`` block may carry; the 3-D engine has no stress outputs yet.
+STRENGTHS = ("material", "sigma_y", "sigma_u", "sigma_e")
+#: Elements across the neck of the 3-D (tetrahedral) model: the range and its default.
+SOLID_RESOLUTIONS = (2, 8)
+
+
+def fe_stiffness6(ctx: Ctx, key: str, spec: dict, planar_file: bool = False) -> np.ndarray:
+    """
+    Return the 6x6 stiffness of a ``model: fe`` spec from the 3-D solid (hinges/fe/solid.py).
+
+    The keys are the planar block's; ``plane`` is not used (the solid needs no plane
+    assumption). ``resolution`` in a 3-D file is the tetrahedral mesh's elements across the
+    neck (2..8, default solid.DEFAULT_RESOLUTION); in a planar file opened in 3-D it is the
+    planar mesh's and the 3-D model takes its default.
+    """
+    from flexure_sim.engine.hinges.fe import solid
+
+    spec = {k: v for k, v in spec.items() if k not in STRENGTHS}
+    n = spec.pop("resolution", None) if not planar_file else None
+    if n is None:
+        n = solid.DEFAULT_RESOLUTION
+    elif (isinstance(n, bool) or not isinstance(n, int)
+          or not SOLID_RESOLUTIONS[0] <= n <= SOLID_RESOLUTIONS[1]):
+        raise ctx.fail(f"{key}.resolution", "expected a whole number of elements across the "
+                       f"neck of the 3-D mesh, {SOLID_RESOLUTIONS[0]}..{SOLID_RESOLUTIONS[1]}, "
+                       f"got {shown(n)}")
+    v = fe_numbers(ctx, key, spec)
+    try:
+        return solid.stiffness(v["shape"], v["geometry"], float(v["E"]), float(v["nu"]), n)
+    except ShapeError as exc:
+        raise ctx.fail(key, str(exc)) from None
+    except MeshError as exc:
+        raise ctx.fail(key, f"the finite-element model failed: {exc}") from None

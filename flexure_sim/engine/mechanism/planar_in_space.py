@@ -6,8 +6,9 @@ hinge is placed in the plane z = 0: a body's pose (x, y, theta) becomes position
 the rotation theta about z, a hinge frame (x, y, angle) likewise; drives, force drives and
 outputs keep their axes (in the plane) or coordinates (``theta`` is ``rz``). Each hinge gets
 the 6x6 stiffness of its ``notch`` or ``cantilever`` model (``hinges.spatial_stiffness``),
-whose in-plane
-block is the planar 3x3 exactly, and B = t_char K6 for ``damping: {t_char}``.
+whose in-plane block is the planar 3x3 exactly, or of its ``model: fe`` block from the 3-D
+solid (``hinges.fe.solid``: its in-plane block is the solid's, not the planar solve's), and
+B = t_char K6 for ``damping: {t_char}``.
 
 What the plane does not say, and how it is chosen:
 
@@ -27,8 +28,10 @@ from __future__ import annotations
 from typing import Any
 
 from flexure_sim.engine.hinges import spatial_stiffness as stiffness
+from flexure_sim.engine.hinges.fe.shapes import SHAPES
 from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.kinematics import quaternion as rotation
+from flexure_sim.engine.mechanism.fe_block import fe_stiffness6
 from flexure_sim.engine.mechanism.loader import mechanism_from_dict
 from flexure_sim.engine.mechanism.parts import Drive as PlanarDrive
 from flexure_sim.engine.mechanism.parts import Fixed, SineRate
@@ -58,16 +61,20 @@ def opened_in_space(data: Any, source: str) -> Mechanism:
         where = f"stiffness_models.{sspec}" if isinstance(sspec, str) else f"{key}.stiffness"
         sspec = named[sspec] if isinstance(sspec, str) else sspec
         model = sspec["model"]
-        if model not in ("notch", "cantilever"):
+        if model == "fe":
+            K6 = fe_stiffness6(ctx, where, sspec, planar_file=True)
+            width = float(sspec[SHAPES[sspec["shape"]].plate])
+        elif model in ("notch", "cantilever"):
+            formula, names = stiffness.MODELS[model]
+            # The planar loader checked these; HyperDual values (design sensitivities) stay so.
+            args = [v if isinstance(v, hd.HyperDual) else float(v)
+                    for v in (sspec[n] for n in names)]
+            K6 = hd.asarray(formula(*args))
+            width = args[names.index("t" if model == "notch" else "width")]
+        else:
             raise ctx.fail(f"{where}.model", f"a {model} stiffness (3x3) has no out-of-plane "
-                           "terms: open the file in 3-D with notch or cantilever hinges, or "
-                           "write a 3-D file with a 6x6 matrix")
-        formula, names = stiffness.MODELS[model]
-        # The planar loader checked these; HyperDual values (design sensitivities) stay so.
-        args = [v if isinstance(v, hd.HyperDual) else float(v)
-                for v in (sspec[n] for n in names)]
-        K6 = hd.asarray(formula(*args))
-        width = args[names.index("t" if model == "notch" else "width")]
+                           "terms: open the file in 3-D with notch, cantilever or fe hinges, "
+                           "or write a 3-D file with a 6x6 matrix")
         for frame in (h.a, h.b):
             if hd.real(width) > hd.real(widths[frame.body]):
                 widths[frame.body] = width

@@ -23,8 +23,9 @@ A 3-D file (SI units, REP-103 axes; see config/tiptilt_stage.yaml)::
 
 ``inertia``: [Ixx, Iyy, Izz] (principal, body axes) or a 3x3 tensor, about the mass centre.
 Stiffness models: ``notch``, ``cantilever`` (6x6 from ``hinges.spatial_stiffness``), any
-``spatial_stiffness.register``-ed
-model (the finite-element hinges: ``model: fe``), and ``matrix`` with ``K`` 6x6. A drive moves
+``spatial_stiffness.register``-ed model, ``fe`` (the planar ``model: fe`` block, its 6x6 from
+the 3-D solid of ``hinges.fe.solid``: ``fe_block.fe_stiffness6``), and ``matrix`` with ``K``
+6x6. A drive moves
 its body along ``axis`` (its other coordinates held) or along one translation coordinate
 (``axis: z``: the others free); ``type: force`` applies a force along an axis or a translation
 coordinate, or a torque about a root axis (``axis: rx``). Other planar keys (sine rates,
@@ -41,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from flexure_sim.engine.hinges import spatial_stiffness as stiffness
+from flexure_sim.engine.mechanism.fe_block import fe_stiffness6
 from flexure_sim.engine.kinematics import quaternion as rotation
 from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.laws.spatial import SpatialLaw
@@ -151,7 +153,7 @@ def stiffness6(ctx: Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
     """Return (K 6x6, model name) of a stiffness specification, checked."""
     spec = mapping(ctx, key, spec)
     model = require(ctx, key, spec, "model")
-    known = ", ".join([*stiffness.MODELS, "matrix"])
+    known = ", ".join([*stiffness.MODELS, "fe", "matrix"])
     if model == "matrix":
         no_unknown(ctx, key, spec, {"model", "K"})
         rows = require(ctx, key, spec, "K")
@@ -159,6 +161,8 @@ def stiffness6(ctx: Ctx, key: str, spec: Any) -> tuple[np.ndarray, str]:
             raise ctx.fail(f"{key}.K", "expected a 6x6 matrix (six rows of six numbers, "
                            "rotations first)")
         K = hd.asarray([vector(ctx, f"{key}.K[{i}]", r, (6,)) for i, r in enumerate(rows)])
+    elif model == "fe":
+        K = fe_stiffness6(ctx, key, spec)
     elif isinstance(model, str) and model in stiffness.MODELS:
         formula, names = stiffness.MODELS[model]
         no_unknown(ctx, key, spec, {"model", "sigma_y", *names})
