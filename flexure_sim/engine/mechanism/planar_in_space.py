@@ -61,6 +61,7 @@ def opened_in_space(data: Any, source: str) -> Mechanism:
         where = f"stiffness_models.{sspec}" if isinstance(sspec, str) else f"{key}.stiffness"
         sspec = named[sspec] if isinstance(sspec, str) else sspec
         model = sspec["model"]
+        width: Any  # the plate thickness: a float, or HyperDual (design sensitivities)
         if model == "fe":
             K6 = fe_stiffness6(ctx, where, sspec, planar_file=True)
             width = float(sspec[SHAPES[sspec["shape"]].plate])
