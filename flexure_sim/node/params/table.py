@@ -62,8 +62,8 @@ _DRIVE = (DRIVE_MIN, DRIVE_MAX, DRIVE_SLEW)
 #: unit, read-only, low, high, description). docs/node.md, "Parameters", is this table for users.
 TABLE: tuple[tuple[Any, ...], ...] = (
     ("mechanism", "microstage", str, "", True, None, None,
-     "Built-in mechanism name (microstage, fourbar_cantilever, fourbar_mixed, tiptilt_stage) "
-     "or path of a mechanism YAML file."),
+     "Built-in mechanism name (a file of the package's config/, e.g. microstage, xy_stage, "
+     "tiptilt_stage; an unknown name lists them all) or path of a mechanism YAML file."),
     ("space", "auto", str, "", True, None, None,
      "auto: the mechanism file's own engine (planar, or the spatial engine for a file with "
      "space: 3d); 3d: a planar file opened in space, with its out-of-plane freedoms (poses, "
