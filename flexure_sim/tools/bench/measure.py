@@ -240,11 +240,12 @@ def run_node(
         result.update(recording_complete=log.complete, recorded_messages=log.message_count,
                       recording_bytes=path.stat().st_size,
                       recording_dropped=int(log.dropped_messages or 0))
-        # Per tick: every recorded topic but the command, diagnostics (~10 Hz) and the display
-        # topics (markers and TF at display_rate).
+        # Per tick: every recorded topic but the command and its malformed payloads' channel,
+        # diagnostics (~10 Hz) and the display topics (markers and TF at display_rate).
         not_per_tick = {"/diagnostics", "/drive/displacement", "/" + topics.MARKERS,
                         topics.TF, topics.TF_STATIC}
-        result["topics_per_tick"] = sum(1 for t in log.topics if t not in not_per_tick)
+        result["topics_per_tick"] = sum(1 for t in log.topics
+                                        if t not in not_per_tick and not t.endswith("/rejected"))
         if flood is not None:
             # The flood ended before the node was stopped: every command it sent must be in
             # the file (each received command is recorded, rejected ones included).
