@@ -25,7 +25,8 @@ from flexure_sim.recording.exceptions import EXIT_OK, EXIT_USAGE, RunError
 from flexure_sim.topics import COMMAND, DRIVE_FORCE, DRIVE_INPUT, OUTPUT
 from flexure_sim.tools.run import step_analysis as analysis
 from flexure_sim.tools.run.analyse_drives import analyse_drives, format_drives
-from flexure_sim.tools.run.run_channels import is_single_drive
+from flexure_sim.tools.run.command_counts import command_counts, format_command_counts
+from flexure_sim.tools.run.run_channels import is_single_drive, recorded_stroke
 from flexure_sim.tools.options import add_file_arguments
 from flexure_sim.tools.run.response_metrics import DEFAULT_BAND
 from flexure_sim.tools.run.runlog import Run, load_run, require_stage_run
@@ -67,8 +68,9 @@ def _run(args: argparse.Namespace) -> int:
         result = analyse_drives(run_, band=args.band, static=not args.no_static)
         for note in result["notes"]:
             warn(PROG, note)
+        result["commands"] = counts = command_counts(run_, [d.name for d in run_.drives()])
         print(json.dumps(_jsonable(result), indent=1) if args.json
-              else format_drives(run_, result))
+              else format_drives(run_, result) + "\n" + format_command_counts(counts))
         return EXIT_OK
     result = analyse_run(run_, band=args.band, static=not args.no_static)
     for note in result["notes"]:
@@ -76,7 +78,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps([_jsonable(s) for s in result["steps"]], indent=1))
     else:
-        print(format_result(run_, result))
+        print(format_result(run_, result) + "\n" + format_command_counts(command_counts(run_)))
     return EXIT_OK
 
 
@@ -113,12 +115,7 @@ def steps_of(run: Run, command: str, applied: str, stroke_keys: tuple[str, str],
     u = run.scalar(applied)
     cmd = run.scalar(command)
     if cmd is not None and not cmd.empty:
-        meta = run.metadata
-        stroke = None
-        try:
-            stroke = (float(meta[stroke_keys[0]]), float(meta[stroke_keys[1]]))
-        except (KeyError, ValueError):
-            pass
+        stroke = recorded_stroke(run.metadata, stroke_keys)
         initial = float(u.values[0]) if same_unit and u is not None and not u.empty else (
             min(max(0.0, stroke[0]), stroke[1]) if stroke else 0.0)
         return analysis.command_steps(

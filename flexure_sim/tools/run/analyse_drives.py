@@ -16,9 +16,8 @@ from typing import Optional
 import numpy as np
 
 from flexure_sim.recording.exceptions import RunError
-from flexure_sim.topics import COMMAND
 from flexure_sim.tools.run import step_analysis as analysis
-from flexure_sim.tools.run.run_channels import DriveChannel, gain_unit
+from flexure_sim.tools.run.run_channels import DriveChannel, gain_unit, stroke_keys
 from flexure_sim.tools.run.gain_matrix import DriveStep, analyse_drive_steps, gain_pairs, matrix
 from flexure_sim.tools.run.runlog import Run
 from flexure_sim.tools.tables import columns, format_si
@@ -28,10 +27,8 @@ def drive_steps(run: Run, drive: DriveChannel) -> tuple[list[analysis.Step], str
     """Return the steps of one drive and where they were found (a topic), as `find_steps`."""
     from flexure_sim.tools.run.analyse import steps_of
 
-    named = drive.command != COMMAND  # per-drive parameters drives.<name>.stroke_min ...
-    keys = ((f"drives.{drive.name}.stroke_min", f"drives.{drive.name}.stroke_max") if named
-            else ("stroke_min", "stroke_max"))
-    return steps_of(run, drive.command, drive.input, keys, drive.command_unit == drive.unit)
+    return steps_of(run, drive.command, drive.input, stroke_keys(drive),
+                    drive.command_unit == drive.unit)
 
 
 def _matrix_dict(drives: list[str], outputs: list[str], rows) -> dict:

@@ -6,7 +6,8 @@
 Figures (those the run's topics allow):
 
 - ``input_output.png``  "Input and output displacement": drive command and applied input,
-  and the output, against time, with the gain of every settled step (cf. Figure 6.3);
+  and the output, against time, with the gain of every settled step (cf. Figure 6.3); a
+  command beyond the recorded stroke drawn where the node clamped it, and marked;
 - ``joint_<h>.png``     "Joint <h> displacement on <body A> and <body B>": x-displacement of
   the compression hinge's frames on its two bodies, and their difference, the compression
   (cf. Figure 6.4);
@@ -38,11 +39,9 @@ import numpy as np
 from flexure_sim.recording.command_line import report_reading, tool_errors
 from flexure_sim.recording.exceptions import EXIT_OK, RunError
 from flexure_sim.topics import COMMAND, DRIVE_FORCE, DRIVE_INPUT, OUTPUT
-from flexure_sim.tools.run.run_channels import is_single_drive
+from flexure_sim.tools.run.run_channels import is_single_drive, recorded_stroke, stroke_keys
 from flexure_sim.tools.options import add_file_arguments
-from flexure_sim.tools.run.plot_drives import (
-    TITLES as DRIVE_TITLES, plot_drives, staircase as _staircase,
-)
+from flexure_sim.tools.run.plot_drives import TITLES as DRIVE_TITLES, draw_command, plot_drives
 from flexure_sim.tools.run.runlog import Run, load_run
 from flexure_sim.tools.tables import time_unit
 
@@ -158,13 +157,10 @@ def plot_run(run: Run, out_dir: Path, dpi: int = 120,
         if u is not None:
             ax_in.plot(tx(u.t), u.values * 1e6, label="drive input (applied)", color="C0")
         if cmd is not None and not cmd.empty:
-            ct, cv = cmd.t, cmd.values
-            if u is not None and not u.empty and u.t[0] < ct[0]:
-                ct, cv = np.append(u.t[0], ct), np.append(u.values[0], cv)
-            ct, cv = _staircase(ct, cv, run.end_ns / 1e9)
-            ax_in.plot(
-                tx(ct), cv * 1e6, label="drive command", color="C1", linestyle="--", linewidth=1
-            )
+            before = (u.t[0], u.values[0]) if u is not None and not u.empty and (
+                u.t[0] < cmd.t[0]) else None
+            draw_command(ax_in, tx, cmd, before, recorded_stroke(run.metadata, stroke_keys(None)),
+                         1e6, run.end_ns / 1e9, "drive command")
         ax_in.set_ylabel("input displacement [µm]")
         ax_in.legend(loc="best", fontsize="small")
         ax_in.grid(alpha=0.3)

@@ -4,17 +4,19 @@ Figures of a run with several drives or outputs (``flexure-sim plot``; issue 13)
 ``drives_outputs.png`` "Drives and outputs": one panel per drive, its command (dashed, held
 until the next one) and applied input, then one panel per output, all against simulation
 time, each labelled with the drive's or output's name and unit (µm for m, µrad for rad, N,
-N·m; a command in volts on a second axis, V). ``drive_forces.png`` "Drive forces": one
-panel per drive with its other recorded signal, the actuator force of a displacement drive
-or the body's displacement of a force drive.
+N·m; a command in volts on a second axis, V); a command beyond the drive's recorded
+stroke is drawn where the node clamped it and marked (`draw_command`). ``drive_forces.png``
+"Drive forces": one panel per drive with its other recorded signal, the actuator force of a
+displacement drive or the body's displacement of a force drive.
 """
 from __future__ import annotations
 
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, Iterator, Optional
 
 import numpy as np
 
 from flexure_sim.tools.run.analyse_drives import drive_steps
+from flexure_sim.tools.run.run_channels import recorded_stroke, stroke_keys
 from flexure_sim.tools.run.runlog import Run
 
 #: Unit -> (unit shown, factor) of the axes.
@@ -38,6 +40,35 @@ def staircase(t: np.ndarray, v: np.ndarray, t_end: float) -> tuple[np.ndarray, n
     return np.repeat(tt, 2)[1:-1], np.repeat(vv, 2)[:-2]
 
 
+def draw_command(ax: Any, tx: Callable[[np.ndarray], np.ndarray], cmd: Any,
+                 before: Optional[tuple[float, float]], stroke: Optional[tuple[float, float]],
+                 factor: float, t_end: float, label: str, prefix: str = "") -> None:
+    """
+    Draw a drive's command (dashed, held until the next one) as the node applied it.
+
+    ``cmd``: the recorded command `Series`; ``before``: (time, target) before the first
+    command, or None. With the ``stroke`` (min, max) the node recorded, a command beyond it is
+    drawn at the stroke's end it was clamped to, and marked there with an ``x`` labelled ``N
+    commands beyond the stroke, clamped``: the axis then spans what the drive was given,
+    not a mistyped 1e6 um. NaN and infinite commands (rejected by the node) are not drawn.
+    """
+    ct, cv = cmd.t, cmd.values
+    if stroke is not None:
+        lo, hi = stroke
+        with np.errstate(invalid="ignore"):
+            beyond = np.isfinite(cv) & ((cv < lo) | (cv > hi))
+        cv = np.clip(cv, lo, hi)
+        n = int(np.count_nonzero(beyond))
+        if n:
+            ax.plot(tx(ct[beyond]), cv[beyond] * factor, linestyle="none", marker="x",
+                    color="C3", label=f"{prefix}{n} command{'s' if n > 1 else ''} beyond the "
+                    "stroke, clamped")
+    if before is not None:
+        ct, cv = np.append(before[0], ct), np.append(before[1], cv)
+    ct, cv = staircase(ct, cv, t_end)
+    ax.plot(tx(ct), cv * factor, color="C1", linestyle="--", linewidth=1, label=label)
+
+
 def plot_drives(plt: Any, run: Run, tx: Callable[[np.ndarray], np.ndarray], tlabel: str,
                 mark_steps: Callable[[Any], None]) -> Iterator[tuple[Any, str, str]]:
     """Yield (figure, file stem, title) of each figure of a run with several drives/outputs."""
@@ -58,16 +89,17 @@ def plot_drives(plt: Any, run: Run, tx: Callable[[np.ndarray], np.ndarray], tlab
                 cunit, cf = display(d.command_unit)
                 cax.set_ylabel(f"command [{cunit}]")
             if cmd is not None and not cmd.empty:
-                ct, cv = cmd.t, cmd.values
-                if u is not None and not u.empty and u.t[0] < ct[0]:
+                before = None
+                if u is not None and not u.empty and u.t[0] < cmd.t[0]:
                     # the target before the first command: the rest input (volts: the
                     # analysis's rest voltage, the first step's starting target)
                     first = drive_steps(run, d)[0]
-                    rest = u.values[0] if cax is ax or not first else first[0].previous
-                    ct, cv = np.append(u.t[0], ct), np.append(rest, cv)
-                ct, cv = staircase(ct, cv, run.end_ns / 1e9)
-                cax.plot(tx(ct), cv * cf, color="C1", linestyle="--", linewidth=1,
-                         label=f"drive {d.name}: command")
+                    before = (u.t[0], u.values[0] if cax is ax or not first
+                              else first[0].previous)
+                stroke = (recorded_stroke(run.metadata, stroke_keys(d)) if cax is ax
+                          else None)  # a stroke in m, a command in volts: not comparable
+                draw_command(cax, tx, cmd, before, stroke, cf, run.end_ns / 1e9,
+                             f"drive {d.name}: command", f"drive {d.name}: ")
             ax.set_ylabel(f"drive {d.name} [{unit}]")
             handles = ax.get_legend_handles_labels()
             if cax is not ax:

@@ -156,3 +156,19 @@ def is_single_drive(topics: Iterable[str], topic: Callable[[str], str]) -> bool:
 def gain_unit(output_unit: str, input_unit: str) -> str:
     """Return the unit of an output per unit of a drive's input (``m/m``, ``rad/m``...)."""
     return f"{output_unit}/({input_unit})" if " " in input_unit else f"{output_unit}/{input_unit}"
+
+
+def stroke_keys(drive: Optional[DriveChannel]) -> tuple[str, str]:
+    """Return the metadata keys of a drive's stroke (``drives.<name>.stroke_min``...)."""
+    if drive is None or drive.command == COMMAND:
+        return "stroke_min", "stroke_max"
+    return f"drives.{drive.name}.stroke_min", f"drives.{drive.name}.stroke_max"
+
+
+def recorded_stroke(metadata: dict[str, str], keys: tuple[str, str]
+                    ) -> Optional[tuple[float, float]]:
+    """Return the stroke (min, max) recorded under ``keys`` at the start, None if absent."""
+    try:
+        return float(metadata[keys[0]]), float(metadata[keys[1]])
+    except (KeyError, ValueError):
+        return None

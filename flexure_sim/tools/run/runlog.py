@@ -39,6 +39,7 @@ from flexure_sim.tools.run.run_channels import (
 from flexure_sim.tools.run.mechanism_reload import (
     hinge_frame_displacements, load_recorded_mechanism,
 )
+from flexure_sim.tools.run.command_counts import tallied, tally
 from flexure_sim.tools.run.series import CLOCK_TYPE, FLOAT64, Series, SeriesBuilder
 from flexure_sim.tools.run.timebase import TimeBase, time_base
 
@@ -70,6 +71,8 @@ class Run:
     undecodable: dict[str, int] = field(default_factory=dict)
     namespace: str = ""
     with_poses: bool = True
+    #: Diagnostics and rejected-command channels: last values, message counts (`command_counts`).
+    tallies: dict[str, Any] = field(default_factory=dict)
     _cache: dict[str, Any] = field(default_factory=dict, repr=False)
 
     # ------------------------------------------------------------------ file level
@@ -348,8 +351,12 @@ def load_run(
     builders: dict[str, SeriesBuilder] = {}
     # A run of the spatial engine: hinge wrenches with all six components (`series`).
     spatial = reader.metadata.get(METADATA_NAME, {}).get("space") == "3d"
+    tallies: dict[str, Any] = {}
 
     def select(topic: TopicInfo) -> bool:
+        if tallied(topic.name, topic.type, ns):
+            tallies[topic.name] = 0
+            return True
         if not SeriesBuilder.supports(topic.type) or not _wanted(topic.name, ns, poses):
             return False
         if topic.name == CLOCK and topic.type != CLOCK_TYPE:
@@ -358,7 +365,10 @@ def load_run(
         return True
 
     for m in reader.messages(select):
-        builders[m.topic].add(m.log_time_ns, m.message)
+        if m.topic in tallies:
+            tallies[m.topic] = tally(tallies[m.topic], m.message)
+        else:
+            builders[m.topic].add(m.log_time_ns, m.message)
     check_readable(reader)
     if ns is None:
         ns = find_namespace(reader, namespace)
@@ -374,6 +384,7 @@ def load_run(
         undecodable=dict(reader.undecodable),
         namespace=ns,
         with_poses=poses,
+        tallies=tallies,
     )
 
 
