@@ -103,6 +103,31 @@ def _clamp_dofs(basis, nodes_x: float, half: float, tol: float):
     return np.unique(ux), np.unique(uy)
 
 
+def tied_end_solve(K, fixed: np.ndarray, tied: np.ndarray, G: np.ndarray,
+                   **splu_options) -> tuple[np.ndarray, np.ndarray, int]:
+    """
+    Compliance of a clamped body whose other end moves rigidly: u_fixed = 0, u_tied = G q.
+
+    The degrees of freedom are reduced to u = T (u_interior, q) and K_r = T^T K T solved for a
+    unit generalized load on each of q's k = G.shape[1] components (sparse LU, ``splu_options``
+    to scipy's splu). Return (C, u, unknowns): the symmetrised k x k compliance (dq per unit
+    load), the full displacement of each load case (n, k) and the reduced system's size.
+    """
+    n, k = K.shape[0], G.shape[1]
+    interior = np.setdiff1d(np.arange(n), np.concatenate([fixed, tied]))
+    ni = len(interior)
+    rows = np.concatenate([interior, np.repeat(tied, k)])
+    cols = np.concatenate([np.arange(ni), ni + np.tile(np.arange(k), len(tied))])
+    vals = np.concatenate([np.ones(ni), G.ravel()])
+    T = sp.csr_matrix((vals, (rows, cols)), shape=(n, ni + k))
+    A = (T.T @ K @ T).tocsc()
+    rhs = np.zeros((ni + k, k))
+    rhs[ni:, :] = np.eye(k)
+    x = spla.splu(A, **splu_options).solve(rhs)
+    C = x[ni:, :]
+    return 0.5 * (C + C.T), T @ x, ni + k
+
+
 def solve(m: HingeMesh, half: float, nu: float, plane: str, at=None) -> Solution:
     """
     Compliance and peak stresses of the meshed hinge ``m`` (clamps at x = -half, +half).
@@ -117,7 +142,6 @@ def solve(m: HingeMesh, half: float, nu: float, plane: str, at=None) -> Solution
     basis = Basis(mesh, element, intorder=4)
     lam, mu = lame(nu, plane)
     K = asm(linear_elasticity(lam, mu), basis).tocsr()
-    n = K.shape[0]
     fixed = np.concatenate(_clamp_dofs(basis, -half, half, 1e-9))
     sx, sy = _clamp_dofs(basis, half, half, 1e-9)
     tied = np.concatenate([sx, sy])
@@ -128,23 +152,10 @@ def solve(m: HingeMesh, half: float, nu: float, plane: str, at=None) -> Solution
     G[:len(sx), 1] = 1.0
     G[len(sx):, 0] = loc[0, sy]
     G[len(sx):, 2] = 1.0
-    interior = np.setdiff1d(np.arange(n), np.concatenate([fixed, tied]))
-    ni = len(interior)
-    rows = np.concatenate([interior, np.repeat(tied, 3)])
-    cols = np.concatenate([np.arange(ni), ni + np.tile(np.arange(3), len(tied))])
-    vals = np.concatenate([np.ones(ni), G.ravel()])
-    T = sp.csr_matrix((vals, (rows, cols)), shape=(n, ni + 3))
-    A = (T.T @ K @ T).tocsc()
-    rhs = np.zeros((ni + 3, 3))
-    rhs[ni:, :] = np.eye(3)
-    lu = spla.splu(A)
-    x = lu.solve(rhs)
-    C = x[ni:, :]
-    C = 0.5 * (C + C.T)
-    u = T @ x  # (n, 3): full displacement of each unit-wrench case
+    C, u, unknowns = tied_end_solve(K, fixed, tied, G)
     peak, peak_at, vm, trace = _von_mises(mesh, element, u, lam, mu, nu, plane)
     fibres, fibres_at = _fibres(mesh, trace, half, nu, plane, at)
-    return Solution(C, peak, peak_at, ni + 3, _to_mesh_nodes(m, basis, u), vm, fibres,
+    return Solution(C, peak, peak_at, unknowns, _to_mesh_nodes(m, basis, u), vm, fibres,
                     fibres_at)
 
 

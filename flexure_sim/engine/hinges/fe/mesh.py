@@ -22,7 +22,9 @@ from __future__ import annotations
 import ctypes
 import signal
 import threading
+from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -82,49 +84,65 @@ class HingeMesh:
     n: int
 
 
-def mesh_profile(prof: Profile, n: int) -> HingeMesh:
-    """Mesh ``prof`` with about ``n`` quadratic triangles across every cross-section."""
+@contextmanager
+def gmsh_session(model: str, what: str = "the hinge") -> Iterator[Any]:
+    """
+    Yield gmsh initialised for one mesh, and finalise it after.
+
+    Under the module's lock, SIGPIPE kept (module docstring), quiet, ``model`` added; gmsh's
+    own exceptions become MeshError naming ``what``.
+    """
     gmsh = _gmsh()
-    if n < 2:
-        raise ValueError(f"n: at least 2 elements across the neck, got {n}")
     with _LOCK:
         sigpipe = signal.getsignal(signal.SIGPIPE)
         gmsh.initialize(interruptible=False)
         _keep_sigpipe(sigpipe)
         try:
             gmsh.option.setNumber("General.Terminal", 0)
-            gmsh.model.add("hinge")
-            groups = build_outline(gmsh, prof)
-            for name in ("MeshSizeFromPoints", "MeshSizeFromCurvature",
-                         "MeshSizeExtendFromBoundary"):
-                gmsh.option.setNumber(f"Mesh.{name}", 0)
-            floor = 2.0 * prof.neck / n
-
-            def size(dim, tag, x, y, z, lc):
-                return max(float(2.0 * prof.y_top(min(abs(x), prof.half))) / n, floor)
-
-            gmsh.model.mesh.setSizeCallback(size)
-            gmsh.model.mesh.generate(2)
-            gmsh.model.mesh.setOrder(2)
-            tags, coords, _ = gmsh.model.mesh.getNodes()
-            index = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
-            index[tags.astype(np.int64)] = np.arange(len(tags))
-            nodes = coords.reshape(-1, 3)[:, :2].copy()
-            types, _, elem_nodes = gmsh.model.mesh.getElements(2)
-            if list(types) != [9]:
-                raise MeshError(f"gmsh returned element types {list(types)}, not six-node "
-                                "triangles (type 9)")
-            triangles = index[elem_nodes[0].astype(np.int64)].reshape(-1, 6)
-
-            def on(group):
-                return index[gmsh.model.mesh.getNodesForPhysicalGroup(1, group)[0]
-                             .astype(np.int64)]
-
-            left, right = on(groups["left"]), on(groups["right"])
+            gmsh.model.add(model)
+            yield gmsh
+        except (MeshError, ValueError):
+            raise
         except Exception as exc:
-            if isinstance(exc, (MeshError, ValueError)):
-                raise
-            raise MeshError(f"gmsh failed to mesh the hinge: {exc}") from None
+            raise MeshError(f"gmsh failed to mesh {what}: {exc}") from None
         finally:
             gmsh.finalize()
+
+
+def size_by_section(gmsh: Any, prof: Profile, n: int) -> None:
+    """Size elements at 1/n of the local cross-section height (at least 2 neck / n)."""
+    for name in ("MeshSizeFromPoints", "MeshSizeFromCurvature", "MeshSizeExtendFromBoundary"):
+        gmsh.option.setNumber(f"Mesh.{name}", 0)
+    floor = 2.0 * prof.neck / n
+
+    def size(dim, tag, x, y, z, lc):
+        return max(float(2.0 * prof.y_top(min(abs(x), prof.half))) / n, floor)
+
+    gmsh.model.mesh.setSizeCallback(size)  # gmsh keeps the callback referenced
+
+
+def mesh_profile(prof: Profile, n: int) -> HingeMesh:
+    """Mesh ``prof`` with about ``n`` quadratic triangles across every cross-section."""
+    if n < 2:
+        raise ValueError(f"n: at least 2 elements across the neck, got {n}")
+    with gmsh_session("hinge") as gmsh:
+        groups = build_outline(gmsh, prof)
+        size_by_section(gmsh, prof, n)
+        gmsh.model.mesh.generate(2)
+        gmsh.model.mesh.setOrder(2)
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        index = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
+        index[tags.astype(np.int64)] = np.arange(len(tags))
+        nodes = coords.reshape(-1, 3)[:, :2].copy()
+        types, _, elem_nodes = gmsh.model.mesh.getElements(2)
+        if list(types) != [9]:
+            raise MeshError(f"gmsh returned element types {list(types)}, not six-node "
+                            "triangles (type 9)")
+        triangles = index[elem_nodes[0].astype(np.int64)].reshape(-1, 6)
+
+        def on(group):
+            return index[gmsh.model.mesh.getNodesForPhysicalGroup(1, group)[0]
+                         .astype(np.int64)]
+
+        left, right = on(groups["left"]), on(groups["right"])
     return HingeMesh(nodes, triangles, np.sort(left), np.sort(right), n)

@@ -32,17 +32,15 @@ T = diag(R, R), R the rotation.
 """
 from __future__ import annotations
 
-import signal
 import time
 from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from flexure_sim.engine.hinges.fe import cache
-from flexure_sim.engine.hinges.fe.mesh import _LOCK, MeshError, _gmsh, _keep_sigpipe
+from flexure_sim.engine.hinges.fe.elastic import tied_end_solve
+from flexure_sim.engine.hinges.fe.mesh import MeshError, gmsh_session, size_by_section
 from flexure_sim.engine.hinges.fe.shapes import Profile, build_outline, profile, shape
 
 #: Elements across the neck by default, and the element order: the convergence study of
@@ -85,48 +83,27 @@ def layers(width: float, first: float, cap: float) -> list[float]:
 
 def mesh_solid(prof: Profile, width: float, n: int, order: int = DEFAULT_ORDER) -> SolidMesh:
     """Mesh the outline ``prof`` extruded by ``width`` (module docstring); MeshError if not."""
-    gmsh = _gmsh()
     if n < 1 or order not in (1, 2):
         raise ValueError(f"n >= 1 and order 1 or 2, got n={n}, order={order}")
-    with _LOCK:
-        sigpipe = signal.getsignal(signal.SIGPIPE)
-        gmsh.initialize(interruptible=False)
-        _keep_sigpipe(sigpipe)
-        try:
-            gmsh.option.setNumber("General.Terminal", 0)
-            gmsh.model.add("hinge3d")
-            build_outline(gmsh, prof)
-            surface = gmsh.model.getEntities(2)[0]
-            geo = gmsh.model.geo
-            geo.translate([surface], 0.0, 0.0, -0.5 * width)
-            heights = layers(width, 1.0 / n, 2.0 * prof.corner / n)
-            geo.extrude([surface], 0.0, 0.0, width, numElements=[1] * len(heights),
-                        heights=heights)
-            geo.synchronize()
-            for name in ("MeshSizeFromPoints", "MeshSizeFromCurvature",
-                         "MeshSizeExtendFromBoundary"):
-                gmsh.option.setNumber(f"Mesh.{name}", 0)
-            floor = 2.0 * prof.neck / n
-
-            def size(dim, tag, x, y, z, lc):
-                return max(float(2.0 * prof.y_top(min(abs(x), prof.half))) / n, floor)
-
-            gmsh.model.mesh.setSizeCallback(size)
-            gmsh.model.mesh.generate(3)
-            if order == 2:
-                gmsh.model.mesh.setOrder(2)
-            tags, coords, _ = gmsh.model.mesh.getNodes()
-            types, _, elem_nodes = gmsh.model.mesh.getElements(3)
-            want = 4 if order == 1 else 11  # gmsh: 4-node and 10-node tetrahedra
-            if list(types) != [want]:
-                raise MeshError(f"gmsh returned volume element types {list(types)}, not "
-                                f"type {want} tetrahedra")
-        except Exception as exc:
-            if isinstance(exc, (MeshError, ValueError)):
-                raise
-            raise MeshError(f"gmsh failed to mesh the hinge in 3-D: {exc}") from None
-        finally:
-            gmsh.finalize()
+    with gmsh_session("hinge3d", "the hinge in 3-D") as gmsh:
+        build_outline(gmsh, prof)
+        surface = gmsh.model.getEntities(2)[0]
+        geo = gmsh.model.geo
+        geo.translate([surface], 0.0, 0.0, -0.5 * width)
+        heights = layers(width, 1.0 / n, 2.0 * prof.corner / n)
+        geo.extrude([surface], 0.0, 0.0, width, numElements=[1] * len(heights),
+                    heights=heights)
+        geo.synchronize()
+        size_by_section(gmsh, prof, n)
+        gmsh.model.mesh.generate(3)
+        if order == 2:
+            gmsh.model.mesh.setOrder(2)
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        types, _, elem_nodes = gmsh.model.mesh.getElements(3)
+        want = 4 if order == 1 else 11  # gmsh: 4-node and 10-node tetrahedra
+        if list(types) != [want]:
+            raise MeshError(f"gmsh returned volume element types {list(types)}, not "
+                            f"type {want} tetrahedra")
     index = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
     index[tags.astype(np.int64)] = np.arange(len(tags))
     points = coords.reshape(-1, 3).T
@@ -202,17 +179,8 @@ def solve_solid(m: SolidMesh, half: float, nu: float) -> tuple[np.ndarray, int]:
     fixed = np.flatnonzero(np.abs(loc[0] + half) < tol)
     tied = np.flatnonzero(np.abs(loc[0] - half) < tol)
     G = _rigid_map(loc[:, tied], comp[tied])
-    interior = np.setdiff1d(np.arange(n), np.concatenate([fixed, tied]))
-    ni = len(interior)
-    rows = np.concatenate([interior, np.repeat(tied, 6)])
-    cols = np.concatenate([np.arange(ni), ni + np.tile(np.arange(6), len(tied))])
-    vals = np.concatenate([np.ones(ni), G.ravel()])
-    T = sp.csr_matrix((vals, (rows, cols)), shape=(n, ni + 6))
-    A = (T.T @ K @ T).tocsc()
-    rhs = np.zeros((ni + 6, 6))
-    rhs[ni:, :] = np.eye(6)
-    C = spla.splu(A, permc_spec="MMD_AT_PLUS_A").solve(rhs)[ni:, :]
-    return 0.5 * (C + C.T), ni + 6
+    C, _, unknowns = tied_end_solve(K, fixed, tied, G, permc_spec="MMD_AT_PLUS_A")
+    return C, unknowns
 
 
 def dimensionless(name: str, ratios: tuple[float, ...], width: float, nu: float,
