@@ -316,6 +316,17 @@ def default_input(mech):
     return tops[0] if len(tops) == 1 else 0.0 if not tops else tops
 
 
+def check_wrt(params, wrt: Sequence[str]) -> None:
+    """Raise ParameterError unless each path of ``wrt`` is a parameter, each number named once."""
+    seen: dict[Any, str] = {}
+    for p in wrt:
+        params.check(p)
+        steps = params.resolve(p)[0]
+        if steps in seen:
+            raise ParameterError(f"--wrt: {seen[steps]} and {p} name the same number")
+        seen[steps] = p
+
+
 def sensitivities(
     params: Parameters, wrt: Sequence[str], of: Sequence[str] = OUTPUTS, u=None,
     hessian: bool = False,
@@ -340,13 +351,7 @@ def sensitivities(
     if "gain" in of and mech.output is None and not (mech.drives and mech.all_outputs):
         raise ParameterError(f"gain: mechanism {mech.name!r} names no output body")
     of = _expand(mech, of)
-    seen: dict[Any, str] = {}
-    for p in wrt:
-        params.check(p)
-        steps = params.resolve(p)[0]
-        if steps in seen:
-            raise ParameterError(f"--wrt: {seen[steps]} and {p} name the same number")
-        seen[steps] = p
+    check_wrt(params, wrt)
     if u is None:
         u = default_input(mech)
     if "compression" in of and mech.compression_hinge is None:

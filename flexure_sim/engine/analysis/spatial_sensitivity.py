@@ -42,7 +42,7 @@ import numpy as np
 import scipy.linalg
 
 from flexure_sim.engine.analysis.sensitivity import _gain_pair, default_input, gain_keys
-from flexure_sim.engine.analysis.sensitivity import implicit_newton
+from flexure_sim.engine.analysis.sensitivity import check_wrt, implicit_newton
 from flexure_sim.engine.analysis.spatial_linear import mass_matrix
 from flexure_sim.engine.kinematics import hyperdual as hd
 from flexure_sim.engine.kinematics import scalar
@@ -242,13 +242,7 @@ def sensitivities(params: SpatialParameters, wrt: Sequence[str], of: Sequence[st
     if any(o.startswith("gain") for o in of) and not (mech.drives and mech.all_outputs):
         raise ParameterError(f"gain: mechanism {mech.name!r} needs a drive and an output")
     of = expand(mech, of)
-    seen: dict[Any, str] = {}
-    for name in wrt:
-        params.check(name)
-        steps = params.resolve(name)[0]
-        if steps in seen:
-            raise ParameterError(f"--wrt: {seen[steps]} and {name} name the same number")
-        seen[steps] = name
+    check_wrt(params, wrt)
     if u is None:
         u = default_input(mech)
     try:

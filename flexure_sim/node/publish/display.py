@@ -247,12 +247,12 @@ class DisplayOutput:
 
 
 def build_display(node: Any, values: Any, qos: QoSProfile, watch: Any,
-                  first_channel: int, display: Any = None) -> tuple[DisplayOutput, list, Any]:
+                  first_channel: int, spatial: bool = False) -> tuple[DisplayOutput, list, Any]:
     """
     Create the stage node's markers publisher, and TF publishers where tf2_msgs is importable.
 
-    ``display``: what draws the mechanism (default: a planar `Display` of ``node.mechanism``;
-    ``spatial_display.SpatialDisplay`` for a mechanism in space).
+    ``spatial``: ``node.mechanism`` is a mechanism in space, drawn by
+    ``spatial_display.SpatialDisplay`` (else a planar `Display`).
 
     Returns the display output for the stepping loop (recording channels from
     ``first_channel`` on), the recorded display topics, (resolved name, type name, QoS) in
@@ -261,7 +261,10 @@ def build_display(node: Any, values: Any, qos: QoSProfile, watch: Any,
     from visualization_msgs.msg import MarkerArray
 
     frames = node.interface.frames
-    if display is None:
+    if spatial:
+        from flexure_sim.node.publish.spatial_display import SpatialDisplay
+        display: Any = SpatialDisplay(node.mechanism, frames, float(values["display_scale"]))
+    else:
         display = Display(node.mechanism, frames, float(values["display_scale"]))
     pub = node.create_publisher(MarkerArray, MARKERS.name, qos,
                                 event_callbacks=watch.publisher_callbacks(MARKERS.name))

@@ -3,7 +3,7 @@ The QoS profiles of the stage node's topics (docs/node.md, "QoS").
 
 Every published stream is reliable, keep last `QUEUE_DEPTH`, volatile; the drive command
 subscriptions keep ``command_depth`` (default `COMMAND_DEPTH`) and are reliable or
-best-effort (``command_reliability``).
+best-effort (``command_reliability``); ``~/ready`` is latched (`READY_QOS`).
 """
 from __future__ import annotations
 
@@ -14,6 +14,12 @@ from flexure_sim.node.params.table import COMMAND_DEPTH
 
 #: Depth of every published stream.
 QUEUE_DEPTH = 100
+
+
+#: ``~/ready``: reliable, transient local, the last message kept (a latched topic).
+READY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def _reliable_volatile(depth: int) -> QoSProfile:

@@ -20,7 +20,6 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, Trigger
 
@@ -33,8 +32,7 @@ from flexure_sim.engine.solver.simulation import Simulation
 from flexure_sim.recording import RecordingError
 from flexure_sim.node.publish import interface as itf
 from flexure_sim.node.publish.cdr import REJECTED_TYPE
-from flexure_sim.node.publish.qos_profiles import command_qos, stream_qos
-from flexure_sim.node.publish.spatial_display import SpatialDisplay
+from flexure_sim.node.publish.qos_profiles import READY_QOS, command_qos, stream_qos
 from flexure_sim.node.publish.spatial_messages import SpatialInterface
 from flexure_sim.node.stage.spatial_report import SpatialReport
 from flexure_sim.node.inputs.command_intake import REJECTED_SUFFIX, intake_for
@@ -61,11 +59,6 @@ from flexure_sim.node.stage.stepping_thread import RELINEARIZE_TOL, SteppingLoop
 
 NODE_NAME = "stage_node"
 
-
-#: ``~/ready``: reliable, transient local, the last message kept (a latched topic).
-READY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                       reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 #: How a parameter's expected type is named in start-up errors.
 _TYPE_NAMES = {float: "double (a number)", int: "integer", bool: "bool (true or false)",
@@ -147,10 +140,8 @@ class StageNode(LiveParameters, Node):
             command_qos(values["command_reliability"], depth),
             raw=True, callback_group=PolledGroup()) for spec in self.interface.commands]
         command_topics = [sub.topic_name for sub in self._command_subs]
-        drawn = (SpatialDisplay(self.mechanism, self.interface.frames,
-                                float(values["display_scale"])) if self.spatial else None)
         display, self._display_topics, self._tf_static_pub = dsp.build_display(
-            self, values, qos, watch, len(tick_pubs) + 1 + len(command_topics), drawn)
+            self, values, qos, watch, len(tick_pubs) + 1 + len(command_topics), self.spatial)
         throttle = WarningThrottle(1.0)
         drive = self._drive if not self._named else None
         intake = intake_for(self._command_subs, drive_filter, self._named, len(tick_pubs) + 1,
