@@ -30,6 +30,13 @@ class Log:
     warning = error = info
 
 
+class Discard:
+    """A tick topic's publisher that the tests never read."""
+
+    def publish(self, _data: bytes) -> None:
+        pass
+
+
 def make_loop(mechanism):
     """Build a real-time stepping loop of the stage at 1 kHz, not started (the test ticks)."""
     sim = Simulation(mechanism, dt=DT, relinearize_tol=RELINEARIZE_TOL)
@@ -37,7 +44,7 @@ def make_loop(mechanism):
     filt = CommandFilter(DriveLimits(drive.stroke[0], drive.stroke[1], drive.slew_rate))
     interface = StageInterface(mechanism, "realtime")
     parts = LoopParts(LoopSettings("realtime", RATE, DT), sim, interface,
-                      [None] * len(interface.tick_topics), RecordingSession(Log()), Log(),
+                      [Discard() for _ in interface.tick_topics], RecordingSession(Log()), Log(),
                       filter=filt)
     loop = SteppingLoop(parts)
     return loop, sim, filt

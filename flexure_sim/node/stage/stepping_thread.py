@@ -30,6 +30,7 @@ from flexure_sim.node.params.checks import monitor_every, steps_per_tick
 from flexure_sim.node.publish import tick_frame
 from flexure_sim.node.publish.diagnostics import Diagnostics
 from flexure_sim.node.publish.display import display_every
+from flexure_sim.node.publish.raw_publish import TickPublishers
 from flexure_sim.node.stage.cpu_latency import request_cpu_latency
 from flexure_sim.node.stage.engine_guard import EngineHold
 from flexure_sim.node.stage.engine_steps import advance
@@ -64,7 +65,8 @@ class SteppingLoop:
         self.sim = sim = parts.sim
         self.filter = parts.filter
         self.interface = interface = parts.interface
-        self._publishers = list(parts.publishers)
+        #: The tick topics' publish calls (raw while the thread holds them, `raw_publish`).
+        self.publish_calls = TickPublishers(parts.publishers, interface.control_indices)
         self.session = parts.session
         self._log = parts.log
         self.intake = parts.intake
@@ -83,7 +85,6 @@ class SteppingLoop:
         #: Publish ticks per display tick (0: off).
         self.display_every = (display_every(rate, settings.display_rate)
                               if parts.display is not None else 0)
-        self._control_publishers = [self._publishers[i] for i in interface.control_indices]
         #: What each tick publishes, in one compiled call (engine), and its messages packed in
         #: another (`tick_frame`; None: `interface.encode` from a snapshot, where the packed
         #: layouts do not apply).
@@ -182,28 +183,10 @@ class SteppingLoop:
             if pacer is not None:
                 pacer.start()
             self.restart_clocks()
-            requests = self.requests
             if self._on_running is not None:
                 self._on_running()
-            while not self._stop.is_set():
-                if requests and requests.serve() and pacer is not None:
-                    pacer.reanchor()
-                if self.time_mode == "lockstep":
-                    requests.wake.wait(0.1)
-                    requests.wake.clear()
-                    self._check_graph()
-                    continue
-                if pacer is None:
-                    self.tick()
-                else:
-                    pacer.wait()
-                    self.tick()
-                    missed = pacer.done()
-                    warning = self.overrun.tick(time.perf_counter(), self._tick_work, missed,
-                                                self._settings_text())
-                    if warning is not None:
-                        self._log.warning(warning)
-                self._check_graph()
+            with self.publish_calls.hold():
+                self._ticks(pacer)
         except BaseException as exc:  # noqa: BLE001 - reported, then the node shuts down
             if not self._stop.is_set() and self._on_failure(exc):
                 self.failure = exc
@@ -213,6 +196,29 @@ class SteppingLoop:
                 self.cpu_latency_us = -1
             self.requests.fail_all()
             self._on_end(self.failure is None)
+
+    def _ticks(self, pacer: Optional[Pacer]) -> None:
+        """Serve requests and run ticks (paced in real time) until `stop`."""
+        requests = self.requests
+        while not self._stop.is_set():
+            if requests and requests.serve() and pacer is not None:
+                pacer.reanchor()
+            if self.time_mode == "lockstep":
+                requests.wake.wait(0.1)
+                requests.wake.clear()
+                self._check_graph()
+                continue
+            if pacer is None:
+                self.tick()
+            else:
+                pacer.wait()
+                self.tick()
+                missed = pacer.done()
+                warning = self.overrun.tick(time.perf_counter(), self._tick_work, missed,
+                                            self._settings_text())
+                if warning is not None:
+                    self._log.warning(warning)
+            self._check_graph()
 
     def _check_graph(self) -> None:
         """Run `graph_check` if it is due (after a tick's work: it never delays one)."""
@@ -290,7 +296,8 @@ class SteppingLoop:
         measured = (self.sensor.sample(float(values[self._output_at]))
                     if self.sensor is not None else 0.0)
         monitor = crossed(self.ticks, span, self.monitor_every)
-        publishers = self._publishers if monitor else self._control_publishers
+        calls = self.publish_calls
+        publishers = calls.full if monitor else calls.control
         session = self.session
         frame = self.frame
         # Recorded first, so that the file holds every message a subscriber can have seen even
@@ -301,8 +308,8 @@ class SteppingLoop:
             if session.current is not None:
                 session.write_frame(body, layout.channels)
             t5 = perf()
-            for pub, (start, end) in zip(publishers, layout.spans):
-                pub.publish(body[start:end])
+            for publish, (start, end) in zip(publishers, layout.spans):
+                publish(body[start:end])
         else:
             snap = report.last_snapshot if self.spatial else sim.snapshot()
             payloads = self.interface.encode(snap, stamp, measured, monitor)
@@ -311,8 +318,8 @@ class SteppingLoop:
             if session.current is not None:
                 session.write(list(zip(channels, payloads)), stamp)
             t5 = perf()
-            for pub, payload in zip(publishers, payloads):
-                pub.publish(payload)
+            for publish, payload in zip(publishers, payloads):
+                publish(payload)
         t6 = perf()
         self._tick_work = t6 - t0
         if self.diagnostics is not None:

@@ -14,6 +14,9 @@
   (`SHORT_SPIN_S`): missed ticks and commands applied at the next tick.
 - **The floor** at 1, 2 and 4 kHz (`pingpong`): a bare rclpy ping-pong between two processes,
   paced like the node, without simulation or recording.
+- **The pacing floor** at 1, 2 and 4 kHz (`pacing_floor`): a thread paced like the stepping
+  thread that busy-waits each real-time run's mean tick, without ROS: the ticks of that length
+  this machine itself misses.
 - Fast mode's real-time factor, and real time next to a 10 kHz command flood (`flood`).
 """
 from __future__ import annotations
@@ -48,7 +51,7 @@ def bench_node(duration: float = 30.0, step_us: Optional[float] = None) -> dict[
     this run (``bench_step_cost``), the denominator of the overhead factors; measured here if
     None.
     """
-    from flexure_sim.tools.bench import closed_loop, measure, pingpong
+    from flexure_sim.tools.bench import closed_loop, measure, pacing_floor, pingpong
     from flexure_sim.tools.bench.tick_profile import profile
 
     profiled = profile(1000.0, 1e-4)
@@ -61,13 +64,14 @@ def bench_node(duration: float = 30.0, step_us: Optional[float] = None) -> dict[
     fast = measure.run_node("fast", min(duration, 10.0), 1000.0, 1e-4, True, False)
     out["fast_rtf"] = fast["real_time_factor"]
     out["fast"] = fast
-    realtime, loops, floor = {}, {}, {}
+    realtime, loops, floor, pacing = {}, {}, {}, {}
     for rate in RATES:
         key = f"{rate / 1e3:g}kHz"
         run = measure.run_node("realtime", duration, rate, 1.0 / (STEPS_PER_TICK * rate), True,
                                False)
         run["overhead_factor"] = overhead(run)
         realtime[key] = run
+        pacing[key] = pacing_floor.run(rate, run["tick_time_mean_us"], min(duration, FLOOR_S))
         for spin in ("period", "short"):
             loop = closed_loop.run(duration, params=_spin_params(rate, spin), rate=rate)
             loop["overhead_factor"] = overhead(loop)
@@ -76,6 +80,7 @@ def bench_node(duration: float = 30.0, step_us: Optional[float] = None) -> dict[
     out["flood"] = measure.run_node("realtime", duration, 1000.0, 1e-4, True, False,
                                     flood_hz=FLOOD_HZ)
     out["realtime"], out["closed_loop"], out["floor"] = realtime, loops, floor
+    out["pacing_floor"] = pacing
     one = realtime["1kHz"]
     out["overhead_factor"] = one["overhead_factor"]
     out["tick_parts_us"] = {part: one[f"{part}_time_mean_us"] for part in TICK_PARTS}
@@ -91,6 +96,7 @@ def _pct(v: Optional[float]) -> str:
 def print_node(nd: dict[str, Any]) -> None:
     """Print the node part of the bench's table."""
     from flexure_sim.tools.bench.closed_loop import summary
+    from flexure_sim.tools.bench.pacing_floor import summary as pacing_summary
     from flexure_sim.tools.bench.pingpong import summary as floor_summary
 
     parts = nd["tick_parts_us"]
@@ -116,6 +122,8 @@ def print_node(nd: dict[str, Any]) -> None:
               f"({_pct(r['missed_fraction'])}), worst lateness {r['max_late_us'] / 1e3:.1f} ms, "
               f"tick {r['tick_time_mean_us']:.0f} us (overhead factor "
               f"{r['overhead_factor']:.2f}), node CPU {r['node_cpu_cores'] or float('nan'):.2f}")
+    for r in nd.get("pacing_floor", {}).values():
+        print("  pacing floor: " + pacing_summary(r))
     for key, r in nd["closed_loop"].items():
         print(f"  {summary(r)} [wake_spin {r['wake_spin_s'] * 1e3:g} ms], node CPU "
               f"{r['node_cpu_cores'] or float('nan'):.2f}")

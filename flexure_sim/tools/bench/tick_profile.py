@@ -139,15 +139,16 @@ def profile(rate: float, sim_step: float, ticks: int = 3000,
                     ticked[0] += 1
                     filt.submit_many([closed_loop_command(ticked[0])])
 
-            for _ in range(300):
-                command()
-                loop.tick()
-            parts.__init__()
-            stats = loop.sim.stats
-            steps, iterations = stats.steps, stats.iterations
-            for _ in range(ticks):
-                command()
-                loop.tick()
+            with loop.publish_calls.hold():  # as the stepping thread publishes
+                for _ in range(300):
+                    command()
+                    loop.tick()
+                parts.__init__()
+                stats = loop.sim.stats
+                steps, iterations = stats.steps, stats.iterations
+                for _ in range(ticks):
+                    command()
+                    loop.tick()
             n = parts.ticks
             for name, total in zip((*TICK_PARTS, "tick"), parts.sums):
                 out[f"{name}_us"] = 1e6 * total / n
