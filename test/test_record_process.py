@@ -127,3 +127,31 @@ def test_a_slow_recorder_in_real_time_counts_every_message_it_drops(tmp_path, mo
                           capture_output=True, text=True, timeout=120)
     assert info.returncode == 0, info.stderr
     assert f"Dropped:      {missing} message(s) could not be recorded" in info.stdout
+
+
+def test_the_recorder_polls_its_pipe_and_reads_frames_split_anywhere_up_to_its_end():
+    """`child.PolledInput`: never blocks in read; bytes in order however written; EOF: None."""
+    import threading
+
+    from flexure_sim.node.record.child import PolledInput
+
+    read_end, write_end = os.pipe()
+    with os.fdopen(read_end, "rb", buffering=0) as stream:
+        polled = PolledInput(stream, poll_s=0.001)
+        assert not os.get_blocking(read_end)  # a write never has a blocked reader to wake
+        data = bytes(range(256)) * 40  # 10240 bytes, written in uneven pieces
+        cuts = [0, 1, 7, 300, 301, 5000, 10000, len(data)]
+
+        def write() -> None:
+            for a, b in zip(cuts, cuts[1:]):
+                os.write(write_end, data[a:b])
+            os.write(write_end, b"xyz")  # a frame cut short by the writer's end
+            os.close(write_end)
+
+        writer = threading.Thread(target=write)
+        writer.start()
+        sizes = [5, 1, 4000, 2, 6232]
+        got = [polled.read_exact(n) for n in sizes]
+        writer.join()
+        assert b"".join(got) == data and [len(g) for g in got] == sizes
+        assert polled.read_exact(4) is None  # 3 bytes left, then the end

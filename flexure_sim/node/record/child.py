@@ -101,6 +101,52 @@ def _open(spec: dict[str, Any]) -> McapRecorder | BagRecorder:
     return _fill(new, spec)
 
 
+#: How long the recorder sleeps when the pipe is empty, s (`PolledInput`).
+READ_POLL_S = 0.002
+
+
+class PolledInput:
+    """
+    The node's pipe, read without ever blocking in ``read``: the recorder polls it.
+
+    A reader blocked in ``read`` is woken by every frame the node writes, and that wake-up is
+    the writer's cost. Measured on a 2-core VM (load 3.5; a 7 kB write every 0.8 ms into a
+    pipe a child process reads): a reader blocked in ``read``, 19.3-20.5 us a write (median;
+    mean 16-27 us, p99 32-231 us; another run, 8.7 us median, p99 2.4-3.0 ms: the woken reader
+    preempts the writer), against 1.2 us (mean 1.4-1.5 us, p99 4-5 us) when the reader polls
+    every 2 ms. Polling every `READ_POLL_S` keeps ~2 ticks in the pipe at 1 kHz (the pipe holds
+    1 MiB where the system allows it: ~140 ticks of the stage); a full pipe makes the node
+    wait (fast, lockstep) or keep the frames in its backlog (real time). What the node wrote
+    before it died is still read, then EOF ends the file.
+    """
+
+    def __init__(self, stream: BinaryIO, poll_s: float = READ_POLL_S) -> None:
+        self._fd = stream.fileno()
+        os.set_blocking(self._fd, False)
+        self._poll_s = poll_s
+        self._buffer = bytearray()
+        self._at = 0
+
+    def read_exact(self, n: int) -> Optional[bytes]:
+        """Return the next ``n`` bytes, or None at the end of the input before ``n`` bytes."""
+        buffer = self._buffer
+        while len(buffer) - self._at < n:
+            try:
+                chunk = os.read(self._fd, 1 << 20)
+            except BlockingIOError:
+                time.sleep(self._poll_s)
+                continue
+            if not chunk:
+                return None
+            if self._at:
+                del buffer[:self._at]
+                self._at = 0
+            buffer += chunk
+        start = self._at
+        self._at = start + n
+        return bytes(buffer[start:start + n])
+
+
 def _child(stdin: BinaryIO, stdout: BinaryIO) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, signal.SIG_IGN)
@@ -113,15 +159,7 @@ def _child(stdin: BinaryIO, stdout: BinaryIO) -> int:
         stdout.write(json.dumps(obj).encode() + b"\n")
         stdout.flush()
 
-    def read_exact(n: int) -> Optional[bytes]:
-        chunks, got = [], 0
-        while got < n:
-            chunk = stdin.read(n - got)
-            if not chunk:
-                return None
-            chunks.append(chunk)
-            got += len(chunk)
-        return b"".join(chunks)
+    read_exact = PolledInput(stdin).read_exact
 
     try:
         while True:
