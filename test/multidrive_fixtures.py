@@ -77,6 +77,8 @@ def record_drives_run(
         "drives": ",".join(f"{d.name}:{d.kind}" for d in drives),
         "outputs": ",".join(o.name for o in mech.all_outputs),
     }
+    if not single_drive:  # declared by the node, unused beside the per-drive limits
+        meta.update(stroke_min="0.0", stroke_max="0.0", slew_rate="1.0")
     for d in drives:
         prefix = "" if single_drive else f"drives.{d.name}."
         meta[f"{prefix}stroke_min"] = repr(d.stroke[0])

@@ -162,7 +162,12 @@ def test_a_force_drives_gain_is_the_leafs_compliance_in_rad_per_newton_metre(cap
         "response_unit": "rad", "stroke_min": "-0.001", "stroke_max": "0.001",
         "slew_rate": None}]
     assert info["outputs"] == [{"name": "angle", "unit": "rad", "topic": "/output/displacement"}]
+    # The single drive's limits, recorded but unused beside the per-drive ones, are not shown.
+    assert info["parameters"] == {"mechanism": info["parameters"]["mechanism"],
+                                  "time_mode": "lockstep", "publish_rate": "1000.0",
+                                  "sim_step": "0.0001"}
     code, out, err = flexure_sim(capsys, "info", rotor)
+    assert "stroke_max" not in out.split("Drives:")[0]
     assert "Drives:       torquer (force, N m; stroke [-0.001, 0.001] N m): command " \
         "/drive/torquer/force, input /drive/torquer/input, /drive/torquer/position [rad]" in out
 

@@ -135,7 +135,7 @@ def summarize(info: LogInfo) -> dict:
             if meta
             else None
         ),
-        "parameters": {k: meta[k] for k in PARAMETER_UNITS if k in meta},
+        "parameters": _parameters(meta),
         "run": {k: meta[k] for k in RUN_KEYS if k in meta},
         "other_metadata": {
             k: v
@@ -148,6 +148,19 @@ def summarize(info: LogInfo) -> dict:
         "undecodable": dict(sorted(info.undecodable.items())) if info.decoded else None,
         **drives_and_outputs(info),
     }
+
+
+def _parameters(meta: dict) -> dict:
+    """
+    The node's recorded parameters of `PARAMETER_UNITS`.
+
+    Without the single drive's stroke and slew rate when the run had per-drive ones
+    (``drives.<name>.stroke_min``...: node/inputs/drive_bank.py): the node declares the
+    single-drive ones then but never uses them; `drives_and_outputs` lists each drive's own.
+    """
+    per_drive = any(k.startswith("drives.") for k in meta)
+    return {k: meta[k] for k in PARAMETER_UNITS
+            if k in meta and not (per_drive and k in ("stroke_min", "stroke_max", "slew_rate"))}
 
 
 def drives_and_outputs(info: LogInfo) -> dict:
