@@ -231,7 +231,7 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
         z, v, _ = model.unpack(y, t, command)
     if not finite:
         raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
-    u = y[model.u_slice].copy()
+    u = y[model.u_slice]  # State copies it
     held = model.drives.held_command(command, s.command, s.programs) if s.programs else s.command
     data.state = State(t, z, v, u, held, dissipated, work, programs=s.programs)
     data.clock = (data.state, origin, k)
