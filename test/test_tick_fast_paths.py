@@ -96,17 +96,13 @@ def test_the_node_follows_a_ramp_as_one_step_at_a_time():
     assert fast.state.t == pytest.approx(30 * STEPS * dt, rel=1e-12)
 
 
-def test_a_ramp_with_a_bad_command_is_refused_and_changes_nothing():
+def test_more_commands_than_steps_are_refused():
     sim = Simulation(load_mechanism("microstage"), energy=False)
-    sim.set_command(1e-6)
-    sim.step(5)
-    before = sim.state
-    command = before.command.copy()
-    with pytest.raises(ValueError, match="finite"):
-        sim.step_commands([1.1e-6, math.nan, 1.2e-6], STEPS)
-    assert sim.state is before and np.array_equal(sim.state.command, command)
     with pytest.raises(ValueError, match="1 to n"):
         sim.step_commands([1.1e-6] * 3, 2)
+    with pytest.raises(ValueError, match="1 to n"):
+        sim.step_commands([], 2)
+    assert sim.state.t == 0.0
 
 
 def test_a_new_command_tick_steps_as_with_a_fresh_rhs(monkeypatch):
@@ -136,3 +132,18 @@ def test_a_new_command_tick_steps_as_with_a_fresh_rhs(monkeypatch):
     # The plain route took F once a tick; the fast one never (the loop took it).
     assert calls["rhs"] == 40
     assert np.max(np.abs(fast.state.v)) > 0.0
+
+
+@pytest.mark.parametrize("energy", [False, True])
+def test_a_ramp_that_fails_leaves_the_state_as_it_was(energy):
+    # With the energies on the ramp is stepped one at a time: the same promise.
+    sim = Simulation(load_mechanism("microstage"), energy=energy)
+    sim.set_command(1e-6)
+    sim.step(5)
+    before = sim.state
+    command = before.command.copy()
+    with pytest.raises(ValueError, match="finite"):
+        sim.step_commands([1.1e-6, 1.2e-6, math.inf], STEPS)
+    assert sim.state is before and np.array_equal(sim.state.command, command)
+    sim.step_commands([1.1e-6, 1.2e-6], STEPS)  # and steps on from there
+    assert sim.state.t == pytest.approx(before.t + STEPS * sim.dt, rel=1e-12)

@@ -89,6 +89,8 @@ class Simulation(Facade):
         The states of ``set_command(commands[i])`` and ``step(1)`` for each command (the last
         with ``step(n - len(commands) + 1)``): a drive filter's ramp (node/stage/engine_steps.py).
         Each entry is a command as ``set_command`` takes it; the state's command is the last.
+        A bad command (ValueError) or a step that fails (``SolverError``) leaves the state as it
+        was before the call.
         Where that is the same to the bit, one call of the stepping loop with one kernel command
         row per step (``integrator.step``: where a row differs from the command held, the loop
         takes F under it at the step's start, as a call does under a new command): a tick
@@ -108,9 +110,14 @@ class Simulation(Facade):
             raise ValueError(f"step_commands: 1 to n = {n} commands, got {count}")
         if (count == 1 or not model.compiled or model.energy or not drives.in_order
                 or len(drives.actuation) or s.programs or model.part.timed):
-            for i, command in enumerate(commands):
-                self.set_command(command)
-                self.step(1 if i < count - 1 else n - i)
+            before = s.command
+            try:
+                for i, command in enumerate(commands):
+                    self.set_command(command)
+                    self.step(1 if i < count - 1 else n - i)
+            except BaseException:
+                s.command, self.data.state = before, s  # as it was
+                raise
             return
         rows = None
         if drives.plain and all(type(c) is float for c in commands):  # a filter's ramp, quickly
