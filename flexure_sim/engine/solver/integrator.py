@@ -178,8 +178,8 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     answer does not depend on where the Jacobian is taken, only the iteration's convergence).
     """
     s = data.state
-    cache = data.cache
-    seeded = cache is not None and cache[0] is s
+    cache: tuple = data.cache or ()
+    seeded = bool(cache) and cache[0] is s
     if command is None:
         if s.programs and n > BLOCK:
             for start in range(0, int(n), BLOCK):
