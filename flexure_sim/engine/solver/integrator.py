@@ -178,7 +178,8 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     answer does not depend on where the Jacobian is taken, only the iteration's convergence).
     """
     s = data.state
-    cache = data.cache
+    cache: tuple = data.cache or ()
+    seeded = bool(cache) and cache[0] is s
     if command is None:
         if s.programs and n > BLOCK:
             for start in range(0, int(n), BLOCK):
@@ -188,8 +189,7 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
             command = model.drives.kernel_command(s.command, s.programs, s.t - 0.5 * model.dt)
             rows = model.drives.kernel_rows(s, model.dt, n)
             key = command.tobytes()
-        elif (cache is not None and cache[0] is s and not cache[8]
-              and cache[7] == s.command.tobytes()):
+        elif seeded and not cache[8] and cache[7] == s.command.tobytes():
             command, key = cache[6], cache[1]  # commands held on: the last vector
         else:
             command = model.drives.kernel_command(s.command)
@@ -197,17 +197,21 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     else:
         command = np.ascontiguousarray(command, dtype=float)
         key = command.tobytes()
-    rows = command.reshape(1, -1) if rows is None else np.ascontiguousarray(rows, dtype=float)
+    under = command  # the command the loop's seed F0, aux0 are taken under
+    plain = rows is None  # one command held over the n steps (``_retaken``)
+    rows = command.reshape(1, -1) if plain else np.ascontiguousarray(rows, dtype=float)
     clock = data.clock
     if clock is None or clock[0] is not s:
         clock = (s, s.t, 0)
     _, origin, k = clock
     dt = model.dt
     t = s.t
-    if cache is not None and cache[0] is s:
+    if seeded:
         y = cache[5]  # model.pack(s), bit for bit: s was unpacked from it
         if cache[1] == key:
             F0, aux0, ye = cache[2:5]
+        elif plain and n >= 1 and _retaken(model, s, cache[6], command):
+            under, F0, aux0, ye = cache[6], cache[2], cache[3], cache[4]
         else:
             F0, aux0 = model.rhs(y, t, command)
             ye = y
@@ -220,15 +224,14 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     else:
         dissipated = work = math.nan
     y, t, k, F0, aux0, ye, command, dissipated, work, z, v, finite = march(
-        model, data, n, (y, t, origin, k), rows, command, (F0, aux0, ye), (dissipated, work),
+        model, data, n, (y, t, origin, k), rows, under, (F0, aux0, ye), (dissipated, work),
         PLANAR)
     if z is None or v is None:  # no step asked for
         finite = bool(np.isfinite(y).all())
         z, v, _ = model.unpack(y, t, command)
     if not finite:
         raise SolverError(f"non-finite state at t = {t:.6g} s (step {dt:g} s)")
-    nF = len(model.part.free)
-    u = y[2 * nF:2 * nF + model.drives.n_lags].copy()
+    u = y[model.u_slice]  # State copies it
     held = model.drives.held_command(command, s.command, s.programs) if s.programs else s.command
     data.state = State(t, z, v, u, held, dissipated, work, programs=s.programs)
     data.clock = (data.state, origin, k)
@@ -238,6 +241,26 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     # tick report (``tick_report.TickReport.fill_data``) while those are the state's.
     data.cache = (data.state, command.tobytes(), F0, aux0, ye, y, command, held.tobytes(),
                   s.programs)
+
+
+def _retaken(model: Model, s: State, before: np.ndarray, command: np.ndarray) -> bool:
+    """
+    Whether the compiled loop may take F under a new ``command`` itself (a closed loop's tick).
+
+    Where the held command changes, the loop evaluates F and the energy rates at the step's
+    start under the new one (``step_loop._advance``): the same compiled ``kernel_rhs`` on the
+    same y and t as ``model.rhs`` here, one call into compiled code fewer per tick (a call
+    unboxes the kernel's ~30 arrays): the stage's closed-loop tick 59.0 -> 57.6 us
+    (tools/bench/tick_profile.py ``call_costs``, ``call_moving``; the values compared as
+    lists, ~0.1 us, where ``np.any`` cost ~1.9 us and ate the gain). Only for the plain case:
+    compiled, no energies (the loop would count the switch's work that ``jump_work`` counts),
+    the kernel's command the drives' own (``DriveTable.in_order``: no prescribed drive, so
+    the coordinates do not depend on the command) and no programs; and only when the values
+    differ (the loop compares values: a command that differs only in the sign of a zero keeps
+    the rhs here).
+    """
+    return (model.compiled and not model.energy and model.drives.in_order and not s.programs
+            and command.tolist() != before.tolist())
 
 
 class Stepper(NamedTuple):
@@ -271,7 +294,7 @@ def march(model, data: Data, n: int, at: tuple, rows: np.ndarray, command: np.nd
     z = v = None
     finite = True
     while remaining > 0:
-        ahead = rows[min(int(n) - remaining, len(rows) - 1):]
+        ahead = rows if remaining == n else rows[min(int(n) - remaining, len(rows) - 1):]
         if data.lin is None or (model.relinearize_tol is not None and stepper.moved_too_far(
                 model, data, model.unpack(y, t, command)[0])):
             stepper.linearize(model, data, y, t, ahead[0])

@@ -117,6 +117,9 @@ class Model:
         self.length_scale = max(
             1e-3, float(np.ptp(self.z0.reshape(nb, 3)[:, :2]))) if nb > 1 else 1.0
         self.atol = self._iteration_atol()
+        #: Where y = (z_F, v_F, u) holds u (the lagged drives' outputs).
+        nF = len(self.part.free)
+        self.u_slice = slice(2 * nF, 2 * nF + self.drives.n_lags)
         self.kernel_args = self._kernel_args() if self.assembly.compiled else None
         #: The outputs (named; the single ``output:`` is named ``output``) and their
         #: directions c (rows; output k is c_k . (z - z0)).

@@ -26,16 +26,17 @@ def advance(sim: Any, filt: Any, intake: Any, n_steps: int, dt: float) -> None:
             sim.set_command(filt.applied)
         sim.step(n_steps)
     else:
-        # Step by step only while the ramp lasts: once the applied target reaches the
-        # command, the rest of the tick is one compiled call (the same states as one step
-        # at a time). A controller's new command every tick is usually within one step's
-        # slew, so a tick is then one set_command and one step(n), not n of each (which
-        # cost ~0.25 ms of Python per tick and made real-time ticks late).
-        remaining = n_steps
-        while remaining:
-            sim.set_command(filt.advance(dt))
-            if filt.settled:
-                sim.step(remaining)
-                break
-            sim.step(1)
-            remaining -= 1
+        # While the ramp lasts each step holds the filter's next applied target; once it
+        # reaches the command, that is held for the rest of the tick. A controller's new command
+        # every tick is usually within one step's slew: one target, one set_command and one
+        # step(n). A longer ramp is one call too where the simulation offers it
+        # (``Simulation.step_commands``: the same states as one step at a time).
+        ramp = [filt.advance(dt)]
+        while not filt.settled and len(ramp) < n_steps:
+            ramp.append(filt.advance(dt))
+        if len(ramp) > 1 and hasattr(sim, "step_commands"):
+            sim.step_commands(ramp, n_steps)
+            return
+        for i, command in enumerate(ramp):
+            sim.set_command(command)
+            sim.step(1 if i < len(ramp) - 1 else n_steps - i)

@@ -14,7 +14,9 @@ tick takes about two; so the engine part is also compared like for like, with th
 commands stepped in one call (``engine_step_us_moving``, ``engine_ratio_moving``; the
 median tick's engine part, robust to a shared machine's preemptions, in
 ``engine_median_ratio_moving``). For comparison, the routes the tick no longer takes: the
-``Snapshot`` and message-by-message packing (``StageInterface.encode``). No DDS traffic
+``Snapshot`` and message-by-message packing (``StageInterface.encode``). Without the node,
+the engine's cost per tick called tick by tick as the node calls it, against the same steps
+in one call, at rest, under a closed loop and ramping (``call_costs``: ``call_*``). No DDS traffic
 reaches another process (no subscriber); diagnostics and display ticks are not in the timed
 parts. The front end is ``python -m flexure_sim.tools.bench.measure --profile``.
 """
@@ -99,6 +101,66 @@ def engine_step_us(mechanism: Any, sim_step: float, steps: int = REFERENCE_STEPS
     return 1e6 * best / steps, (sim.stats.iterations - iterations) / steps
 
 
+def call_costs(mechanism: Any, sim_step: float, steps: int = 10, ticks: int = 500,
+               repeats: int = 9) -> dict[str, float]:
+    """
+    Return the engine's cost per tick (us) called tick by tick and the same steps in one call.
+
+    No node: a ``Simulation`` as the node builds it, ticked by ``engine_steps.advance`` with a
+    drive filter (the node's route), against the same steps' commands (one row per step) in one
+    call of ``integrator.step`` from the same state; runs of ``ticks`` ticks of ``steps`` steps,
+    the two alternating, the best of ``repeats`` each (robust to a shared machine's
+    preemptions). ``call_rest``: the command held; ``call_moving``: a closed loop's new command
+    every tick (``closed_loop_command``, within a step's slew); ``call_ramp``: the command
+    jumping 1 um every tick under a slew rate that makes each tick a ramp over its steps.
+    ``*_ratio``: tick by tick over one call (1: no cost per call). Empty unless one drive.
+    """
+    import numpy as np
+
+    from flexure_sim.engine.solver import integrator
+    from flexure_sim.engine.solver.simulation import Simulation
+    from flexure_sim.node.inputs.command_checks import CommandFilter, DriveLimits
+    from flexure_sim.node.stage.engine_steps import advance
+    from flexure_sim.node.stage.stepping_thread import RELINEARIZE_TOL
+
+    out: dict[str, float] = {}
+    cases = (("rest", lambda k: 1e-6, 1.0), ("moving", closed_loop_command, 1.0),
+             ("ramp", lambda k: 1e-6 * (k % 2), 1e-6 / (steps * sim_step)))
+    for name, target, slew in cases:
+        sim = Simulation(mechanism, dt=sim_step, relinearize_tol=RELINEARIZE_TOL, energy=False)
+        if len(sim.model.drives) != 1:
+            return out
+        filt = CommandFilter(DriveLimits(-1e-4, 1e-4, slew))
+        for k in range(300):
+            filt.submit(target(k))
+            advance(sim, filt, None, steps, sim_step)
+        start, applied = sim.state.copy(), filt.applied
+        rows = []  # the same ticks' commands, one per step (the filter's own arithmetic)
+        for k in range(ticks):
+            filt.submit(target(k))
+            filt.begin_tick(steps * sim_step)
+            rows += [filt.advance(sim_step) for _ in range(steps)]
+        kernel_rows = np.array(rows)[:, None]
+        held = sim.model.drives.kernel_command(start.command)
+        best = one = float("inf")
+        for _ in range(repeats):
+            sim.state, filt.target = start.copy(), applied
+            filt.hold(applied)
+            t0 = time.perf_counter()
+            for k in range(ticks):
+                filt.submit(target(k))
+                advance(sim, filt, None, steps, sim_step)
+            best = min(best, time.perf_counter() - t0)
+            sim.state = start.copy()
+            t0 = time.perf_counter()
+            integrator.step(sim.model, sim.data, len(rows), held, kernel_rows)
+            one = min(one, time.perf_counter() - t0)
+        out[f"call_{name}_us"] = 1e6 * best / ticks
+        out[f"call_{name}_one_call_us"] = 1e6 * one / ticks
+        out[f"call_{name}_ratio"] = best / one
+    return out
+
+
 def profile(rate: float, sim_step: float, ticks: int = 3000,
             mechanism: str = "microstage", monitor_rate: float = 0.0) -> dict[str, float]:
     """
@@ -177,6 +239,7 @@ def profile(rate: float, sim_step: float, ticks: int = 3000,
     out["engine_median_ratio_moving"] = (out["engine_median_us"]
                                          / (steps * out["engine_step_us_moving"]))
     out["tick_budget_us"] = 1e6 / rate
+    out.update(call_costs(node.mechanism, sim_step, int(steps)))
     return out
 
 
