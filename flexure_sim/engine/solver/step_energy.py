@@ -23,10 +23,9 @@ x(s) = x_n + S w(s) (S selects x from y)
 P^(x) = x^T C_x x + 2 c^T x + c_0 (C_x = L^T C L, c = L^T C b, c_0 = b^T C b), xi = (F_0, N_1),
 int_0^h w ds = h^2 phi_2(hA) F_0 + h^2 phi_3(hA) N_1, and G the (F_0, N_1) block of
 int_0^h e^{M^T s} S^T C_x S e^{M s} ds for the generator M of (w, F_0 + s N_1/h), rho = P - P^
-at the step's ends. G is Van Loan's integral (Van Loan, IEEE TAC 23 (1978) 395, Thm. 1), but
-taken by doubling, G(2t) = G(t) + e^{M^T t} G(t) e^{Mt} from a Taylor series at a t small
-enough that |tM| < 1/4: the block exponential of Van Loan's paper holds e^{-M^T h}, which
-overflows for the stage's eigenvalues near -1e8 1/s. One such integral per linearization;
+at the step's ends. G is Van Loan's integral (Van Loan, IEEE TAC 23 (1978) 395, Thm. 1), taken
+by doubling by blocks (``quadratic_integrals``: his block exponential holds e^{-M^T h}, which
+overflows for the stage's eigenvalues near -1e8 1/s). One such integral per linearization;
 per step the cost is O(m^2) (two quadratic forms of order m).
 
 Drive work: a displacement drive's power is ud (D_k^T M_P a_P - q) with ud = (command - u)/tau
@@ -62,9 +61,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.linalg
 
 from flexure_sim.engine.jit import njit
+from flexure_sim.engine.solver.quadratic_integrals import quadratic_integrals
 
 #: Entries of the energy vector ``rhs`` returns next to F (``stepping.energy_rates``); the load
 #: of displacement drive k is entry AUX_LOAD + k.
@@ -155,28 +154,89 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
             moved += vj * Trows[i, j] * (ye1[j] - y0[j])
     rest = aux1[AUX_TIMED_POWER] - (timed0 - moved)
     work += h * timed0 - linear + 0.5 * h * rest
-    c = R @ b
-    c0 = b @ (SP @ b)
-    x0 = y0[nF:]
-    gv = Cx @ x0 + c
-    p0 = x0 @ gv + c @ x0 + c0
-    xi = np.concatenate((F0, N1p, accel))
-    dissipated = h * p0 + 2.0 * (gv @ (V @ xi)) + xi @ (G @ xi)
-    c1, c01 = c, c0     # the linear model's c, c_0 at the step's end
+    # The quadratic forms as loops (NumPy's small products and their temporaries: ~1 us a step).
+    nx = Cx.shape[0]
+    mb = b.shape[0]
+    c = np.empty(nx)
+    for i in range(nx):
+        acc = 0.0
+        for j in range(mb):
+            acc += R[i, j] * b[j]
+        c[i] = acc
+    c0 = _form(SP, b, 0, b, 0)
+    p0 = c0
+    nxi = G.shape[0]
+    xi = np.empty(nxi)
+    xi[:m] = F0
+    xi[m:2 * m] = N1p
+    xi[2 * m:] = accel
+    gv = np.empty(nx)
+    for i in range(nx):
+        acc = c[i]
+        for j in range(nx):
+            acc += Cx[i, j] * y0[nF + j]
+        gv[i] = acc
+        p0 += y0[nF + i] * acc + c[i] * y0[nF + i]
+    # V^T gv and G xi accumulated along contiguous rows (G is symmetric, ``quadratic_integrals``):
+    # independent sums the compiler vectorizes, not one chain of dependent additions per row.
+    vt = np.zeros(nxi)
+    for i in range(nx):
+        g = gv[i]
+        for j in range(nxi):
+            vt[j] += g * V[i, j]
+    gx = np.zeros(nxi)
+    for j in range(nxi):
+        x = xi[j]
+        for i in range(nxi):
+            gx[i] += G[j, i] * x
+    gVxi = 0.0
+    quad = 0.0
+    for i in range(nxi):
+        gVxi += vt[i] * xi[i]
+        quad += xi[i] * gx[i]
+    dissipated = h * p0 + 2.0 * gVxi + quad
+    b1 = b
     if q:
         # The program velocities rise by beta(s) = a s + c s^2 over the step (the generator's
         # beta, gamma, kappa): the linear term 2 (R^T x_n + S_P b)_pc . int beta ds.
-        gb = R.T @ x0 + SP @ b
         b1 = b.copy()
         for k in range(q):
             a, c2 = accel[k], 0.5 * accel[q + k]
-            dissipated += 2.0 * gb[where[k]] * (a * h * h / 2.0 + c2 * h * h * h / 3.0)
-            b1[where[k]] += a * h + c2 * h * h
-        c1, c01 = R @ b1, b1 @ (SP @ b1)
-    xa, xb = ye0[nF:], ye1[nF:]
-    rho = (aux0[AUX_DISSIPATION] - (xa @ (Cx @ xa) + 2.0 * (c @ xa) + c0)
-           + aux1[AUX_DISSIPATION] - (xb @ (Cx @ xb) + 2.0 * (c1 @ xb) + c01))
+            j = where[k]
+            gb = 0.0
+            for i in range(nx):
+                gb += R[i, j] * y0[nF + i]
+            for i in range(mb):
+                gb += SP[j, i] * b[i]
+            dissipated += 2.0 * gb * (a * h * h / 2.0 + c2 * h * h * h / 3.0)
+            b1[j] += a * h + c2 * h * h
+    # The linear model's c, c_0 at the step's end.
+    c01 = _form(SP, b1, 0, b1, 0) if q else c0
+    end = _form(Cx, ye1, nF, ye1, nF) + c01
+    for i in range(nx):
+        c1 = c[i]
+        if q:
+            c1 = 0.0
+            for j in range(mb):
+                c1 += R[i, j] * b1[j]
+        end += 2.0 * c1 * ye1[nF + i]
+    start = _form(Cx, ye0, nF, ye0, nF) + c0
+    for i in range(nx):
+        start += 2.0 * c[i] * ye0[nF + i]
+    rho = aux0[AUX_DISSIPATION] - start + aux1[AUX_DISSIPATION] - end
     return dissipated + 0.5 * h * rho, work
+
+
+@njit(cache=True, inline="always")
+def _form(Mat, x, i0, z, j0):
+    """x[i0:]^T Mat z[j0:], summed in place."""
+    out = 0.0
+    for i in range(Mat.shape[0]):
+        row = 0.0
+        for j in range(Mat.shape[1]):
+            row += Mat[i, j] * z[j0 + j]
+        out += x[i0 + i] * row
+    return out
 
 
 #: ``emats`` of a model without energy bookkeeping (``Model.energy`` False): empty arrays of
@@ -201,57 +261,6 @@ def weighted_phi(A, phi1, phi2, h, tau, shifted_phi1):
     psi1 = tau * (shifted_phi1 - decay * phi1)
     psi2 = (tau * tau * shifted_phi1 - tau * decay * ((h + tau) * phi1 - h * (phi1 - phi2))) / h
     return psi1, psi2
-
-
-def quadratic_integrals(M: np.ndarray, Q: np.ndarray, h: float, terms: int = 18):
-    """
-    G = int_0^h e^{M^T s} Q e^{M s} ds and I = int_0^h e^{M s} ds (and e^{Mh}), by doubling.
-
-    M is first balanced, B = T^-1 M T with T diagonal (powers of 2: exact; LAPACK's gebal via
-    ``scipy.linalg.matrix_balance``), which brings |hM|_1 from ~5e8 to ~1.6e4 for the stage,
-    near its spectral radius 1.3e4: 16 doublings instead of 31, half the cost. Then
-    G = T^-T G_B T^-1 with Q_B = T^T Q T, I = T I_B T^-1, e^{Mh} = T e^{Bh} T^-1.
-    """
-    B, (scale, _) = scipy.linalg.matrix_balance(M, permute=False, separate=True)
-    GB, IB, EB = _doubled_integrals(B, scale[:, None] * Q * scale[None, :], h, terms)
-    inv = 1.0 / scale
-    return (inv[:, None] * GB * inv[None, :], scale[:, None] * IB * inv[None, :],
-            scale[:, None] * EB * inv[None, :])
-
-
-def _doubled_integrals(M: np.ndarray, Q: np.ndarray, h: float, terms: int):
-    """
-    ``quadratic_integrals`` of a (balanced) M by doubling.
-
-    At t = h / 2^k with |tM|_1 <= 1/4 the Taylor series G(t) = sum_j t^{j+1}/(j+1)! L_j,
-    L_0 = Q, L_{j+1} = M^T L_j + L_j M (and those of I, e^{Mt}) converge to rounding in
-    ``terms`` terms; then k times G <- G + E^T G E, I <- I + E I, E <- E E (E = e^{Mt}),
-    which only multiplies by the bounded e^{Mt}: stable however stiff M is, unlike Van
-    Loan's block exponential.
-    """
-    n = M.shape[0]
-    norm = np.linalg.norm(M, 1) * h
-    k = max(0, int(math.ceil(math.log2(norm / 0.25)))) if norm > 0.25 else 0
-    t = h / 2.0 ** k
-    Mt = M * t
-    E = np.eye(n)
-    integral = np.eye(n) * t
-    G = Q * t
-    L = Q          # t^j L_j, so that nothing grows with |M|
-    power = np.eye(n)
-    factor = 1.0
-    for j in range(1, terms):
-        factor /= j
-        power = power @ Mt
-        E = E + factor * power
-        integral = integral + (factor / (j + 1)) * t * power
-        L = Mt.T @ L + L @ Mt
-        G = G + (factor / (j + 1)) * t * L
-    for _ in range(k):
-        G = G + E.T @ G @ E
-        integral = integral + E @ integral
-        E = E @ E
-    return G, integral, E
 
 
 def energy_matrices(A, phi1, phi2, h, G_load, damping, free, prescribed, D, drive_mass, tau,
@@ -304,7 +313,7 @@ def energy_matrices(A, phi1, phi2, h, G_load, damping, free, prescribed, D, driv
     Q[nF:m, 3 * m + q:3 * m + 2 * q] = R[:, pc]
     Q[3 * m + q:3 * m + 2 * q, nF:m] = R[:, pc].T
     Q[3 * m + q:3 * m + 2 * q, 3 * m + q:3 * m + 2 * q] = SP[np.ix_(pc, pc)]
-    Gfull, integral, _ = quadratic_integrals(M, Q, h)
+    Gfull, IW = quadratic_integrals(M, Q, h, m)     # IW: int_0^h of e^{Ms}'s [:m, m:] block
     start = np.r_[m:3 * m, 3 * m + 2 * q:3 * m + 4 * q]    # (f, n, gamma, kappa): xi's entries
     rows = max(nd, 1)
     erows = np.zeros((rows, 3, m))
@@ -318,6 +327,6 @@ def energy_matrices(A, phi1, phi2, h, G_load, damping, free, prescribed, D, driv
         escal[k, E_TAU] = tau[k]
         escal[k, E_HAS_DRIVE] = 1.0
     timed_rows = np.asarray(timed_rows, dtype=float).reshape(len(timed_rows), m)
-    out = (erows, escal, Gfull[np.ix_(start, start)], integral[nF:m][:, start], Cx, R, SP, B,
-           sines, timed_rows, timed_rows @ integral[:m, m:3 * m], forcing)
+    out = (erows, escal, Gfull[np.ix_(start, start)], IW[nF:m][:, start - m], Cx, R, SP, B,
+           sines, timed_rows, timed_rows @ IW[:, :2 * m], forcing)
     return tuple(np.ascontiguousarray(a) for a in out)

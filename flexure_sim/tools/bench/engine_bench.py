@@ -85,6 +85,8 @@ def bench_stage_step(dt: float = DEFAULT_STEP, radau: bool = True) -> dict:
         "wall_s": wall,
         "rtf": DURATION / wall,
         "wall_no_energy_s": wall_no_energy,
+        # the energy integrals' cost: the run with them over the motion-only run (goal <= 1.5)
+        "energy_factor": wall / wall_no_energy,
         "max_rel_error": float(np.max(np.abs(traj - ref)) / scale),
         "reference_rel_error_estimate": ref_err,
         "linearizations": sim.stats.linearizations,
@@ -177,6 +179,7 @@ def bench_step_cost(dt: float = DEFAULT_STEP, sim_seconds: float = 1.0) -> dict:
         "rtf": sim_seconds / wall,
         "step_us": wall / n * 1e6,
         "step_no_energy_us": walls[False] / n * 1e6,
+        "energy_step_factor": walls[True] / walls[False],
         "linearization_us": lin * 1e6,
         "linearization_no_energy_us": lin_bare * 1e6,
         "force_evaluation_us": force * 1e6,
