@@ -152,7 +152,7 @@ def summarize(info: LogInfo) -> dict:
 
 def _parameters(meta: dict) -> dict:
     """
-    The node's recorded parameters of `PARAMETER_UNITS`.
+    Return the node's recorded parameters of `PARAMETER_UNITS`.
 
     Without the single drive's stroke and slew rate when the run had per-drive ones
     (``drives.<name>.stroke_min``...: node/inputs/drive_bank.py): the node declares the
