@@ -170,3 +170,41 @@ def test_commands_sent_before_the_node_listened_are_counted_as_unheard(tmp_path)
     assert int(d["commands_lost"]) == 0
     assert int(d["commands_unheard"]) == early
     assert len(recorded) + int(d["commands_lost"]) + int(d["commands_unheard"]) == early + 1
+
+
+def test_the_recordings_last_status_holds_the_commands_taken_up_to_the_stop(tmp_path):
+    """
+    A stop records one more status: its counters are the whole run's (what ``analyse`` reads).
+
+    At 1 kHz the node reports every 100 ticks; this run stops after 3 ticks, each taking a
+    command acknowledged by the node's reader before its step, so only the status written at
+    the stop can count them.
+    """
+    domain = next_domain_id()
+    node = NodeProcess(tmp_path / "node", domain, {
+        "time_mode": "lockstep", "publish_rate": 1000.0, "sim_step": 1e-4,
+        "record": True, "record_path": "stop.mcap"})
+    peer = Peer(domain)
+    peer.watch = node
+    values = [2e-7, 4e-7, 6e-7]
+    try:
+        node.wait_for_output("topics per tick", 120)
+        pub = peer.publisher("/drive/displacement", Float64)
+        peer.wait_for_subscribers(pub)
+        for v in values:
+            pub.publish(Float64(data=v))
+            assert pub.wait_for_all_acked(Duration(seconds=30))
+            answer = peer.call(Trigger, "/stage_node/step")
+            assert answer.success, answer.message
+    finally:
+        peer.watch = None
+        peer.close()
+        rc = node.stop(signal.SIGINT)
+    assert rc == 0, node.stderr
+    log = read_log(node.cwd / "stop.mcap")
+    assert [m.message.data for m in log.messages_on("/drive/displacement")] == values
+    statuses = log.messages_on("/diagnostics")
+    assert len(statuses) == 1  # no periodic one within 3 ticks: the stop's
+    d = diagnostics_values(statuses[-1].message)
+    assert int(d["ticks"]) == 3 and statuses[-1].log_time_ns == 3_000_000
+    assert int(d["commands_received"]) == int(d["commands_accepted"]) == len(values)
