@@ -247,6 +247,8 @@ class StageNode(LiveParameters, Node):
 
     def _simulation(self, values: dict[str, Any]) -> tuple[Any, Any]:
         """Build the simulation, stepped once and reset (warm), and the drives' command filter."""
+        self._log.info(f"building {self.mechanism.name} (the first start after an install "
+                       "compiles the engine's kernels: up to a minute, then cached)")
         # No energy bookkeeping: the node publishes no energies (Model.energy; none in 3-D).
         sim: Any
         if self.spatial:
