@@ -363,7 +363,7 @@ def test_ticks_with_new_commands_on_several_drives_reach_the_step_by_step_states
     from flexure_sim.node.record.session import RecordingSession
     from flexure_sim.node.stage.loop_parts import LoopParts, LoopSettings
     from flexure_sim.node.stage.stepping_thread import RELINEARIZE_TOL, SteppingLoop
-    from test_node_stepping import DT, N_STEPS, RATE, Log
+    from test_node_stepping import DT, N_STEPS, RATE, Discard, Log
 
     xy = load_mechanism("xy_stage")
     slew = {"x": xy.drives[0].slew_rate, "y": 2e-3}   # y ramps over several steps and ticks
@@ -372,7 +372,8 @@ def test_ticks_with_new_commands_on_several_drives_reach_the_step_by_step_states
     sim = Simulation(xy, dt=DT, relinearize_tol=RELINEARIZE_TOL)
     itf = StageInterface(xy, "realtime")
     loop = SteppingLoop(LoopParts(LoopSettings("realtime", RATE, DT), sim, itf,
-                                  [None] * len(itf.tick_topics), RecordingSession(Log()), Log(),
+                                  [Discard() for _ in itf.tick_topics], RecordingSession(Log()),
+                                  Log(),
                                   filter=bank))
     commands = [(1e-6, 0.0), (1e-6, 5e-7), (1e-6 + 3e-9, 5e-7), (0.0, 1e-6), (0.0, 1e-6),
                 (2e-6, 0.0), (2e-6, 0.0)]
