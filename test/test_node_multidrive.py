@@ -21,7 +21,6 @@ from rcl_interfaces.srv import SetParameters
 from std_msgs.msg import Float64
 from diagnostic_msgs.msg import DiagnosticArray
 from rosgraph_msgs.msg import Clock
-from std_srvs.srv import Trigger
 
 from flexure_sim.recording import read_log
 
@@ -58,16 +57,7 @@ def start(tmp_path, domain, peer, **params) -> NodeProcess:
 
 def step_until(peer: Peer, predicate, what: str, limit: int = 50, topics=INPUTS) -> None:
     """Lockstep ticks until ``predicate`` holds (e.g. the node has taken a command)."""
-    for _ in range(limit):
-        n = len(peer.received["/clock"])
-        answer = peer.call(Trigger, "/stage_node/step")
-        assert answer.success, answer.message
-        peer.spin_until(lambda: len(peer.received["/clock"]) > n
-                        and all(len(peer.received[t]) > n for t in topics), 10,
-                        "the tick's messages")
-        if predicate():
-            return
-    raise AssertionError(f"{what} not reached in {limit} ticks")
+    peer.tick_until(predicate, what, topics, limit)
 
 
 def static_gain_matrix() -> np.ndarray:

@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
-from std_srvs.srv import Trigger
 
 from flexure_sim.tools.run.plot import figure_title
 
@@ -33,14 +32,6 @@ U = 1e-8
 RATE = 200.0
 TICKS = 20        # per level: 100 ms, a hundred actuator time constants
 INPUTS = [f"/drive/{d}/input" for d in DRIVES]
-
-
-def _tick(peer: Peer) -> None:
-    n = len(peer.received["/clock"])
-    answer = peer.call(Trigger, "/stage_node/step")
-    assert answer.success, answer.message
-    peer.spin_until(lambda: len(peer.received["/clock"]) > n
-                    and all(len(peer.received[t]) > n for t in INPUTS), 10, "the tick's messages")
 
 
 @pytest.fixture(scope="module")
@@ -62,16 +53,16 @@ def xy_run(tmp_path_factory):
         for pub in commands.values():
             peer.wait_for_subscribers(pub)
         for _ in range(TICKS):
-            _tick(peer)
+            peer.tick(INPUTS)
         for k, drive in enumerate(DRIVES):
             commands[drive].publish(Float64(data=U))
             # The command is taken at the next tick whose step sees it: tick until it shows.
             for _ in range(50):
-                _tick(peer)
+                peer.tick(INPUTS)
                 if peer.last(INPUTS[k]).data > 0.0:
                     break
             for _ in range(TICKS - 1):
-                _tick(peer)
+                peer.tick(INPUTS)
     finally:
         code = node.stop(signal.SIGINT)
         peer.close()
