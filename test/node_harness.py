@@ -271,6 +271,26 @@ class Peer:
                         f"a subscriber of {publisher.topic_name}")
 
     # ---------------------------------------------------------------- lockstep ticks
+    def connect_drives(self, drives: Sequence[str], topics: Sequence[str],
+                       kind: str = "displacement") -> dict[str, Any]:
+        """
+        Subscribe ``/clock`` and the Float64 ``topics``; publish each drive's command.
+
+        Returns the command publishers (by drive) once the stage publishes ``topics`` and
+        reads every command topic.
+        """
+        from rosgraph_msgs.msg import Clock
+        from std_msgs.msg import Float64
+
+        self.subscribe("/clock", Clock)
+        for topic in topics:
+            self.subscribe(topic, Float64)
+        commands = {d: self.publisher(f"/drive/{d}/{kind}", Float64) for d in drives}
+        self.wait_for_publishers(topics)
+        for publisher in commands.values():
+            self.wait_for_subscribers(publisher)
+        return commands
+
     def tick(self, topics: Sequence[str] = (), timeout: float = 30.0,
              service: str = "/stage_node/step") -> None:
         """

@@ -24,7 +24,7 @@ from rosgraph_msgs.msg import Clock
 
 from flexure_sim.recording import read_log
 
-from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id
+from node_harness import NodeProcess, Peer, diagnostics_values
 
 DRIVES = ("x", "y")
 OUTPUTS = ("x", "y", "theta")
@@ -33,18 +33,6 @@ U = 1e-6
 INPUTS = [f"/drive/{d}/input" for d in DRIVES]
 FORCES = [f"/drive/{d}/force" for d in DRIVES]
 OUTPUT_TOPICS = [f"/output/{o}/displacement" for o in OUTPUTS]
-
-
-@pytest.fixture
-def domain() -> int:
-    return next_domain_id()
-
-
-@pytest.fixture
-def peer(domain):
-    p = Peer(domain)
-    yield p
-    p.close()
 
 
 def start(tmp_path, domain, peer, **params) -> NodeProcess:

@@ -29,14 +29,9 @@ from flexure_sim.node.publish.interface import StageInterface
 from flexure_sim.engine.solver.simulation import Simulation
 from flexure_sim.recording import read_log
 
-from node_harness import NodeProcess, Peer, next_domain_id
+from node_harness import NodeProcess, Peer
 
 TICKS = 3000
-
-
-@pytest.fixture
-def domain() -> int:
-    return next_domain_id()
 
 
 def stage_file(path, sensor: dict) -> str:

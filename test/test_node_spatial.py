@@ -19,7 +19,7 @@ from rosgraph_msgs.msg import Clock
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Float64
 
-from node_harness import NodeProcess, Peer, next_domain_id
+from node_harness import NodeProcess
 
 DRIVES = ("p1", "p2", "p3")
 OUTPUTS = ("tip", "tilt", "piston")
@@ -29,18 +29,6 @@ U = 2e-6
 INPUTS = [f"/drive/{d}/input" for d in DRIVES]
 HINGES = ("wire1", "wire2", "wire3", "guide1", "guide2", "guide3")
 BODIES = ("base", "platform", "cap1", "cap2", "cap3")
-
-
-@pytest.fixture
-def domain() -> int:
-    return next_domain_id()
-
-
-@pytest.fixture
-def peer(domain):
-    p = Peer(domain)
-    yield p
-    p.close()
 
 
 def read_bag(path) -> dict[str, list]:
@@ -80,13 +68,7 @@ def test_tiptilt_node_settles_at_the_engines_statics_and_analyse_gives_its_stati
         **{f"drives.{d}.stroke_min": -1.5e-5 for d in DRIVES}})
     peer.watch = node
     try:
-        peer.subscribe("/clock", Clock)
-        for topic in INPUTS:
-            peer.subscribe(topic, Float64)
-        commands = {d: peer.publisher(f"/drive/{d}/displacement", Float64) for d in DRIVES}
-        peer.wait_for_publishers(INPUTS)
-        for pub in commands.values():
-            peer.wait_for_subscribers(pub)
+        commands = peer.connect_drives(DRIVES, INPUTS)
         for k, drive in enumerate(DRIVES):
             for level in (-U, U, 0.0):
                 commands[drive].publish(Float64(data=level))

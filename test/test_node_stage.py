@@ -62,18 +62,6 @@ def engine_static():
     return sim.static(STEP).snapshot
 
 
-@pytest.fixture
-def domain() -> int:
-    return next_domain_id()
-
-
-@pytest.fixture
-def peer(domain):
-    p = Peer(domain)
-    yield p
-    p.close()
-
-
 def start(tmp_path: Path, domain: int, peer: Peer | None = None, **params) -> NodeProcess:
     node = NodeProcess(tmp_path / "node", domain, params)
     if peer is not None:

@@ -61,14 +61,8 @@ def clamped_run(tmp_path_factory):
         "publish_rate": 20.0, "record": True, "record_path": "tt.mcap"})
     peer.watch = node
     try:
-        peer.subscribe("/clock", Clock)
         peer.subscribe("/diagnostics", DiagnosticArray)
-        for topic in INPUTS:
-            peer.subscribe(topic, Float64)
-        commands = {d: peer.publisher(f"/drive/{d}/displacement", Float64) for d in DRIVES}
-        peer.wait_for_publishers(INPUTS)
-        for pub in commands.values():
-            peer.wait_for_subscribers(pub)
+        commands = peer.connect_drives(DRIVES, INPUTS)
         for _ in range(2):
             peer.tick(INPUTS)
         for drive, value in SENT:

@@ -16,7 +16,6 @@ import subprocess
 
 import numpy as np
 import pytest
-from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from flexure_sim.tools.run.plot import figure_title
@@ -45,13 +44,7 @@ def xy_run(tmp_path_factory):
         "publish_rate": RATE, "record": True, "record_path": "xy.mcap"})
     peer.watch = node
     try:
-        peer.subscribe("/clock", Clock)
-        for topic in INPUTS:
-            peer.subscribe(topic, Float64)
-        commands = {d: peer.publisher(f"/drive/{d}/displacement", Float64) for d in DRIVES}
-        peer.wait_for_publishers(INPUTS)
-        for pub in commands.values():
-            peer.wait_for_subscribers(pub)
+        commands = peer.connect_drives(DRIVES, INPUTS)
         for _ in range(TICKS):
             peer.tick(INPUTS)
         for k, drive in enumerate(DRIVES):
