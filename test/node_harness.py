@@ -294,7 +294,7 @@ class Peer:
     def tick(self, topics: Sequence[str] = (), timeout: float = 30.0,
              service: str = "/stage_node/step") -> None:
         """
-        Advance a lockstep stage by one tick (``~/step``) and receive its messages.
+        Advance a lockstep stage by one tick through its ``~/step`` service; receive its messages.
 
         Returns once ``/clock`` (subscribed by the caller) and each of ``topics`` have one
         message more than ``/clock`` had before. The step client is kept for the peer's life:
