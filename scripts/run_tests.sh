@@ -10,4 +10,4 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( (RANDOM % 100) + 1 ))}"
 export MPLBACKEND=Agg
 echo "[tests] ROS_DOMAIN_ID=$ROS_DOMAIN_ID  python=$(command -v python)" >&2
-exec python -m pytest test "$@"
+exec python -m pytest --durations=25 test "$@"

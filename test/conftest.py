@@ -61,6 +61,24 @@ def context():
 
 
 @pytest.fixture
+def domain() -> int:
+    """Return a fresh DDS domain id for one test (node_harness.next_domain_id)."""
+    from node_harness import next_domain_id
+
+    return next_domain_id()
+
+
+@pytest.fixture
+def peer(domain):
+    """Return a real rclpy peer node (node_harness.Peer) on the test's `domain`."""
+    from node_harness import Peer
+
+    p = Peer(domain)
+    yield p
+    p.close()
+
+
+@pytest.fixture
 def peer_and_domain():
     """Return a fresh DDS domain and a real rclpy peer node on it (node_harness.Peer)."""
     from node_harness import Peer, next_domain_id

@@ -202,6 +202,7 @@ class Peer:
         self._types: dict[str, type] = {}
         #: A node process whose death ends every wait at once (with its output).
         self.watch: Optional[NodeProcess] = None
+        self._step_clients: dict[str, Any] = {}
 
     # ---------------------------------------------------------------- topics
     def subscribe(self, topic: str, msg_type: type, depth: int = 1000,
@@ -268,6 +269,60 @@ class Peer:
     def wait_for_subscribers(self, publisher, timeout: float = 20.0) -> None:
         self.spin_until(lambda: publisher.get_subscription_count() > 0, timeout,
                         f"a subscriber of {publisher.topic_name}")
+
+    # ---------------------------------------------------------------- lockstep ticks
+    def connect_drives(self, drives: Sequence[str], topics: Sequence[str],
+                       kind: str = "displacement") -> dict[str, Any]:
+        """
+        Subscribe ``/clock`` and the Float64 ``topics``; publish each drive's command.
+
+        Returns the command publishers (by drive) once the stage publishes ``topics`` and
+        reads every command topic.
+        """
+        from rosgraph_msgs.msg import Clock
+        from std_msgs.msg import Float64
+
+        self.subscribe("/clock", Clock)
+        for topic in topics:
+            self.subscribe(topic, Float64)
+        commands = {d: self.publisher(f"/drive/{d}/{kind}", Float64) for d in drives}
+        self.wait_for_publishers(topics)
+        for publisher in commands.values():
+            self.wait_for_subscribers(publisher)
+        return commands
+
+    def tick(self, topics: Sequence[str] = (), timeout: float = 30.0,
+             service: str = "/stage_node/step") -> None:
+        """
+        Advance a lockstep stage by one tick through its ``~/step`` service; receive its messages.
+
+        Returns once ``/clock`` (subscribed by the caller) and each of ``topics`` have one
+        message more than ``/clock`` had before. The step client is kept for the peer's life:
+        one discovery, not one per tick.
+        """
+        from std_srvs.srv import Trigger
+
+        client = self._step_clients.get(service)
+        if client is None:
+            client = self._step_clients[service] = self.node.create_client(Trigger, service)
+        self.spin_until(client.service_is_ready, timeout, f"service {service}")
+        n = len(self.received["/clock"])
+        future = client.call_async(Trigger.Request())
+        self.spin_until(future.done, timeout, f"the answer of {service}")
+        answer = future.result()
+        assert answer.success, answer.message
+        self.spin_until(lambda: len(self.received["/clock"]) > n
+                        and all(len(self.received[t]) > n for t in topics), timeout,
+                        "the tick's messages")
+
+    def tick_until(self, predicate: Callable[[], bool], what: str,
+                   topics: Sequence[str] = (), limit: int = 50) -> None:
+        """Lockstep ticks (`tick`) until ``predicate`` holds after one (e.g. a command taken)."""
+        for _ in range(limit):
+            self.tick(topics)
+            if predicate():
+                return
+        raise AssertionError(f"{what} not reached in {limit} ticks")
 
     # ---------------------------------------------------------------- services
     def call(self, srv_type: type, name: str, request: Any = None, timeout: float = 30.0) -> Any:

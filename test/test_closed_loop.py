@@ -13,10 +13,10 @@ answers. (The controller runs with the shipped Fast DDS profile of 1 ms heartbea
 """
 from __future__ import annotations
 
+import subprocess
 import sys
 
 import numpy as np
-import pytest
 import yaml
 from std_msgs.msg import UInt64
 from std_srvs.srv import Trigger
@@ -24,17 +24,12 @@ from std_srvs.srv import Trigger
 from flexure_sim.engine.mechanism.loader import resolve_mechanism_path
 from flexure_sim.recording import read_log
 
-from node_harness import ROOT, NodeProcess, Peer, next_domain_id, node_env
+from node_harness import ROOT, NodeProcess, Peer, node_env
 from node_harness import reliable as reliable_qos
 
 SETPOINT = 2.0e-5
 TICKS = 100
 SENSOR = {"noise_rms": 1.0e-9, "resolution": 1.0e-9, "bandwidth": 2000.0, "latency": 1, "seed": 3}
-
-
-@pytest.fixture
-def domain() -> int:
-    return next_domain_id()
 
 
 def test_lockstep_closed_loop_settles_to_the_setpoint_and_runs_are_bit_identical(tmp_path, domain):
@@ -98,8 +93,15 @@ def test_lockstep_closed_loop_settles_to_the_setpoint_and_runs_are_bit_identical
     finally:
         peer.watch = None
         peer.close()
-        assert controller.stop() == 0, controller.stderr
-        assert stage.stop() == 0, stage.stderr
+        codes = []
+        for process in (controller, stage):  # both stopped before either is checked
+            try:
+                codes.append(process.stop())
+            except subprocess.TimeoutExpired:
+                process.kill()
+                codes.append(None)
+        assert codes[0] == 0, controller.stderr
+        assert codes[1] == 0, stage.stderr
     runs = []
     for name in ("loop_1.mcap", "loop_2.mcap"):
         log = read_log(stage.cwd / name)

@@ -21,11 +21,10 @@ from rcl_interfaces.srv import SetParameters
 from std_msgs.msg import Float64
 from diagnostic_msgs.msg import DiagnosticArray
 from rosgraph_msgs.msg import Clock
-from std_srvs.srv import Trigger
 
 from flexure_sim.recording import read_log
 
-from node_harness import NodeProcess, Peer, diagnostics_values, next_domain_id
+from node_harness import NodeProcess, Peer, diagnostics_values
 
 DRIVES = ("x", "y")
 OUTPUTS = ("x", "y", "theta")
@@ -34,18 +33,6 @@ U = 1e-6
 INPUTS = [f"/drive/{d}/input" for d in DRIVES]
 FORCES = [f"/drive/{d}/force" for d in DRIVES]
 OUTPUT_TOPICS = [f"/output/{o}/displacement" for o in OUTPUTS]
-
-
-@pytest.fixture
-def domain() -> int:
-    return next_domain_id()
-
-
-@pytest.fixture
-def peer(domain):
-    p = Peer(domain)
-    yield p
-    p.close()
 
 
 def start(tmp_path, domain, peer, **params) -> NodeProcess:
@@ -58,16 +45,7 @@ def start(tmp_path, domain, peer, **params) -> NodeProcess:
 
 def step_until(peer: Peer, predicate, what: str, limit: int = 50, topics=INPUTS) -> None:
     """Lockstep ticks until ``predicate`` holds (e.g. the node has taken a command)."""
-    for _ in range(limit):
-        n = len(peer.received["/clock"])
-        answer = peer.call(Trigger, "/stage_node/step")
-        assert answer.success, answer.message
-        peer.spin_until(lambda: len(peer.received["/clock"]) > n
-                        and all(len(peer.received[t]) > n for t in topics), 10,
-                        "the tick's messages")
-        if predicate():
-            return
-    raise AssertionError(f"{what} not reached in {limit} ticks")
+    peer.tick_until(predicate, what, topics, limit)
 
 
 def static_gain_matrix() -> np.ndarray:

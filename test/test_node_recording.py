@@ -91,8 +91,10 @@ def test_fast_mode_waits_for_a_slow_recorder_and_loses_nothing(tmp_path, domain_
 def test_real_time_drops_are_counted_in_diagnostics_and_file(tmp_path, domain_peer):
     _, peer = domain_peer
     path = tmp_path / "node" / "rt.mcap"
+    # 1 s a write: the recorder falls behind at once (drops begin ~3 s in, as with 0.5 s or
+    # 2 s), and the stop, which writes what the pipe still holds, takes ~11 s instead of 23.
     node = start(tmp_path, domain_peer, "realtime", "rt.mcap",
-                 **{WRITE_DELAY_ENV: "2.0", MAX_BACKLOG_ENV: str(64 << 10)})
+                 **{WRITE_DELAY_ENV: "1.0", MAX_BACKLOG_ENV: str(64 << 10)})
     peer.subscribe("/diagnostics", DiagnosticArray)
 
     def dropping() -> bool:

@@ -18,9 +18,8 @@ import pytest
 from rosgraph_msgs.msg import Clock
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Float64
-from std_srvs.srv import Trigger
 
-from node_harness import NodeProcess, Peer, next_domain_id
+from node_harness import NodeProcess
 
 DRIVES = ("p1", "p2", "p3")
 OUTPUTS = ("tip", "tilt", "piston")
@@ -30,35 +29,6 @@ U = 2e-6
 INPUTS = [f"/drive/{d}/input" for d in DRIVES]
 HINGES = ("wire1", "wire2", "wire3", "guide1", "guide2", "guide3")
 BODIES = ("base", "platform", "cap1", "cap2", "cap3")
-
-
-@pytest.fixture
-def domain() -> int:
-    return next_domain_id()
-
-
-@pytest.fixture
-def peer(domain):
-    p = Peer(domain)
-    yield p
-    p.close()
-
-
-def tick(peer: Peer, topics) -> None:
-    """One lockstep tick, its messages received."""
-    n = len(peer.received["/clock"])
-    answer = peer.call(Trigger, "/stage_node/step")
-    assert answer.success, answer.message
-    peer.spin_until(lambda: len(peer.received["/clock"]) > n
-                    and all(len(peer.received[t]) > n for t in topics), 30, "the tick's messages")
-
-
-def step_until(peer: Peer, predicate, what: str, topics, limit: int = 50) -> None:
-    for _ in range(limit):
-        tick(peer, topics)
-        if predicate():
-            return
-    raise AssertionError(f"{what} not reached in {limit} ticks")
 
 
 def read_bag(path) -> dict[str, list]:
@@ -98,22 +68,16 @@ def test_tiptilt_node_settles_at_the_engines_statics_and_analyse_gives_its_stati
         **{f"drives.{d}.stroke_min": -1.5e-5 for d in DRIVES}})
     peer.watch = node
     try:
-        peer.subscribe("/clock", Clock)
-        for topic in INPUTS:
-            peer.subscribe(topic, Float64)
-        commands = {d: peer.publisher(f"/drive/{d}/displacement", Float64) for d in DRIVES}
-        peer.wait_for_publishers(INPUTS)
-        for pub in commands.values():
-            peer.wait_for_subscribers(pub)
+        commands = peer.connect_drives(DRIVES, INPUTS)
         for k, drive in enumerate(DRIVES):
             for level in (-U, U, 0.0):
                 commands[drive].publish(Float64(data=level))
                 # The 0.1 ms actuator lag and the modes (6-12 kHz, ~2 % damped: 1.3 ms decay)
                 # settle within the 50 ms tick; three more ticks at rest for analyse.
-                step_until(peer, lambda: abs(peer.last(INPUTS[k]).data - level) < 1e-12 * U,
-                           f"drive {drive} at {level:g} m", INPUTS)
+                peer.tick_until(lambda: abs(peer.last(INPUTS[k]).data - level) < 1e-12 * U,
+                                f"drive {drive} at {level:g} m", INPUTS)
                 for _ in range(3):
-                    tick(peer, INPUTS)
+                    peer.tick(INPUTS)
     finally:
         assert node.stop(signal.SIGINT) == 0, node.stderr
     assert "tiptilt_stage" in node.stderr and "28 topics per tick" in node.stderr
@@ -227,12 +191,12 @@ def test_a_planar_stage_in_3d_under_its_in_plane_drive_has_no_out_of_plane_motio
         peer.wait_for_publishers(["/drive/input"])
         peer.wait_for_subscribers(command)
         for _ in range(2):  # at rest first: analyse sees the step
-            tick(peer, ["/drive/input"])
+            peer.tick(["/drive/input"])
         command.publish(Float64(data=u))
-        step_until(peer, lambda: abs(peer.last("/drive/input").data - u) < 1e-12 * u,
-                   "the drive at 1 um", ["/drive/input"])
+        peer.tick_until(lambda: abs(peer.last("/drive/input").data - u) < 1e-12 * u,
+                        "the drive at 1 um", ["/drive/input"])
         for _ in range(3):
-            tick(peer, ["/drive/input"])
+            peer.tick(["/drive/input"])
     finally:
         assert node.stop(signal.SIGINT) == 0, node.stderr
     bag = read_bag(node.cwd / "micro3d.mcap")

@@ -62,18 +62,6 @@ def engine_static():
     return sim.static(STEP).snapshot
 
 
-@pytest.fixture
-def domain() -> int:
-    return next_domain_id()
-
-
-@pytest.fixture
-def peer(domain):
-    p = Peer(domain)
-    yield p
-    p.close()
-
-
 def start(tmp_path: Path, domain: int, peer: Peer | None = None, **params) -> NodeProcess:
     node = NodeProcess(tmp_path / "node", domain, params)
     if peer is not None:
@@ -484,17 +472,25 @@ def test_realtime_run_records_what_it_publishes_and_kill_9_leaves_readable_chunk
 ):
     custom = tmp_path / "my_stage.yaml"
     custom.write_text(resolve_mechanism_path("microstage").read_text())
-    node = start(
-        tmp_path,
-        domain,
-        peer,
-        mechanism=str(custom),
-        time_mode="realtime",
-        sim_step=5e-4,
-        publish_rate=200.0,
-        record=True,
-        record_path="rt.mcap",
-    )
+    realtime = dict(time_mode="realtime", sim_step=5e-4, publish_rate=200.0)
+    # The two nodes killed below start with the first, each on a domain of its own (nothing
+    # of theirs reaches the peer): their start-ups overlap its run instead of following it.
+    node = start(tmp_path, domain, peer, mechanism=str(custom), **realtime, record=True,
+                 record_path="rt.mcap")
+    killed = NodeProcess(tmp_path / "killed", next_domain_id(),
+                         dict(realtime, record_path="k.mcap"))
+    crashed = NodeProcess(tmp_path / "crashed", next_domain_id(),
+                          dict(realtime, record_path="c.mcap"))
+    try:
+        _realtime_run_and_kill_9(peer, node, custom, killed, crashed)
+    finally:
+        for left in (killed, crashed):  # never left behind when a check fails
+            for pid in left.children():
+                os.kill(pid, signal.SIGKILL)
+            left.kill()
+
+
+def _realtime_run_and_kill_9(peer, node, custom, killed, crashed):
     try:
         peer.subscribe("/bodies/poses", PoseArray, depth=10000)
         peer.subscribe("/diagnostics", DiagnosticArray)
@@ -526,8 +522,7 @@ def test_realtime_run_records_what_it_publishes_and_kill_9_leaves_readable_chunk
     assert sorted(t for t in recorded if got[0] <= t <= got[-1]) == got
 
     # kill -9 of the node: its recorder process sees the pipe close and finishes the file.
-    node = NodeProcess(tmp_path / "killed", domain, dict(time_mode="realtime", sim_step=5e-4,
-                                                         publish_rate=200.0, record_path="k.mcap"))
+    node = killed
     peer.watch = node
     path = node.cwd / "k.mcap"
     peer.spin_until(
@@ -541,11 +536,7 @@ def test_realtime_run_records_what_it_publishes_and_kill_9_leaves_readable_chunk
     assert log.complete and log.message_count > 1000
 
     # kill -9 of node and recorder alike: the chunks already written are readable.
-    node = NodeProcess(
-        tmp_path / "crashed",
-        domain,
-        dict(time_mode="realtime", sim_step=5e-4, publish_rate=200.0, record_path="c.mcap"),
-    )
+    node = crashed
     peer.watch = node
     path = node.cwd / "c.mcap"
     peer.spin_until(

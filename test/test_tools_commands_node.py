@@ -20,7 +20,6 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
-from std_srvs.srv import Trigger
 
 from flexure_sim import cli
 
@@ -40,14 +39,6 @@ EXPECTED = {
     "p3": {"received": 2, "accepted": 2, "clamped": 2, "rejected": 0, "malformed": 0,
            "lost": 0},
 }
-
-
-def _tick(peer: Peer) -> None:
-    n = len(peer.received["/clock"])
-    answer = peer.call(Trigger, "/stage_node/step")
-    assert answer.success, answer.message
-    peer.spin_until(lambda: len(peer.received["/clock"]) > n
-                    and all(len(peer.received[t]) > n for t in INPUTS), 30, "the tick's messages")
 
 
 def _counts_reached(peer: Peer) -> bool:
@@ -70,27 +61,21 @@ def clamped_run(tmp_path_factory):
         "publish_rate": 20.0, "record": True, "record_path": "tt.mcap"})
     peer.watch = node
     try:
-        peer.subscribe("/clock", Clock)
         peer.subscribe("/diagnostics", DiagnosticArray)
-        for topic in INPUTS:
-            peer.subscribe(topic, Float64)
-        commands = {d: peer.publisher(f"/drive/{d}/displacement", Float64) for d in DRIVES}
-        peer.wait_for_publishers(INPUTS)
-        for pub in commands.values():
-            peer.wait_for_subscribers(pub)
+        commands = peer.connect_drives(DRIVES, INPUTS)
         for _ in range(2):
-            _tick(peer)
+            peer.tick(INPUTS)
         for drive, value in SENT:
             msg = value if isinstance(value, bytes) else Float64(data=value)
             peer.publish_acked(commands[drive], msg)  # in the reader before the next step
             for _ in range(2):
-                _tick(peer)
+                peer.tick(INPUTS)
         for _ in range(40):  # until a diagnostics window has closed over every command
             if _counts_reached(peer):
                 break
-            _tick(peer)
-        _tick(peer)
-        _tick(peer)
+            peer.tick(INPUTS)
+        peer.tick(INPUTS)
+        peer.tick(INPUTS)
     finally:
         code = node.stop(signal.SIGINT)
         peer.close()
@@ -197,13 +182,6 @@ def test_one_drive_a_clamped_command_in_the_plot_and_the_counts_in_analyse(tmp_p
         "record_path": "ms.mcap"})
     peer.watch = node
     inputs = ["/drive/input"]
-
-    def tick() -> None:
-        n = len(peer.received["/clock"])
-        assert peer.call(Trigger, "/stage_node/step").success
-        peer.spin_until(lambda: len(peer.received["/clock"]) > n
-                        and len(peer.received[inputs[0]]) > n, 30, "a tick")
-
     try:
         peer.subscribe("/clock", Clock)
         peer.subscribe("/diagnostics", DiagnosticArray)
@@ -214,12 +192,12 @@ def test_one_drive_a_clamped_command_in_the_plot_and_the_counts_in_analyse(tmp_p
         for value in (1.0, 2e-6):
             peer.publish_acked(drive, Float64(data=value))
             for _ in range(5):
-                tick()
+                peer.tick(inputs)
         for _ in range(100):  # until a diagnostics window has closed over both commands
             last = peer.last("/diagnostics")
             if last is not None and diagnostics_values(last).get("commands_received") == "2":
                 break
-            tick()
+            peer.tick(inputs)
     finally:
         code = node.stop(signal.SIGINT)
         peer.close()

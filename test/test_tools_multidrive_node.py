@@ -16,9 +16,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
-from std_srvs.srv import Trigger
 
 from flexure_sim.tools.run.plot import figure_title
 
@@ -35,14 +33,6 @@ TICKS = 20        # per level: 100 ms, a hundred actuator time constants
 INPUTS = [f"/drive/{d}/input" for d in DRIVES]
 
 
-def _tick(peer: Peer) -> None:
-    n = len(peer.received["/clock"])
-    answer = peer.call(Trigger, "/stage_node/step")
-    assert answer.success, answer.message
-    peer.spin_until(lambda: len(peer.received["/clock"]) > n
-                    and all(len(peer.received[t]) > n for t in INPUTS), 10, "the tick's messages")
-
-
 @pytest.fixture(scope="module")
 def xy_run(tmp_path_factory):
     """Return the recording of the XY stage: x steps by U, then y (each held TICKS ticks)."""
@@ -54,24 +44,18 @@ def xy_run(tmp_path_factory):
         "publish_rate": RATE, "record": True, "record_path": "xy.mcap"})
     peer.watch = node
     try:
-        peer.subscribe("/clock", Clock)
-        for topic in INPUTS:
-            peer.subscribe(topic, Float64)
-        commands = {d: peer.publisher(f"/drive/{d}/displacement", Float64) for d in DRIVES}
-        peer.wait_for_publishers(INPUTS)
-        for pub in commands.values():
-            peer.wait_for_subscribers(pub)
+        commands = peer.connect_drives(DRIVES, INPUTS)
         for _ in range(TICKS):
-            _tick(peer)
+            peer.tick(INPUTS)
         for k, drive in enumerate(DRIVES):
             commands[drive].publish(Float64(data=U))
             # The command is taken at the next tick whose step sees it: tick until it shows.
             for _ in range(50):
-                _tick(peer)
+                peer.tick(INPUTS)
                 if peer.last(INPUTS[k]).data > 0.0:
                     break
             for _ in range(TICKS - 1):
-                _tick(peer)
+                peer.tick(INPUTS)
     finally:
         code = node.stop(signal.SIGINT)
         peer.close()
