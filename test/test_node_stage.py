@@ -336,11 +336,17 @@ def test_signal_leaves_a_complete_recording_matching_what_was_received(
     assert received["/bodies/poses"] == ticks and received["/diagnostics"] == ticks // 10  # 10 Hz
     assert received["/markers"] == 9  # display_rate 30 Hz: every 3rd of the 100 Hz ticks
     received["/drive/displacement"] = 2
+    # One status more than the peer took while it listened: the stop's, written with the
+    # run's final counters (the 5 ticks after the last periodic one).
+    expected = dict(received, **{"/diagnostics": received["/diagnostics"] + 1})
     path = node.cwd / "run.mcap"
     counts, total, metadata = read_with_mcap(path)
-    assert counts == received
-    assert total == sum(received.values())
-    assert read_with_rosbags(path) == received
+    assert counts == expected
+    assert total == sum(expected.values())
+    assert read_with_rosbags(path) == expected
+    last_status = read_log(path).messages_on("/diagnostics")[-1]
+    assert last_status.log_time_ns == ticks * 10_000_000  # the last tick's time
+    assert diagnostics_values(last_status.message)["ticks"] == str(ticks)
     meta = metadata["flexure_sim"]
     assert meta["mechanism"] == "microstage" and meta["mechanism_name"] == "microstage"
     assert meta["time_mode"] == "lockstep" and meta["publish_rate"] == "100.0"
