@@ -138,6 +138,21 @@ class Diagnostics:
                       stats.linearizations, stats.steps, self.counters(), loop.hold.failures,
                       self.intake())
 
+    def publish_final(self, stamp: int) -> None:
+        """
+        Send, at the stop, the status of the ticks since the last one (none if there were none).
+
+        Recorded, so that the recording's last status holds the run's final counters
+        (``analyse``), and published if ROS still can: a stop by a signal has usually shut
+        rclpy's context down by then.
+        """
+        if not self.window.ticks:
+            return
+        try:
+            self.publish(stamp)
+        except Exception:  # noqa: BLE001 - rclpy's context already shut down: recorded anyway
+            pass
+
     def publish(self, stamp: int) -> None:
         """Publish (and record) the status of the window ending now; start a new window."""
         loop = self.loop

@@ -122,8 +122,6 @@ class SteppingLoop:
         self._latency_request = settings.cpu_latency_us if time_mode == "realtime" else -1
         self.cpu_latency_us = -1
         self.ticks = 0
-        #: The tick count at the last diagnostics status.
-        self._status_tick = 0
         self.runs = 0
         #: Wall time of the last tick's work (s).
         self._tick_work = 0.0
@@ -189,7 +187,8 @@ class SteppingLoop:
                 self._on_running()
             with self.publish_calls.hold():
                 self._ticks(pacer)
-            self._final_status()
+            if self.diagnostics is not None:
+                self.diagnostics.publish_final(round(self.sim.state.t * 1e9))
         except BaseException as exc:  # noqa: BLE001 - reported, then the node shuts down
             if not self._stop.is_set() and self._on_failure(exc):
                 self.failure = exc
@@ -343,21 +342,6 @@ class SteppingLoop:
         self.ticks += span
         if crossed(first, span, self.diag_every) and self.diagnostics is not None:
             self.diagnostics.publish(stamp)
-            self._status_tick = self.ticks
-
-    def _final_status(self) -> None:
-        """
-        At the stop, record (and publish if ROS still can) the status of the ticks since the last.
-
-        The recording's last status then holds the run's final counters (``analyse``).
-        """
-        if self.diagnostics is None or self.ticks == self._status_tick:
-            return
-        try:
-            self.diagnostics.publish(round(self.sim.state.t * 1e9))
-        except Exception:  # noqa: BLE001 - rclpy's context already shut down: recorded anyway
-            pass
-        self._status_tick = self.ticks
 
     # ------------------------------------------------------------- live changes
     def _set_merge(self, merge_after: int) -> None:
@@ -406,7 +390,7 @@ class SteppingLoop:
         if self.intake is not None:
             self.intake.discard()  # sent before the reset: discarded
         self.runs += 1
-        self.ticks = self._status_tick = 0
+        self.ticks = 0
         if self.pacer is not None:
             self.pacer.reset_stats()
         self.restart_clocks()
