@@ -61,7 +61,7 @@ class ManualClock:
 
 
 def make_loop(sent: list[str], display_takes: float, clock: ManualClock) -> SteppingLoop:
-    """A real-time loop at 1 kHz with markers every DISPLAY_EVERY ticks and diagnostics."""
+    """Build a real-time loop at 1 kHz with markers every DISPLAY_EVERY ticks and diagnostics."""
     stage = load_mechanism("microstage")
     sim = Simulation(stage, dt=DT, relinearize_tol=RELINEARIZE_TOL)
     interface = StageInterface(stage, "realtime")
