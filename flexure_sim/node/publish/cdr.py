@@ -249,7 +249,7 @@ _PAD_AFTER = (b"\x00" * 4, b"\x00" * 3, b"\x00" * 2, b"\x00")
 
 def _key_values(values: Sequence[tuple[str, str]]) -> bytes:
     """
-    The KeyValue strings of `pack_diagnostics`, from a 4-aligned offset, in one join.
+    Pack the KeyValue strings of `pack_diagnostics` from a 4-aligned offset, in one join.
 
     Each string is its uint32 length, its bytes, a NUL, and the zeros that align the next
     (none after the last): the bytes `_put_string` writes one call at a time. Built as one list

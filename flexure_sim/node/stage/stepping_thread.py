@@ -265,10 +265,8 @@ class SteppingLoop:
 
         In real time it may cover several periods (`Pacer.span`): the engine steps through
         all of them, the state at the end is published. Returns False when the engine failed:
-        the state is then held and only diagnostics go out.
-
-        ``defer``: the display and diagnostics it makes due wait in `extras` (the paced loop
-        sends them once the tick's deadline is checked, `tick_extras`).
+        the state is then held and only diagnostics go out. ``defer``: the display and
+        diagnostics it makes due wait in `extras` (sent by the paced loop, `tick_extras`).
         """
         perf = time.perf_counter
         t0 = perf()

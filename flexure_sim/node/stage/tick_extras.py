@@ -9,9 +9,10 @@ Published from inside the tick, every display and diagnostics tick at 4 kHz ende
 next tick was due. The paced loop therefore sends them after it has checked the tick's
 deadline (`Pacer.done`), in the slack of the period: the next tick starts that much later
 and misses only if the extras overrun that slack too (interleaved runs at 4 kHz under
-SCHED_FIFO: 0.87-0.96 % of the ticks missed against 1.88-2.07 % with the extras inside). Lockstep and fast mode send them at the end of the tick, as the paced
-loop does: the order of what is published and recorded is the same in every mode (after the
-tick's topics, before the next tick's).
+SCHED_FIFO: 0.87-0.96 % of the ticks missed against 1.88-2.07 % with the extras inside).
+Lockstep and fast mode send them at the end of the tick, as the paced loop does: the order
+of what is published and recorded is the same in every mode (after the tick's topics,
+before the next tick's).
 """
 from __future__ import annotations
 
