@@ -6,10 +6,11 @@ more than a whole tick: in a stage node at 4 kHz (stepping thread under SCHED_FI
 VM) a display took 257 us and a status 334 us (medians, wall time) against the tick's 78 us,
 about three times their cost ticked back to back in one process, where caches stay warm.
 Published from inside the tick, 64-100 % of the display ticks and every diagnostics tick at
-4 kHz ended after the next tick was due (node traces, 2-core VM under load). The paced loop therefore sends them after it has checked the tick's
-deadline (`Pacer.done`), in the slack of the period: the next tick starts that much later
-and misses only if the extras overrun that slack too (interleaved runs at 4 kHz under
-SCHED_FIFO: 0.87-0.96 % of the ticks missed against 1.88-2.07 % with the extras inside).
+4 kHz ended after the next tick was due (node traces, 2-core VM under load). The paced loop
+therefore sends them after it has checked the tick's deadline (`Pacer.done`), in the slack
+of the period: the next tick starts that much later and misses only if the extras overrun
+that slack too (interleaved runs at 4 kHz under SCHED_FIFO: 0.87-0.96 % of the ticks missed
+against 1.88-2.07 % with the extras inside).
 Lockstep and fast mode send them at the end of the tick, as the paced loop does: the order
 of what is published and recorded is the same in every mode (after the tick's topics,
 before the next tick's).
