@@ -18,3 +18,18 @@ def test_the_command_line_prints_one_json_object(capsys):
                               "--warmup", "0", "--json"]) == 0
     r = json.loads(capsys.readouterr().out)
     assert r["ticks"] == 20 and r["work_us"] == 0.0 and r["rate_hz"] == 200.0
+
+
+def test_the_command_line_paces_with_the_wake_spin_asked_and_refuses_a_negative_one(capsys):
+    import json
+
+    import pytest
+
+    assert pacing_floor.main(["--rate", "200", "--work-us", "0", "--duration", "0.1",
+                              "--warmup", "0", "--wake-spin", "5e-05", "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["wake_spin_s"] == 5e-05 and r["ticks"] == 20
+    with pytest.raises(SystemExit) as exc:
+        pacing_floor.main(["--wake-spin", "-1"])
+    assert exc.value.code == 2
+    assert "--wake-spin" in capsys.readouterr().err

@@ -39,6 +39,7 @@ from flexure_sim.node.stage.overrun import OverrunWatch
 from flexure_sim.node.stage.pacing import Pacer, set_thread_fifo, set_thread_nice
 from flexure_sim.node.stage.qos_watch import GRAPH_CHECK_PERIOD_S
 from flexure_sim.node.stage.requests import RequestQueue
+from flexure_sim.node.stage.tick_extras import TickExtras, crossed
 
 #: Engine's relinearize_tol: None = its default, re-linearize only when the step's iteration
 #: stops contracting (the answer does not depend on where the Jacobian was taken), which lets
@@ -50,11 +51,6 @@ DIAGNOSTICS_RATE = 10.0
 #: tick, and merging late ticks (``merge_late_ticks``; then only a stopped process slips).
 SLIP_LAG_S = 0.1
 MERGE_MAX_LAG_S = 1.0
-
-
-def crossed(first: int, count: int, every: int) -> bool:
-    """Whether one of the ticks ``first .. first + count - 1`` is a multiple of ``every``."""
-    return (first + count - 1) // every != (first - 1) // every
 
 
 class SteppingLoop:
@@ -136,6 +132,8 @@ class SteppingLoop:
         self.failure: Optional[BaseException] = None
         self.diagnostics: Optional[Diagnostics] = (
             Diagnostics(self, parts.diagnostics) if parts.diagnostics is not None else None)
+        #: The display and diagnostics a tick made due (sent after it, `tick_extras`).
+        self.extras = TickExtras(self)
 
     # ------------------------------------------------------------------ thread
     def start(self, on_end: Any, on_failure: Any, on_running: Any = None) -> None:
@@ -214,8 +212,9 @@ class SteppingLoop:
                 self.tick()
             else:
                 pacer.wait()
-                self.tick()
+                self.tick(defer=True)
                 missed = pacer.done()
+                self.extras.send()
                 warning = self.overrun.tick(time.perf_counter(), self._tick_work, missed,
                                             self._settings_text())
                 if warning is not None:
@@ -260,13 +259,14 @@ class SteppingLoop:
             if sensor is not None:
                 sensor.sample(float(sim.model.output_displacement(sim.state.z)))
 
-    def tick(self) -> bool:
+    def tick(self, defer: bool = False) -> bool:
         """
         One publish tick: commands, engine steps, report, pack, record, publish.
 
         In real time it may cover several periods (`Pacer.span`): the engine steps through
         all of them, the state at the end is published. Returns False when the engine failed:
-        the state is then held and only diagnostics go out.
+        the state is then held and only diagnostics go out. ``defer``: the display and
+        diagnostics it makes due wait in `extras` (sent by the paced loop, `tick_extras`).
         """
         perf = time.perf_counter
         t0 = perf()
@@ -291,6 +291,8 @@ class SteppingLoop:
                 self._log.error(message + f" ({self.hold.failures} engine failures in all)")
             self._count_tick(round(sim.state.t * 1e9), span)
             self._tick_work = perf() - t0
+            if not defer:
+                self.extras.send()
             return False
         t3 = perf()
         self.reported = True
@@ -327,9 +329,10 @@ class SteppingLoop:
         if self.diagnostics is not None:
             self.diagnostics.window.add(t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5,
                                         t6 - t0)
-        if self.display_every and crossed(self.ticks, span, self.display_every):
-            self.display.publish(report.view(), stamp)
-        self._count_tick(stamp, span)
+        self._count_tick(stamp, span, bool(self.display_every)
+                         and crossed(self.ticks, span, self.display_every))
+        if not defer:
+            self.extras.send()
         return True
 
     def _settings_text(self) -> str:
@@ -337,11 +340,11 @@ class SteppingLoop:
         return (f"publish_rate {self.rate:g} Hz, monitor_rate {self.monitor_rate:g} Hz, "
                 f"stepping_priority {self.priority}")
 
-    def _count_tick(self, stamp: int, span: int = 1) -> None:
+    def _count_tick(self, stamp: int, span: int = 1, display: bool = False) -> None:
+        """Count the tick; make its display (if ``display``) and diagnostics due (`extras`)."""
         first = self.ticks + 1
         self.ticks += span
-        if crossed(first, span, self.diag_every) and self.diagnostics is not None:
-            self.diagnostics.publish(stamp)
+        self.extras.note(stamp, display, crossed(first, span, self.diag_every))
 
     # ------------------------------------------------------------- live changes
     def _set_merge(self, merge_after: int) -> None:

@@ -10,8 +10,10 @@
   node's own mean tick.
 - **The closed loop at 1, 2 and 4 kHz** (`closed_loop`: ``pi_controller`` in a second process
   answering every measurement), with the stepping thread spinning through the period
-  (``wake_spin`` = the period) and sleeping with a short spin before each tick
-  (`SHORT_SPIN_S`): missed ticks and commands applied at the next tick.
+  (``wake_spin`` = the period), sleeping with a short spin before each tick (`SHORT_SPIN_S`,
+  the default) and with a shorter one (`SLEEP_SPIN_S`): missed ticks and commands applied at
+  the next tick. The less the thread spins, the more of the two cores the controller has
+  for its answer, and the later a sleeping thread may wake.
 - **The floor** at 1, 2 and 4 kHz (`pingpong`): a bare rclpy ping-pong between two processes,
   paced like the node, without simulation or recording.
 - **The pacing floor** at 1, 2 and 4 kHz (`pacing_floor`): a thread paced like the stepping
@@ -32,6 +34,11 @@ STEPS_PER_TICK = 10
 #: The short busy-wait of the sleeping variant (s): sleep, then spin this long before a tick
 #: (the node's default).
 SHORT_SPIN_S = WAKE_SPIN_S
+#: The shorter busy-wait of the third variant (s): the stepping thread sleeps most of even a
+#: 4 kHz period.
+SLEEP_SPIN_S = 5e-5
+#: The closed loop's variants: ``wake_spin`` per variant name (`_spin_params`).
+SPIN_VARIANTS = ("period", "short", "sleep")
 #: Rate of the drive-command flood next to the 1 kHz real-time run.
 FLOOD_HZ = 10000.0
 #: Length of each floor run, s (at most the node runs').
@@ -39,8 +46,9 @@ FLOOR_S = 15.0
 
 
 def _spin_params(rate: float, spin: str) -> dict[str, str]:
-    """``wake_spin`` of a variant: ``period`` spins the whole period, ``short`` SHORT_SPIN_S."""
-    return {"wake_spin": repr(1.0 / rate if spin == "period" else SHORT_SPIN_S)}
+    """``wake_spin`` of a variant: the whole period, SHORT_SPIN_S or SLEEP_SPIN_S."""
+    spins = {"period": 1.0 / rate, "short": SHORT_SPIN_S, "sleep": SLEEP_SPIN_S}
+    return {"wake_spin": repr(spins[spin])}
 
 
 def bench_node(duration: float = 30.0, step_us: Optional[float] = None) -> dict[str, Any]:
@@ -72,7 +80,7 @@ def bench_node(duration: float = 30.0, step_us: Optional[float] = None) -> dict[
         run["overhead_factor"] = overhead(run)
         realtime[key] = run
         pacing[key] = pacing_floor.run(rate, run["tick_time_mean_us"], min(duration, FLOOR_S))
-        for spin in ("period", "short"):
+        for spin in SPIN_VARIANTS:
             loop = closed_loop.run(duration, params=_spin_params(rate, spin), rate=rate)
             loop["overhead_factor"] = overhead(loop)
             loops[f"{key}_{spin}_spin"] = loop

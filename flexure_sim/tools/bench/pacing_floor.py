@@ -74,11 +74,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--work-us", type=float, default=100.0, help="busy work per tick, us")
     parser.add_argument("--duration", type=float, default=10.0, help="measured seconds")
     parser.add_argument("--warmup", type=float, default=2.0, help="ignored start, s")
+    parser.add_argument("--wake-spin", type=float, default=WAKE_SPIN_S,
+                        help=f"busy-wait before each tick, s (the node's wake_spin, default "
+                             f"{WAKE_SPIN_S:g})")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
-    if not (args.rate > 0 and args.work_us >= 0 and args.duration > 0 and args.warmup >= 0):
-        parser.error("--rate and --duration must be > 0, --work-us and --warmup >= 0")
-    result = run(args.rate, args.work_us, args.duration, warmup=args.warmup)
+    if not (args.rate > 0 and args.work_us >= 0 and args.duration > 0 and args.warmup >= 0
+            and args.wake_spin >= 0):
+        parser.error("--rate and --duration must be > 0, --work-us, --warmup and --wake-spin "
+                     ">= 0")
+    result = run(args.rate, args.work_us, args.duration, wake_spin=args.wake_spin,
+                 warmup=args.warmup)
     print(json.dumps(result) if args.json else summary(result))
     return 0
 
