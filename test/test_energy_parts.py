@@ -61,3 +61,17 @@ def test_power_entries_are_n_powers_and_follow_a_new_n(programs):
             rebuilt[rows[:, 0].astype(int), rows[:, 1].astype(int)] = rows[:, 2]
             assert np.array_equal(rebuilt, power)
     assert quadratic_integrals._power_entries(N.copy()) is coo      # the same N: kept
+
+
+@pytest.mark.parametrize("m", [0, 1, 7, 25])
+def test_balancing_is_scipys_and_refuses_what_scipy_refuses(m):
+    import scipy.linalg
+
+    rng = np.random.default_rng(m)
+    A = rng.normal(size=(m, m)) * 10.0 ** rng.integers(-6, 6, size=(m, m))
+    want = scipy.linalg.matrix_balance(A, permute=False, separate=True)[1][0]
+    assert np.array_equal(quadratic_integrals._balancing(A), want)
+    if m:
+        A[0, -1] = np.nan
+        with pytest.raises(ValueError, match="infs or NaNs"):
+            quadratic_integrals._balancing(A)
