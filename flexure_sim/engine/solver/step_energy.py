@@ -179,16 +179,8 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
         p0 += y0[nF + i] * acc + c[i] * y0[nF + i]
     # V^T gv and G xi accumulated along contiguous rows (G is symmetric, ``quadratic_integrals``):
     # independent sums the compiler vectorizes, not one chain of dependent additions per row.
-    vt = np.zeros(nxi)
-    for i in range(nx):
-        g = gv[i]
-        for j in range(nxi):
-            vt[j] += g * V[i, j]
-    gx = np.zeros(nxi)
-    for j in range(nxi):
-        x = xi[j]
-        for i in range(nxi):
-            gx[i] += G[j, i] * x
+    vt = _rows_times(V, gv)
+    gx = _rows_times(G, xi)
     gVxi = 0.0
     quad = 0.0
     for i in range(nxi):
@@ -225,6 +217,36 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
         start += 2.0 * c[i] * ye0[nF + i]
     rho = aux0[AUX_DISSIPATION] - start + aux1[AUX_DISSIPATION] - end
     return dissipated + 0.5 * h * rho, work
+
+
+@njit(cache=True, inline="always")
+def _rows_times(Mat, x):
+    """
+    Mat^T x, row by row of Mat: out += Mat[j] x_j for j in order.
+
+    Four rows per pass over ``out``, each entry still summed in the order of the rows (the
+    same bits as one row per pass): a quarter of the loads and stores of ``out``, which the
+    compiler cannot keep in registers across rows (it cannot tell ``out`` from ``Mat``).
+    """
+    n = Mat.shape[1]
+    out = np.zeros(n)
+    j = 0
+    while j + 4 <= Mat.shape[0]:
+        x0, x1, x2, x3 = x[j], x[j + 1], x[j + 2], x[j + 3]
+        for i in range(n):
+            acc = out[i]
+            acc += Mat[j, i] * x0
+            acc += Mat[j + 1, i] * x1
+            acc += Mat[j + 2, i] * x2
+            acc += Mat[j + 3, i] * x3
+            out[i] = acc
+        j += 4
+    while j < Mat.shape[0]:
+        xj = x[j]
+        for i in range(n):
+            out[i] += Mat[j, i] * xj
+        j += 1
+    return out
 
 
 @njit(cache=True, inline="always")
