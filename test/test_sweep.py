@@ -70,11 +70,11 @@ class _OneLineAhead:
         self._drain = threading.Thread(target=self._read_to_end, daemon=True)
 
     def started(self) -> None:
-        """The child holds the write end now: close ours, so the end of its output is seen."""
+        """Close our write end once the child holds it, so the end of its output is seen."""
         os.close(self.write_end)
 
     def line(self) -> str:
-        """The child's next write (a progress line), waiting for it."""
+        """Wait for the child's next write (a progress line) and return it."""
         return os.read(self.read_end, 65536).decode()
 
     def _read_to_end(self) -> None:
