@@ -38,6 +38,10 @@ _WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:])
 _WORKERS = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
 _SHARE = 100 // _WORKERS
 _offsets = itertools.count(1)
+#: Bound on the first start of a freshly installed copy of the package (colcon, pip, ros2 run):
+#: it compiles the engine's kernels into that copy's cache ("up to a minute", the node says) on a
+#: machine perhaps 5x slower and busy (the suite's other worker included). It only ends a hang.
+FIRST_START_TIMEOUT = 300.0
 
 
 def next_domain_id() -> int:
