@@ -37,7 +37,7 @@ _USES_ROS = re.compile(
 
 
 def pytest_configure(config):
-    """Declare ``xdist_group`` where pytest-xdist is absent (``colcon test``, FLEXURE_TEST_WORKERS=0)."""
+    """Declare ``xdist_group`` where pytest-xdist is absent (``colcon test``)."""
     config.addinivalue_line("markers", "xdist_group(name): the tests of one pytest-xdist worker")
 
 

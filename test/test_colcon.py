@@ -101,6 +101,8 @@ def test_built_stage_node_runs_the_builtin_stage_and_stops_on_sigint(workspace, 
         peer.subscribe("/output/displacement", Float64)
         peer.spin_until(lambda: peer.last("/output/displacement") is not None, FIRST_START_TIMEOUT,
                         "the first output message")
+        # The stepping thread can publish before the main thread logs the start-up line.
+        node.wait_for_output("mechanism microstage (", timeout=FIRST_START_TIMEOUT)
     finally:
         peer.close()
         rc = node.stop(signal.SIGINT)
