@@ -7,6 +7,11 @@ Markers (a fast loop: ``scripts/run_tests.sh -m "not ros and not slow"``):
   is marked without a list to keep;
 - ``slow``: set by hand (``@pytest.mark.slow``) on tests that take seconds on a fast machine.
 The whole suite, both included, is what CI runs.
+
+scripts/run_tests.sh runs the suite on two pytest-xdist workers (``--dist loadgroup``): a module
+with a module- or class-scoped fixture goes whole to one worker (its fixture made once), the
+other tests one by one, slow ones first, then ROS ones, so that neither worker idles at the end
+while the other runs a long test. node_harness gives each worker its own DDS domains.
 """
 import os
 import re
@@ -31,15 +36,50 @@ _USES_ROS = re.compile(
     r"|rosgraph_msgs|diagnostic_msgs|geometry_msgs|std_msgs|visualization_msgs)\b", re.M)
 
 
+def pytest_configure(config):
+    """Declare ``xdist_group`` where pytest-xdist is absent (``colcon test``)."""
+    config.addinivalue_line("markers", "xdist_group(name): the tests of one pytest-xdist worker")
+
+
+def _shares_a_fixture(item) -> bool:
+    """Whether ``item`` uses a fixture made once for several tests of its module or class."""
+    info = getattr(item, "_fixtureinfo", None)
+    return info is not None and any(
+        defs and defs[-1].scope in ("module", "class", "package")
+        for defs in info.name2fixturedefs.values())
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's hook reads the groups
 def pytest_collection_modifyitems(config, items):
-    """Mark every test of a module that uses ROS 2 with ``ros``."""
+    """
+    Mark every test of a module that uses ROS 2 with ``ros``; group and order for xdist.
+
+    A module with a shared fixture becomes one ``xdist_group`` (one worker runs it in order);
+    the modules keep their order, and the other tests go out slow first, then ROS, then the
+    rest (each in collection order). Every worker computes the same order (xdist checks it).
+    """
     uses_ros: dict[str, bool] = {}
+    modules: dict[str, list] = {}
     for item in items:
         path = str(item.fspath)
         if path not in uses_ros:
             uses_ros[path] = bool(_USES_ROS.search(Path(path).read_text(encoding="utf-8")))
         if uses_ros[path]:
             item.add_marker(pytest.mark.ros)
+        modules.setdefault(path, []).append(item)
+    grouped, single = [], []
+    for path, tests in modules.items():
+        if any(_shares_a_fixture(item) for item in tests):
+            name = Path(path).name
+            for item in tests:
+                item.add_marker(pytest.mark.xdist_group(name))
+            grouped += tests
+        else:
+            single += tests
+    rank = {"slow": 0, "ros": 1}
+    single.sort(key=lambda item: min([rank[m] for m in rank if item.get_closest_marker(m)],
+                                     default=2))
+    items[:] = grouped + single
 
 
 @pytest.fixture

@@ -6,7 +6,8 @@ publishes commands, subscribes and calls services.
 
 DDS stays on this machine (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST). Every node test gets
 its own domain id, derived from the run's ROS_DOMAIN_ID (scripts/run_tests.sh picks a random
-one), so tests and concurrent runs do not hear each other.
+one), so tests and concurrent runs do not hear each other. Under pytest-xdist each worker
+draws from its own share of the domains (`next_domain_id`), so two workers never meet on one.
 """
 from __future__ import annotations
 
@@ -32,12 +33,25 @@ from flexure_sim.node.publish.interface import value_text
 
 ROOT = Path(__file__).resolve().parent.parent
 _BASE_DOMAIN = int(os.environ.get("ROS_DOMAIN_ID") or random.randint(1, 100))
+#: pytest-xdist worker k of n (gw<k>; a plain run is worker 0 of 1) uses the domains k + 1 + n i.
+_WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:])
+_WORKERS = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+_SHARE = 100 // _WORKERS
 _offsets = itertools.count(1)
+#: Bound on the first start of a freshly installed copy of the package (colcon, pip, ros2 run):
+#: it compiles the engine's kernels into that copy's cache ("up to a minute", the node says) on a
+#: machine perhaps 5x slower and busy (the suite's other worker included). It only ends a hang.
+FIRST_START_TIMEOUT = 300.0
 
 
 def next_domain_id() -> int:
-    """Return a fresh domain id in 1..100 for one test (cycles through the range from the base)."""
-    return (_BASE_DOMAIN - 1 + 37 * next(_offsets)) % 100 + 1
+    """
+    Return a fresh domain id in 1..100 for one test: the next of this worker's share.
+
+    Steps of 37 (a prime, so prime to the share's size) cycle through the whole share from the
+    run's base before one comes back.
+    """
+    return 1 + _WORKER + _WORKERS * ((_BASE_DOMAIN + 37 * next(_offsets)) % _SHARE)
 
 
 def run_python(script: str) -> subprocess.CompletedProcess:

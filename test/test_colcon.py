@@ -27,7 +27,7 @@ from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import GetParameters
 from std_msgs.msg import Float64
 
-from node_harness import NodeProcess, Peer, next_domain_id
+from node_harness import FIRST_START_TIMEOUT, NodeProcess, Peer, next_domain_id
 from ros_workspace import ROS2CLI_DIR, build_workspace, fresh_shell_env
 
 #: Gain of the stage at small inputs (reference/README.md: 27.8 at 1.35 um); the checks only
@@ -80,7 +80,7 @@ def test_built_flexure_sim_simulates_a_builtin_from_the_workspace(workspace):
     exe = workspace.install / "lib" / "flexure_sim" / "flexure-sim"
     p = subprocess.run([str(exe), "simulate", "microstage", "--static", "--drive", "step:1.35e-6",
                         "--json"], capture_output=True, text=True, env=workspace.shell_env(),
-                       cwd=workspace.root, timeout=120)
+                       cwd=workspace.root, timeout=FIRST_START_TIMEOUT)
     assert p.returncode == 0, p.stderr
     out = json.loads(p.stdout)
     assert Path(out["mechanism_file"]) == workspace.install / MICROSTAGE
@@ -99,8 +99,10 @@ def test_built_stage_node_runs_the_builtin_stage_and_stops_on_sigint(workspace, 
     peer.watch = node
     try:
         peer.subscribe("/output/displacement", Float64)
-        peer.spin_until(lambda: peer.last("/output/displacement") is not None, 60,
+        peer.spin_until(lambda: peer.last("/output/displacement") is not None, FIRST_START_TIMEOUT,
                         "the first output message")
+        # The stepping thread can publish before the main thread logs the start-up line.
+        node.wait_for_output("mechanism microstage (", timeout=FIRST_START_TIMEOUT)
     finally:
         peer.close()
         rc = node.stop(signal.SIGINT)
@@ -219,7 +221,8 @@ def test_ros2_run_topic_pub_and_param_set_against_the_built_node(workspace, tmp_
     peer = Peer(domain)
     try:
         peer.subscribe("/output/displacement", Float64)
-        peer.spin_until(lambda: peer.last("/output/displacement") is not None, 60, "output")
+        peer.spin_until(lambda: peer.last("/output/displacement") is not None, FIRST_START_TIMEOUT,
+                        "output")
         # --keep-alive: the publisher outlives the reliable delivery of its one message.
         pub = ros2("topic", "pub", "--once", "--keep-alive", "1", "drive/displacement",
                    "std_msgs/msg/Float64", "{data: 1.0e-6}")

@@ -42,8 +42,11 @@ def test_a_change_to_a_module_compiled_into_the_loop_reaches_the_cached_loop(tmp
     package = tmp_path / "flexure_sim"
     # The source tree's Numba caches come along (copytree keeps the times Numba checks them
     # by), as in an installed package that has run before: only what the change below touches
-    # is compiled, not every kernel twice (the test took ~30 s on a slow machine).
-    shutil.copytree(ROOT / "flexure_sim", package, ignore=shutil.ignore_patterns("*.pyc"))
+    # is compiled, not every kernel twice (the test took ~30 s on a slow machine). A cache file
+    # another process is writing right now (Numba's "<name>.tmp.<uid>", renamed into place when
+    # complete: another pytest-xdist worker) stays behind: it can vanish while copytree runs.
+    shutil.copytree(ROOT / "flexure_sim", package,
+                    ignore=shutil.ignore_patterns("*.pyc", "*.nb[ic].tmp.*"))
     first = _dissipated(tmp_path)
     assert 0.0 < first < 1e-3
     caches = list((package / "engine" / "solver" / "__pycache__").glob("step_loop._advance-*.nbi"))

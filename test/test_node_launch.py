@@ -23,7 +23,7 @@ from std_msgs.msg import Float64
 
 from flexure_sim.recording import read_log
 
-from node_harness import NodeProcess, Peer, next_domain_id, node_env
+from node_harness import FIRST_START_TIMEOUT, NodeProcess, Peer, next_domain_id, node_env
 
 PACKAGE = "flexure_sim"
 
@@ -96,13 +96,13 @@ def test_ros2_run_starts_the_installed_node_with_the_builtin_stage(tmp_path):
     try:
         peer.subscribe("/output/displacement", Float64)
         drive = peer.publisher("/drive/displacement", Float64)
-        peer.wait_for_publishers(["/output/displacement"], timeout=30)
+        peer.wait_for_publishers(["/output/displacement"], timeout=FIRST_START_TIMEOUT)
         peer.wait_for_subscribers(drive)
         drive.publish(Float64(data=1.35e-6))
         peer.spin_until(
             lambda: peer.last("/output/displacement") is not None
             and peer.last("/output/displacement").data > 30e-6,
-            30,
+            FIRST_START_TIMEOUT,
             "the stage to move",
         )
     finally:
@@ -132,8 +132,9 @@ def test_console_script_runs_another_mechanism_and_stops_on_sigterm(tmp_path):
     peer.watch = node
     try:
         peer.subscribe("/bodies/poses", PoseArray)
-        peer.wait_for_publishers(["/bodies/poses"], timeout=30)
-        peer.spin_until(lambda: len(peer.received["/bodies/poses"]) > 20, 30, "poses")
+        peer.wait_for_publishers(["/bodies/poses"], timeout=FIRST_START_TIMEOUT)
+        peer.spin_until(lambda: len(peer.received["/bodies/poses"]) > 20, FIRST_START_TIMEOUT,
+                        "poses")
         assert len(peer.last("/bodies/poses").poses) == 4
     finally:
         peer.close()

@@ -31,6 +31,15 @@ def _weak_stage(tmp_path: Path) -> Path:
     return path
 
 
+def _first_stressed(messages) -> float | None:
+    """Sim time of the first diagnostics with a stress ratio off rest (None: none yet)."""
+    for msg in messages:
+        values = diagnostics_values(msg)
+        if float(values.get("stress_ratio_max", 0.0)) > 1e-9:
+            return float(values["sim_time"])
+    return None
+
+
 def test_diagnostics_warn_when_full_stroke_exceeds_yield_with_the_engines_ratio(tmp_path):
     mech_file = _weak_stage(tmp_path)
     expected_hinge, expected = peak_ratio(stress_table(
@@ -57,9 +66,13 @@ def test_diagnostics_warn_when_full_stroke_exceeds_yield_with_the_engines_ratio(
         at_full = pytest.approx(FULL_STROKE, rel=1e-12)
         peer.spin_until(lambda: peer.last("/drive/input").data == at_full, 30,
                         "the actuator to reach full stroke")
-        reached = float(diagnostics_values(peer.last("/diagnostics"))["sim_time"])
-        # Settled: 0.2 s of simulated time after the input reached the command (actuator lag
-        # 1 ms, the modes faster still), as the node's step-response test.
+        # When the stage started to move, from the diagnostics alone (one topic arrives in
+        # order; the last diagnostics received with /drive/input can be older than it).
+        peer.spin_until(lambda: _first_stressed(peer.messages("/diagnostics")) is not None, 60,
+                        "diagnostics of the stressed stage")
+        reached = _first_stressed(peer.messages("/diagnostics"))
+        # Settled: 0.2 s of simulated time after the input started to follow the command
+        # (actuator lag 1 ms, the modes faster still), as the node's step-response test.
         peer.spin_until(
             lambda: float(diagnostics_values(peer.last("/diagnostics"))["sim_time"])
             > reached + 0.2, 60, "settling")

@@ -4,12 +4,14 @@ flexure-sim sweep.
 Outputs against independent figures, failed designs, Ctrl-C and --resume, a LocalCluster worker
 killed mid-study, bit-identical results for any worker count.
 """
+import fcntl
 import json
 import math
 import os
 import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +52,43 @@ def _grid(values, outputs=("gain", "compression", "drive_force"), input=1.35e-6,
             "parameters": [{"name": "h", "path": "stiffness_models.notch.h", "values": values}],
             **over}
     return study_from_dict(data, "grid.yaml", OUTPUTS)
+
+
+class _OneLineAhead:
+    """
+    A child's stderr that holds one write at a time: the child runs at most a line ahead.
+
+    A packet-mode pipe (O_DIRECT) of one page takes one write; the child's next write blocks
+    until the test reads. A study that prints a line per batch cannot finish before the test's
+    Ctrl-C, however busy the machine (the test waits for an event, never for a time).
+    """
+
+    def __init__(self):
+        self.read_end, self.write_end = os.pipe2(os.O_DIRECT | os.O_CLOEXEC)
+        fcntl.fcntl(self.write_end, fcntl.F_SETPIPE_SZ, 4096)
+        self.rest: list[bytes] = []
+        self._drain = threading.Thread(target=self._read_to_end, daemon=True)
+
+    def started(self) -> None:
+        """Close our write end once the child holds it, so the end of its output is seen."""
+        os.close(self.write_end)
+
+    def line(self) -> str:
+        """Wait for the child's next write (a progress line) and return it."""
+        return os.read(self.read_end, 65536).decode()
+
+    def _read_to_end(self) -> None:
+        while chunk := os.read(self.read_end, 65536):
+            self.rest.append(chunk)
+
+    def finish(self, proc: subprocess.Popen, timeout: float) -> str:
+        """Read the child's remaining output while it ends; return that output."""
+        self._drain.start()
+        proc.wait(timeout=timeout)
+        self._drain.join(timeout=timeout)  # the LocalCluster's workers hold the pipe too
+        assert not self._drain.is_alive(), "the child's processes kept stderr open"
+        os.close(self.read_end)
+        return b"".join(self.rest).decode()
 
 
 # ------------------------------------------------------------------------------ outputs
@@ -304,13 +343,15 @@ def test_ctrl_c_keeps_finished_batches_and_resume_completes_the_study(tmp_path):
     reference = sweep.run_study(load_study(study, OUTPUTS), tmp_path / "ref.parquet", workers=1)
     out = tmp_path / "out.parquet"
     env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
+    stderr = _OneLineAhead()
     proc = subprocess.Popen([sys.executable, "-m", "flexure_sim.cli", "sweep", str(study),
                              "-o", str(out), "--workers", "1"], cwd=tmp_path, env=env,
-                            stderr=subprocess.PIPE, text=True)
-    first = proc.stderr.readline()  # printed once the first batch is stored
+                            stderr=stderr.write_end)
+    stderr.started()
+    first = stderr.line()  # printed once the first batch is stored
     assert first.startswith("flexure-sim sweep: 10/120 designs"), first
-    proc.send_signal(signal.SIGINT)
-    rest = proc.communicate(timeout=60)[1]
+    proc.send_signal(signal.SIGINT)  # the child can store at most two more batches before it
+    rest = stderr.finish(proc, timeout=60)
     assert proc.returncode == 130
     assert "interrupted: the finished batches are kept" in rest and "Traceback" not in rest
     kept = sorted(p.name for p in (tmp_path / "out.parquet.parts").glob("part-*.parquet"))
@@ -355,13 +396,15 @@ def test_ctrl_c_at_a_terminal_stops_a_local_cluster_study_cleanly(tmp_path):
     study = _small_stage_study(tmp_path, samples=400, batch_size=10)
     out = tmp_path / "out.parquet"
     env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
+    stderr = _OneLineAhead()
     proc = subprocess.Popen([sys.executable, "-m", "flexure_sim.cli", "sweep", str(study),
                              "-o", str(out), "--workers", "2"], cwd=tmp_path, env=env,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
-    first = proc.stderr.readline()  # printed once the first batch is stored
+                            stderr=stderr.write_end, start_new_session=True)
+    stderr.started()
+    first = stderr.line()  # printed once the first batch is stored
     assert first.startswith("flexure-sim sweep: 10/400 designs"), first
-    os.killpg(proc.pid, signal.SIGINT)  # what the terminal does
-    rest = proc.communicate(timeout=120)[1]
+    os.killpg(proc.pid, signal.SIGINT)  # what the terminal does; the study cannot end first
+    rest = stderr.finish(proc, timeout=120)
     assert proc.returncode == 130
     assert "Traceback" not in rest and "KeyboardInterrupt" not in rest, rest
     assert rest.strip().endswith("continue with --resume")
