@@ -15,6 +15,7 @@ while the other runs a long test. node_harness gives each worker its own DDS dom
 """
 import os
 import re
+import signal
 import sys
 from pathlib import Path
 
@@ -37,8 +38,19 @@ _USES_ROS = re.compile(
 
 
 def pytest_configure(config):
-    """Declare ``xdist_group`` where pytest-xdist is absent (``colcon test``)."""
+    """
+    Declare ``xdist_group`` where pytest-xdist is absent (``colcon test``); give Ctrl-C back.
+
+    A shell without job control starts a background command (``.ci/run &``, a CI runner's
+    step) with SIGINT ignored, and that disposition passes to every process it starts: a
+    Python child then never raises KeyboardInterrupt, and the tests that press Ctrl-C on a
+    child (``test_sweep``'s) saw the study run to its end (exit 0 instead of 130). The tests
+    restore Python's own handler, so that the children they start get SIGINT as a terminal
+    gives it (an installed handler is reset to the default across ``exec``).
+    """
     config.addinivalue_line("markers", "xdist_group(name): the tests of one pytest-xdist worker")
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def _shares_a_fixture(item) -> bool:
