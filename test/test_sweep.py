@@ -74,8 +74,17 @@ class _OneLineAhead:
         os.close(self.write_end)
 
     def line(self) -> str:
-        """Wait for the child's next write (a progress line) and return it."""
-        return os.read(self.read_end, 65536).decode()
+        """
+        Wait for the child's next progress line and return it.
+
+        Other writes before it are kept in `rest`: Dask warns there when another cluster holds
+        its default HTTP port (two studies at once, as the suite's two workers can run).
+        """
+        while True:
+            text = os.read(self.read_end, 65536).decode()
+            if not text or text.startswith("flexure-sim sweep:"):
+                return text
+            self.rest.append(text.encode())
 
     def _read_to_end(self) -> None:
         while chunk := os.read(self.read_end, 65536):
