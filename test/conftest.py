@@ -131,11 +131,6 @@ def peer(domain):
 
 
 @pytest.fixture
-def peer_and_domain():
-    """Return a fresh DDS domain and a real rclpy peer node on it (node_harness.Peer)."""
-    from node_harness import Peer, next_domain_id
-
-    domain = next_domain_id()
-    peer = Peer(domain)
-    yield peer, domain
-    peer.close()
+def peer_and_domain(peer, domain):
+    """Return the test's `peer` and its `domain` as one pair."""
+    return peer, domain

@@ -21,18 +21,13 @@ from flexure_sim.node.stage.loop_parts import LoopParts, LoopSettings
 from flexure_sim.node.stage.pacing import Pacer
 from flexure_sim.node.stage.stepping_thread import RELINEARIZE_TOL, SteppingLoop
 
+from test_node_stepping import Log  # a logger that discards
+
 DT = 1.0e-4
 RATE = 1000.0
 PERIOD = 1.0 / RATE
 #: Publish ticks per display tick.
 DISPLAY_EVERY = 4
-
-
-class Log:
-    def info(self, _text: str) -> None:
-        pass
-
-    warning = error = info
 
 
 class Kept:
