@@ -4,7 +4,8 @@ Live parameters and commands the engine cannot follow never stop stage_node (iss
 A real node process; real ``set_parameters`` calls and drive commands from a real rclpy peer.
 Strokes without a static equilibrium are refused with the engine's reason; a step that fails
 anyway holds the last good state (ERROR in the diagnostics, counted, logged), publishes no
-non-finite value, and the node goes on following later commands.
+non-finite value, and the node goes on following later commands. A parameter change is in
+force when ``set_parameters`` answers: the next command meets the new limits.
 """
 from __future__ import annotations
 
@@ -58,6 +59,35 @@ def test_a_stroke_without_static_equilibrium_is_refused_with_the_reason(tmp_path
     assert bad.wait(60) == 1
     assert "stroke_max" in bad.stderr and "no static equilibrium" in bad.stderr
     assert "Traceback" not in bad.stderr
+
+
+def test_a_command_sent_after_set_parameters_answered_meets_the_new_stroke(
+        tmp_path, peer_and_domain):
+    # At 2 Hz the stepping thread serves its queue once every 0.5 s. The microstage's own
+    # stroke ends at 2 um (config), so the node's default stroke_max clamps a 3 um command.
+    peer, domain = peer_and_domain
+    assert load_mechanism("microstage").drives[0].stroke[1] == pytest.approx(2e-6)
+    node = NodeProcess(tmp_path / "node", domain, dict(time_mode="realtime", sim_step=5e-4,
+                                                       publish_rate=2.0, record=False))
+    peer.watch = node
+    try:
+        peer.subscribe("/drive/input", Float64)
+        peer.subscribe("/diagnostics", DiagnosticArray)
+        drive = peer.publisher("/drive/displacement", Float64)
+        peer.wait_for_publishers(["/drive/input", "/diagnostics"])
+        peer.wait_for_subscribers(drive)
+        assert set_double(peer, "stroke_max", 4e-6) == (True, "")
+        drive.publish(Float64(data=3e-6))
+        peer.spin_until(lambda: any(m.data != 0.0 for m in peer.messages("/drive/input")), 20,
+                        "the actuator to move")
+        first = next(m.data for m in peer.messages("/drive/input") if m.data != 0.0)
+        assert first == pytest.approx(3e-6, rel=1e-9)  # 2e-6 when clamped to the old stroke
+        peer.spin_until(lambda: peer.last("/diagnostics") is not None, 20, "the diagnostics")
+        assert int(diagnostics_values(peer.last("/diagnostics"))["commands_clamped"]) == 0
+    finally:
+        rc = node.stop(signal.SIGINT)
+    assert rc == 0, node.stderr
+    assert "clamped" not in node.stderr
 
 
 def test_a_step_the_engine_cannot_take_holds_the_state_and_the_node_goes_on(

@@ -6,7 +6,10 @@ pre-set one turns ``ros2 param set`` integers and strings into the declared doub
 (``table.as_declared_type``), the on-set one checks the resulting set of values as a whole
 (``checks.validate``, per drive ``drive_bank.drives_problem``, and whether the engine could
 hold the changed stroke ends, ``engine_guard.StrokeProbe``), the post-set one hands accepted
-changes to the stepping thread through its request queue and notes them in the recording.
+changes to the stepping thread through its request queue, notes them in the recording, and
+returns once the stepping thread has taken them: a command sent after ``set_parameters``
+answered meets the new limits (the queue is served between ticks, so an answer waits up to one
+period).
 It uses the node's ``_specs``, ``_named``, ``_probe``, ``mechanism``, ``loop``, ``session``
 and ``_set_recording``.
 """
@@ -75,31 +78,45 @@ class LiveParameters:
         return SetParametersResult(successful=problem is None, reason=problem or "")
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
-        """Post-set callback: hand accepted changes to the stepping thread."""
+        """
+        Post-set callback: hand accepted changes to the stepping thread; wait until it took them.
+
+        Without the wait the service answered before the change reached the stepping thread,
+        so a command sent right after a successful ``stroke_max`` change could still be
+        clamped to the old stroke (``test_node_params_order``).
+        """
         names = {p.name for p in params}
         values = self._values()
         loop = self.loop
+        calls = []
         if names & {"stroke_min", "stroke_max", "slew_rate"} and not self._named \
                 and loop.filter is not None:
             limits = self._limits(values)
-            loop.requests.call(lambda: loop.filter.set_limits(limits))
+            calls.append(loop.requests.call(lambda: loop.filter.set_limits(limits)))
         for d in self._named:
             if names & {parameter_name(d.name, k) for k in LIMIT_KEYS}:
                 one, limits = loop.filter.filter(d.name), drive_limits(values, d.name)
-                loop.requests.call(lambda one=one, limits=limits: one.set_limits(limits))
+                calls.append(loop.requests.call(
+                    lambda one=one, limits=limits: one.set_limits(limits)))
         if names & {"publish_rate", "wake_spin", "monitor_rate", "merge_late_ticks"}:
             rate, spin = float(values["publish_rate"]), float(values["wake_spin"])
             monitor, merge = float(values["monitor_rate"]), int(values["merge_late_ticks"])
-            loop.requests.call(lambda: loop.set_pacing(rate, spin, monitor, merge))
+            calls.append(loop.requests.call(
+                lambda: loop.set_pacing(rate, spin, monitor, merge)))
         if names & {"publish_rate", "display_rate"}:
             every = display_every(float(values["publish_rate"]), float(values["display_rate"]))
-            loop.requests.call(lambda: setattr(loop, "display_every", every))
+            calls.append(loop.requests.call(lambda: setattr(loop, "display_every", every)))
         if "display_scale" in names:
             scale = float(values["display_scale"])
-            loop.requests.call(lambda: setattr(loop.display.display.scene, "display_scale", scale))
+            calls.append(loop.requests.call(
+                lambda: setattr(loop.display.display.scene, "display_scale", scale)))
         if "record" in names and not self._sync_record_param:
             ok, message = self._set_recording(bool(values["record"]))
             (self._log.info if ok else self._log.error)(message)
         changed = {p.name: value_text(p.value) for p in params}
-        loop.requests.call(lambda: self.session.note(
-            PARAMETER_CHANGE_NAME, {"t": repr(loop.sim.state.t), **changed}))
+        calls.append(loop.requests.call(lambda: self.session.note(
+            PARAMETER_CHANGE_NAME, {"t": repr(loop.sim.state.t), **changed})))
+        for future in calls:
+            ok, message = loop.requests.wait(future)
+            if not ok:
+                self._log.error(f"applying {', '.join(sorted(names))}: {message}")
