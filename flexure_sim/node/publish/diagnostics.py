@@ -213,6 +213,7 @@ class Diagnostics:
             ("stepping_priority", loop.priority),
             ("cpu_latency_us", loop.cpu_latency_us),
             ("ticks", loop.ticks),
+            ("subscribed_topics", loop.publish_calls.subscribed_count),
             *[(f"{part}_time_mean_us", 1e6 * total / n)
               for part, total in zip(TICK_PARTS, w.sums)],
             ("engine_time_max_us", 1e6 * w.engine_max),

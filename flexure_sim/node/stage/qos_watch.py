@@ -24,7 +24,7 @@ the window in which one appeared).
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable, Optional
 
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.qos import qos_policy_name_from_kind
@@ -52,7 +52,10 @@ class QosWatch:
         self._best_effort_seen = 0
 
     # ------------------------------------------------------------- callbacks
-    def publisher_callbacks(self, topic: str) -> PublisherEventCallbacks:
+    def publisher_callbacks(self, topic: str,
+                            matched: Optional[Callable[[Any], None]] = None
+                            ) -> PublisherEventCallbacks:
+        """Return the publisher's event callbacks: incompatible QoS, and ``matched`` if given."""
         def incompatible(event: Any) -> None:
             self.subscribers += max(int(getattr(event, "total_count_change", 1)), 1)
             policy = qos_policy_name_from_kind(event.last_policy_kind)
@@ -60,7 +63,7 @@ class QosWatch:
                 f"a subscriber of {topic} requests QoS this node does not offer ({policy}): "
                 f"it receives nothing (the node publishes reliable, volatile); "
                 f"{self.subscribers} such subscribers so far")
-        return PublisherEventCallbacks(incompatible_qos=incompatible)
+        return PublisherEventCallbacks(incompatible_qos=incompatible, matched=matched)
 
     def check_command_publishers(self, node: Any, topic: str) -> None:
         """

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import gc
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import rclpy
 from rclpy.exceptions import ParameterException
@@ -123,9 +123,10 @@ class StageNode(LiveParameters, Node):
         sim, drive_filter = self._simulation(values)
         self.qos_watch = watch = QosWatch(self._log, values["command_reliability"])
         qos = stream_qos()
-        tick_pubs = [self.create_publisher(t.msg_type, t.name, qos,
-                                           event_callbacks=watch.publisher_callbacks(t.name))
-                     for t in self.interface.tick_topics]
+        tick_pubs = [self.create_publisher(
+            t.msg_type, t.name, qos,
+            event_callbacks=watch.publisher_callbacks(t.name, self._on_matched(k)))
+            for k, t in enumerate(self.interface.tick_topics)]
         self._tick_names = [p.topic_name for p in tick_pubs]
         diagnostics = self.interface.diagnostics
         diag_pub = self.create_publisher(
@@ -187,6 +188,13 @@ class StageNode(LiveParameters, Node):
         ready = self.create_publisher(Bool, "~/ready", READY_QOS)
         loop.start(self._stepping_ended, self._stepping_failed,
                    lambda: ready.publish(Bool(data=True)))
+
+    def _on_matched(self, index: int) -> Callable[[Any], None]:
+        """Return tick topic ``index``'s matched-event callback: published while subscribed."""
+        def matched(status: Any) -> None:
+            if self.loop is not None:
+                self.loop.publish_calls.set_subscribed(index, int(status.current_count) > 0)
+        return matched
 
     def _declare_parameters(self) -> dict[str, Any]:
         """

@@ -238,7 +238,8 @@ class SteppingLoop:
 
     # ------------------------------------------------------------------ ticks
     def step_once(self) -> tuple[bool, str]:
-        """One tick (lockstep ``~/step``)."""
+        """One tick (lockstep ``~/step``), to every topic subscribed when it was called."""
+        self.publish_calls.refresh()
         if not self.tick():
             return False, f"{self.hold.last_error}; state held at t = {self.sim.state.t:.9g} s"
         return True, f"t = {self.sim.state.t:.9g} s"
@@ -300,8 +301,7 @@ class SteppingLoop:
         measured = (self.sensor.sample(float(values[self._output_at]))
                     if self.sensor is not None else 0.0)
         monitor = crossed(self.ticks, span, self.monitor_every)
-        calls = self.publish_calls
-        publishers = calls.full if monitor else calls.control
+        publishers = self.publish_calls.current(monitor)
         session = self.session
         frame = self.frame
         # Recorded first, so that the file holds every message a subscriber can have seen even
@@ -312,7 +312,9 @@ class SteppingLoop:
             if session.current is not None:
                 session.write_frame(body, layout.channels)
             t5 = perf()
-            for publish, (start, end) in zip(publishers, layout.spans):
+            spans = layout.spans
+            for k, publish in publishers:
+                start, end = spans[k]
                 publish(body[start:end])
         else:
             snap = report.last_snapshot if self.spatial else sim.snapshot()
@@ -322,8 +324,8 @@ class SteppingLoop:
             if session.current is not None:
                 session.write(list(zip(channels, payloads)), stamp)
             t5 = perf()
-            for publish, payload in zip(publishers, payloads):
-                publish(payload)
+            for k, publish in publishers:
+                publish(payloads[k])
         t6 = perf()
         self._tick_work = t6 - t0
         if self.diagnostics is not None:
