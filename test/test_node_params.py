@@ -223,6 +223,47 @@ def test_pacer_period_change_and_reanchor():
         Pacer(0.0)
 
 
+class TickingClock(FakeClock):
+    """A FakeClock that also moves 1 us at every reading (a busy-wait's time passes)."""
+
+    def __init__(self):
+        super().__init__()
+        self.sleeps: list[float] = []
+
+    def __call__(self):
+        self.t += 1e-6
+        return self.t
+
+    def sleep(self, s):
+        self.sleeps.append(s)
+        super().sleep(s)
+
+
+def test_a_wait_with_a_spin_sleeps_only_when_the_sleep_outlasts_the_timer_slack():
+    # Linux's default timer slack, 50 us (prctl(2), PR_SET_TIMERSLACK), bounds the shortest
+    # sleep worth making before a busy-wait of 0.2 ms.
+    spin = 2e-4
+    for work, slept in ((1e-3 - spin - 30e-6, False), (1e-3 - spin - 80e-6, True)):
+        clock = TickingClock()
+        pacer = Pacer(1e-3, spin_s=spin, clock=clock, sleep=clock.sleep)
+        pacer.start()
+        start = clock.t
+        clock.t += work  # the previous tick's work, 30 or 80 us before the spin would begin
+        deadline = pacer.wait()
+        assert deadline == pytest.approx(start + 1e-3, abs=2e-6)
+        assert clock.t >= deadline  # never early, spun or slept
+        assert bool(clock.sleeps) is slept, clock.sleeps
+        if slept:
+            assert clock.sleeps[0] == pytest.approx(80e-6, abs=3e-6)
+    # Without a spin every wait sleeps, however short.
+    clock = TickingClock()
+    pacer = Pacer(1e-3, clock=clock, sleep=clock.sleep)
+    pacer.start()
+    clock.t += 1e-3 - 10e-6
+    pacer.wait()
+    assert len(clock.sleeps) == 1 and clock.sleeps[0] == pytest.approx(10e-6, abs=3e-6)
+
+
 def test_recording_names_hold_the_node_and_take_the_next_suffix_when_taken(tmp_path):
     now = dt.datetime(2026, 1, 2, 3, 4, 5, tzinfo=dt.timezone.utc)
     d = str(tmp_path / "runs")
