@@ -83,7 +83,7 @@ class LiveParameters:
 
         Without the wait the service answered before the change reached the stepping thread,
         so a command sent right after a successful ``stroke_max`` change could still be
-        clamped to the old stroke (``test_node_params_order``).
+        clamped to the old stroke (``test_node_engine_guard``).
         """
         names = {p.name for p in params}
         values = self._values()

@@ -4,8 +4,9 @@
 It loads the mechanism, declares and validates the parameters (`params`, `declare`), creates
 the publishers, the polled command subscription (`polled`, `commands`) and the services, and
 hands everything that touches the simulation or the recording to the stepping thread
-(`stepping`) through its request queue (`requests`). Recording files are managed by a
-`session.RecordingSession`, diagnostics by `diagnostics`, incompatible QoS by `qos_watch`.
+(`stepping`) through its request queue (`requests`); its services are in `services`.
+Recording files are managed by a `session.RecordingSession`, diagnostics by `diagnostics`,
+incompatible QoS by `qos_watch`.
 The executor (main thread) serves only services, parameter changes and QoS events. Topics,
 parameters and services are documented in docs/node.md.
 """
@@ -18,7 +19,6 @@ from typing import Any, Callable, Optional
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.task import Future
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, Trigger
@@ -31,11 +31,10 @@ from flexure_sim.errors import FlexureSimError
 from flexure_sim.engine.solver.simulation import Simulation
 from flexure_sim.recording import RecordingError
 from flexure_sim.node.publish import interface as itf
-from flexure_sim.node.publish.cdr import REJECTED_TYPE
 from flexure_sim.node.publish.qos_profiles import READY_QOS, command_qos, stream_qos
 from flexure_sim.node.publish.spatial_messages import SpatialInterface
 from flexure_sim.node.stage.spatial_report import SpatialReport
-from flexure_sim.node.inputs.command_intake import REJECTED_SUFFIX, intake_for
+from flexure_sim.node.inputs.command_intake import intake_for
 from flexure_sim.node.params.declare import (
     coerce_integer_overrides, declare, undeclared_drive_overrides,
 )
@@ -49,11 +48,12 @@ from flexure_sim.node.inputs.command_checks import CommandFilter, WarningThrottl
 from flexure_sim.node.stage.engine_guard import StrokeProbe
 from flexure_sim.node.stage.pacing import set_threads_nice
 from flexure_sim.node.params.live import LiveParameters
+from flexure_sim.node.stage.services import StageServices
 from flexure_sim.node.params.table import SPACES, parameter_specs
 from flexure_sim.node.stage.polled import PolledGroup, never_called
 from flexure_sim.node.stage.qos_watch import QosWatch
 from flexure_sim.node.stage.requests import REQUEST_TIMEOUT_S
-from flexure_sim.node.record.session import RecordingSession, run_metadata
+from flexure_sim.node.record.session import RecordingSession
 from flexure_sim.node.stage.loop_parts import LoopParts, LoopSettings
 from flexure_sim.node.stage.stepping_thread import RELINEARIZE_TOL, SteppingLoop
 
@@ -101,7 +101,7 @@ def load(mechanism_arg: Any, space: Any = "auto") -> tuple[Any, Path]:
     return mech, path
 
 
-class StageNode(LiveParameters, Node):
+class StageNode(LiveParameters, StageServices, Node):
     """The stage node. Construct after ``rclpy.init``; call `shutdown` before destroy_node."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -287,75 +287,6 @@ class StageNode(LiveParameters, Node):
     @property
     def time_mode(self) -> str:
         return self.loop.time_mode
-
-    # ================================================================ services
-    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        response.success, response.message = self.loop.requests.run(self._reset)
-        return response
-
-    def _on_record(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
-        ok, message = self._set_recording(bool(request.data))
-        if ok:
-            self._sync_record_param = True
-            try:
-                self.set_parameters([Parameter("record", Parameter.Type.BOOL, bool(request.data))])
-            finally:
-                self._sync_record_param = False
-        response.success, response.message = ok, message
-        return response
-
-    def _on_step(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        if self.time_mode != "lockstep":
-            response.success = False
-            response.message = ("~/step works in lockstep mode only "
-                                f"(time_mode is {self.time_mode})")
-            return response
-        response.success, response.message = self.loop.requests.run(self.loop.step_once)
-        return response
-
-    def _set_recording(self, on: bool) -> tuple[bool, str]:
-        def change() -> tuple[bool, str]:
-            current = self.session.current
-            if on:
-                if current is not None:
-                    return True, f"already recording to {current.path}"
-                return True, f"recording to {self._start_recording()}"
-            if current is None:
-                return True, "not recording"
-            return True, f"closed {self.session.stop()}"
-        return self.loop.requests.run(change)
-
-    # ======================================================= stepping-thread work
-    def _start_recording(self) -> Path:
-        values = self._values()
-        qos = stream_qos()
-        topics = [(name, spec.type_name, qos)
-                  for name, spec in zip(self._tick_names, self.interface.tick_topics)]
-        topics.append((self._diag_topic, self.interface.diagnostics.type_name, qos))
-        commands = command_qos(values["command_reliability"], values["command_depth"])
-        for sub, spec in zip(self._command_subs, self.interface.commands):
-            topics.append((sub.topic_name, spec.type_name, commands))
-        topics += self._display_topics
-        topics += [(sub.topic_name + REJECTED_SUFFIX, REJECTED_TYPE, commands)
-                   for sub in self._command_subs]
-        loop = self.loop
-        node = self.get_fully_qualified_name()
-        metadata = run_metadata(values, self.mechanism, self.mechanism_path, self.interface, node,
-                                loop.n_steps, RELINEARIZE_TOL, loop.runs, loop.sim.state.t)
-        metadata["space"] = "3d" if self.spatial else "2d"  # the engine that ran
-        return self.session.start(values, self.mechanism.name, node, topics, metadata,
-                                  lossless=self.time_mode != "realtime")
-
-    def _reset(self) -> tuple[bool, str]:
-        closed = self.session.stop()
-        self.loop.reset()
-        message = "simulation reset to t = 0"
-        if closed is not None:
-            message += f"; closed {closed}"
-            if self.get_parameter("record").value:
-                message += f"; recording to {self._start_recording()}"
-        self._log.info(message)
-        return True, message
 
     # ================================================================ shutdown
     def _stepping_failed(self, exc: BaseException) -> bool:

@@ -4,11 +4,11 @@ The stage node's stepping thread.
 It owns the `Simulation` and the recording, and per publish tick applies the drive commands
 received since the last tick (`command_intake`), advances the engine by round(1 /
 (publish_rate * sim_step)) steps, reports the state in one compiled call (the engine's
-``tick_report``), packs every message into one recorder frame in another (`tick_frame`), hands
-that frame to the recorder and publishes slices of it: the bytes recorded are the bytes
-published. A mechanism in space is reported by its snapshot and packed by its interface
-(`LoopParts.report`: ``spatial_report``). The loop is built from its parts (`LoopParts`, made
-by ``shell.StageNode``) and its settings (`LoopSettings`, the node's parameters).
+``tick_report``), packs every message into one recorder frame in another (`tick_frame`),
+records that frame and publishes slices of it to the subscribed topics (`raw_publish`). A
+mechanism in space is reported by its snapshot and packed by its interface (`LoopParts.report`:
+``spatial_report``). Built from its parts (`LoopParts`, made by ``shell.StageNode``) and its
+settings (`LoopSettings`, the node's parameters).
 
 Real-time mode paces ticks with absolute deadlines of a steady clock (`pacing.Pacer`; with
 ``merge_late_ticks`` a loop that many ticks late merges them into one that steps the engine
@@ -41,13 +41,12 @@ from flexure_sim.node.stage.qos_watch import GRAPH_CHECK_PERIOD_S
 from flexure_sim.node.stage.requests import RequestQueue
 from flexure_sim.node.stage.tick_extras import TickExtras, crossed
 
-#: Engine's relinearize_tol: None = its default, re-linearize only when the step's iteration
-#: stops contracting (the answer does not depend on where the Jacobian was taken), which lets
-#: Simulation.step(n) run all n steps in one compiled loop.
+#: Engine's relinearize_tol: None = re-linearize only when the step's iteration stops
+#: contracting (answers do not depend on where it was taken): step(n) is one compiled loop.
 RELINEARIZE_TOL = None
 #: Diagnostics rate (Hz of simulated time), or every tick if the publish rate is lower.
 DIAGNOSTICS_RATE = 10.0
-#: Real time: lateness (s) beyond which the schedule slips (re-anchors), catching up tick by
+#: Real time: lateness (s) beyond which the schedule slips (re-anchors): catching up tick by
 #: tick, and merging late ticks (``merge_late_ticks``; then only a stopped process slips).
 SLIP_LAG_S = 0.1
 MERGE_MAX_LAG_S = 1.0
@@ -238,7 +237,7 @@ class SteppingLoop:
 
     # ------------------------------------------------------------------ ticks
     def step_once(self) -> tuple[bool, str]:
-        """One tick (lockstep ``~/step``), to every topic subscribed when it was called."""
+        """One tick (lockstep ``~/step``) to the topics subscribed at the call."""
         self.publish_calls.refresh()
         if not self.tick():
             return False, f"{self.hold.last_error}; state held at t = {self.sim.state.t:.9g} s"
