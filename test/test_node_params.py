@@ -359,3 +359,33 @@ def test_numbers_given_as_integers_or_yaml_strings_set_double_parameters():
     # A non-finite string becomes a float that the validation then refuses, with the reason.
     values = defaults() | {"stroke_max": as_declared_type(stroke, "nan")}
     assert "stroke_max: must be finite" in validate(values)
+
+
+def test_a_spinning_wait_warms_once_when_time_is_left_and_never_without_a_spin():
+    clock = TickingClock()
+    warmed: list[float] = []
+    spin = 2e-4
+    pacer = Pacer(1e-3, spin_s=spin, warm=lambda: warmed.append(clock.t), clock=clock,
+                  sleep=clock.sleep)
+    pacer.start()
+    start = clock.t
+    clock.t += 100e-6  # the previous tick's work
+    deadline = pacer.wait()
+    # Once, after the sleep, where the busy-wait begins (the spin's 0.2 ms before the deadline).
+    assert len(warmed) == 1
+    assert deadline - spin <= warmed[0] <= deadline - spin + 30e-6
+    assert deadline == pytest.approx(start + 1e-3, abs=2e-6)
+    # Less than pacing.WARM_MARGIN_S (50 us) left: no warm-up, the tick is due.
+    clock.t = deadline + 1e-3 - 40e-6
+    pacer.wait()
+    assert len(warmed) == 1
+    # A late tick: no wait, no warm-up.
+    clock.t += 2.5e-3
+    pacer.wait()
+    assert len(warmed) == 1
+    # Without a spin the wait sleeps to the deadline: no warm-up.
+    clock = TickingClock()
+    pacer = Pacer(1e-3, warm=lambda: warmed.append(clock.t), clock=clock, sleep=clock.sleep)
+    pacer.start()
+    pacer.wait()
+    assert len(warmed) == 1

@@ -147,3 +147,46 @@ def test_a_ramp_that_fails_leaves_the_state_as_it_was(energy):
     assert sim.state is before and np.array_equal(sim.state.command, command)
     sim.step_commands([1.1e-6, 1.2e-6], STEPS)  # and steps on from there
     assert sim.state.t == pytest.approx(before.t + STEPS * sim.dt, rel=1e-12)
+
+
+@pytest.mark.parametrize("energy", [False, True])
+def test_warm_runs_the_next_step_and_leaves_every_state_as_it_was(energy, monkeypatch):
+    """
+    ``Simulation.warm`` (the paced node's busy-wait) steps the loop once and keeps nothing.
+
+    A simulation warmed before every tick, at rest and under a closed loop's new commands,
+    steps the states and counters of one never warmed, to the bit; each warm ran the loop once
+    (counted around the integrator's call); with no linearization at hand it takes none.
+    """
+    from flexure_sim.engine.solver import integrator
+
+    mech = load_mechanism("microstage")
+    warmed, plain = Simulation(mech, energy=energy), Simulation(mech, energy=energy)
+    calls = []
+    real = integrator._advance
+    monkeypatch.setattr(integrator, "_advance",
+                        lambda *a: calls.append(a[2]) or real(*a))
+    warmed.warm()  # nothing stepped yet: no linearization, no seed
+    assert calls == [] and warmed.data.lin is None and warmed.stats.linearizations == 0
+    for k in range(30):
+        command = 1e-6 if k < 15 else 1e-6 + 1e-9 * (k % 4)
+        for sim in (warmed, plain):
+            sim.set_command(command)
+        if k:
+            before = (warmed.data.state, warmed.data.cache, warmed.data.lin, warmed.data.clock)
+            n_calls = len(calls)
+            warmed.warm()
+            assert calls[n_calls:] == [1]
+            after = (warmed.data.state, warmed.data.cache, warmed.data.lin, warmed.data.clock)
+            assert all(x is y for x, y in zip(before, after))
+        for sim in (warmed, plain):
+            sim.step(STEPS)
+        _same(warmed, plain)
+        if energy:
+            assert warmed.state.dissipated == plain.state.dissipated
+            assert warmed.state.drive_work == plain.state.drive_work
+    warmed.data.lin = None  # a linearization due: warm leaves it to the step
+    n_calls, linearizations = len(calls), warmed.stats.linearizations
+    warmed.warm()
+    assert len(calls) == n_calls and warmed.data.lin is None
+    assert warmed.stats.linearizations == linearizations

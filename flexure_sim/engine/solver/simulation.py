@@ -82,6 +82,10 @@ class Simulation(Facade):
         """
         actuation.step(self.model, self.data, n)
 
+    def warm(self) -> None:
+        """Run the next step and discard it: the state is unchanged (``integrator.warm``)."""
+        integrator.warm(self.model, self.data)
+
     def step_commands(self, commands, n: int) -> None:
         """
         Take n steps, step i holding ``commands[i]`` (the last one held for the steps beyond).

@@ -25,7 +25,7 @@ import sys
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Optional
 
 import numpy as np
 
@@ -36,6 +36,9 @@ import numpy as np
 #: tick (47 us) and the 0.2 ms spin leave ~3 us to sleep, interleaved 10 s runs on a 2-core VM
 #: missed 0.03-0.18 % of the ticks spinning against 0.24-0.70 % sleeping those microseconds.
 MIN_SLEEP_S = 50e-6
+#: A wait calls its ``warm`` only with more than this left before the deadline (s): a warm-up
+#: (the engine's next step, discarded: ~10 us) must end before the tick is due.
+WARM_MARGIN_S = 50e-6
 #: Lateness histogram: 1 us bins up to 20 ms, the last bin collects anything later.
 _BIN_S = 1e-6
 _BINS = 20_000
@@ -93,7 +96,10 @@ class Pacer:
 
     ``spin_s``: the last part of each wait is busy-waited instead of slept (sleep overshoots by
     ~0.1 ms and lets the core idle); with a spin, a wait whose sleep would be shorter than
-    `MIN_SLEEP_S` spins throughout. ``merge_after``: periods of lateness from which the late
+    `MIN_SLEEP_S` spins throughout. ``warm``: called once where the busy-wait begins, if more
+    than `WARM_MARGIN_S` is left (the engine's discarded next step, ``Simulation.warm``: the
+    tick then finds its code and data in the core's caches); not without a spin.
+    ``merge_after``: periods of lateness from which the late
     ticks are merged into one (0: never, catch up tick by tick). ``clock`` and ``sleep`` are
     injectable for tests.
     """
@@ -105,6 +111,7 @@ class Pacer:
         max_lag_s: float = 0.1,
         spin_s: float = 0.0,
         merge_after: int = 0,
+        warm: Optional[Callable[[], None]] = None,
         clock: Callable[[], float] = time.perf_counter,
         sleep: Callable[[float], None] = time.sleep,
     ) -> None:
@@ -117,6 +124,7 @@ class Pacer:
         self.stats = PacingStats()
         self.spin_s = float(spin_s)
         self.merge_after = int(merge_after)
+        self.warm = warm
         #: Periods the current tick covers (1, or more when late ticks were merged into it).
         self.span = 1
         self._t0 = clock()
@@ -167,6 +175,8 @@ class Pacer:
                 if deadline - now - spin >= MIN_SLEEP_S:
                     self._sleep(deadline - now - spin)
                 clock = self._clock
+                if self.warm is not None and deadline - clock() > WARM_MARGIN_S:
+                    self.warm()
                 while clock() < deadline:
                     pass
             self.stats.observe(self._clock() - deadline)  # the sleep's overshoot

@@ -98,7 +98,8 @@ class SteppingLoop:
         spec = interface.mechanism.sensor if interface.has_sensor else None
         self.sensor: Optional[Sensor] = Sensor(spec, 1.0 / rate) if spec is not None else None
         self.pacer: Optional[Pacer] = (
-            Pacer(1.0 / rate, spin_s=min(settings.wake_spin, 1.0 / rate))
+            Pacer(1.0 / rate, spin_s=min(settings.wake_spin, 1.0 / rate),
+                  warm=getattr(sim, "warm", None))
             if time_mode == "realtime" else None)
         self._set_merge(settings.merge_after)
         #: Warns when real-time ticks do not fit their period (`overrun`).
