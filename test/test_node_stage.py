@@ -720,7 +720,10 @@ def test_invalid_startup_parameters_and_bad_mechanisms_stop_with_the_reason(tmp_
         "step": (dict(sim_step=3e-4), "does not divide"),
         "zero_step": (dict(sim_step=0.0), "sim_step"),
         "mode": (dict(time_mode="slow"), "time_mode"),
-        "range": (dict(publish_rate=20000.0), "publish_rate"),
+        "range": (dict(publish_rate=20000.0),
+                  "invalid parameter publish_rate: 20000.0 is outside its range [1, 10000] Hz"),
+        "int_range": (dict(stepping_priority=150),
+                      "invalid parameter stepping_priority: 150 is outside its range [0, 99]"),
         "stroke": (dict(stroke_min=3e-6), "stroke_min"),
     }
     nodes = {

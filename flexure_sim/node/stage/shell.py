@@ -236,11 +236,22 @@ class StageNode(LiveParameters, StageServices, Node):
         return values
 
     def _declare_checked(self, spec: Any) -> None:
-        """Declare one parameter; StartupError naming it if its override has the wrong type."""
+        """
+        Declare one parameter; StartupError naming it if its override is refused.
+
+        Refused for its type (the type expected and the one given) or, of the right type,
+        for the parameter's range (the value and the range).
+        """
         try:
             declare(self, spec)
         except ParameterException as exc:
             given = self._parameter_overrides.get(spec.name)
+            if (given is not None and type(given.value) is spec.type
+                    and spec.low is not None and spec.high is not None):
+                raise StartupError(
+                    f"invalid parameter {spec.name}: {given.value!r} is outside its range "
+                    f"[{spec.low:g}, {spec.high:g}]{' ' + spec.unit if spec.unit else ''}"
+                ) from exc
             got = (f"got {given.type_.name.lower()} {given.value!r}" if given is not None
                    else str(exc))
             raise StartupError(f"invalid parameter {spec.name}: expected a "
