@@ -82,6 +82,9 @@ def node_env(domain_id: int, **extra: str) -> dict[str, str]:
         ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
         PYTHONUNBUFFERED="1",
         RCUTILS_COLORIZED_OUTPUT="0",
+        # A process that hangs is sent SIGABRT (`NodeProcess.wait`): Python's faulthandler
+        # then writes every thread's stack to its stderr, which the failure shows.
+        PYTHONFAULTHANDLER="1",
     )
     env.update(extra)
     return env
@@ -133,11 +136,33 @@ class NodeProcess:
         self.proc.send_signal(sig)
 
     def wait(self, timeout: float = 30.0) -> int:
+        """
+        Return the exit code; a process still running after ``timeout`` s is aborted.
+
+        SIGABRT: its faulthandler (``node_env``) writes every thread's stack to its stderr,
+        printed here (pytest shows it with the failure); then TimeoutExpired as before.
+        """
         try:
             return self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self._dump_stacks()
+            raise
         finally:
             self._out.flush()
             self._err.flush()
+
+    def _dump_stacks(self) -> None:
+        if self.proc.poll() is not None:
+            return
+        self.proc.send_signal(signal.SIGABRT)
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(timeout=10)
+        self._err.flush()
+        print(f"{' '.join(self.args)} hung; its stderr, with the threads' stacks:\n"
+              f"{self.stderr[-20000:]}", file=sys.stderr)
 
     def stop(self, sig: int = signal.SIGINT, timeout: float = 30.0) -> int:
         if self.alive():
