@@ -18,10 +18,13 @@ once, and the code that can receive that exception is all inside one ``try``.
 """
 from __future__ import annotations
 
+import contextlib
+import faulthandler
+import gc
 import signal
 import sys
 import threading
-from typing import Any, Optional
+from typing import Any, Iterator, Optional
 
 from flexure_sim.console import quiet_pipe
 from flexure_sim.errors import FlexureSimError
@@ -29,6 +32,8 @@ from flexure_sim.errors import FlexureSimError
 #: GIL switch interval: keeps the stepping thread's latency low while callbacks run.
 SWITCH_INTERVAL_S = 0.0005
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
+#: Seconds the middleware may take to release the node at exit (`exit_deadline`).
+EXIT_GRACE_S = 10.0
 
 USAGE = """usage: stage_node [--ros-args -p NAME:=VALUE ...]
 
@@ -147,6 +152,9 @@ class Run:
         self.error: Optional[str] = None
         self.code = 0
         self._threads: set[int] = set()
+        #: What ended the run, kept until `end` releases it: its traceback may hold a node
+        #: that failed half-built, whose release can hang (`exit_deadline`).
+        self.exc: Optional[BaseException] = None
 
     def init(self, argv: list[str]) -> None:
         """``rclpy.init`` with rclpy's signal handlers on top of the guard's."""
@@ -173,6 +181,7 @@ class Run:
 
     def failed(self, exc: BaseException) -> None:
         """Take note of what ended the run."""
+        self.exc = exc
         if isinstance(exc, Done):
             self.code = exc.code
         elif isinstance(exc, Interrupted):
@@ -186,8 +195,16 @@ class Run:
         # KeyboardInterrupt (a handler other than the guard's, none expected): as SIGINT.
 
     def end(self) -> int:
-        """Finish the recording, release ROS, print the one line; return the exit code."""
+        """
+        Finish the recording, release ROS, print the one line; return the exit code.
+
+        A reason known before ROS is released is printed first: releasing it can hang
+        (`exit_deadline`, which then ends the process).
+        """
         self.guard.started()
+        said = self.error is not None
+        if said:
+            print(f"stage_node: error: {self.error}", file=sys.stderr, flush=True)
         if self.rclpy is not None or self.node is not None:
             try:
                 if _clean_up(self):
@@ -195,7 +212,8 @@ class Run:
             except Exception as exc:  # noqa: BLE001 - still one line
                 self.error = self.error or f"while shutting down: {type(exc).__name__}: {exc}"
         if self.error is not None:
-            print(f"stage_node: error: {self.error}", file=sys.stderr)
+            if not said:
+                print(f"stage_node: error: {self.error}", file=sys.stderr)
             self.code = max(self.code, 1)
         elif self.guard.received is not None:
             when = " during start-up" if self.node is None else ""
@@ -219,7 +237,12 @@ def _startup_error(exc: Optional[BaseException]) -> Optional[str]:
 
 
 def _clean_up(run: Run) -> bool:
-    """Finish the recording and release ROS; True if the simulation had failed."""
+    """
+    Finish the recording and release ROS; True if the simulation had failed.
+
+    The recording first, with no deadline; then ROS (the node, a node that failed half-built
+    with the exception that holds it, the context) within `EXIT_GRACE_S` (`exit_deadline`).
+    """
     failed = False
     node = run.node
     if run.rclpy is not None:
@@ -232,13 +255,38 @@ def _clean_up(run: Run) -> bool:
     if node is not None:
         node.shutdown()
         failed = node.failure is not None
-        try:
-            node.destroy_node()
-        except Exception:  # noqa: BLE001 - the context is already gone
-            pass
-    if run.rclpy is not None:
-        run.rclpy.try_shutdown()
+    with exit_deadline(EXIT_GRACE_S):
+        if run.exc is not None:
+            run.exc = None
+            gc.collect()  # a half-built node in a reference cycle goes now, not at exit
+        if node is not None:
+            try:
+                node.destroy_node()
+            except Exception:  # noqa: BLE001 - the context is already gone
+                pass
+        if run.rclpy is not None:
+            run.rclpy.try_shutdown()
     return failed
+
+
+@contextlib.contextmanager
+def exit_deadline(seconds: float) -> Iterator[None]:
+    """
+    End the process with exit code 1 if the block takes longer than ``seconds``.
+
+    For releasing the middleware: in one CI run a node that failed to start spun for 35 min
+    (one core busy, nothing printed) in Fast DDS 2.14's ``DomainParticipant::set_listener``
+    under ``rcl_node_fini``, which waits for an in-flight discovery callback while that callback
+    waited for the mutex the spinning thread kept taking (eight node processes starting at once
+    on one domain; eProsima/Fast-DDS#6513 describes the spin). The spinning thread holds the
+    GIL, so no Python thread can end it: faulthandler's watchdog, a C thread, writes every
+    thread's stack to stderr and exits.
+    """
+    faulthandler.dump_traceback_later(seconds, exit=True, file=sys.stderr)
+    try:
+        yield
+    finally:
+        faulthandler.cancel_dump_traceback_later()
 
 
 @quiet_pipe
