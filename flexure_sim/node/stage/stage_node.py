@@ -282,7 +282,10 @@ def exit_deadline(seconds: float) -> Iterator[None]:
     GIL, so no Python thread can end it: faulthandler's watchdog, a C thread, writes every
     thread's stack to stderr and exits.
     """
-    faulthandler.dump_traceback_later(seconds, exit=True, file=sys.stderr)
+    try:
+        faulthandler.dump_traceback_later(seconds, exit=True, file=sys.stderr)
+    except (AttributeError, ValueError, OSError):  # a stderr without a file descriptor
+        faulthandler.dump_traceback_later(seconds, exit=True, file=sys.__stderr__)
     try:
         yield
     finally:
