@@ -1,10 +1,12 @@
 """
-A stage_node process that cannot release its middleware at exit ends anyway.
+How stage_node ends when C code is in the way (real subprocesses, no node needed).
 
-Releasing a node can hang in the middleware (``stage_node.exit_deadline``: Fast DDS spinning
-in ``DomainParticipant::set_listener`` while it holds the GIL). The deadline is a C thread
-(faulthandler's), so it ends even a process whose main thread never gives the GIL back: a
-foreign call made through ``ctypes.PyDLL``, which keeps the GIL, to ``pause(2)``.
+- Releasing a node can hang in the middleware (``stage_node.exit_deadline``: Fast DDS spinning
+  in ``DomainParticipant::set_listener`` while it holds the GIL). The deadline is a C thread
+  (faulthandler's), so it ends even a process whose main thread never gives the GIL back: a
+  foreign call made through ``ctypes.PyDLL``, which keeps the GIL, to ``pause(2)``.
+- A start-up signal that lands in a Python function C calls back (llvmlite's object-cache
+  hook, while Numba compiles) is sent again and stops start-up after it (``SignalGuard``).
 """
 from __future__ import annotations
 
@@ -51,3 +53,42 @@ def test_a_release_in_time_goes_on_and_the_deadline_is_cancelled():
     done, _ = _run("pass\nimport time; time.sleep(2.0)", seconds=0.5)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "released"
+
+
+CALLBACK = """
+import ctypes, os, signal, sys, time
+from flexure_sim.node.stage.stage_node import Interrupted, SignalGuard
+guard = SignalGuard()
+guard.install()
+
+def _raw_object_cache_notify():  # as llvmlite's hook, called from C through ctypes
+    os.kill(os.getpid(), signal.SIGINT)
+    end = time.monotonic() + 0.2
+    while time.monotonic() < end:  # the handler runs here, within the callback
+        pass
+
+hook = ctypes.CFUNCTYPE(None)(_raw_object_cache_notify)
+try:
+    hook()
+    end = time.monotonic() + 10.0
+    while time.monotonic() < end:  # Python code that can take the exception
+        pass
+    print("not interrupted")
+except Interrupted as exc:
+    print("interrupted after the callback by signal", exc.signum, guard.received)
+"""
+
+
+def test_a_signal_during_start_up_that_lands_in_a_c_callback_stops_start_up_after_it():
+    """
+    Ctrl-C while Numba compiles (a fresh install's first start) can land in llvmlite's
+    object-cache hook, a Python function C calls through ctypes, where an exception is printed
+    ("Exception ignored ...", a traceback) and lost. The guard sends the signal again and it
+    raises in the Python code after the callback.
+    """
+    done = subprocess.run([sys.executable, "-c", CALLBACK], cwd=ROOT, capture_output=True,
+                          text=True, timeout=60,
+                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "interrupted after the callback by signal 2 2", done.stdout
+    assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr, done.stderr

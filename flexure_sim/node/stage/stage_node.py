@@ -14,13 +14,16 @@ start-up the first SIGINT/SIGTERM aborts it (an exception from the handler); whi
 runs, rclpy's own handler shuts the context down, which ends the spin; from the moment
 start-up ends (successfully or not) until exit, signals are only noted, so the exit — the
 error message, finishing the recording — is never cut short. The handler raises at most
-once, and the code that can receive that exception is all inside one ``try``.
+once, and the code that can receive that exception is all inside one ``try``; a signal that
+lands in a Python function C code calls back, where an exception would be printed and lost,
+is sent again (`FOREIGN_CALLBACKS`).
 """
 from __future__ import annotations
 
 import contextlib
 import faulthandler
 import gc
+import os
 import signal
 import sys
 import threading
@@ -34,6 +37,13 @@ SWITCH_INTERVAL_S = 0.0005
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 #: Seconds the middleware may take to release the node at exit (`exit_deadline`).
 EXIT_GRACE_S = 10.0
+#: Python functions that C code calls back while the node starts: an exception raised in one
+#: does not propagate (ctypes prints "Exception ignored ..." with a traceback and goes on).
+#: llvmlite's object-cache hooks run them while Numba compiles the kernels (the first start
+#: after an install): a Ctrl-C landing there printed a traceback and did not stop start-up.
+FOREIGN_CALLBACKS = frozenset({"_raw_object_cache_notify", "_raw_object_cache_getbuffer"})
+#: Seconds after which a signal that landed in such a callback is sent again (`SignalGuard`).
+RESEND_S = 0.01
 
 USAGE = """usage: stage_node [--ros-args -p NAME:=VALUE ...]
 
@@ -67,10 +77,17 @@ class SignalGuard:
         for sig in SIGNALS:
             signal.signal(sig, self._handle)
 
-    def _handle(self, signum: int, _frame: Any) -> None:
+    def _handle(self, signum: int, frame: Any) -> None:
         if self.received is None:
             self.received = signum
         if self.starting:
+            if _in_foreign_callback(frame):
+                # Raised here it would be printed and lost: the signal comes again shortly,
+                # to land in code that can take the exception (or after start-up: noted).
+                timer = threading.Timer(RESEND_S, os.kill, (os.getpid(), signum))
+                timer.daemon = True
+                timer.start()
+                return
             self.starting = False  # first and last raise
             raise Interrupted(signum)
 
@@ -86,6 +103,15 @@ class SignalGuard:
     @property
     def name(self) -> str:
         return signal.Signals(self.received).name if self.received else ""
+
+
+def _in_foreign_callback(frame: Any) -> bool:
+    """Whether ``frame`` runs within one of the `FOREIGN_CALLBACKS`."""
+    while frame is not None:
+        if frame.f_code.co_name in FOREIGN_CALLBACKS:
+            return True
+        frame = frame.f_back
+    return False
 
 
 def _usage() -> str:
