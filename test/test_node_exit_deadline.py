@@ -1,10 +1,10 @@
 """
 How stage_node ends when C code is in the way (real subprocesses, no node needed).
 
-- Releasing a node can hang in the middleware (``stage_node.exit_deadline``: Fast DDS spinning
-  in ``DomainParticipant::set_listener`` while it holds the GIL). The deadline is a C thread
-  (faulthandler's), so it ends even a process whose main thread never gives the GIL back: a
-  foreign call made through ``ctypes.PyDLL``, which keeps the GIL, to ``pause(2)``.
+- Releasing a node can hang in the middleware (``node/release.py``, ``exit_deadline``: Fast
+  DDS spinning in ``DomainParticipant::set_listener`` while it holds the GIL). The deadline
+  is a C thread (faulthandler's), so it ends even a process whose main thread never gives the
+  GIL back: a foreign call made through ``ctypes.PyDLL``, which keeps the GIL, to ``pause(2)``.
 - A start-up signal that lands in a Python function C calls back (llvmlite's object-cache
   hook, while Numba compiles) is sent again and stops start-up after it (``SignalGuard``).
 """
@@ -18,7 +18,7 @@ from conftest import ROOT
 
 HANG = """
 import ctypes, sys
-from flexure_sim.node.stage.stage_node import exit_deadline
+from flexure_sim.node.release import exit_deadline
 print("stage_node: error: the reason, said first", file=sys.stderr, flush=True)
 with exit_deadline({seconds}):
     {block}
@@ -81,10 +81,11 @@ except Interrupted as exc:
 
 def test_a_signal_during_start_up_that_lands_in_a_c_callback_stops_start_up_after_it():
     """
+    A start-up signal landing in a C callback raises in the Python code after it.
+
     Ctrl-C while Numba compiles (a fresh install's first start) can land in llvmlite's
     object-cache hook, a Python function C calls through ctypes, where an exception is printed
-    ("Exception ignored ...", a traceback) and lost. The guard sends the signal again and it
-    raises in the Python code after the callback.
+    ("Exception ignored ...", a traceback) and lost. The guard sends the signal again.
     """
     done = subprocess.run([sys.executable, "-c", CALLBACK], cwd=ROOT, capture_output=True,
                           text=True, timeout=60,

@@ -34,6 +34,7 @@ from typing import Any, Optional, Sequence
 
 from flexure_sim.errors import FlexureSimError
 from flexure_sim import topics
+from flexure_sim.node.release import release
 
 PROG = "demo_drive"
 NODE_NAME = "flexure_sim_demo_drive"
@@ -101,9 +102,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         code = 130
     finally:
-        if driver is not None:
-            driver.destroy_node()
-        rclpy.try_shutdown()
+        release(rclpy, driver)
     return code
 
 

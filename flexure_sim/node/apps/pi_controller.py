@@ -53,6 +53,7 @@ from flexure_sim import topics
 from flexure_sim.console import quiet_pipe
 from flexure_sim.control.pi_notch import NonFiniteInput, PIConfig, PIController
 from flexure_sim.errors import FlexureSimError
+from flexure_sim.node.release import release
 
 #: (name, default, description) of every parameter; all can be changed live except the
 #: topics, ``handshake`` and ``trace_path`` (read-only). The default gains suit the built-in
@@ -264,14 +265,12 @@ def main(args: Optional[list[str]] = None) -> int:
     except Exception as exc:  # noqa: BLE001 - one line, never a traceback
         error = f"{type(exc).__name__}: {exc}"
     finally:
+        if error is not None:  # before ROS is released, which can hang (`release`)
+            print(f"pi_controller: error: {error}", file=sys.stderr, flush=True)
         if node is not None:
             node.close()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if error is not None:
-        print(f"pi_controller: error: {error}", file=sys.stderr)
-        return 1
-    return 0
+        release(rclpy, node)
+    return 1 if error is not None else 0
 
 
 if __name__ == "__main__":

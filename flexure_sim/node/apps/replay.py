@@ -29,6 +29,7 @@ import time
 from typing import Any, Iterator, Optional, Sequence
 
 from flexure_sim.console import quiet_pipe
+from flexure_sim.node.release import release
 from flexure_sim.recording.command_line import check_path, report_reading, tool_errors, warn
 from flexure_sim.recording.ordered import OrderedLog
 from flexure_sim.recording.exceptions import EXIT_OK, EXIT_USAGE, RunError
@@ -262,9 +263,7 @@ def play(args: argparse.Namespace) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         code = EXIT_OK  # Ctrl-C ends a replay, as it ends ros2 bag play
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        release(rclpy, node)
     return code
 
 

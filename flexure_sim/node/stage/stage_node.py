@@ -20,23 +20,20 @@ is sent again (`FOREIGN_CALLBACKS`).
 """
 from __future__ import annotations
 
-import contextlib
-import faulthandler
 import gc
 import os
 import signal
 import sys
 import threading
-from typing import Any, Iterator, Optional
+from typing import Any, Optional
 
 from flexure_sim.console import quiet_pipe
 from flexure_sim.errors import FlexureSimError
+from flexure_sim.node.release import EXIT_GRACE_S, exit_deadline
 
 #: GIL switch interval: keeps the stepping thread's latency low while callbacks run.
 SWITCH_INTERVAL_S = 0.0005
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
-#: Seconds the middleware may take to release the node at exit (`exit_deadline`).
-EXIT_GRACE_S = 10.0
 #: Python functions that C code calls back while the node starts: an exception raised in one
 #: does not propagate (ctypes prints "Exception ignored ..." with a traceback and goes on).
 #: llvmlite's object-cache hooks run them while Numba compiles the kernels (the first start
@@ -293,29 +290,6 @@ def _clean_up(run: Run) -> bool:
         if run.rclpy is not None:
             run.rclpy.try_shutdown()
     return failed
-
-
-@contextlib.contextmanager
-def exit_deadline(seconds: float) -> Iterator[None]:
-    """
-    End the process with exit code 1 if the block takes longer than ``seconds``.
-
-    For releasing the middleware: in one CI run a node that failed to start spun for 35 min
-    (one core busy, nothing printed) in Fast DDS 2.14's ``DomainParticipant::set_listener``
-    under ``rcl_node_fini``, which waits for an in-flight discovery callback while that callback
-    waited for the mutex the spinning thread kept taking (eight node processes starting at once
-    on one domain; eProsima/Fast-DDS#6513 describes the spin). The spinning thread holds the
-    GIL, so no Python thread can end it: faulthandler's watchdog, a C thread, writes every
-    thread's stack to stderr and exits.
-    """
-    try:
-        faulthandler.dump_traceback_later(seconds, exit=True, file=sys.stderr)
-    except (AttributeError, ValueError, OSError):  # a stderr without a file descriptor
-        faulthandler.dump_traceback_later(seconds, exit=True, file=sys.__stderr__)
-    try:
-        yield
-    finally:
-        faulthandler.cancel_dump_traceback_later()
 
 
 @quiet_pipe
