@@ -310,6 +310,21 @@ class Peer:
                         f"a subscriber of {publisher.topic_name}")
 
     # ---------------------------------------------------------------- lockstep ticks
+    def connect_drive(self, topics: dict[str, type]) -> Any:
+        """
+        Subscribe ``topics`` ({name: message type}); publish the single drive's command.
+
+        Returns the command publisher once the stage publishes every topic and reads it.
+        """
+        from std_msgs.msg import Float64
+
+        for topic, msg_type in topics.items():
+            self.subscribe(topic, msg_type)
+        drive = self.publisher("/drive/displacement", Float64)
+        self.wait_for_publishers(list(topics))
+        self.wait_for_subscribers(drive)
+        return drive
+
     def connect_drives(self, drives: Sequence[str], topics: Sequence[str],
                        kind: str = "displacement") -> dict[str, Any]:
         """

@@ -71,11 +71,7 @@ def test_a_command_sent_after_set_parameters_answered_meets_the_new_stroke(
                                                        publish_rate=2.0, record=False))
     peer.watch = node
     try:
-        peer.subscribe("/drive/input", Float64)
-        peer.subscribe("/diagnostics", DiagnosticArray)
-        drive = peer.publisher("/drive/displacement", Float64)
-        peer.wait_for_publishers(["/drive/input", "/diagnostics"])
-        peer.wait_for_subscribers(drive)
+        drive = peer.connect_drive({"/drive/input": Float64, "/diagnostics": DiagnosticArray})
         assert set_double(peer, "stroke_max", 4e-6) == (True, "")
         drive.publish(Float64(data=3e-6))
         peer.spin_until(lambda: any(m.data != 0.0 for m in peer.messages("/drive/input")), 20,

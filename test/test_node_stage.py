@@ -434,11 +434,8 @@ def test_lockstep_runs_are_deterministic_and_reset_restarts_time(tmp_path, domai
     node = start(tmp_path, domain, peer, time_mode="lockstep", sim_step=1e-4, publish_rate=1000.0,
                  record=True, record_path="det.mcap")
     try:
-        peer.subscribe("/output/displacement", Float64)
-        peer.subscribe("/hinges/b/wrench", WrenchStamped)
-        drive = peer.publisher("/drive/displacement", Float64)
-        peer.wait_for_publishers(["/output/displacement", "/hinges/b/wrench"])
-        peer.wait_for_subscribers(drive)
+        drive = peer.connect_drive({"/output/displacement": Float64,
+                                    "/hinges/b/wrench": WrenchStamped})
         peer.spin_for(0.5)
 
         def run() -> tuple[list[float], list[tuple[int, float, float, float]]]:

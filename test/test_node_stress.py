@@ -53,11 +53,7 @@ def test_diagnostics_warn_when_full_stroke_exceeds_yield_with_the_engines_ratio(
         record=False))
     peer.watch = node
     try:
-        peer.subscribe("/diagnostics", DiagnosticArray)
-        peer.subscribe("/drive/input", Float64)
-        drive = peer.publisher("/drive/displacement", Float64)
-        peer.wait_for_publishers(["/diagnostics", "/drive/input"])
-        peer.wait_for_subscribers(drive)
+        drive = peer.connect_drive({"/diagnostics": DiagnosticArray, "/drive/input": Float64})
         peer.spin_until(lambda: len(peer.received["/diagnostics"]) > 1, 30, "diagnostics")
         at_rest = peer.last("/diagnostics").status[0]
         values = diagnostics_values(peer.last("/diagnostics"))
