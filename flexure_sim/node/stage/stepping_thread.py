@@ -10,7 +10,8 @@ mechanism in space is reported by its snapshot and packed by its interface (`Loo
 ``spatial_report``). Built from its parts (`LoopParts`, made by ``shell.StageNode``) and its
 settings (`LoopSettings`, the node's parameters).
 
-Real-time mode paces ticks with absolute deadlines of a steady clock (`pacing.Pacer`; with
+Real-time mode paces ticks with absolute deadlines of a steady clock (`pacing.Pacer`, whose
+busy-wait before a tick runs the engine's discarded next step, ``Simulation.warm``; with
 ``merge_late_ticks`` a loop that many ticks late merges them into one that steps the engine
 through all their periods and publishes once); fast mode runs flat out; lockstep mode runs
 one tick per ``~/step`` request. Between ticks the thread runs the work services and
@@ -69,9 +70,7 @@ class SteppingLoop:
         self.graph_check = parts.graph_check
         self.throttle = parts.throttle
         time_mode, rate, dt = settings.time_mode, settings.rate, settings.dt
-        self.time_mode = time_mode
-        self.rate = rate
-        self.dt = dt
+        self.time_mode, self.rate, self.dt = time_mode, rate, dt
         self.n_steps, _ = steps_per_tick(rate, dt)
         self.diag_every = max(1, round(rate / DIAGNOSTICS_RATE))
         self.monitor_rate = settings.monitor_rate
@@ -80,11 +79,11 @@ class SteppingLoop:
         #: Publish ticks per display tick (0: off).
         self.display_every = (display_every(rate, settings.display_rate)
                               if parts.display is not None else 0)
+        #: True: a mechanism in space, reported by its snapshot (`LoopParts.report`).
+        self.spatial = parts.report is not None
         #: What each tick publishes, in one compiled call (engine), and its messages packed in
         #: another (`tick_frame`; None: `interface.encode` from a snapshot, where the packed
         #: layouts do not apply).
-        #: True: a mechanism in space, reported by its snapshot (`LoopParts.report`).
-        self.spatial = parts.report is not None
         self.report = parts.report if self.spatial else TickReport(sim.model)
         self.reported = False
         self.frame = (tick_frame.TickFrame(interface, self.report.index)
