@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import time
 
 from conftest import ROOT
 
@@ -26,31 +25,28 @@ print("released", flush=True)
 """
 
 
-def _run(block: str, seconds: float = 1.0) -> tuple[subprocess.CompletedProcess, float]:
-    start = time.monotonic()
-    done = subprocess.run([sys.executable, "-c", HANG.format(seconds=seconds, block=block)],
+def _run(block: str, seconds: float = 1.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", HANG.format(seconds=seconds, block=block)],
                           cwd=ROOT, capture_output=True, text=True, timeout=60,
                           env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
-    return done, time.monotonic() - start
 
 
 def test_a_release_that_holds_the_gil_forever_ends_the_process_at_the_deadline():
-    done, took = _run("ctypes.PyDLL(None).pause()")
+    done = _run("ctypes.PyDLL(None).pause()")
     assert done.returncode == 1, (done.returncode, done.stderr)
-    assert 1.0 <= took < 30.0, took
     assert "released" not in done.stdout
     lines = done.stderr.splitlines()
     assert lines[0] == "stage_node: error: the reason, said first"
-    assert "Timeout (0:00:01)!" in done.stderr  # faulthandler's stacks follow the reason
+    assert "Timeout (0:00:01)!" in done.stderr  # the 1 s deadline ended it; stacks follow
     assert "exit_deadline" not in lines[0]
 
 
 def test_a_release_in_time_goes_on_and_the_deadline_is_cancelled():
-    done, _ = _run("import time; time.sleep(0.1)")
+    done = _run("import time; time.sleep(0.1)", seconds=30.0)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "released"
     # Cancelled: a process that lives on past the deadline is not ended by it.
-    done, _ = _run("pass\nimport time; time.sleep(2.0)", seconds=0.5)
+    done = _run("pass\nimport time; time.sleep(2.0)", seconds=0.5)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "released"
 
