@@ -40,8 +40,8 @@ setup(
         (f"lib/{PACKAGE}", [f"scripts/ros2run/{name}" for name in sorted(EXECUTABLES)]),
     ],
     # The oldest versions the code needs, as requirements.txt states them (test_packaging.py
-    # holds the two lists equal): NumPy 1.26 is Jazzy's on Ubuntu 24.04; the MCAP writer calls
-    # Writer.flush(), new in mcap 1.6.
+    # holds the two lists equal): NumPy 1.26 is Jazzy's on Ubuntu 24.04; mcap 1.6's Writer (with
+    # flush()) is the reference the recorder's writer is tested against.
     install_requires=["numpy>=1.26", "scipy>=1.11", "numba>=0.59", "PyYAML>=6.0", "mcap>=1.6",
                       "mcap-ros2-support>=0.5"],
     extras_require={

@@ -26,6 +26,7 @@ from flexure_sim.recording.bag_metadata import (
     combine_bag_metadata, metadata_yaml, parse_metadata_yaml,
 )
 from flexure_sim.recording.exceptions import RecordingError
+from flexure_sim.recording.mcap_batch import frame_messages
 from flexure_sim.recording.writer import McapRecorder, Output, RecordingStats
 
 METADATA_FILE = "metadata.yaml"
@@ -135,17 +136,33 @@ class BagRecorder:
         self._current.add_dropped(topic, count)
 
     def write_batch(self, messages: Sequence[tuple[str, bytes]], stamp_ns: int) -> bool:
-        if self._file_start is not None and (
-                (self._max_bytes and self._file_bytes >= self._max_bytes)
-                or (self._max_duration and stamp_ns - self._file_start >= self._max_duration)):
-            self._finish_file()
-            self._current = self._new_file()
+        self._maybe_split(stamp_ns)
         kept = self._current.write_batch(messages, stamp_ns)
         if kept:
             if self._file_start is None:
                 self._file_start = stamp_ns
             self._file_bytes += sum(len(p) for _, p in messages)
         return kept
+
+    def write_frame(self, frame: bytes, start: int, topics: Sequence[str],
+                    stamp_ns: int) -> bool:
+        """`McapRecorder.write_frame` into the current file, as `write_batch` splits."""
+        self._maybe_split(stamp_ns)
+        kept = self._current.write_frame(frame, start, topics, stamp_ns)
+        if kept:
+            if self._file_start is None:
+                self._file_start = stamp_ns
+            if self._max_bytes:
+                self._file_bytes += sum(len(p) for _, p in frame_messages(frame, start, topics))
+        return kept
+
+    def _maybe_split(self, stamp_ns: int) -> None:
+        """Start the next file if the current one holds ``max_bytes`` or ``max_duration``."""
+        if self._file_start is not None and (
+                (self._max_bytes and self._file_bytes >= self._max_bytes)
+                or (self._max_duration and stamp_ns - self._file_start >= self._max_duration)):
+            self._finish_file()
+            self._current = self._new_file()
 
     def write(self, topic: str, payload: bytes, stamp_ns: int) -> bool:
         return self.write_batch(((topic, payload),), stamp_ns)

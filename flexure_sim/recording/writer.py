@@ -34,8 +34,10 @@ from flexure_sim.recording.bag_metadata import METADATA_RECORD_NAME
 from flexure_sim.recording.exceptions import (
     RecorderClosedError, RecorderFailedError, RecordingError,
 )
+from flexure_sim.recording.mcap_batch import frame_messages
 from flexure_sim.recording.mcap_writer import (
-    DROPPED_KEY, AddMetadata, AddTopic, Worker, describe, metadata_items, start_writer,
+    DROPPED_KEY, AddMetadata, AddTopic, FrameItem, Worker, describe, metadata_items,
+    start_writer,
 )
 from flexure_sim.recording.qos import QosDescription, QosLike, qos_profiles_yaml
 from flexure_sim.recording.schema import SchemaResolver, normalize_type_name
@@ -124,6 +126,7 @@ class McapRecorder:
         self._channels: dict[str, int] = {}
         self._types: dict[str, str] = {}
         self._schema_ids: dict[str, int] = {}
+        self._frame_ids: tuple[Sequence[str], list[int]] | None = None
         self._worker = Worker(
             writer, out, file_name, self._counters.dropped_total,
             queue_size, chunk_interval_s, ros_distro, fsync_chunks,
@@ -155,8 +158,24 @@ class McapRecorder:
 
     @property
     def stats(self) -> RecordingStats:
-        """Accept and dropped counts per topic, and messages still queued."""
-        return self._counters.snapshot(self._worker.queue.qsize())
+        """
+        Accept and dropped counts per topic, and batches still queued.
+
+        A frame's messages (`write_frame`) count as accepted once written.
+        """
+        return self._with_frames(self._counters.snapshot(self._worker.queue.qsize()))
+
+    def _with_frames(self, stats: RecordingStats) -> RecordingStats:
+        """``stats`` with the messages of the frames written so far added to ``accepted``."""
+        written = self._worker.frame_counts()
+        if any(written.values()):
+            topic_of = {channel_id: topic for topic, channel_id in self._channels.items()}
+            accepted = stats.accepted
+            for channel_id, n in written.items():
+                if n:
+                    topic = topic_of[channel_id]
+                    accepted[topic] = accepted.get(topic, 0) + n
+        return stats
 
     @property
     def dropped_count(self) -> int:
@@ -253,16 +272,9 @@ class McapRecorder:
             if channel_id is None:
                 raise ValueError(f"topic: {topic!r} was not added (call add_topic first)")
             items.append((channel_id, payload if isinstance(payload, bytes) else bytes(payload)))
-        if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, int):
-            raise ValueError(f"stamp_ns: expected an int of nanoseconds, got {stamp_ns!r}")
-        if not 0 <= stamp_ns <= _MAX_STAMP:
-            raise ValueError(f"stamp_ns: must be in [0, 2**64), got {stamp_ns}")
-        worker = self._worker
+        _check_stamp(stamp_ns)
         with self._lock:
-            self._check_open()
-            if worker.error is not None:
-                raise RecorderFailedError(f"MCAP writer failed: {describe(worker.error)}") \
-                    from worker.error
+            self._check_writing()
             kept = self._enqueue((stamp_ns, items))
             counts = self._counters.accepted if kept else self._counters.dropped
             with self._counters.lock:
@@ -270,7 +282,43 @@ class McapRecorder:
                     counts[topic] += 1
         return kept
 
-    def _enqueue(self, item: tuple[int, list[tuple[int, bytes]]]) -> bool:
+    def write_frame(self, frame: bytes, start: int, topics: Sequence[str],
+                    stamp_ns: int) -> bool:
+        """
+        Queue one tick's messages packed in ``frame``: from ``start``, per message its index
+        into ``topics`` and its size (`mcap_batch.FRAME_ITEM`), then its CDR payload.
+
+        `write_batch` of the same messages, kept or dropped whole alike, without a Python
+        object per message on the way (the recorder process's frames, `BatchWriter.add_frame`).
+        Its messages count in `stats` as accepted once written. Pass the same ``topics``
+        sequence each time: its channels are looked up once for it.
+        """
+        ids = self._frame_ids
+        if ids is None or ids[0] is not topics:
+            try:
+                ids = self._frame_ids = (topics, [self._channels[t] for t in topics])
+            except KeyError as exc:
+                raise ValueError(f"topic: {exc.args[0]!r} was not added (call add_topic first)") \
+                    from None
+        _check_stamp(stamp_ns)
+        with self._lock:
+            self._check_writing()
+            kept = self._enqueue(FrameItem(stamp_ns, frame, start, ids[1]))
+            if not kept:
+                dropped = self._counters.dropped
+                with self._counters.lock:
+                    for topic, _ in frame_messages(frame, start, topics):
+                        dropped[topic] += 1
+        return kept
+
+    def _check_writing(self) -> None:
+        """Raise if the recorder is closed or its writer failed (with ``_lock`` held)."""
+        self._check_open()
+        error = self._worker.error
+        if error is not None:
+            raise RecorderFailedError(f"MCAP writer failed: {describe(error)}") from error
+
+    def _enqueue(self, item: object) -> bool:
         """
         Put a batch on the queue.
 
@@ -338,6 +386,8 @@ class McapRecorder:
         worker.shutdown(timeout_s)
         if worker.thread.is_alive():
             raise RecorderFailedError(f"MCAP writer did not finish within {timeout_s} s")
+        # The frames' messages count once written; a failed writer's stats keep what it wrote.
+        self._close_result = self._with_frames(self._close_result)
         if worker.error is not None:
             raise RecorderFailedError(f"MCAP writer failed: {describe(worker.error)}") \
                 from worker.error
@@ -361,3 +411,11 @@ def _open_output(output: Output, overwrite: bool) -> tuple[BinaryIO, Path | None
     name = getattr(output, "name", None)
     file_name = Path(name).name if isinstance(name, str) and name else "recording.mcap"
     return output, None, file_name
+
+
+def _check_stamp(stamp_ns: object) -> None:
+    """Raise ValueError unless ``stamp_ns`` is an int of nanoseconds in [0, 2**64)."""
+    if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, int):
+        raise ValueError(f"stamp_ns: expected an int of nanoseconds, got {stamp_ns!r}")
+    if not 0 <= stamp_ns <= _MAX_STAMP:
+        raise ValueError(f"stamp_ns: must be in [0, 2**64), got {stamp_ns}")

@@ -23,7 +23,7 @@ from flexure_sim.recording import McapRecorder, QosDescription, RecordingError
 from flexure_sim.recording.bag import BagRecorder
 from flexure_sim.recording.mcap_writer import describe
 from flexure_sim.node.record.process import (
-    CHILD_QUEUE, FRAME_HEADER, FRAME_ITEM, FRAME_STAMP, RECORDER_NICE, WRITE_DELAY_ENV,
+    CHILD_QUEUE, FRAME_HEADER, FRAME_STAMP, RECORDER_NICE, WRITE_DELAY_ENV,
 )
 
 
@@ -153,7 +153,7 @@ def _child(stdin: BinaryIO, stdout: BinaryIO) -> int:
     _lower_priority()
     recorder: Optional[McapRecorder | BagRecorder] = None
     path = ""
-    names: list[str] = []
+    names: tuple[str, ...] = ()
 
     def reply(obj: dict[str, Any]) -> None:
         stdout.write(json.dumps(obj).encode() + b"\n")
@@ -174,14 +174,7 @@ def _child(stdin: BinaryIO, stdout: BinaryIO) -> int:
                 if recorder is None:
                     continue
                 (stamp,) = FRAME_STAMP.unpack_from(body, 0)
-                offset = FRAME_STAMP.size
-                messages = []
-                while offset < len(body):
-                    channel, size = FRAME_ITEM.unpack_from(body, offset)
-                    offset += FRAME_ITEM.size
-                    messages.append((names[channel], body[offset:offset + size]))
-                    offset += size
-                recorder.write_batch(messages, stamp)
+                recorder.write_frame(body, FRAME_STAMP.size, names, stamp)
             elif opcode == b"O":
                 spec = json.loads(body)
                 try:
@@ -189,7 +182,7 @@ def _child(stdin: BinaryIO, stdout: BinaryIO) -> int:
                 except (RecordingError, OSError, ValueError) as exc:
                     reply({"ok": False, "error": describe(exc)})
                     continue
-                recorder, names, path = new, [t[0] for t in spec["topics"]], spec["path"]
+                recorder, names, path = new, tuple(t[0] for t in spec["topics"]), spec["path"]
                 reply({"ok": True})
             elif opcode == b"M":
                 if recorder is not None:

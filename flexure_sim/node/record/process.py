@@ -59,11 +59,11 @@ from pathlib import Path
 from typing import Any
 
 from flexure_sim.recording import RecordingError
+from flexure_sim.recording.mcap_batch import FRAME_ITEM
 from flexure_sim.recording.qos import as_qos_description
 
 FRAME_HEADER = struct.Struct("<cI")
 FRAME_STAMP = struct.Struct("<Q")
-FRAME_ITEM = struct.Struct("<HI")
 #: Bytes of frames kept in the parent when the pipe is full, before ticks are dropped (only
 #: for recordings that are not lossless).
 MAX_BACKLOG = 64 << 20
