@@ -21,6 +21,8 @@ Wall times are medians of several runs (7 for flexure_sim, 3 for the baseline).
   the stage with model: fe hinges (goal < 10 ms; tools/bench/fe_bench.py).
 - optimize: flexure-sim optimize on the stage over its 7 hinge thicknesses (goal: converged
   in < 10 s), and its time in exact gradients.
+- recorder: the CPU time a message of the recording's MCAP writer against the mcap library's
+  ``Writer.add_message`` (tools/bench/recorder_bench.py).
 - sweep (with --sweep): flexure-sim sweep's scaling on the stage tolerance study: designs
   per second in this process without Dask, on a LocalCluster of 1 and of 2 worker processes,
   the parallel efficiency and the overhead of a batch (a task).
@@ -49,6 +51,7 @@ from flexure_sim.tools.bench.engine_bench import (
     bench_static_sweep, bench_stage_step, bench_step_cost,
 )
 from flexure_sim.tools.bench.fe_bench import bench_fe_hinge
+from flexure_sim.tools.bench.recorder_bench import bench_recorder, print_recorder
 from flexure_sim.tools.bench.study_bench import bench_analyses, bench_optimize, bench_sweep
 
 
@@ -124,6 +127,8 @@ def print_table(res: dict) -> None:
               f"with exact gradients ({o['gradient_s']:.2f} s; values only {o['values_s']:.2f} "
               f"s); first mode {o['start_objective']:.2f} -> {o['objective']:.2f} Hz, KKT "
               f"stationarity {o['stationarity']:.1g}")
+    if "recorder" in res:
+        print_recorder(res["recorder"])
     if "sweep" in res:
         sw = res["sweep"]
         print(f"\nsweep, stage tolerance study, {sw['designs']} designs in batches of "
@@ -152,6 +157,7 @@ def run(args: argparse.Namespace) -> dict:
     res["analyses"] = bench_analyses()
     res["fe_hinge"] = bench_fe_hinge()
     res["optimize"] = bench_optimize()
+    res["recorder"] = bench_recorder()
     if args.sweep:
         res["sweep"] = bench_sweep(args.sweep_designs)
     if args.node:
