@@ -7,7 +7,9 @@ offsets), byte for byte for the same calls (``test/test_mcap_batch.py`` holds th
 side); every record other than a message is the library's (``mcap.records``). What it adds is
 ``add_batch`` and ``add_frame``: a tick's messages, one log time, packed with one ``struct``
 call each and joined into the open chunk once per chunk; a frame's payloads are views into it
-until then.
+until then, and the message indexes are arrays of integers (no Python object a message that
+lives until the chunk ends, which the cyclic garbage collector would walk). ``flexure-sim
+bench`` (``recorder``): 0.62 us of CPU a message against the library's 2.66 us.
 
 Measured reason for writing it rather than calling ``Writer.add_message``: the library builds
 a ``Message`` object and writes five fields through a ``BytesIO`` for each message, 2.9 us a
@@ -23,14 +25,16 @@ With this writer and frames passed through (``McapRecorder.write_frame``), 97.5 
 from __future__ import annotations
 
 import struct
+import sys
 import zlib
+from array import array
 from typing import BinaryIO, Iterator, Sequence, TypeVar
 
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import (
-    Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, MessageIndex, Metadata, MetadataIndex,
-    Schema, Statistics, SummaryOffset,
+    Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Metadata, MetadataIndex, Schema,
+    Statistics, SummaryOffset,
 )
 
 from flexure_sim.recording.exceptions import RecordingError
@@ -39,6 +43,11 @@ from flexure_sim.recording.exceptions import RecordingError
 #: follows.
 FRAME_ITEM = struct.Struct("<HI")
 T = TypeVar("T")
+#: A MessageIndex record's head: opcode, record length, channel id, byte length of its
+#: (log time, offset) pairs, which follow as little-endian uint64s (MCAP spec, "Message Index").
+INDEX_HEAD = struct.Struct("<BQHI")
+_MESSAGE_INDEX = int(Opcode.MESSAGE_INDEX)
+_SWAP = sys.byteorder != "little"
 #: The file's first and last 8 bytes (MCAP spec, "Magic").
 MAGIC = bytes((137, 77, 67, 65, 80, 48, 13, 10))
 #: A Message record's head: opcode, record length, channel id, sequence, log time, publish
@@ -88,10 +97,11 @@ class BatchWriter:
         self._schemas: list[Schema] = []
         self._channels: list[Channel] = []
         # The open chunk: its records as parts, their length, the message index per channel
-        # ({channel: [(log time, offset in the chunk), ...]}), its messages and time span.
+        # ({channel: array of log time, offset in the chunk, log time, ...}: no Python object
+        # a message that lives until the chunk ends), its messages and time span.
         self._parts: list[bytes | memoryview] = []
         self._size = 0
-        self._index: dict[int, list[tuple[int, int]]] = {}
+        self._index: dict[int, array] = {}
         self._in_chunk = 0
         self._chunk_start = self._chunk_end = 0
         # The file's statistics and indexes.
@@ -151,7 +161,7 @@ class BatchWriter:
         self._times(log_time)
         self._messages += 1
         self._counts[channel_id] = self._counts.get(channel_id, 0) + 1
-        self._index.setdefault(channel_id, []).append((log_time, self._size))
+        self._index.setdefault(channel_id, array("Q")).extend((log_time, self._size))
         self._in_chunk += 1
         self._to_chunk(MESSAGE_HEAD.pack(_MESSAGE, _HEAD_FIELDS + len(data), channel_id,
                                          sequence, log_time, publish_time) + data)
@@ -191,8 +201,9 @@ class BatchWriter:
             counts[channel_id] = number
             entries = index.get(channel_id)
             if entries is None:
-                entries = index[channel_id] = []
-            entries.append((stamp, size))
+                entries = index[channel_id] = array("Q")
+            entries.append(stamp)
+            entries.append(size)
             length = len(data)
             append(pack(_MESSAGE, _HEAD_FIELDS + length, channel_id, number & _SEQUENCE_MASK,
                         stamp, stamp))
@@ -247,13 +258,18 @@ class BatchWriter:
                            chunk_length=len(record), message_index_offsets={},
                            message_index_length=0, compression="",
                            compressed_size=len(data), uncompressed_size=len(data))
-        indexes = RecordBuilder()
-        first = start + len(record)
+        at = first = start + len(record)
+        indexes = []
         for channel_id, entries in self._index.items():
-            entry.message_index_offsets[channel_id] = first + indexes.count
-            MessageIndex(channel_id=channel_id, records=entries).write(indexes)
-        entry.message_index_length = indexes.count
-        self._emit(indexes.end())
+            entry.message_index_offsets[channel_id] = at
+            if _SWAP:
+                entries.byteswap()
+            size = 8 * len(entries)
+            indexes.append(INDEX_HEAD.pack(_MESSAGE_INDEX, 6 + size, channel_id, size))
+            indexes.append(entries.tobytes())
+            at += INDEX_HEAD.size + size
+        entry.message_index_length = at - first
+        self._emit(b"".join(indexes))
         self._chunk_indexes.append(entry)
         self._parts, self._size, self._index, self._in_chunk = [], 0, {}, 0
 

@@ -4,11 +4,18 @@ The recorder's cost a message (``flexure-sim bench``, ``recorder``), with no ROS
 A tick of 26 messages of 12-404 bytes (sizes like the stage node's tick), written `TICKS`
 times into an in-memory MCAP file with 1 MiB chunks, by the `mcap` library's
 ``Writer.add_message`` one message at a time and by `mcap_batch.BatchWriter.add_frame` one
-frame at a time (what the recorder process does); CPU time of the better of `REPEATS` runs.
+frame at a time (what the recorder process does); CPU time of the better of `REPEATS` runs,
+in a process of its own that loads only the recording layer, as the recorder process does
+(``python -m flexure_sim.tools.bench.recorder_bench`` prints the JSON): in the bench's own
+process, where the engine, SciPy and ROS are loaded, each collection of Python's cyclic
+garbage collector walks far more objects.
 """
 from __future__ import annotations
 
 import io
+import json
+import subprocess
+import sys
 import time
 
 from flexure_sim.recording.mcap_batch import FRAME_ITEM, BatchWriter
@@ -46,6 +53,13 @@ def _run(batched: bool) -> float:
 
 
 def bench_recorder() -> dict:
+    """`measure` in a process of its own (module docstring)."""
+    out = subprocess.run([sys.executable, "-m", __name__], check=True, capture_output=True,
+                         text=True).stdout
+    return json.loads(out)
+
+
+def measure() -> dict:
     """CPU µs a message and a tick of both writers, and their ratio."""
     library = min(_run(False) for _ in range(REPEATS))
     batched = min(_run(True) for _ in range(REPEATS))
@@ -64,3 +78,7 @@ def print_recorder(r: dict) -> None:
           f"({r['library_us_per_tick']:.0f} us a tick); BatchWriter.add_frame "
           f"{r['batch_us_per_message']:.2f} us ({r['batch_us_per_tick']:.0f} us a tick), "
           f"{r['speedup']:.1f}x")
+
+
+if __name__ == "__main__":
+    print(json.dumps(measure()))
