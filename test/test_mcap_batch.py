@@ -29,7 +29,7 @@ MS = 1_000_000
 
 
 def _calls(rng: random.Random) -> list[tuple]:
-    """A random sequence of writer calls; batches of 0-30 messages of 0-60 bytes."""
+    """Return a random sequence of writer calls; batches of 0-30 messages of 0-60 bytes."""
     calls: list[tuple] = [("schema", "pkg/msg/A", "ros2msg", b"float64 x"),
                           ("channel", "/a", "cdr", 1, {"k": "v"})]
     channels, t = 1, 0
@@ -53,7 +53,7 @@ def _calls(rng: random.Random) -> list[tuple]:
 
 
 def _write(calls: list[tuple], chunk_size: int, library: bool) -> bytes:
-    """The file of ``calls``: the library's Writer (one add_message each) or BatchWriter."""
+    """Return the file of ``calls``: the library's Writer (add_message each) or BatchWriter."""
     buffer = io.BytesIO()
     out = PositionStream(buffer)
     if library:

@@ -179,9 +179,11 @@ class BatchWriter:
     def add_frame(self, stamp: int, frame: bytes, start: int,
                   channel_ids: Sequence[int]) -> None:
         """
-        ``add_batch`` of a frame's messages: from ``start``, per message ``FRAME_ITEM`` (its
-        index into ``channel_ids``, its size) then its payload (the recorder process's ``B``
-        frames, ``node/record/process.py``). The payloads are not copied until the chunk is.
+        Add a frame's messages, as ``add_batch`` does.
+
+        From ``start``, per message ``FRAME_ITEM`` (its index into ``channel_ids``, its size)
+        then its payload (the recorder process's ``B`` frames, ``node/record/process.py``).
+        The payloads are not copied until the chunk is.
         """
         if start < len(frame):
             self._put(stamp, frame_messages(frame, start, channel_ids))
@@ -222,7 +224,7 @@ class BatchWriter:
         self._messages += total + added
 
     def _times(self, log_time: int) -> None:
-        """The open chunk's and the file's message time spans, for a message at ``log_time``."""
+        """Widen the open chunk's and the file's message time spans to ``log_time``."""
         if not self._in_chunk:
             self._chunk_start = self._chunk_end = log_time
         elif log_time < self._chunk_start:
@@ -235,7 +237,7 @@ class BatchWriter:
             self._end = log_time
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
-        """A Metadata record in the data section, indexed (``Writer.add_metadata``)."""
+        """Write a Metadata record into the data section, indexed (``Writer.add_metadata``)."""
         offset = self._stream.tell()
         record = self._record(Metadata(name=name, metadata=data))
         self._metadata_indexes.append(MetadataIndex(offset=offset, length=len(record),
@@ -243,7 +245,7 @@ class BatchWriter:
         self._emit(record)
 
     def _finish_chunk(self) -> None:
-        """The open chunk as a Chunk record, then its message indexes (``Writer``'s order)."""
+        """Write the open chunk as a Chunk record, then its message indexes (as ``Writer``)."""
         if not self._in_chunk:
             return
         data = b"".join(self._parts)

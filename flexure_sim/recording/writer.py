@@ -285,13 +285,14 @@ class McapRecorder:
     def write_frame(self, frame: bytes, start: int, topics: Sequence[str],
                     stamp_ns: int) -> bool:
         """
-        Queue one tick's messages packed in ``frame``: from ``start``, per message its index
-        into ``topics`` and its size (`mcap_batch.FRAME_ITEM`), then its CDR payload.
+        Queue one tick's messages packed in ``frame``.
 
-        `write_batch` of the same messages, kept or dropped whole alike, without a Python
-        object per message on the way (the recorder process's frames, `BatchWriter.add_frame`).
-        Its messages count in `stats` as accepted once written. Pass the same ``topics``
-        sequence each time: its channels are looked up once for it.
+        From ``start``, per message its index into ``topics`` and its size
+        (`mcap_batch.FRAME_ITEM`), then its CDR payload. `write_batch` of the same messages,
+        kept or dropped whole alike, without a Python object per message on the way (the
+        recorder process's frames, `BatchWriter.add_frame`). Its messages count in `stats` as
+        accepted once written. Pass the same ``topics`` sequence each time: its channels are
+        looked up once for it.
         """
         ids = self._frame_ids
         if ids is None or ids[0] is not topics:
