@@ -1,9 +1,10 @@
 """
 Parts of the energy integrals that were made cheaper without changing a bit.
 
-``step_energy._rows_times`` (Mat^T x four rows per pass) against the row-by-row sum in Python
-floats, and ``quadratic_integrals._power_entries`` (N^p / p!'s entries, kept for the last N)
-against N's powers.
+``step_energy._rows_times`` (Mat^T x four rows per pass) and ``_form_t`` (x^T Mat x along the
+rows of Mat^T) against the row-by-row sums in Python floats, and
+``quadratic_integrals._power_entries`` (N^p / p!'s entries, kept for the last N) against N's
+powers.
 """
 import math
 
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 
 from flexure_sim.engine.solver import quadratic_integrals
-from flexure_sim.engine.solver.step_energy import _rows_times
+from flexure_sim.engine.solver.step_energy import _form_t, _rows_times
 
 
 @pytest.mark.parametrize("shape", [(50, 50), (13, 50), (7, 3), (1, 4), (0, 5)])
@@ -19,12 +20,27 @@ def test_rows_times_sums_each_entry_in_the_order_of_the_rows(shape):
     rng = np.random.default_rng(sum(shape))
     Mat = rng.normal(size=shape) * 10.0 ** rng.integers(-8, 8, size=shape)
     x = rng.normal(size=shape[0]) * 10.0 ** rng.integers(-8, 8, size=shape[0])
-    want = [0.0] * shape[1]
+    start = rng.normal(size=shape[1])
+    want = [float(v) for v in start]
     for j in range(shape[0]):                 # one row per pass, in order: the old loop
         for i in range(shape[1]):
             want[i] += float(Mat[j, i]) * float(x[j])
-    got = _rows_times(Mat, x)
+    got = _rows_times(Mat, x, start.copy())
     assert [v.hex() for v in got] == [v.hex() for v in want]
+
+
+@pytest.mark.parametrize("n", [13, 6, 1, 0])
+def test_form_from_the_transpose_is_the_row_by_row_form(n):
+    rng = np.random.default_rng(n)
+    Mat = rng.normal(size=(n, n)) * 10.0 ** rng.integers(-8, 8, size=(n, n))
+    x = rng.normal(size=n + 3) * 10.0 ** rng.integers(-8, 8, size=n + 3)
+    want = 0.0
+    for i in range(n):                        # each row from 0.0 in column order, then the rows
+        row = 0.0
+        for j in range(n):
+            row += float(Mat[i, j]) * float(x[3 + j])
+        want += float(x[3 + i]) * row
+    assert _form_t(np.ascontiguousarray(Mat.T), x[3:]).hex() == want.hex()
 
 
 def _generator_inputs(m, h, programs):

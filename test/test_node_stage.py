@@ -386,6 +386,10 @@ def test_fast_mode_publishes_clock_and_a_use_sim_time_node_follows_it(tmp_path, 
             lambda: len(follower.received["/bodies/body4/pose"]) > 300, 30, "poses"
         )
         during = follower.node.get_clock().now().nanoseconds
+        # Its clock moves on while the node runs (a /clock after `during` reached it), so that
+        # it cannot stay at `during` when the node stops right after that reading.
+        follower.spin_until(lambda: follower.node.get_clock().now().nanoseconds > during, 30,
+                            "the follower's clock to move past its reading")
         follower.watch = None
         stop_cleanly(node)
         # The node has exited. Once its writers have left the graph nothing more can arrive,

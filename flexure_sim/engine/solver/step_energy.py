@@ -74,22 +74,25 @@ N_SCALARS = 5
 
 
 @njit(cache=True, inline="always")
-def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
+def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats, form0):
     """
     Dissipated energy and drive work over one step (module docstring).
 
     y0, y1: the step's accepted states; ye0, ye1: where aux0, aux1 were evaluated; t0: the
     step's start time; command: the displacement drives' commands, then the force drives'
-    forces. ``emats`` = (erows, escal, G, V, Cx, R, S_P, B, sines) from ``energy_matrices``.
+    forces. ``emats`` = (erows, escal, G, V, Cx^T, R, S_P, B, sines, ...) from
+    ``energy_matrices``.
     The work sums over the displacement drives k (row k of erows, escal; their coordinates
     are disjoint, so each drive's work is its own) and adds the force drives' held forces'
-    work, the change of their potential ``AUX_APPLIED`` (exact).
+    work, the change of their potential ``AUX_APPLIED`` (exact). ``form0``: x^T C_x x at ye0
+    if known (the previous step's end: NaN if not). Returns the dissipated energy, the work and
+    x^T C_x x at ye1 (the next step's ``form0``).
     """
-    erows, escal, G, V, Cx, R, SP, B, sines, Trows, T, Ep = emats
+    erows, escal, G, V, CxT, R, SP, B, sines, Trows, T, Ep = emats
     if escal.shape[0] == 0:   # NO_ENERGY: the model does not integrate energies
-        return 0.0, 0.0
+        return 0.0, 0.0, math.nan
     m = y0.shape[0]
-    nx = Cx.shape[0]
+    nx = CxT.shape[0]
     nF = m - nx
     nd = B.shape[1]
     work = 0.0
@@ -155,7 +158,6 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
     rest = aux1[AUX_TIMED_POWER] - (timed0 - moved)
     work += h * timed0 - linear + 0.5 * h * rest
     # The quadratic forms as loops (NumPy's small products and their temporaries: ~1 us a step).
-    nx = Cx.shape[0]
     mb = b.shape[0]
     c = np.empty(nx)
     for i in range(nx):
@@ -170,17 +172,14 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
     xi[:m] = F0
     xi[m:2 * m] = N1p
     xi[2 * m:] = accel
-    gv = np.empty(nx)
+    # gv = c + Cx x_n, V^T gv and G xi accumulated along contiguous rows (of Cx^T; G is
+    # symmetric, ``quadratic_integrals``): independent sums the compiler vectorizes, not one
+    # chain of dependent additions per row.
+    gv = _rows_times(CxT, y0[nF:], c.copy())
     for i in range(nx):
-        acc = c[i]
-        for j in range(nx):
-            acc += Cx[i, j] * y0[nF + j]
-        gv[i] = acc
-        p0 += y0[nF + i] * acc + c[i] * y0[nF + i]
-    # V^T gv and G xi accumulated along contiguous rows (G is symmetric, ``quadratic_integrals``):
-    # independent sums the compiler vectorizes, not one chain of dependent additions per row.
-    vt = _rows_times(V, gv)
-    gx = _rows_times(G, xi)
+        p0 += y0[nF + i] * gv[i] + c[i] * y0[nF + i]
+    vt = _rows_times(V, gv, np.zeros(V.shape[1]))
+    gx = _rows_times(G, xi, np.zeros(G.shape[1]))
     gVxi = 0.0
     quad = 0.0
     for i in range(nxi):
@@ -204,7 +203,8 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
             b1[j] += a * h + c2 * h * h
     # The linear model's c, c_0 at the step's end.
     c01 = _form(SP, b1, 0, b1, 0) if q else c0
-    end = _form(Cx, ye1, nF, ye1, nF) + c01
+    form1 = _form_t(CxT, ye1[nF:])
+    end = form1 + c01
     for i in range(nx):
         c1 = c[i]
         if q:
@@ -212,24 +212,23 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats):
             for j in range(mb):
                 c1 += R[i, j] * b1[j]
         end += 2.0 * c1 * ye1[nF + i]
-    start = _form(Cx, ye0, nF, ye0, nF) + c0
+    start = (_form_t(CxT, ye0[nF:]) if math.isnan(form0) else form0) + c0
     for i in range(nx):
         start += 2.0 * c[i] * ye0[nF + i]
     rho = aux0[AUX_DISSIPATION] - start + aux1[AUX_DISSIPATION] - end
-    return dissipated + 0.5 * h * rho, work
+    return dissipated + 0.5 * h * rho, work, form1
 
 
 @njit(cache=True, inline="always")
-def _rows_times(Mat, x):
+def _rows_times(Mat, x, out):
     """
-    Mat^T x, row by row of Mat: out += Mat[j] x_j for j in order.
+    Return ``out`` + Mat^T x, row by row of Mat: out += Mat[j] x_j for j in order, in place.
 
     Four rows per pass over ``out``, each entry still summed in the order of the rows (the
     same bits as one row per pass): a quarter of the loads and stores of ``out``, which the
     compiler cannot keep in registers across rows (it cannot tell ``out`` from ``Mat``).
     """
     n = Mat.shape[1]
-    out = np.zeros(n)
     j = 0
     while j + 4 <= Mat.shape[0]:
         x0, x1, x2, x3 = x[j], x[j + 1], x[j + 2], x[j + 3]
@@ -246,6 +245,21 @@ def _rows_times(Mat, x):
         for i in range(n):
             out[i] += Mat[j, i] * xj
         j += 1
+    return out
+
+
+@njit(cache=True, inline="always")
+def _form_t(MatT, x):
+    """
+    Return x^T Mat x from Mat's transpose.
+
+    The row sums of ``_form`` (each from 0.0, in column order), taken together along MatT's
+    contiguous rows, then summed in row order: the same bits.
+    """
+    rows = _rows_times(MatT, x, np.zeros(MatT.shape[1]))
+    out = 0.0
+    for i in range(rows.shape[0]):
+        out += x[i] * rows[i]
     return out
 
 
@@ -349,6 +363,6 @@ def energy_matrices(A, phi1, phi2, h, G_load, damping, free, prescribed, D, driv
         escal[k, E_TAU] = tau[k]
         escal[k, E_HAS_DRIVE] = 1.0
     timed_rows = np.asarray(timed_rows, dtype=float).reshape(len(timed_rows), m)
-    out = (erows, escal, Gfull[np.ix_(start, start)], IW[nF:m][:, start - m], Cx, R, SP, B,
+    out = (erows, escal, Gfull[np.ix_(start, start)], IW[nF:m][:, start - m], Cx.T, R, SP, B,
            sines, timed_rows, timed_rows @ IW[:, :2 * m], forcing)
     return tuple(np.ascontiguousarray(a) for a in out)

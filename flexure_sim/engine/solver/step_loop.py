@@ -260,12 +260,14 @@ def _advance(
     iterations = 0
     status = CONVERGED
     rows = commands.shape[0]
+    form_e = math.nan   # x^T C_x x at ye (``step_energy``), once a step has taken it
     for i in range(n):
         command = commands[min(i, rows - 1)]
         if np.any(command != held):
             t0 = t + i * dt
             F0, aux0 = rhs(y, t0, command, args)
             ye = y
+            form_e = math.nan
             work += switch(y, t0, held, command, args)
             held = command
         t1 = t + (i + 1) * dt  # on the step grid, not a running sum
@@ -300,7 +302,8 @@ def _advance(
         if not converged:
             status = NOT_CONTRACTING
             break
-        dd, dw = step_energy(y, ye, y1, ye1, F0, N1, aux0, aux1, command, t1 - dt, dt, emats)
+        dd, dw, form_e = step_energy(y, ye, y1, ye1, F0, N1, aux0, aux1, command, t1 - dt, dt,
+                                     emats, form_e)
         dissipated += dd
         work += dw
         y = y1
