@@ -55,7 +55,7 @@ def test_a_change_to_a_module_compiled_into_the_loop_reaches_the_cached_loop(tmp
     # dissipated energy becomes 1 J, so five steps give 5 J if the change is compiled in.
     energy = package / "engine" / "solver" / "step_energy.py"
     text = energy.read_text()
-    line = "    return dissipated + 0.5 * h * rho, work\n"
+    line = "    return dissipated + 0.5 * h * rho, work, form1\n"
     assert text.count(line) == 1
-    energy.write_text(text.replace(line, "    return 1.0, work\n"))
+    energy.write_text(text.replace(line, "    return 1.0, work, form1\n"))
     assert _dissipated(tmp_path) == 5.0
