@@ -85,9 +85,10 @@ class BatchWriter:
     An MCAP writer on ``stream`` (``write`` and ``tell``; `mcap_writer.PositionStream`).
 
     The methods of ``mcap.writer.Writer`` the recorder uses (``start``, ``register_schema``,
-    ``register_channel``, ``add_message``, ``add_metadata``, ``flush``, ``finish``) with the
-    same results, and ``add_batch``. A chunk is finished once it passes ``chunk_size`` bytes,
-    after the message that passed it, as the library does.
+    ``register_channel``, ``add_metadata``, ``flush``, ``finish``) with the same results, and
+    ``add_batch`` and ``add_frame`` for its messages, the same records as the library's
+    ``add_message`` of each. A chunk is finished once it passes ``chunk_size`` bytes, after
+    the message that passed it, as the library does.
     """
 
     def __init__(self, stream: BinaryIO, chunk_size: int) -> None:
@@ -110,6 +111,11 @@ class BatchWriter:
         self._start = self._end = 0
         self._chunk_indexes: list[ChunkIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
+
+    @property
+    def message_times(self) -> tuple[int, int]:
+        """Return the earliest and latest log time of the messages written ((0, 0): none)."""
+        return self._start, self._end
 
     @property
     def channel_counts(self) -> dict[int, int]:
@@ -155,20 +161,9 @@ class BatchWriter:
         if self._size > self._chunk_size:
             self._finish_chunk()
 
-    def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
-                    sequence: int = 0) -> None:
-        """One Message record (``Writer.add_message``)."""
-        self._times(log_time)
-        self._messages += 1
-        self._counts[channel_id] = self._counts.get(channel_id, 0) + 1
-        self._index.setdefault(channel_id, array("Q")).extend((log_time, self._size))
-        self._in_chunk += 1
-        self._to_chunk(MESSAGE_HEAD.pack(_MESSAGE, _HEAD_FIELDS + len(data), channel_id,
-                                         sequence, log_time, publish_time) + data)
-
     def add_batch(self, stamp: int, messages: Sequence[tuple[int, bytes]]) -> None:
         """
-        Message records of ``messages`` (channel id, payload), log and publish time ``stamp``.
+        Add the Message records of ``messages`` (channel id, payload) at log time ``stamp``.
 
         Each message's sequence is its number on its channel in this file (1, 2, ...; modulo
         2^32): the same records as ``add_message(channel, stamp, payload, stamp, number)``.
@@ -189,7 +184,7 @@ class BatchWriter:
             self._put(stamp, frame_messages(frame, start, channel_ids))
 
     def _put(self, stamp: int, messages: Iterator[tuple[int, bytes | memoryview]]) -> None:
-        """Message records of at least one message (``add_batch``), in one loop."""
+        """Add the Message records of at least one message (``add_batch``), in one loop."""
         pack = MESSAGE_HEAD.pack
         append = self._parts.append
         index = self._index

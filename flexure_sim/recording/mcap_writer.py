@@ -160,7 +160,6 @@ class Worker:
         self._topics: dict[int, AddTopic] = {}
         #: Messages per channel written from `write_batch`'s tuples; the rest came in frames.
         self.batch_counts: dict[int, int] = {}
-        self._start = self._end = -1
         self.bag_metadata: dict | None = None
         self._deadline: float | None = None
         self.thread = threading.Thread(target=self._run, name="mcap-recorder", daemon=True)
@@ -220,12 +219,7 @@ class Worker:
                         for channel_id, _ in messages:
                             batch[channel_id] = batch.get(channel_id, 0) + 1
                     else:
-                        stamp = item.stamp
-                        writer.add_frame(stamp, item.frame, item.start, item.channel_ids)
-                    if self._start < 0 or stamp < self._start:
-                        self._start = stamp
-                    if stamp > self._end:
-                        self._end = stamp
+                        writer.add_frame(item.stamp, item.frame, item.start, item.channel_ids)
                     if self._deadline is None:
                         self._deadline = monotonic() + self._interval
                     elif monotonic() >= self._deadline:
@@ -275,12 +269,12 @@ class Worker:
             )
             for t in sorted(self._topics.values(), key=lambda t: t.channel_id)
         ]
-        start = max(self._start, 0)
+        start, end = self._writer.message_times
         metadata = build_bag_metadata(
             file_name=self._file_name,
             topics=topics,
             start_ns=start,
-            end_ns=max(self._end, start),
+            end_ns=end,
             custom_data={DROPPED_KEY: str(self._dropped())},
             ros_distro=self._ros_distro,
         )

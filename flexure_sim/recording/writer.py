@@ -2,7 +2,7 @@
 `McapRecorder`: records serialized ROS 2 messages to an MCAP file as rosbag2 (Jazzy) does.
 
 The caller (the simulation loop) only enqueues; a background thread (`mcap_writer.Worker`,
-on the `mcap` library's ``Writer``) owns the file.
+with `mcap_batch.BatchWriter`) owns the file.
 
 Overflow policy: the queue holds ``queue_size`` batches (`McapRecorder.write_batch`, e.g. one
 tick; `write` queues a batch of one message). When it is full, a write waits at most
@@ -25,12 +25,12 @@ import re
 import threading
 import weakref
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
 from flexure_sim import __version__
 from flexure_sim.recording.bag_metadata import METADATA_RECORD_NAME
+from flexure_sim.recording.counts import Counters, RecordingStats
 from flexure_sim.recording.exceptions import (
     RecorderClosedError, RecorderFailedError, RecordingError,
 )
@@ -48,40 +48,6 @@ _MAX_STAMP = 2**64 - 1
 
 Output = str | os.PathLike[str] | BinaryIO
 _CONTROL_TIMEOUT_S = 30.0
-
-
-@dataclass(frozen=True)
-class RecordingStats:
-    """Per-topic counts of messages accepted for writing and dropped on a full queue."""
-
-    accepted: Mapping[str, int]
-    dropped: Mapping[str, int]
-    pending: int = 0
-
-    @property
-    def accepted_count(self) -> int:
-        return sum(self.accepted.values())
-
-    @property
-    def dropped_count(self) -> int:
-        return sum(self.dropped.values())
-
-
-class _Counters:
-    """Counts shared by the producers and the writer thread, guarded by ``lock``."""
-
-    def __init__(self) -> None:
-        self.lock = threading.RLock()  # re-entrant: a signal handler may run inside write()
-        self.accepted: dict[str, int] = {}
-        self.dropped: dict[str, int] = {}
-
-    def dropped_total(self) -> int:
-        with self.lock:
-            return sum(self.dropped.values())
-
-    def snapshot(self, pending: int = 0) -> RecordingStats:
-        with self.lock:
-            return RecordingStats(dict(self.accepted), dict(self.dropped), pending)
 
 
 class McapRecorder:
@@ -120,7 +86,7 @@ class McapRecorder:
         self._max_block_s = max_block_s
         self._resolver = SchemaResolver(ament_prefixes)
         self._lock = threading.RLock()
-        self._counters = _Counters()
+        self._counters = Counters()
         self._closed = False
         self._close_result: RecordingStats | None = None
         self._channels: dict[str, int] = {}
@@ -163,19 +129,12 @@ class McapRecorder:
 
         A frame's messages (`write_frame`) count as accepted once written.
         """
-        return self._with_frames(self._counters.snapshot(self._worker.queue.qsize()))
+        return self._counters.snapshot(self._worker.queue.qsize(), self._frames_written())
 
-    def _with_frames(self, stats: RecordingStats) -> RecordingStats:
-        """``stats`` with the messages of the frames written so far added to ``accepted``."""
-        written = self._worker.frame_counts()
-        if any(written.values()):
-            topic_of = {channel_id: topic for topic, channel_id in self._channels.items()}
-            accepted = stats.accepted
-            for channel_id, n in written.items():
-                if n:
-                    topic = topic_of[channel_id]
-                    accepted[topic] = accepted.get(topic, 0) + n
-        return stats
+    def _frames_written(self) -> dict[str, int]:
+        """Messages per topic written from `write_frame`'s frames so far."""
+        topic_of = {channel_id: topic for topic, channel_id in self._channels.items()}
+        return {topic_of[c]: n for c, n in self._worker.frame_counts().items() if n}
 
     @property
     def dropped_count(self) -> int:
@@ -388,7 +347,7 @@ class McapRecorder:
         if worker.thread.is_alive():
             raise RecorderFailedError(f"MCAP writer did not finish within {timeout_s} s")
         # The frames' messages count once written; a failed writer's stats keep what it wrote.
-        self._close_result = self._with_frames(self._close_result)
+        self._close_result = self._counters.snapshot(0, self._frames_written())
         if worker.error is not None:
             raise RecorderFailedError(f"MCAP writer failed: {describe(worker.error)}") \
                 from worker.error
