@@ -148,13 +148,18 @@ class Diagnostics:
         """
         if not self.window.ticks:
             return
+        payload = self.record(stamp)
         try:
-            self.publish(stamp)
+            self._publisher.publish(payload)
         except Exception:  # noqa: BLE001 - rclpy's context already shut down: recorded anyway
             pass
 
     def publish(self, stamp: int) -> None:
         """Publish (and record) the status of the window ending now; start a new window."""
+        self._publisher.publish(self.record(stamp))
+
+    def record(self, stamp: int) -> bytes:
+        """Record the status of the window ending now and return it (CDR); start a new window."""
         loop = self.loop
         w = self.window
         now = time.perf_counter()
@@ -262,5 +267,5 @@ class Diagnostics:
             stamp, f"{self._name}: simulation", self._hardware_id, level,
             "; ".join(notes) if notes else "running", values)
         session.write(((self._channel, payload),), stamp)
-        self._publisher.publish(payload)
         self.window = self.new_window()
+        return payload

@@ -184,12 +184,16 @@ class SteppingLoop:
                 self._on_running()
             with self.publish_calls.hold():
                 self._ticks(pacer)
-            if self.diagnostics is not None:
-                self.diagnostics.publish_final(round(self.sim.state.t * 1e9))
         except BaseException as exc:  # noqa: BLE001 - reported, then the node shuts down
             if not self._stop.is_set() and self._on_failure(exc):
                 self.failure = exc
         finally:
+            # However the ticks ended: a signal shuts rclpy down first, and its next call raises.
+            try:
+                if self.diagnostics is not None:
+                    self.diagnostics.publish_final(round(self.sim.state.t * 1e9))
+            except Exception as exc:  # noqa: BLE001 - the rest of the clean-up still runs
+                self._log.error(f"the status at the stop is not recorded: {exc!r}")
             if latency is not None:
                 latency.release()
                 self.cpu_latency_us = -1
