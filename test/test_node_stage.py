@@ -343,7 +343,7 @@ def test_signal_leaves_a_complete_recording_matching_what_was_received(
     expected = dict(received, **{"/diagnostics": received["/diagnostics"] + 1})
     path = node.cwd / "run.mcap"
     counts, total, metadata = read_with_mcap(path)
-    assert counts == expected
+    assert counts == expected, node.stderr
     assert total == sum(expected.values())
     assert read_with_rosbags(path) == expected
     last_status = read_log(path).messages_on("/diagnostics")[-1]
@@ -428,10 +428,11 @@ def test_fast_mode_publishes_clock_and_a_use_sim_time_node_follows_it(tmp_path, 
     assert set(stamps) & set(clocks)
     # The follower's ROS clock is simulated time: it followed /clock (taken best effort by
     # rclpy's TimeSource, the newest only) past where it was while the node ran, to a tick.
-    # (A subscription that joins an unpaced run misses its first ticks, each its own: the
-    # TimeSource's first /clock can precede this test's first.)
+    # (The TimeSource's reader and this test's /clock reader each lose their own messages: a
+    # subscription that joins an unpaced run misses its first ticks, and a slow reader of a
+    # writer that keeps the last 100 its last ones. So `during` need not lie within `clocks`.)
     assert active and now > during and now % 1_000_000 == 0
-    assert during <= clocks[-1] and during % 1_000_000 == 0
+    assert during % 1_000_000 == 0
 
 
 def test_lockstep_runs_are_deterministic_and_reset_restarts_time(tmp_path, domain, peer):
