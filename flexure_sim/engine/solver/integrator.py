@@ -25,7 +25,7 @@ from typing import Any, Callable, NamedTuple
 import numpy as np
 import scipy.linalg
 
-from flexure_sim.engine.solver import step_energy, step_loop as stepping
+from flexure_sim.engine.solver import kernel_pack, step_energy, step_loop as stepping
 from flexure_sim.engine.solver.state import Data, Linearization, State
 from flexure_sim.engine.solver.model import Model, SolverError
 
@@ -76,7 +76,9 @@ def linearize(model: Model, data: Data, y: np.ndarray, t: float, command) -> Non
             drive_mass, tau, shifted, sines, tangent.load_rows[timed], forcing)
     else:
         emats = step_energy.NO_ENERGY
-    data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, emats)
+    packed = (kernel_pack.loop_args(A, phi1, phi2, emats, model.kernel_args) if model.compiled
+              else None)
+    data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, emats, packed)
     data.stats.linearizations += 1
 
 
@@ -133,12 +135,14 @@ def _advance(model: Model, data: Data, n, y, t, rows, held, F0, aux0, ye, origin
     """Run the stepping loop's up to n steps from (y, t = origin + k dt) (``stepping.advance``)."""
     lin = data.lin
     assert lin is not None  # step() linearizes before it advances
-    common = (n, y, t, model.dt, rows, held, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,
-              model.atol, model.max_iterations, model.relinearize_after, F0, aux0, ye,
-              lin.emats)
-    if model.compiled:
-        return stepping.advance(*common, model.kernel_args, origin, k)
-    return stepping.advance_interpreted(*common, model, origin, k)
+    if model.compiled:  # the fixed arrays as one structure (``kernel_pack``)
+        return stepping.advance_packed(
+            n, y, t, model.dt, rows, held, model.iteration_rtol, model.atol,
+            model.max_iterations, model.relinearize_after, F0, aux0, ye, lin.packed, origin, k)
+    return stepping.advance_interpreted(
+        n, y, t, model.dt, rows, held, lin.A, lin.phi1, lin.phi2, model.iteration_rtol,
+        model.atol, model.max_iterations, model.relinearize_after, F0, aux0, ye, lin.emats,
+        model, origin, k)
 
 
 def warm(model: Model, data: Data) -> None:

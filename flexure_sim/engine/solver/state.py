@@ -77,6 +77,9 @@ class Linearization:
     phi1: np.ndarray
     phi2: np.ndarray
     emats: tuple
+    #: A, phi1, phi2, emats and the model's kernel arguments as one structure for the compiled
+    #: loop (``kernel_pack.LoopArgs``; None: not compiled).
+    packed: Any = field(default=None, compare=False, repr=False)
 
 
 class Data:

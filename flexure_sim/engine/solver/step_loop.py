@@ -31,6 +31,7 @@ import numpy as np
 from flexure_sim.engine import jit as kernel_cache
 from flexure_sim.engine.solver import step_energy as step_energy_module
 from flexure_sim.engine.jit import njit
+from flexure_sim.engine.solver.kernel_pack import LoopArgs
 from flexure_sim.engine.solver.kernels import quadratic_forces
 from flexure_sim.engine.solver.motion import coordinates, kernel_coordinates, prescribed_motion
 from flexure_sim.engine.solver.step_energy import (
@@ -249,8 +250,8 @@ def _advance(
     and velocities there (``where``; at the caller's time origin + (clock + steps) dt: t = origin
     + clock dt, and time is kept on the step grid, not summed) and whether every entry of y is
     finite. Taking z and v here spares the caller a second call into compiled code, which
-    unboxes every array argument again (~0.1 us each; with the kernel's arguments a call
-    costs ~3 us for the stage).
+    unboxes every array argument again (~0.1 us each; ``advance_packed`` takes the fixed ones as
+    one structure).
     ``rhs``, ``switch`` and ``where`` are globals of the function (see the end of this module),
     not arguments: Numba cannot cache functions that take compiled functions as arguments.
     """
@@ -329,6 +330,20 @@ where = kernel_coordinates
 
 #: The loop, compiled with the quadratic-law kernel.
 advance = njit(cache=True)(_advance)
+
+
+@njit(cache=True)
+def advance_packed(n, y, t, dt, commands, held, rtol, atol, max_iter, slow_after, F0, aux0, ye,
+                   packed: LoopArgs, origin, clock):
+    """
+    ``advance`` with the linearization's and the model's arrays as one structure.
+
+    ``packed``: ``kernel_pack.LoopArgs`` (that module says why: a call from Python unboxes it as
+    one object instead of ~45 arrays).
+    """
+    return advance(n, y, t, dt, commands, held, packed.A, packed.phi1, packed.phi2, rtol, atol,
+                   max_iter, slow_after, F0, aux0, ye, packed.emats, packed.args, origin, clock)
+
 
 # Numba's cache of each kernel is keyed on its own file only (``kernel_cache``).
 kernel_cache.revalidate(kernel_cache.dispatchers_of(step_energy_module, globals()), __file__)
