@@ -13,9 +13,11 @@ import numpy as np
 import pytest
 
 from flexure_sim.engine.mechanism.loader import load_mechanism
-from flexure_sim.engine.solver import integrator, step_loop
+from flexure_sim.engine.mechanism.spatial_loader import load_spatial
+from flexure_sim.engine.solver import integrator, spatial_kernels, step_loop
 from flexure_sim.engine.solver.kernel_pack import LoopArgs
 from flexure_sim.engine.solver.simulation import Simulation
+from flexure_sim.engine.solver.spatial_simulation import SpatialSimulation
 
 
 def same(a, b) -> bool:
@@ -77,3 +79,33 @@ def test_a_stepped_simulation_pickles_and_steps_on_as_the_original():
     assert a.z.tobytes() == b.z.tobytes() and a.v.tobytes() == b.v.tobytes()
     assert (a.dissipated, a.drive_work) == (b.dissipated, b.drive_work)
     assert np.any(a.z != sim.model.z0)  # it moved
+
+
+def test_the_spatial_packed_loop_returns_what_its_loop_with_the_arrays_returns():
+    sim = SpatialSimulation(load_spatial("tiptilt_stage"))
+    sim.set_command([1e-6, 0.0, -1e-6])
+    sim.step(5)
+    calls = []
+    real = spatial_kernels.advance_packed
+
+    def spy(*args):
+        calls.append(args)
+        return real(*args)
+
+    spatial_kernels.advance_packed = spy
+    try:
+        sim.set_command([2e-6, 1e-6, 0.0])
+        sim.step(4)
+    finally:
+        spatial_kernels.advance_packed = real
+    lin = sim.data.lin
+    assert calls and isinstance(lin.packed, LoopArgs)
+    for args in calls:
+        (n, y, t, dt, rows, held, rtol, atol, max_iter, slow, F0, aux0, ye, packed, origin,
+         clock) = args
+        assert packed is lin.packed
+        by_arrays = spatial_kernels.advance(
+            n, y, t, dt, rows, held, lin.A, lin.phi1, lin.phi2, rtol, atol, max_iter, slow, F0,
+            aux0, ye, lin.emats, sim.model.kernel_args, origin, clock)
+        assert all(same(a, b) for a, b in zip(real(*args), by_arrays))
+    assert np.any(sim.state.z != sim.model.z0)

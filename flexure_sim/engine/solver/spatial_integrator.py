@@ -20,6 +20,7 @@ import scipy.sparse.csgraph
 
 from flexure_sim.engine.solver import spatial_kernels as kernels
 from flexure_sim.engine.solver.integrator import Stepper, march, phi_matrices
+from flexure_sim.engine.solver.kernel_pack import loop_args
 from flexure_sim.engine.solver.integrator import moved_too_far as planar_moved_too_far
 from flexure_sim.engine.solver.model import SolverError
 from flexure_sim.engine.solver.spatial_model import SpatialModel
@@ -54,7 +55,8 @@ def linearize(model: SpatialModel, data: Data, y: np.ndarray, t: float, command)
     """Exact Jacobian at y and the step's h phi_1(hA), h phi_2(hA), into ``data.lin``."""
     A = model.jacobian(y, t, command)
     phi1, phi2 = phi_by_blocks(A, model.dt)
-    data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, NO_ENERGY)
+    data.lin = Linearization(model.unpack(y, t, command)[0], A, phi1, phi2, NO_ENERGY,
+                             loop_args(A, phi1, phi2, NO_ENERGY, model.kernel_args))
     data.stats.linearizations += 1
 
 
@@ -67,10 +69,9 @@ def _advance(model: SpatialModel, data: Data, n, y, t, rows, held, F0, aux0, ye,
     """Advance up to n steps in the compiled spatial loop (``spatial_kernels.advance``)."""
     lin = data.lin
     assert lin is not None  # march() linearizes before it advances
-    return kernels.advance(n, y, t, model.dt, rows, held, lin.A, lin.phi1, lin.phi2,
-                           model.iteration_rtol, model.atol, model.max_iterations,
-                           model.relinearize_after, F0, aux0, ye, NO_ENERGY, model.kernel_args,
-                           origin, k)
+    return kernels.advance_packed(n, y, t, model.dt, rows, held, model.iteration_rtol,
+                                  model.atol, model.max_iterations, model.relinearize_after, F0,
+                                  aux0, ye, lin.packed, origin, k)
 
 
 #: The planar engine's step loop (``integrator.march``) with the spatial model's pieces.

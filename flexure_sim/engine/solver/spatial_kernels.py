@@ -23,6 +23,7 @@ from flexure_sim.engine import jit
 from flexure_sim.engine.jit import njit
 from flexure_sim.engine.solver import spatial_chain as chain
 from flexure_sim.engine.solver import step_loop as stepping
+from flexure_sim.engine.solver.kernel_pack import LoopArgs
 from flexure_sim.engine.solver.motion import coordinates
 from flexure_sim.engine.solver.step_energy import AUX_LOAD
 
@@ -148,6 +149,15 @@ def _bind():
 #: The exponential trapezoidal loop of ``stepping`` with the spatial right-hand side.
 advance = _bind()
 
+
+@njit(cache=True)
+def advance_packed(n, y, t, dt, commands, held, rtol, atol, max_iter, slow_after, F0, aux0, ye,
+                   packed: LoopArgs, origin, clock):
+    """``advance`` with the fixed arrays as one structure (``step_loop.advance_packed``)."""
+    return advance(n, y, t, dt, commands, held, packed.A, packed.phi1, packed.phi2, rtol, atol,
+                   max_iter, slow_after, F0, aux0, ye, packed.emats, packed.args, origin, clock)
+
+
 # Numba keys a cache on its function's file: flush when any source of these kernels changes.
-jit.revalidate([spatial_rhs, terms, complex_step, no_switch_work, no_coordinates, advance],
-               __file__)
+jit.revalidate([spatial_rhs, terms, complex_step, no_switch_work, no_coordinates, advance,
+                advance_packed], __file__)
