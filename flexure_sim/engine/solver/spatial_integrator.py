@@ -79,28 +79,47 @@ SPATIAL = Stepper(linearize, _advance, moved_too_far)
 
 
 def step(model: SpatialModel, data: Data, n: int = 1) -> None:
-    """Advance ``data`` n fixed steps with the drives' commands held at state.command."""
+    """
+    Advance ``data`` n fixed steps with the drives' commands held at state.command.
+
+    From the state it stepped last, the next call takes y, the kernel's command vector and F
+    from the cache (as ``integrator.step``), and the loop returns the coordinates
+    (``spatial_kernels.spatial_coordinates``): the tip-tilt stage's step(1) 18 us against 32 us
+    when each call packed y, built the command and unpacked z and w in Python (step(10): 48
+    against 62 us; two interleaved runs, best of 7 x 2000 calls).
+    """
     s = data.state
-    command = np.ascontiguousarray(model.actuator_command(s.command), dtype=float)
+    cache = data.cache
+    seeded = cache is not None and cache[0] is s
+    if seeded and cache[6] == s.command.tobytes():
+        command, key = cache[7], cache[1]  # commands held on: the last vector
+    else:
+        command = np.ascontiguousarray(model.actuator_command(s.command), dtype=float)
+        key = command.tobytes()
     rows = command.reshape(1, -1)
-    key = command.tobytes()
     clock = data.clock
     if clock is None or clock[0] is not s:
         clock = (s, s.t, 0)
     _, origin, k = clock
-    y, t = model.pack(s), s.t
-    cache = data.cache
-    if cache is not None and cache[0] is s and cache[1] == key:
+    t = s.t
+    y = cache[5] if seeded else model.pack(s)  # bit for bit: s was unpacked from it
+    if seeded and cache[1] == key:
         F0, aux0, ye = cache[2:5]
     else:
         F0, aux0 = model.rhs(y, t, command)
         ye = y
-    y, t, k, F0, aux0, ye, command, _, _, _, _, _ = march(
+    y, t, k, F0, aux0, ye, command, _, _, z, w, finite = march(
         model, data, n, (y, t, origin, k), rows, command, (F0, aux0, ye), (0.0, 0.0), SPATIAL)
-    z, w, u = model.unpack(y, t, command)
-    if not np.all(np.isfinite(y)):
+    if z is None or w is None:  # no step asked for
+        z, w, _ = model.unpack(y, t, command)
+        finite = bool(np.isfinite(y).all())
+    if not finite:
         raise SolverError(f"non-finite state at t = {t:.6g} s (step {model.dt:g} s)")
     model.check_range(z)
-    data.state = State(t, z, w, model.state_u(u), s.command, math.nan, math.nan)
+    nF = len(model.part.free)
+    u = model.state_u(y[2 * nF:2 * nF + model.n_actuators])
+    data.state = State(t, z, w, u, s.command, math.nan, math.nan)
     data.clock = (data.state, origin, k)
-    data.cache = (data.state, command.tobytes(), F0, aux0, ye)
+    # As ``integrator.step``'s: (state, command key, F and rates, where they were taken, y, the
+    # bytes of the state's commands, the kernel's command vector held).
+    data.cache = (data.state, command.tobytes(), F0, aux0, ye, y, s.command.tobytes(), command)

@@ -132,9 +132,18 @@ def no_switch_work(y, t, old, new, args):
 
 
 @njit(cache=True)
-def no_coordinates(y, t, command, args):
-    """Return two empty arrays: the spatial stepping unpacks y itself (``SpatialModel.unpack``)."""
-    return np.zeros(0), np.zeros(0)
+def spatial_coordinates(y, t, command, args):
+    """
+    Return all coordinates z and quasi-velocities w at y (``SpatialModel.full``, compiled).
+
+    The loop's ``where``: the caller takes them from the loop's return instead of a second
+    call into compiled code (``step_loop._advance``).
+    """
+    (free, prescribed, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, Dp,
+     first_program) = args[:11]
+    z, w, _ = coordinates(y, t, command, free, prescribed, 6 * args[13].shape[0], tau, zP0, D,
+                          sine_index, sine_amp, sine_w, sine_phase, Dp, first_program)
+    return z, w
 
 
 def _bind():
@@ -142,7 +151,7 @@ def _bind():
     code = stepping._advance.__code__.replace(co_name="_advance_spatial",
                                               co_qualname="_advance_spatial")
     space = dict(vars(stepping))
-    space.update(rhs=spatial_rhs, switch=no_switch_work, where=no_coordinates)
+    space.update(rhs=spatial_rhs, switch=no_switch_work, where=spatial_coordinates)
     return njit(cache=True)(types.FunctionType(code, space, "_advance_spatial"))
 
 
@@ -159,5 +168,5 @@ def advance_packed(n, y, t, dt, commands, held, rtol, atol, max_iter, slow_after
 
 
 # Numba keys a cache on its function's file: flush when any source of these kernels changes.
-jit.revalidate([spatial_rhs, terms, complex_step, no_switch_work, no_coordinates, advance,
+jit.revalidate([spatial_rhs, terms, complex_step, no_switch_work, spatial_coordinates, advance,
                 advance_packed], __file__)
