@@ -12,6 +12,8 @@ Spatial engine benchmarks of ``flexure-sim bench``: 3-D stepping speed at the pl
   of every step tried.
 - steady: steps per second over 1 s simulated once linearized (what a long run or the node
   sees), both engines.
+- call costs: the wall time of one ``step(1)`` and one ``step(10)`` call once linearized (best
+  of 7 x 500 calls), both engines: a call's fixed cost is what a short call adds to its steps.
 - linearization: the cost of one exact Jacobian (the complex step of the compiled force
   chain) and of the phi-functions' exponentials, paid once per run here.
 """
@@ -29,6 +31,9 @@ from flexure_sim.engine.solver.spatial_simulation import SpatialSimulation
 from flexure_sim.tools.bench.engine_bench import REPEATS, U_STEP
 
 DURATION = 0.05
+#: Steps per call of the call costs: one (a controller stepping the simulation itself), ten
+#: (a 1 kHz node tick at the shipped step).
+CALL_STEPS = (1, 10)
 #: How many times the tip-tilt stage's step is halved at most to reach the planar accuracy.
 HALVINGS = 6
 
@@ -64,13 +69,25 @@ def _run(make, command, dt: float, output) -> dict:
     start = time.perf_counter()
     sim.step(10 * n)
     steady = (time.perf_counter() - start) / (10 * n)
-    return {"steps": n, "steady_step_us": steady * 1e6, "steady_rtf": dt / steady,
+    calls = {f"call_{k}_us": 1e6 * _call(sim, k) for k in CALL_STEPS}
+    return {"steps": n, "steady_step_us": steady * 1e6, "steady_rtf": dt / steady, **calls,
             "wall_s": wall, "rtf": DURATION / wall, "step_us": wall / n * 1e6,
             "max_rel_error": float(np.max(np.abs(traj - ref)) / np.max(np.abs(ref))),
             "reference_rel_error_estimate": float(np.max(np.abs(fine - ref))
                                                   / np.max(np.abs(ref))),
             "linearizations": sim.stats.linearizations,
             "iterations_per_step": sim.stats.iterations / sim.stats.steps, "final": sim}
+
+
+def _call(sim, steps: int, calls: int = 500, rounds: int = 7) -> float:
+    """Return the wall time (s) of one ``sim.step(steps)`` call: the best of ``rounds``."""
+    best = float("inf")
+    for _ in range(rounds):
+        start = time.perf_counter()
+        for _ in range(calls):
+            sim.step(steps)
+        best = min(best, (time.perf_counter() - start) / calls)
+    return best
 
 
 def at_accuracy(make, command, dt: float, output, target: float) -> dict:
@@ -153,6 +170,9 @@ def print_spatial(res: dict) -> None:
           f"{s['steady_step_us']:.2f} us per step (RTF {s['steady_rtf']:.1f}), planar "
           f"{p['steady_step_us']:.2f} us (RTF {p['steady_rtf']:.1f}), tip-tilt "
           f"{t['steady_step_us']:.2f} us (RTF {t['steady_rtf']:.1f})")
+    print("  a call of 1 / 10 steps: the stage in 3-D " + ", planar ".join(
+        f"{r['call_1_us']:.1f} / {r['call_10_us']:.1f} us" for r in (s, p))
+          + f", tip-tilt {t['call_1_us']:.1f} / {t['call_10_us']:.1f} us")
     print(f"  per linearization of the 3-D stage: exact Jacobian (complex step) "
           f"{res['jacobian_ms']:.1f} ms, with the matrix exponential "
           f"{res['linearization_ms']:.1f} ms ({s['linearizations']} per run)")
