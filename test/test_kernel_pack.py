@@ -29,39 +29,53 @@ def same(a, b) -> bool:
     return a == b
 
 
-@pytest.mark.parametrize("energy", [False, True], ids=["motion", "energies"])
-def test_the_packed_loop_returns_what_the_loop_with_the_arrays_returns(energy):
-    sim = Simulation(load_mechanism("microstage"), dt=1e-4, energy=energy)
-    sim.set_command(1e-6)
-    sim.step(20)
+def checked_calls(module, sim, run) -> int:
+    """
+    Run ``run()`` recording ``module.advance_packed``'s calls; return how many there were.
+
+    Each call is repeated by ``module.advance`` with the linearization's and the model's arrays
+    themselves, which must return the same to the bit.
+    """
     calls = []
-    real = step_loop.advance_packed
+    real = module.advance_packed
 
     def spy(*args):
         calls.append(args)
         return real(*args)
 
-    step_loop.advance_packed = spy
+    module.advance_packed = spy
     try:
-        sim.set_command(1.3e-6)  # a new command: the loop re-evaluates F at the switch
-        sim.step(7)
-        integrator.step(sim.model, sim.data, 5, None,
-                        np.array([[1.3e-6 + 1e-9 * k] for k in range(5)]))
+        run()
     finally:
-        step_loop.advance_packed = real
-    assert len(calls) >= 2
+        module.advance_packed = real
     lin = sim.data.lin
     assert isinstance(lin.packed, LoopArgs)
     for args in calls:
         (n, y, t, dt, rows, held, rtol, atol, max_iter, slow, F0, aux0, ye, packed, origin,
          clock) = args
         assert packed is lin.packed
-        by_arrays = step_loop.advance(
+        by_arrays = module.advance(
             n, y, t, dt, rows, held, lin.A, lin.phi1, lin.phi2, rtol, atol, max_iter, slow, F0,
             aux0, ye, lin.emats, sim.model.kernel_args, origin, clock)
         result = real(*args)
         assert len(result) == len(by_arrays) == 13
         assert all(same(a, b) for a, b in zip(result, by_arrays))
+    return len(calls)
+
+
+@pytest.mark.parametrize("energy", [False, True], ids=["motion", "energies"])
+def test_the_packed_loop_returns_what_the_loop_with_the_arrays_returns(energy):
+    sim = Simulation(load_mechanism("microstage"), dt=1e-4, energy=energy)
+    sim.set_command(1e-6)
+    sim.step(20)
+
+    def run():
+        sim.set_command(1.3e-6)  # a new command: the loop re-evaluates F at the switch
+        sim.step(7)
+        integrator.step(sim.model, sim.data, 5, None,
+                        np.array([[1.3e-6 + 1e-9 * k] for k in range(5)]))
+
+    assert checked_calls(step_loop, sim, run) >= 2
     if energy:
         assert sim.state.dissipated > 0.0
 
@@ -85,27 +99,10 @@ def test_the_spatial_packed_loop_returns_what_its_loop_with_the_arrays_returns()
     sim = SpatialSimulation(load_spatial("tiptilt_stage"))
     sim.set_command([1e-6, 0.0, -1e-6])
     sim.step(5)
-    calls = []
-    real = spatial_kernels.advance_packed
 
-    def spy(*args):
-        calls.append(args)
-        return real(*args)
-
-    spatial_kernels.advance_packed = spy
-    try:
+    def run():
         sim.set_command([2e-6, 1e-6, 0.0])
         sim.step(4)
-    finally:
-        spatial_kernels.advance_packed = real
-    lin = sim.data.lin
-    assert calls and isinstance(lin.packed, LoopArgs)
-    for args in calls:
-        (n, y, t, dt, rows, held, rtol, atol, max_iter, slow, F0, aux0, ye, packed, origin,
-         clock) = args
-        assert packed is lin.packed
-        by_arrays = spatial_kernels.advance(
-            n, y, t, dt, rows, held, lin.A, lin.phi1, lin.phi2, rtol, atol, max_iter, slow, F0,
-            aux0, ye, lin.emats, sim.model.kernel_args, origin, clock)
-        assert all(same(a, b) for a, b in zip(real(*args), by_arrays))
+
+    assert checked_calls(spatial_kernels, sim, run) >= 1
     assert np.any(sim.state.z != sim.model.z0)
