@@ -84,8 +84,14 @@ def test_a_stepped_simulation_pickles_and_steps_on_as_the_original():
     sim = Simulation(load_mechanism("microstage"), dt=1e-4, energy=True)
     sim.set_command(1e-6)
     sim.step(30)
+    lin, packed = sim.data.lin, sim.data.lin.packed
+    # The structure holds the arrays themselves (no copies), and shows them to Python.
+    assert packed.A is lin.A and packed.phi1 is lin.phi1 and packed.phi2 is lin.phi2
+    assert all(a is b for a, b in zip(packed.emats, lin.emats)) and len(packed.emats) == 12
+    assert all(a is b for a, b in zip(packed.args, sim.model.kernel_args))
     copy = pickle.loads(pickle.dumps(sim))
-    assert copy.data.lin.packed is not sim.data.lin.packed
+    assert copy.data.lin.packed is not packed
+    assert np.array_equal(copy.data.lin.packed.A, lin.A)
     for s in (sim, copy):
         s.set_command(2e-6)
         s.step(25)

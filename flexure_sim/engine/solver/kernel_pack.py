@@ -14,6 +14,7 @@ arrays (no copies), which are never changed in place; one per linearization (~3 
 """
 from __future__ import annotations
 
+import numpy as np
 from numba import types
 from numba.experimental import structref
 
@@ -41,6 +42,31 @@ class LoopArgs(structref.StructRefProxy):
     def __reduce__(self):
         """Pickle as the arrays (a `Simulation` goes to Dask workers whole)."""
         return _rebuild, _fields(self)
+
+    @property
+    def A(self) -> np.ndarray:
+        """Return the Jacobian A."""
+        return _fields(self)[0]
+
+    @property
+    def phi1(self) -> np.ndarray:
+        """Return h phi_1(hA)."""
+        return _fields(self)[1]
+
+    @property
+    def phi2(self) -> np.ndarray:
+        """Return h phi_2(hA)."""
+        return _fields(self)[2]
+
+    @property
+    def emats(self) -> tuple:
+        """Return the energy matrices (``step_energy.energy_matrices``; ``NO_ENERGY``)."""
+        return _fields(self)[3]
+
+    @property
+    def args(self) -> tuple:
+        """Return the model's kernel arguments (``Model.kernel_args``)."""
+        return _fields(self)[4]
 
 
 structref.define_proxy(LoopArgs, LoopArgsType, ["A", "phi1", "phi2", "emats", "args"])

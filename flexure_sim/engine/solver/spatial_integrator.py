@@ -89,8 +89,8 @@ def step(model: SpatialModel, data: Data, n: int = 1) -> None:
     against 62 us; two interleaved runs, best of 7 x 2000 calls).
     """
     s = data.state
-    cache = data.cache
-    seeded = cache is not None and cache[0] is s
+    cache: tuple = data.cache or ()
+    seeded = bool(cache) and cache[0] is s
     if seeded and cache[6] == s.command.tobytes():
         command, key = cache[7], cache[1]  # commands held on: the last vector
     else:
