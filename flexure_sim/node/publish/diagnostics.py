@@ -138,17 +138,23 @@ class Diagnostics:
                       stats.linearizations, stats.steps, self.counters(), loop.hold.failures,
                       self.intake())
 
-    def publish_final(self, stamp: int) -> None:
+    def publish_final(self, stamp: int, log: Any) -> None:
         """
         Send, at the stop, the status of the ticks since the last one (none if there were none).
 
         Recorded, so that the recording's last status holds the run's final counters
         (``analyse``), and published if ROS still can: a stop by a signal has usually shut
-        rclpy's context down by then.
+        rclpy's context down by then, and may have ended the ticks with rclpy's error. It never
+        raises (the stepping thread's clean-up goes on): a status it cannot make goes to
+        ``log`` as an error.
         """
         if not self.window.ticks:
             return
-        payload = self.record(stamp)
+        try:
+            payload = self.record(stamp)
+        except Exception as exc:  # noqa: BLE001 - see the docstring
+            log.error(f"the status at the stop is not recorded: {exc!r}")
+            return
         try:
             self._publisher.publish(payload)
         except Exception:  # noqa: BLE001 - rclpy's context already shut down: recorded anyway

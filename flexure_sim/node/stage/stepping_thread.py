@@ -188,12 +188,8 @@ class SteppingLoop:
             if not self._stop.is_set() and self._on_failure(exc):
                 self.failure = exc
         finally:
-            # However the ticks ended: a signal shuts rclpy down first, and its next call raises.
-            try:
-                if self.diagnostics is not None:
-                    self.diagnostics.publish_final(round(self.sim.state.t * 1e9))
-            except Exception as exc:  # noqa: BLE001 - the rest of the clean-up still runs
-                self._log.error(f"the status at the stop is not recorded: {exc!r}")
+            if self.diagnostics is not None:  # however the ticks ended (``publish_final``)
+                self.diagnostics.publish_final(round(self.sim.state.t * 1e9), self._log)
             if latency is not None:
                 latency.release()
                 self.cpu_latency_us = -1
