@@ -218,11 +218,9 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
             command = model.drives.kernel_command(s.command, s.programs, s.t - 0.5 * model.dt)
             rows = model.drives.kernel_rows(s, model.dt, n)
             key = command.tobytes()
-        elif seeded and not cache[8] and cache[7] == s.command.tobytes():
-            command, key = cache[6], cache[1]  # commands held on: the last vector
         else:
-            command = model.drives.kernel_command(s.command)
-            key = command.tobytes()
+            last = data.held_command(s)  # commands held on: the last vector
+            command, key = last if last is not None else _kernel_command(model, s)
     else:
         command = np.ascontiguousarray(command, dtype=float)
         key = command.tobytes()
@@ -264,12 +262,14 @@ def step(model: Model, data: Data, n: int = 1, command=None, rows=None) -> None:
     held = model.drives.held_command(command, s.command, s.programs) if s.programs else s.command
     data.state = State(t, z, v, u, held, dissipated, work, programs=s.programs)
     data.clock = (data.state, origin, k)
-    # The cache seeds the next call: (state, command key, F and energy rates while the command
-    # is unchanged, where they were taken, y, the kernel's command vector held last, the bytes
-    # of the state's commands and the programs it was held under). The vector also serves the
-    # tick report (``tick_report.TickReport.fill_data``) while those are the state's.
-    data.cache = (data.state, command.tobytes(), F0, aux0, ye, y, command, held.tobytes(),
-                  s.programs)
+    # The command vector also serves the tick report (``tick_report.TickReport.fill_data``).
+    data.seed(F0, aux0, ye, y, command)
+
+
+def _kernel_command(model: Model, s: State) -> tuple:
+    """Return (the kernel's command vector of ``s``'s commands, its key)."""
+    command = model.drives.kernel_command(s.command)
+    return command, command.tobytes()
 
 
 def _retaken(model: Model, s: State, before: np.ndarray, command: np.ndarray) -> bool:

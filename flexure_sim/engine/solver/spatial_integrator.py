@@ -20,8 +20,8 @@ import scipy.sparse.csgraph
 
 from flexure_sim.engine.solver import spatial_kernels as kernels
 from flexure_sim.engine.solver.integrator import Stepper, march, phi_matrices
-from flexure_sim.engine.solver.kernel_pack import loop_args
 from flexure_sim.engine.solver.integrator import moved_too_far as planar_moved_too_far
+from flexure_sim.engine.solver.kernel_pack import loop_args
 from flexure_sim.engine.solver.model import SolverError
 from flexure_sim.engine.solver.spatial_model import SpatialModel
 from flexure_sim.engine.solver.state import Data, Linearization, State
@@ -91,8 +91,9 @@ def step(model: SpatialModel, data: Data, n: int = 1) -> None:
     s = data.state
     cache: tuple = data.cache or ()
     seeded = bool(cache) and cache[0] is s
-    if seeded and cache[6] == s.command.tobytes():
-        command, key = cache[7], cache[1]  # commands held on: the last vector
+    held = data.held_command(s)  # commands held on: the last vector
+    if held is not None:
+        command, key = held
     else:
         command = np.ascontiguousarray(model.actuator_command(s.command), dtype=float)
         key = command.tobytes()
@@ -120,6 +121,4 @@ def step(model: SpatialModel, data: Data, n: int = 1) -> None:
     u = model.state_u(y[2 * nF:2 * nF + model.n_actuators])
     data.state = State(t, z, w, u, s.command, math.nan, math.nan)
     data.clock = (data.state, origin, k)
-    # As ``integrator.step``'s: (state, command key, F and rates, where they were taken, y, the
-    # bytes of the state's commands, the kernel's command vector held).
-    data.cache = (data.state, command.tobytes(), F0, aux0, ye, y, s.command.tobytes(), command)
+    data.seed(F0, aux0, ye, y, command)

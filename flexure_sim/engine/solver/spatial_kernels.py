@@ -139,10 +139,10 @@ def spatial_coordinates(y, t, command, args):
     The loop's ``where``: the caller takes them from the loop's return instead of a second
     call into compiled code (``step_loop._advance``).
     """
-    (free, prescribed, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, Dp,
-     first_program) = args[:11]
-    z, w, _ = coordinates(y, t, command, free, prescribed, 6 * args[13].shape[0], tau, zP0, D,
-                          sine_index, sine_amp, sine_w, sine_phase, Dp, first_program)
+    (free, prescribed, zP0, D, tau, sine_index, sine_amp, sine_w, sine_phase, Dp, first_program,
+     _, _, inverse_mass, _) = args
+    z, w, _ = coordinates(y, t, command, free, prescribed, 6 * inverse_mass.shape[0], tau, zP0,
+                          D, sine_index, sine_amp, sine_w, sine_phase, Dp, first_program)
     return z, w
 
 

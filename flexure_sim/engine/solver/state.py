@@ -86,9 +86,9 @@ class Data:
     """
     State, statistics and the integrator's caches of one run.
 
-    ``lin``: the current linearization (None: compute at the next step); ``cache``:
-    (state, command, F, energy rates) at the last stepped state, to seed the next call;
-    ``clock``: (state, origin t, steps since origin), so time stays on the step grid.
+    ``lin``: the current linearization (None: compute at the next step); ``cache``: what the
+    last step call left to seed the next one (`seed`); ``clock``: (state, origin t, steps since
+    origin), so time stays on the step grid.
     """
 
     def __init__(self, z0: np.ndarray, n_lags: int = 0, n_drives: int = 0):
@@ -100,6 +100,32 @@ class Data:
         self.lin: Optional[Linearization] = None
         self.cache: Optional[tuple] = None
         self.clock: Optional[tuple] = None
+
+    def seed(self, F0: np.ndarray, aux0: np.ndarray, ye: np.ndarray, y: np.ndarray,
+             command: np.ndarray) -> None:
+        """
+        Keep what seeds the next step call from the current state (the integrators' ``step``).
+
+        ``cache`` = (state, command key, F and energy rates while the command is unchanged,
+        where they were taken, y (the state packed, bit for bit), the kernel's command vector
+        held last, the bytes of the state's commands and the programs it was held under).
+        """
+        s = self.state
+        self.cache = (s, command.tobytes(), F0, aux0, ye, y, command, s.command.tobytes(),
+                      s.programs)
+
+    def held_command(self, s: State) -> Optional[tuple]:
+        """
+        Return (kernel command vector, its key) of the last step if it is state ``s``'s, or None.
+
+        It is while ``s`` is the state that step made and its commands and programs are those
+        the vector was made from (a command set since, even in place, is not).
+        """
+        cache = self.cache
+        if (cache is None or cache[0] is not s or cache[8] != s.programs
+                or cache[7] != s.command.tobytes()):
+            return None
+        return cache[6], cache[1]
 
     def initial_state(self) -> State:
         """Return the unstressed poses at rest, every actuator output and command 0, t = 0."""

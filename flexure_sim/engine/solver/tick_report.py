@@ -341,12 +341,8 @@ class TickReport:
         those it was made from, spares ``DriveTable.kernel_command``.
         """
         s = data.state
-        cache = data.cache
-        command = None
-        if (self.compiled and cache is not None and cache[0] is s and cache[8] == s.programs
-                and cache[7] == s.command.tobytes()):
-            command = cache[6]
-        return self.fill(s, command)
+        held = data.held_command(s) if self.compiled else None
+        return self.fill(s, held[0] if held is not None else None)
 
     def fill(self, s: State, command: Optional[np.ndarray] = None) -> np.ndarray:
         """
