@@ -86,8 +86,8 @@ def test_balancing_is_scipys_and_refuses_what_scipy_refuses(m):
     rng = np.random.default_rng(m)
     A = rng.normal(size=(m, m)) * 10.0 ** rng.integers(-6, 6, size=(m, m))
     want = scipy.linalg.matrix_balance(A, permute=False, separate=True)[1][0]
-    assert np.array_equal(quadratic_integrals._balancing(A), want)
+    assert np.array_equal(quadratic_integrals.balancing(A), want)
     if m:
         A[0, -1] = np.nan
         with pytest.raises(ValueError, match="infs or NaNs"):
-            quadratic_integrals._balancing(A)
+            quadratic_integrals.balancing(A)

@@ -27,6 +27,7 @@ linearization as step_cost.linearization_us).
 from __future__ import annotations
 
 import math
+from typing import Optional
 
 import numpy as np
 import scipy.linalg.lapack as lapack
@@ -40,17 +41,18 @@ from flexure_sim.engine.jit import njit
 START, TERMS = 0.25, 18
 
 
-def quadratic_integrals(M: np.ndarray, Q: np.ndarray, h: float, m: int):
+def quadratic_integrals(M: np.ndarray, Q: np.ndarray, h: float, m: int,
+                        scale: Optional[np.ndarray] = None):
     """
     Return G = int_0^h e^{M^T s} Q e^{Ms} ds (n x n) and I_W = int_0^h W(s) ds (m x (n - m)).
 
     M = [[A, U], [0, N]] with A the first m rows and columns and N nilpotent (module doc). A is
     balanced first, T = diag(D, I): M = T M_b T^-1, so G = T^-1 G_b T^-1 with Q_b = T Q T, and
-    I_W = D I_Wb.
+    I_W = D I_Wb. ``scale``: D's diagonal if already at hand (``balancing``).
     """
     n = M.shape[0]
     A, U, N = M[:m, :m], M[:m, m:], M[m:, m:]
-    scale = _balancing(A)
+    scale = balancing(A) if scale is None else scale
     tscale = np.concatenate((scale, np.ones(n - m)))
     inv = 1.0 / scale
     Ab = A * inv[:, None] * scale[None, :]
@@ -59,7 +61,7 @@ def quadratic_integrals(M: np.ndarray, Q: np.ndarray, h: float, m: int):
     return tinv[:, None] * Gb * tinv[None, :], scale[:, None] * IWb
 
 
-def _balancing(A: np.ndarray) -> np.ndarray:
+def balancing(A: np.ndarray) -> np.ndarray:
     """
     D of A's balancing D^-1 A D: ``scipy.linalg.matrix_balance(A, permute=False)``'s.
 

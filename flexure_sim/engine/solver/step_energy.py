@@ -25,7 +25,8 @@ int_0^h w ds = h^2 phi_2(hA) F_0 + h^2 phi_3(hA) N_1, and G the (F_0, N_1) block
 int_0^h e^{M^T s} S^T C_x S e^{M s} ds for the generator M of (w, F_0 + s N_1/h), rho = P - P^
 at the step's ends. G is Van Loan's integral (Van Loan, IEEE TAC 23 (1978) 395, Thm. 1), taken
 by doubling by blocks (``quadratic_integrals``: his block exponential holds e^{-M^T h}, which
-overflows for the stage's eigenvalues near -1e8 1/s). One such integral per linearization;
+overflows for the stage's eigenvalues near -1e8 1/s) with the stiff modes split off
+(``stiff_split``). One such integral per linearization;
 per step the cost is O(m^2) (two quadratic forms of order m).
 
 Drive work: a displacement drive's power is ud (D_k^T M_P a_P - q) with ud = (command - u)/tau
@@ -63,7 +64,7 @@ import math
 import numpy as np
 
 from flexure_sim.engine.jit import njit
-from flexure_sim.engine.solver.quadratic_integrals import quadratic_integrals
+from flexure_sim.engine.solver.stiff_split import step_integrals
 
 #: Entries of the energy vector ``rhs`` returns next to F (``stepping.energy_rates``); the load
 #: of displacement drive k is entry AUX_LOAD + k.
@@ -349,7 +350,7 @@ def energy_matrices(A, phi1, phi2, h, G_load, damping, free, prescribed, D, driv
     Q[nF:m, 3 * m + q:3 * m + 2 * q] = R[:, pc]
     Q[3 * m + q:3 * m + 2 * q, nF:m] = R[:, pc].T
     Q[3 * m + q:3 * m + 2 * q, 3 * m + q:3 * m + 2 * q] = SP[np.ix_(pc, pc)]
-    Gfull, IW = quadratic_integrals(M, Q, h, m)     # IW: int_0^h of e^{Ms}'s [:m, m:] block
+    Gin, IW = step_integrals(M, Q, h, m)    # G[m:, m:]; IW: int_0^h of e^{Ms}'s [:m, m:] block
     start = np.r_[m:3 * m, 3 * m + 2 * q:3 * m + 4 * q]    # (f, n, gamma, kappa): xi's entries
     rows = max(nd, 1)
     erows = np.zeros((rows, 3, m))
@@ -363,6 +364,6 @@ def energy_matrices(A, phi1, phi2, h, G_load, damping, free, prescribed, D, driv
         escal[k, E_TAU] = tau[k]
         escal[k, E_HAS_DRIVE] = 1.0
     timed_rows = np.asarray(timed_rows, dtype=float).reshape(len(timed_rows), m)
-    out = (erows, escal, Gfull[np.ix_(start, start)], IW[nF:m][:, start - m], Cx.T, R, SP, B,
+    out = (erows, escal, Gin[np.ix_(start - m, start - m)], IW[nF:m][:, start - m], Cx.T, R, SP, B,
            sines, timed_rows, timed_rows @ IW[:, :2 * m], forcing)
     return tuple(np.ascontiguousarray(a) for a in out)
