@@ -40,7 +40,7 @@ def test_form_from_the_transpose_is_the_row_by_row_form(n):
         for j in range(n):
             row += float(Mat[i, j]) * float(x[3 + j])
         want += float(x[3 + i]) * row
-    assert _form_t(np.ascontiguousarray(Mat.T), x[3:]).hex() == want.hex()
+    assert _form_t(np.ascontiguousarray(Mat.T), x[3:], np.empty(len(Mat))).hex() == want.hex()
 
 
 def _generator_inputs(m, h, programs):

@@ -20,7 +20,8 @@ x(s) = x_n + S w(s) (S selects x from y)
 
     int_0^h P ds = h P^(x_n) + 2 (C_x x_n + c)^T S int_0^h w ds + xi^T G xi + h/2 (rho_0 + rho_1),
 
-P^(x) = x^T C_x x + 2 c^T x + c_0 (C_x = L^T C L, c = L^T C b, c_0 = b^T C b), xi = (F_0, N_1),
+P^(x) = x^T C_x x + 2 c^T x + c_0 (C_x = L^T C L, c = L^T C b, c_0 = b^T C b), xi = (F_0, N_1)
+(N_1 without its z rows, which vanish: F's z rows are v, which A carries exactly),
 int_0^h w ds = h^2 phi_2(hA) F_0 + h^2 phi_3(hA) N_1, and G the (F_0, N_1) block of
 int_0^h e^{M^T s} S^T C_x S e^{M s} ds for the generator M of (w, F_0 + s N_1/h), rho = P - P^
 at the step's ends. G is Van Loan's integral (Van Loan, IEEE TAC 23 (1978) 395, Thm. 1), taken
@@ -75,7 +76,7 @@ N_SCALARS = 5
 
 
 @njit(cache=True, inline="always")
-def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats, form0):
+def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats, form0, ws):
     """
     Dissipated energy and drive work over one step (module docstring).
 
@@ -86,8 +87,10 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats, for
     The work sums over the displacement drives k (row k of erows, escal; their coordinates
     are disjoint, so each drive's work is its own) and adds the force drives' held forces'
     work, the change of their potential ``AUX_APPLIED`` (exact). ``form0``: x^T C_x x at ye0
-    if known (the previous step's end: NaN if not). Returns the dissipated energy, the work and
-    x^T C_x x at ye1 (the next step's ``form0``).
+    if known (the previous step's end: NaN if not). ``ws``: scratch of ``workspace_size``
+    entries (the loop's: a step's ~10 small arrays allocated per step cost ~0.2 us of its ~1 us
+    here). Returns the dissipated energy, the work and x^T C_x x at ye1 (the next step's
+    ``form0``).
     """
     erows, escal, G, V, CxT, R, SP, B, sines, Trows, T, Ep = emats
     if escal.shape[0] == 0:   # NO_ENERGY: the model does not integrate energies
@@ -114,8 +117,22 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats, for
     applied = aux1[AUX_APPLIED] - aux0[AUX_APPLIED]
     if applied != 0.0:
         work += applied
+    q = Ep.shape[1] // 2
+    mb = B.shape[0]
+    nxi = G.shape[0]
+    # Scratch: b, b1 (mb), accel (2q), where (q), c, gv, rows (nx), xi, gx (nxi), vt, N1p (m).
+    b, ws = ws[:mb], ws[mb:]
+    b1, ws = ws[:mb], ws[mb:]
+    accel, ws = ws[:2 * q], ws[2 * q:]
+    where, ws = ws[:q], ws[q:]
+    c, ws = ws[:nx], ws[nx:]
+    gv, ws = ws[:nx], ws[nx:]
+    rows, ws = ws[:nx], ws[nx:]
+    xi, ws = ws[:nxi], ws[nxi:]
+    gx, ws = ws[:nxi], ws[nxi:]
+    vt, ws = ws[:V.shape[1]], ws[V.shape[1]:]
     # b_P: the prescribed velocities' part that does not depend on the state.
-    b = np.zeros(B.shape[0])
+    b[:] = 0.0
     for k in range(nd):
         for i in range(B.shape[0]):
             b[i] += B[i, k] * command[k]
@@ -125,23 +142,22 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats, for
     timed0 = aux0[AUX_TIMED_POWER]
     linear = 0.0
     moved = 0.0
-    q = Ep.shape[1] // 2
     ns = sines.shape[1] - q
     # The program coordinates' velocities over the step, b_j + a_j s + c_j s^2, from their
     # rates at t0 and their velocities at t0 + h (functions of time: exact at both ends): the
     # generator's gamma(0) = a_j and kappa = 2 c_j. Their forcing of the free coordinates is in
     # the generator, so it leaves the remainder: N1p.
-    accel = np.zeros(2 * q)
-    where = np.zeros(q, dtype=np.int64)
+    accel[:] = 0.0
     N1p = N1
     if q:
-        N1p = N1.copy()
+        N1p = ws[:m]
+        N1p[:] = N1
         for k in range(q):
             slot = int(sines[4, ns + k])
             a = aux0[slot + q]
             c2 = (aux1[slot] - aux0[slot] - a * h) / (h * h)
             accel[k], accel[q + k] = a, 2.0 * c2
-            where[k] = int(sines[0, ns + k])
+            where[k] = sines[0, ns + k]
             moved_z = a * h * h / 2.0 + c2 * h * h * h / 3.0
             moved_v = a * h + c2 * h * h
             for j in range(m):
@@ -159,8 +175,6 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats, for
     rest = aux1[AUX_TIMED_POWER] - (timed0 - moved)
     work += h * timed0 - linear + 0.5 * h * rest
     # The quadratic forms as loops (NumPy's small products and their temporaries: ~1 us a step).
-    mb = b.shape[0]
-    c = np.empty(nx)
     for i in range(nx):
         acc = 0.0
         for j in range(mb):
@@ -168,33 +182,33 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats, for
         c[i] = acc
     c0 = _form(SP, b, 0, b, 0)
     p0 = c0
-    nxi = G.shape[0]
-    xi = np.empty(nxi)
     xi[:m] = F0
-    xi[m:2 * m] = N1p
-    xi[2 * m:] = accel
+    xi[m:m + nx] = N1p[nF:]     # N_1's z rows vanish: F's z rows are v, which A carries exactly
+    xi[m + nx:] = accel
     # gv = c + Cx x_n, V^T gv and G xi accumulated along contiguous rows (of Cx^T; G is
     # symmetric, ``quadratic_integrals``): independent sums the compiler vectorizes, not one
     # chain of dependent additions per row.
-    gv = _rows_times(CxT, y0[nF:], c.copy())
+    gv[:] = c
+    gv = _rows_times(CxT, y0[nF:], gv)
     for i in range(nx):
         p0 += y0[nF + i] * gv[i] + c[i] * y0[nF + i]
-    vt = _rows_times(V, gv, np.zeros(V.shape[1]))
-    gx = _rows_times(G, xi, np.zeros(G.shape[1]))
+    vt[:] = 0.0
+    vt = _rows_times(V, gv, vt)
+    gx[:] = 0.0
+    gx = _rows_times(G, xi, gx)
     gVxi = 0.0
     quad = 0.0
     for i in range(nxi):
         gVxi += vt[i] * xi[i]
         quad += xi[i] * gx[i]
     dissipated = h * p0 + 2.0 * gVxi + quad
-    b1 = b
     if q:
         # The program velocities rise by beta(s) = a s + c s^2 over the step (the generator's
         # beta, gamma, kappa): the linear term 2 (R^T x_n + S_P b)_pc . int beta ds.
-        b1 = b.copy()
+        b1[:] = b
         for k in range(q):
             a, c2 = accel[k], 0.5 * accel[q + k]
-            j = where[k]
+            j = int(where[k])
             gb = 0.0
             for i in range(nx):
                 gb += R[i, j] * y0[nF + i]
@@ -204,7 +218,7 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats, for
             b1[j] += a * h + c2 * h * h
     # The linear model's c, c_0 at the step's end.
     c01 = _form(SP, b1, 0, b1, 0) if q else c0
-    form1 = _form_t(CxT, ye1[nF:])
+    form1 = _form_t(CxT, ye1[nF:], rows)
     end = form1 + c01
     for i in range(nx):
         c1 = c[i]
@@ -213,11 +227,21 @@ def step_energy(y0, ye0, y1, ye1, F0, N1, aux0, aux1, command, t0, h, emats, for
             for j in range(mb):
                 c1 += R[i, j] * b1[j]
         end += 2.0 * c1 * ye1[nF + i]
-    start = (_form_t(CxT, ye0[nF:]) if math.isnan(form0) else form0) + c0
+    start = (_form_t(CxT, ye0[nF:], rows) if math.isnan(form0) else form0) + c0
     for i in range(nx):
         start += 2.0 * c[i] * ye0[nF + i]
     rho = aux0[AUX_DISSIPATION] - start + aux1[AUX_DISSIPATION] - end
     return dissipated + 0.5 * h * rho, work, form1
+
+
+@njit(cache=True, inline="always")
+def workspace_size(emats, m):
+    """Entries of ``step_energy``'s scratch ``ws`` for matrices ``emats`` and a state of m."""
+    _, escal, G, V, CxT, _, _, B, _, _, _, Ep = emats
+    if escal.shape[0] == 0:
+        return 0
+    q = Ep.shape[1] // 2
+    return 2 * B.shape[0] + 3 * q + 3 * CxT.shape[0] + 2 * G.shape[0] + V.shape[1] + m
 
 
 @njit(cache=True, inline="always")
@@ -250,14 +274,15 @@ def _rows_times(Mat, x, out):
 
 
 @njit(cache=True, inline="always")
-def _form_t(MatT, x):
+def _form_t(MatT, x, rows):
     """
-    Return x^T Mat x from Mat's transpose.
+    Return x^T Mat x from Mat's transpose (``rows``: scratch of Mat's order).
 
     The row sums of ``_form`` (each from 0.0, in column order), taken together along MatT's
     contiguous rows, then summed in row order: the same bits.
     """
-    rows = _rows_times(MatT, x, np.zeros(MatT.shape[1]))
+    rows[:] = 0.0
+    rows = _rows_times(MatT, x, rows)
     out = 0.0
     for i in range(rows.shape[0]):
         out += x[i] * rows[i]
@@ -351,7 +376,9 @@ def energy_matrices(A, phi1, phi2, h, G_load, damping, free, prescribed, D, driv
     Q[3 * m + q:3 * m + 2 * q, nF:m] = R[:, pc].T
     Q[3 * m + q:3 * m + 2 * q, 3 * m + q:3 * m + 2 * q] = SP[np.ix_(pc, pc)]
     Gin, IW = step_integrals(M, Q, h, m)    # G[m:, m:]; IW: int_0^h of e^{Ms}'s [:m, m:] block
-    start = np.r_[m:3 * m, 3 * m + 2 * q:3 * m + 4 * q]    # (f, n, gamma, kappa): xi's entries
+    # xi's entries (``step_energy``): f, n's rows of v_F and u (the z rows of N_1 vanish), gamma,
+    # kappa.
+    start = np.r_[m:2 * m, 2 * m + nF:3 * m, 3 * m + 2 * q:3 * m + 4 * q]
     rows = max(nd, 1)
     erows = np.zeros((rows, 3, m))
     escal = np.zeros((rows, N_SCALARS))

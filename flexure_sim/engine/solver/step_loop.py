@@ -37,7 +37,7 @@ from flexure_sim.engine.solver.motion import coordinates, kernel_coordinates, pr
 from flexure_sim.engine.solver.step_energy import (
     AUX_APPLIED, AUX_DISSIPATION, AUX_ENERGY, AUX_LOAD, AUX_TIMED_POWER,
 )
-from flexure_sim.engine.solver.step_energy import step_energy
+from flexure_sim.engine.solver.step_energy import step_energy, workspace_size
 
 CONVERGED, NOT_CONTRACTING, SLOW = 0, 1, 2
 
@@ -262,6 +262,7 @@ def _advance(
     status = CONVERGED
     rows = commands.shape[0]
     form_e = math.nan   # x^T C_x x at ye (``step_energy``), once a step has taken it
+    ews = np.empty(workspace_size(emats, y.shape[0]))   # its scratch, once per call
     for i in range(n):
         command = commands[min(i, rows - 1)]
         if np.any(command != held):
@@ -304,7 +305,7 @@ def _advance(
             status = NOT_CONTRACTING
             break
         dd, dw, form_e = step_energy(y, ye, y1, ye1, F0, N1, aux0, aux1, command, t1 - dt, dt,
-                                     emats, form_e)
+                                     emats, form_e, ews)
         dissipated += dd
         work += dw
         y = y1
