@@ -3,7 +3,7 @@ Parts of the energy integrals that were made cheaper without changing a bit.
 
 ``step_energy._rows_times`` (Mat^T x four rows per pass) and ``_form_t`` (x^T Mat x along the
 rows of Mat^T) against the row-by-row sums in Python floats, and
-``quadratic_integrals._power_entries`` (N^p / p!'s entries, kept for the last N) against N's
+``quadratic_integrals.power_entries`` (N^p / p!'s entries, kept for the last N) against N's
 powers.
 """
 import math
@@ -65,10 +65,10 @@ def _dense_powers(N):
 
 
 @pytest.mark.parametrize("programs", [0, 2])
-def test_power_entries_are_n_powers_and_follow_a_new_n(programs):
+def testpower_entries_are_n_powers_and_follow_a_new_n(programs):
     for h in (1e-4, 2.5e-5, 1e-4):              # back to the first N after another one
         N = _generator_inputs(5, h, programs)
-        coo = quadratic_integrals._power_entries(N)
+        coo = quadratic_integrals.power_entries(N)
         want = _dense_powers(N)
         assert sorted(set(coo[:, 3].astype(int))) == sorted(want)
         for p, power in want.items():
@@ -76,7 +76,7 @@ def test_power_entries_are_n_powers_and_follow_a_new_n(programs):
             rows = coo[coo[:, 3] == p]
             rebuilt[rows[:, 0].astype(int), rows[:, 1].astype(int)] = rows[:, 2]
             assert np.array_equal(rebuilt, power)
-    assert quadratic_integrals._power_entries(N.copy()) is coo      # the same N: kept
+    assert quadratic_integrals.power_entries(N.copy()) is coo      # the same N: kept
 
 
 @pytest.mark.parametrize("m", [0, 1, 7, 25])

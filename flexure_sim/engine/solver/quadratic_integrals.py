@@ -38,7 +38,7 @@ from flexure_sim.engine.jit import njit
 #: The Taylor series start at |tA|_1 <= START. G's series sums terms up to e^{2|tA|} times its
 #: value (a stiff mode's alternating terms), so rounding grows with START: 1/4 keeps it near
 #: the rounding of one product. Its term j is below (2 START)^j / j! <= 1e-18 at j = TERMS.
-START, TERMS = 0.25, 18
+START, TERMS = 0.25, 16
 
 
 def quadratic_integrals(M: np.ndarray, Q: np.ndarray, h: float, m: int,
@@ -83,16 +83,16 @@ def _doubled(A: np.ndarray, U: np.ndarray, N: np.ndarray, Q: np.ndarray, h: floa
     k = max(0, int(math.ceil(math.log2(norm / START)))) if norm > START else 0
     i, j = np.nonzero(U)
     Ucoo = np.stack([i, j, U[i, j]], axis=1)
-    return _doubling(np.ascontiguousarray(A), Ucoo, _power_entries(N), np.ascontiguousarray(Q),
+    return _doubling(np.ascontiguousarray(A), Ucoo, power_entries(N), np.ascontiguousarray(Q),
                      h / 2.0 ** k, k)
 
 
-#: The last N and its ``_power_entries``: N depends on the step and the model's programs only,
+#: The last N and its ``power_entries``: N depends on the step and the model's programs only,
 #: so every linearization of a run (and of the runs of a model) takes the same.
 _last_powers: tuple = (None, None)
 
 
-def _power_entries(N: np.ndarray) -> np.ndarray:
+def power_entries(N: np.ndarray) -> np.ndarray:
     """
     N^p / p!'s entries, p >= 1, as (row, column, value, p) rows: K(t) - I = sum_p t^p N^p / p!.
 

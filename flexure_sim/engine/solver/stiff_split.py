@@ -36,10 +36,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.linalg
 import scipy.linalg.lapack as lapack
 
-from flexure_sim.engine.solver.quadratic_integrals import START, balancing, quadratic_integrals
+from flexure_sim.engine.solver.quadratic_integrals import (
+    START, balancing, power_entries, quadratic_integrals,
+)
 
 #: A mode is fast when Re(lambda) h < -FAST: its transient within the step is below e^-50 of
 #: its start (the shipped mechanisms' tails |e^{A_f h}|: 1e-22 at most, at their steps).
@@ -108,8 +109,13 @@ def _split(M, Q, h, m, d):
     n = M.shape[0]
     r = n - m
     A, N = M[:m, :m], M[m:, m:]
-    T, Zq, ms = scipy.linalg.schur(A / d[:, None] * d[None, :], output="real",
-                                   sort=lambda re, im: re * h > -FAST)
+    # Real Schur form, slow eigenvalues first (LAPACK dgees: scipy.linalg.schur's, without its
+    # wrapper's checks, 8 of its 59 us; A is finite, ``balancing`` checked it).
+    slow = lambda re, im: re * h > -FAST   # noqa: E731  (dgees calls it per eigenvalue)
+    T, ms, _, _, Zq, _, info = lapack.dgees(slow, A / d[:, None] * d[None, :], compute_v=1,
+                                            sort_t=1)
+    if info != 0:
+        raise ValueError(f"LAPACK dgees failed on the step's Jacobian (info {info})")
     if ms == m:
         return None
     T11, T22 = T[:ms, :ms], T[ms:, ms:]
@@ -124,8 +130,9 @@ def _split(M, Q, h, m, d):
     Qh = Q.copy()
     for b in range(3):
         rows = slice(b * m, (b + 1) * m)
-        Qh[rows] = V.T @ Qh[rows]
-        Qh[:, rows] = Qh[:, rows] @ V
+        if Q[rows].any():             # Q is symmetric; the step's damps w only
+            Qh[rows] = V.T @ Qh[rows]
+            Qh[:, rows] = Qh[:, rows] @ V
     Uh = np.zeros((m, r))
     Uh[:, :m] = np.eye(m)
     Uh[:, 2 * m:] = Vinv @ M[:m, 3 * m:]
@@ -147,14 +154,12 @@ def _split(M, Q, h, m, d):
     ZX = Zu @ X
     Gh = Gs[ms:, ms:] - ZX - ZX.T + X.T @ (0.5 * (Yf + Yf.T)) @ X
     G = _times_inverse(_times_inverse(Gh, Vinv, m).T, Vinv, m)
-    # int_0^h w_f = X int_0^h K - int_0^inf e^{A_f s} ds X, int_0^inf e^{A_f s} = -A_f^-1.
+    # int_0^h w_f = X int_0^h K - int_0^inf e^{A_f s} ds X, int_0^inf e^{A_f s} = -A_f^-1;
+    # int_0^h K = h I + sum_p h^{p+1} / (p + 1) N^p / p! (N^p / p!'s entries: ``power_entries``).
     IK = h * np.eye(r)
-    power = np.eye(r)
-    for p in range(1, r + 1):
-        power = power @ N
-        if not power.any():
-            break
-        IK += h ** (p + 1) / math.factorial(p + 1) * power
+    entries = power_entries(N)
+    i, j, p = (entries[:, c].astype(np.int64) for c in (0, 1, 3))
+    np.add.at(IK, (i, j), entries[:, 2] * h ** (p + 1.0) / (p + 1.0))
     IWf = X @ IK + np.linalg.solve(T22, X)
     IW = _times_inverse(V @ np.vstack((IWs, IWf)), Vinv, m)
     return 0.5 * (G + G.T), IW
