@@ -148,8 +148,12 @@ def _doubling(A, Ucoo, Ncoo, Q, t, k):
     first = Ncoo[:, 3] == 1.0
     na, nb = Ncoo[first, 0].astype(np.int64), Ncoo[first, 1].astype(np.int64)
     nv = t * Ncoo[first, 2]
+    # The terms' products into buffers made once (a term's ~8 small arrays allocated and freed
+    # cost about as much as its arithmetic here).
+    Yn = np.zeros((m, r))
+    Xn = np.empty((m, m))
     for j in range(1, TERMS):
-        Yn = np.zeros((m, r))
+        Yn[:] = 0.0
         LM[:, :m] = L[:m].T @ tA                   # L symmetric: L[:, :m] = L[:m]^T
         LM[:, m:] = 0.0
         for i in range(n):
@@ -161,11 +165,17 @@ def _doubling(A, Ucoo, Ncoo, Q, t, k):
                 LM[i, m + nb[e]] += nv[e] * L[i, m + na[e]]
                 if i < m:
                     Yn[i, nb[e]] += nv[e] * Y[i, na[e]]
-        X = (X @ tA) / j
-        Y = Yn / j
+        np.dot(X, tA, Xn)
+        Xn /= j
+        X, Xn = Xn, X
+        Yn /= j
+        Y, Yn = Yn, Y
         E += X
         W += Y
-        IW += (t / (j + 1)) * Y
+        c = t / (j + 1)
+        for i in range(m):
+            for e in range(r):
+                IW[i, e] += c * Y[i, e]
         factor /= j + 1
         _symmetric_sum(LM, L, G, t * factor, 1.0)
     B = np.zeros((m, n))
