@@ -21,13 +21,13 @@ G is assembled from three parts that cost a few small products each:
 - With x = P z - E_f(s) D x_0 (z = (w_s, u) the slow part, P: z -> (w_s, X u, u),
   D x_0 = X u_0 - w_f0), the integrand is z^T (P^T Q P) z (doubled as before, on the slow
   generator, whose |h A_s| is ~0.5 for the stage: one doubling), minus twice a cross term and
-  plus E_f's own square, whose integrals to infinity solve Sylvester equations
-  (Van Loan, IEEE TAC 23 (1978) 395, eq. (3)): M_s^T Z + Z A_f = -P^T Q_{., f} and
-  A_f^T Y_f + Y_f A_f = -Q_ff (LAPACK trsyl on the Schur blocks; N nilpotent and upper
-  triangular).
+  plus E_f's own square, whose integrals to infinity solve Sylvester equations (integrate
+  the integrand's derivative; A_f is stable): M_s^T Z + Z A_f = -P^T Q_{., f} and
+  A_f^T Y_f + Y_f A_f = -Q_ff (LAPACK trsyl on the Schur blocks; those with N, nilpotent, as
+  finite series in A_f^-1).
 
-The stage at its step: 0.52 ms where the doubling of the whole generator took 0.82 ms (best of
-10, one BLAS thread), the same G and I_W to 7e-12 of their largest entries
+The stage at its step: 0.31 ms where the doubling of the whole generator takes 0.73 ms (best
+of 10, one BLAS thread), the same G and I_W to 7e-12 of their largest entries
 (``test_stiff_split``).
 A generator of another form, or one without fast modes, is doubled as a whole.
 """
@@ -38,17 +38,19 @@ import math
 import numpy as np
 import scipy.linalg.lapack as lapack
 
+from flexure_sim.engine import jit as kernel_cache
+from flexure_sim.engine.jit import njit
 from flexure_sim.engine.solver.quadratic_integrals import (
-    START, balancing, power_entries, quadratic_integrals,
+    START, _doubling, balancing, power_entries, quadratic_integrals,
 )
 
 #: A mode is fast when Re(lambda) h < -FAST: its transient within the step is below e^-50 of
 #: its start (the shipped mechanisms' tails |e^{A_f h}|: 1e-22 at most, at their steps).
 FAST = 50.0
-#: The split's own cost (a Schur form, five Sylvester solves, ~20 small products: ~0.1 ms) pays
-#: when the whole generator's doubling is long: k doublings of an n x n generator, k n^2 at
-#: least this (the stage at 1e-4 s: 16 x 75^2, 0.82 -> 0.52 ms; the four-bar: 11 x 48^2, 0.27 ms
-#: doubled, 0.39 ms split).
+#: The split pays when the whole generator's doubling is long: k doublings of an n x n
+#: generator, k n^2 at least this (the stage at 1e-4 s: 16 x 75^2, 0.73 ms doubled, 0.31 ms
+#: split; the four-bar, whose slow part keeps most of its stiffness: 11 x 48^2, 0.23 ms
+#: doubled, 0.26 ms split).
 SPLIT_WORK = 60_000
 
 
@@ -96,7 +98,8 @@ def _sylvester(A, B, C, transpose_a: bool, sign: int) -> np.ndarray:
     return X / scale if scale != 1.0 else X
 
 
-def _nilpotent_sylvester(Tinv, N, C) -> np.ndarray:
+@njit(cache=True)
+def _nilpotent_sylvester(Tinv, N, C):
     """
     X with T X - X N = C for N nilpotent, from T^-1: X = sum_j T^-(j+1) C N^j (N^j = 0 ends it).
 
@@ -107,78 +110,159 @@ def _nilpotent_sylvester(Tinv, N, C) -> np.ndarray:
     X = term.copy()
     for _ in range(N.shape[0]):
         term = term @ N
-        if not term.any():
+        if not np.any(term != 0.0):
             break
         term = Tinv @ term
         X += term
     return X
 
 
-def _times_inverse(X: np.ndarray, Vinv: np.ndarray, m: int) -> np.ndarray:
+@njit(cache=True)
+def _times_inverse(X, Vinv, m):
     """X diag(V^-1, V^-1, I): the inputs' columns back from (f^, n^, g)."""
     out = X.copy()
-    out[:, :m] = X[:, :m] @ Vinv
-    out[:, m:2 * m] = X[:, m:2 * m] @ Vinv
+    out[:, :m] = np.ascontiguousarray(X[:, :m]) @ Vinv
+    out[:, m:2 * m] = np.ascontiguousarray(X[:, m:2 * m]) @ Vinv
     return out
 
 
 def _split(M, Q, h, m, d):
-    """``step_integrals`` with the fast modes split off (module doc), or None without any."""
-    n = M.shape[0]
-    r = n - m
-    A, N = M[:m, :m], M[m:, m:]
+    """
+    ``step_integrals`` with the fast modes split off (module doc), or None without any.
+
+    LAPACK in Python (dgees, three trsyl, gebal), the rest in two compiled calls
+    (``_coordinates``, ``_assemble``): as ~40 NumPy calls on 11- to 75-wide blocks, the split
+    took 0.60 ms of a fresh stage's first step, compiled 0.40 ms.
+    """
+    m3 = 3 * m
+    N = np.ascontiguousarray(M[m:, m:])
     # Real Schur form, slow eigenvalues first (LAPACK dgees: scipy.linalg.schur's, without its
     # wrapper's checks, 8 of its 59 us; A is finite, ``balancing`` checked it).
     slow = lambda re, im: re * h > -FAST   # noqa: E731  (dgees calls it per eigenvalue)
-    T, ms, _, _, Zq, _, info = lapack.dgees(slow, A / d[:, None] * d[None, :], compute_v=1,
-                                            sort_t=1)
+    T, ms, _, _, Zq, _, info = lapack.dgees(slow, M[:m, :m] / d[:, None] * d[None, :],
+                                            compute_v=1, sort_t=1)
     if info != 0:
         raise ValueError(f"LAPACK dgees failed on the step's Jacobian (info {info})")
     if ms == m:
         return None
-    T11, T22 = T[:ms, :ms], T[ms:, ms:]
+    T11, T22 = np.ascontiguousarray(T[:ms, :ms]), np.ascontiguousarray(T[ms:, ms:])
     Y = _sylvester(T11, T22, -T[:ms, ms:], False, -1)          # T11 Y - Y T22 = -T12
+    V, Vinv, Qh, Uh, Tinv, X, XQ, Qs = _coordinates(
+        np.ascontiguousarray(Zq), np.ascontiguousarray(Y), d, np.ascontiguousarray(Q),
+        np.ascontiguousarray(M[:m, m3:]), N, T22, ms)
+    Zs = _sylvester(T11, T22, -Qh[:ms, ms:m], True, 1)         # A_s^T Z_s + Z_s A_f = -B_s
+    Yf = _sylvester(T22, T22, -Qh[ms:m, ms:m], True, 1)        # A_f^T Y + Y A_f = -Q_ff
+    return _assemble(T11, balancing(T11), Uh, N, power_entries(N), Qs, h,
+                     np.ascontiguousarray(Zs), np.ascontiguousarray(Yf), XQ, X, Tinv, V, Vinv)
+
+
+@njit(cache=True)
+def _coordinates(Zq, Y, d, Q, F, N, T22, ms):
+    """
+    Return V, V^-1, Q^, U^, A_f^-1, X, (P^T Q^_{., f})'s input rows and the slow Q_s.
+
+    w = V w^, f = V f^, n = V n^ with V = D Z [[I, Y], [0, I]] (module doc); Q^ = T^T Q T,
+    T = diag(V, V, V, I), by blocks (the step's Q damps w only); A_f X - X N = -U_f.
+    """
+    m, n = Zq.shape[0], Q.shape[0]
+    r = n - m
     V = Zq.copy()
-    V[:, ms:] += Zq[:, :ms] @ Y
-    Vinv = Zq.T.copy()
-    Vinv[:ms] -= Y @ Zq.T[ms:]
-    V *= d[:, None]
-    Vinv /= d[None, :]
-    # Q^ = T^T Q T with T = diag(V, V, V, I), block by block.
+    V[:, ms:] += np.ascontiguousarray(Zq[:, :ms]) @ Y
+    Vinv = np.ascontiguousarray(Zq.T)
+    Vinv[:ms] -= Y @ np.ascontiguousarray(Zq.T[ms:])
+    for i in range(m):
+        for j in range(m):
+            V[i, j] *= d[i]
+            Vinv[i, j] /= d[j]
     Qh = Q.copy()
+    VT = np.ascontiguousarray(V.T)
     for b in range(3):
-        rows = slice(b * m, (b + 1) * m)
-        if Q[rows].any():             # Q is symmetric; the step's damps w only
-            Qh[rows] = V.T @ Qh[rows]
-            Qh[:, rows] = Qh[:, rows] @ V
+        lo, hi = b * m, (b + 1) * m
+        if np.any(Q[lo:hi] != 0.0):
+            Qh[lo:hi] = VT @ np.ascontiguousarray(Qh[lo:hi])
+            Qh[:, lo:hi] = np.ascontiguousarray(Qh[:, lo:hi]) @ V
     Uh = np.zeros((m, r))
-    Uh[:, :m] = np.eye(m)
-    Uh[:, 2 * m:] = Vinv @ M[:m, 3 * m:]
+    for i in range(m):
+        Uh[i, i] = 1.0
+    Uh[:, 2 * m:] = Vinv @ F
     Tinv = np.linalg.inv(T22)
-    X = _nilpotent_sylvester(Tinv, N, -Uh[ms:])                # A_f X - X N = -U_f
-    s, f, u = slice(0, ms), slice(ms, m), slice(m, n)
-    Qsf, Qff = Qh[s, f], Qh[f, f]
-    XQ = X.T @ Qff + Qh[u, f]                                  # (P^T Q_{., f})'s input rows
+    X = _nilpotent_sylvester(Tinv, N, -np.ascontiguousarray(Uh[ms:]))
+    Qsf = np.ascontiguousarray(Qh[:ms, ms:m])
+    XQ = X.T @ np.ascontiguousarray(Qh[ms:m, ms:m]) + Qh[m:, ms:m]
     Qs = np.empty((ms + r, ms + r))                            # P^T Q^ P
-    Qs[:ms, :ms] = Qh[s, s]
-    Qs[:ms, ms:] = Qsf @ X + Qh[s, u]
+    Qs[:ms, :ms] = Qh[:ms, :ms]
+    Qs[:ms, ms:] = Qsf @ X + Qh[:ms, m:]
     Qs[ms:, :ms] = Qs[:ms, ms:].T
-    Qs[ms:, ms:] = XQ @ X + X.T @ Qh[f, u] + Qh[u, u]
-    Ms = np.zeros((ms + r, ms + r))
-    Ms[:ms, :ms], Ms[:ms, ms:], Ms[ms:, ms:] = T11, Uh[:ms], N
-    Gs, IWs = quadratic_integrals(Ms, Qs, h, ms)
-    Zs = _sylvester(T11, T22, -Qsf, True, 1)                   # A_s^T Z_s + Z_s A_f = -B_s
-    Zu = _nilpotent_sylvester(Tinv.T, -N, (-XQ - Uh[:ms].T @ Zs).T).T   # N^T Z_u + Z_u A_f
-    Yf = _sylvester(T22, T22, -Qff, True, 1)                   # A_f^T Y + Y A_f = -Q_ff
-    ZX = Zu @ X
-    Gh = Gs[ms:, ms:] - ZX - ZX.T + X.T @ (0.5 * (Yf + Yf.T)) @ X
-    G = _times_inverse(_times_inverse(Gh, Vinv, m).T, Vinv, m)
+    Qs[ms:, ms:] = XQ @ X + X.T @ np.ascontiguousarray(Qh[ms:m, m:]) + Qh[m:, m:]
+    return V, Vinv, Qh, Uh, Tinv, X, XQ, Qs
+
+
+@njit(cache=True)
+def _assemble(T11, d, Uh, N, Ncoo, Qs, h, Zs, Yf, XQ, X, Tinv, V, Vinv):
+    """
+    Return G's input block and I_W from the parts (module doc).
+
+    The slow generator's integrals as ``quadratic_integrals`` takes them (balanced, doubled),
+    then the cross term, the fast modes' own square and the change of coordinates back.
+    """
+    ms, r, m = T11.shape[0], N.shape[0], V.shape[0]
+    # Balanced slow generator: A_b = D^-1 A_s D, U_b = D^-1 U_s, Q_b = T Q_s T, T = diag(D, I).
+    inv = 1.0 / d
+    ts = np.ones(ms + r)
+    ts[:ms] = d
+    Ab = np.empty((ms, ms))
+    norm = 0.0
+    for j in range(ms):
+        col = 0.0
+        for i in range(ms):
+            Ab[i, j] = T11[i, j] * inv[i] * d[j]
+            col += abs(Ab[i, j])
+        norm = max(norm, col * h)
+    k = max(0, int(math.ceil(math.log2(norm / START)))) if norm > START else 0
+    count = 0
+    for i in range(ms):
+        for j in range(r):
+            if Uh[i, j] != 0.0:
+                count += 1
+    Ucoo = np.empty((count, 3))
+    count = 0
+    for i in range(ms):
+        for j in range(r):
+            if Uh[i, j] != 0.0:
+                Ucoo[count, 0], Ucoo[count, 1], Ucoo[count, 2] = i, j, Uh[i, j] * inv[i]
+                count += 1
+    Qb = np.empty_like(Qs)
+    for i in range(ms + r):
+        for j in range(ms + r):
+            Qb[i, j] = Qs[i, j] * ts[i] * ts[j]
+    Gb, IWb = _doubling(Ab, Ucoo, Ncoo, Qb, h / 2.0 ** k, k)
+    Guu = np.empty((r, r))
+    for i in range(r):
+        for j in range(r):
+            Guu[i, j] = Gb[ms + i, ms + j]               # T^-1 is I on the inputs
+    IWs = np.empty((ms, r))
+    for i in range(ms):
+        for j in range(r):
+            IWs[i, j] = d[i] * IWb[i, j]
+    # The cross term and the fast modes' own square (module doc).
+    C = -XQ - np.ascontiguousarray(Uh[:ms].T) @ Zs
+    Zu = _nilpotent_sylvester(np.ascontiguousarray(Tinv.T), -N, np.ascontiguousarray(C.T)).T
+    ZX = np.ascontiguousarray(Zu) @ X
+    Ysym = 0.5 * (Yf + Yf.T)
+    Gh = Guu - ZX - ZX.T + np.ascontiguousarray(X.T) @ (Ysym @ X)
+    G = _times_inverse(np.ascontiguousarray(_times_inverse(Gh, Vinv, m).T), Vinv, m)
     # int_0^h w_f = X int_0^h K - int_0^inf e^{A_f s} ds X, int_0^inf e^{A_f s} = -A_f^-1;
     # int_0^h K = h I + sum_p h^{p+1} / (p + 1) N^p / p! (N^p / p!'s entries: ``power_entries``).
     IK = h * np.eye(r)
-    entries = power_entries(N)
-    i, j, p = (entries[:, c].astype(np.int64) for c in (0, 1, 3))
-    np.add.at(IK, (i, j), entries[:, 2] * h ** (p + 1.0) / (p + 1.0))
-    IWf = X @ IK + Tinv @ X
-    IW = _times_inverse(V @ np.vstack((IWs, IWf)), Vinv, m)
+    for e in range(Ncoo.shape[0]):
+        p = Ncoo[e, 3]
+        IK[int(Ncoo[e, 0]), int(Ncoo[e, 1])] += Ncoo[e, 2] * h ** (p + 1.0) / (p + 1.0)
+    IWhat = np.empty((m, r))
+    IWhat[:ms] = IWs
+    IWhat[ms:] = X @ IK + Tinv @ X
+    IW = _times_inverse(V @ IWhat, Vinv, m)
     return 0.5 * (G + G.T), IW
+
+
+# Numba's cache of each kernel is keyed on its own file only (``kernel_cache``).
+kernel_cache.revalidate(kernel_cache.dispatchers_of(globals()), __file__)
