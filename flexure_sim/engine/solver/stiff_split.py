@@ -149,7 +149,7 @@ def _split(M, Q, h, m, d):
     Y = _sylvester(T11, T22, -T[:ms, ms:], False, -1)          # T11 Y - Y T22 = -T12
     V, Vinv, Qh, Uh, Tinv, X, XQ, Qs = _coordinates(
         np.ascontiguousarray(Zq), np.ascontiguousarray(Y), d, np.ascontiguousarray(Q),
-        np.ascontiguousarray(M[:m, m3:]), N, T22, ms)
+        np.ascontiguousarray(M[:m, m3:]), N, np.linalg.inv(T22), ms)
     Zs = _sylvester(T11, T22, -Qh[:ms, ms:m], True, 1)         # A_s^T Z_s + Z_s A_f = -B_s
     Yf = _sylvester(T22, T22, -Qh[ms:m, ms:m], True, 1)        # A_f^T Y + Y A_f = -Q_ff
     return _assemble(T11, balancing(T11), Uh, N, power_entries(N), Qs, h,
@@ -157,9 +157,11 @@ def _split(M, Q, h, m, d):
 
 
 @njit(cache=True)
-def _coordinates(Zq, Y, d, Q, F, N, T22, ms):
+def _coordinates(Zq, Y, d, Q, F, N, Tinv, ms):
     """
     Return V, V^-1, Q^, U^, A_f^-1, X, (P^T Q^_{., f})'s input rows and the slow Q_s.
+
+    Tinv: A_f^-1 (from NumPy: numba's np.linalg.inv added ~1 s to the first compilation).
 
     w = V w^, f = V f^, n = V n^ with V = D Z [[I, Y], [0, I]] (module doc); Q^ = T^T Q T,
     T = diag(V, V, V, I), by blocks (the step's Q damps w only); A_f X - X N = -U_f.
@@ -185,7 +187,6 @@ def _coordinates(Zq, Y, d, Q, F, N, T22, ms):
     for i in range(m):
         Uh[i, i] = 1.0
     Uh[:, 2 * m:] = Vinv @ F
-    Tinv = np.linalg.inv(T22)
     X = _nilpotent_sylvester(Tinv, N, -np.ascontiguousarray(Uh[ms:]))
     Qsf = np.ascontiguousarray(Qh[:ms, ms:m])
     XQ = X.T @ np.ascontiguousarray(Qh[ms:m, ms:m]) + Qh[m:, ms:m]
