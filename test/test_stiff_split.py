@@ -93,6 +93,16 @@ def test_the_stage_is_split_and_agrees_with_the_whole_doubling():
     assert np.array_equal(G, G.T)
 
 
+def test_a_generator_with_only_fast_modes_is_left_to_the_whole_doubling():
+    """Every mode fast (a coarse step): nothing slow to double; the split declines."""
+    rng = np.random.default_rng(2)
+    m, h = 4, 1e-4
+    A = rng.normal(size=(m, m)) / h - 3e3 / h * np.eye(m)
+    assert np.all(np.linalg.eigvals(A).real * h < -stiff_split.FAST)
+    M, Q = _generator(A, h, 1, rng)
+    assert stiff_split._split(M, Q, h, m, balancing(A)) is None
+
+
 def test_generators_without_fast_modes_or_of_another_form_are_doubled_whole():
     """No fast mode, or inputs that do not force w as the step's f does: the doubling's bits."""
     rng = np.random.default_rng(3)

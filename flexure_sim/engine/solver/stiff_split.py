@@ -128,7 +128,9 @@ def _times_inverse(X, Vinv, m):
 
 def _split(M, Q, h, m, d):
     """
-    ``step_integrals`` with the fast modes split off (module doc), or None without any.
+    ``step_integrals`` with the fast modes split off (module doc), or None.
+
+    None unless some modes are fast and some slow.
 
     LAPACK in Python (dgees, three trsyl, gebal), the rest in two compiled calls
     (``_coordinates``, ``_assemble``): as ~40 NumPy calls on 11- to 75-wide blocks, the split
@@ -143,7 +145,7 @@ def _split(M, Q, h, m, d):
                                             compute_v=1, sort_t=1)
     if info != 0:
         raise ValueError(f"LAPACK dgees failed on the step's Jacobian (info {info})")
-    if ms == m:
+    if ms in (0, m):                   # no fast mode, or no slow one: doubled as a whole
         return None
     T11, T22 = np.ascontiguousarray(T[:ms, :ms]), np.ascontiguousarray(T[ms:, ms:])
     Y = _sylvester(T11, T22, -T[:ms, ms:], False, -1)          # T11 Y - Y T22 = -T12
