@@ -262,6 +262,17 @@ class Peer:
         items = self.received[topic]
         return items[-1][0] if items else None
 
+    def last_data(self, topic: str) -> float:
+        """
+        Return the ``data`` of the last message on ``topic``, NaN before the first one arrives.
+
+        For predicates of ``spin_until``: a tick topic is published only once the node has
+        matched a subscriber, so its first message can come after other topics' (NaN compares
+        false with every number; ``last(topic).data`` raised on None).
+        """
+        msg = self.last(topic)
+        return float("nan") if msg is None else msg.data
+
     def publisher(self, topic: str, msg_type: type, depth: int = 1000):
         return self.node.create_publisher(msg_type, topic, reliable(depth))
 

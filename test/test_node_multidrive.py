@@ -127,9 +127,9 @@ def test_each_drive_has_its_own_limits_counters_and_warnings(tmp_path, domain, p
             peer.wait_for_subscribers(pub)
         commands["x"].publish(Float64(data=1.0))        # far beyond x's 15 um stroke
         commands["y"].publish(Float64(data=math.nan))   # refused
-        step_until(peer, lambda: abs(peer.last(INPUTS[0]).data - 1.5e-5) < 1e-17, "x clamped")
+        step_until(peer, lambda: abs(peer.last_data(INPUTS[0]) - 1.5e-5) < 1e-17, "x clamped")
         commands["y"].publish(Float64(data=1e-5))       # ramps at y's own 10 um/s
-        step_until(peer, lambda: peer.last(INPUTS[1]).data > 0, "y moving")
+        step_until(peer, lambda: peer.last_data(INPUTS[1]) > 0, "y moving")
         assert peer.last(INPUTS[1]).data <= 1e-5 * 0.05 * (1 + 1e-9)  # one 50 ms tick
         step_until(peer, lambda: len(peer.received["/diagnostics"]) > 0, "diagnostics", 20)
         d = diagnostics_values(peer.last("/diagnostics"))
@@ -238,7 +238,7 @@ def test_a_force_drive_is_commanded_in_newton_metres_and_turns_its_body(
         peer.wait_for_publishers(topics)
         peer.wait_for_subscribers(command)
         command.publish(Float64(data=torque))
-        step_until(peer, lambda: peer.last(topics[0]).data == torque, "the torque applied",
+        step_until(peer, lambda: peer.last_data(topics[0]) == torque, "the torque applied",
                    topics=topics)
         for _ in range(10):   # 0.5 s: the disc's swing (~180 /s decay) has died out
             step_until(peer, lambda: True, "one more tick", topics=topics)

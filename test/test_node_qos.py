@@ -92,7 +92,7 @@ def test_best_effort_command_reliability_hears_both_kinds_of_publisher(
 
         peer.spin_until(best_effort_applied, 10, "the best-effort command applied")
         reliable.publish(Float64(data=0.5e-6))
-        peer.spin_until(lambda: peer.last("/drive/input").data == pytest.approx(0.5e-6, rel=1e-9),
+        peer.spin_until(lambda: peer.last_data("/drive/input") == pytest.approx(0.5e-6, rel=1e-9),
                         10, "the reliable command applied")
         peer.spin_until(lambda: int(diag(peer).get("commands_received", 0)) >= 2, 10,
                         "both commands counted")

@@ -116,7 +116,7 @@ def test_step_response_settles_to_the_engines_static_gain_and_compression(
         # Settled: the actuator lag is 1 ms, the hinge modes are faster still; wait for
         # 0.2 s of simulated time after the input reached the command.
         peer.spin_until(
-            lambda: peer.last("/drive/input").data == pytest.approx(STEP, rel=1e-12),
+            lambda: peer.last_data("/drive/input") == pytest.approx(STEP, rel=1e-12),
             30,
             "the actuator to reach the command",
         )

@@ -60,7 +60,7 @@ def test_diagnostics_warn_when_full_stroke_exceeds_yield_with_the_engines_ratio(
         assert float(values["stress_ratio_max"]) < 1e-9 and at_rest.level == DiagnosticStatus.OK
         drive.publish(Float64(data=FULL_STROKE))
         at_full = pytest.approx(FULL_STROKE, rel=1e-12)
-        peer.spin_until(lambda: peer.last("/drive/input").data == at_full, 30,
+        peer.spin_until(lambda: peer.last_data("/drive/input") == at_full, 30,
                         "the actuator to reach full stroke")
         # When the stage started to move, from the diagnostics alone (one topic arrives in
         # order; the last diagnostics received with /drive/input can be older than it).
