@@ -224,45 +224,6 @@ def test_weighted_phi_functions_equal_their_integrals():
     assert psi2 == pytest.approx(ref2, rel=1e-10, abs=1e-12)
 
 
-@pytest.mark.parametrize("programs", [0, 1])
-def test_quadratic_integrals_equal_their_integrals_for_a_stiff_generator(programs):
-    """
-    G = int_0^h e^{M^T s} Q e^{Ms} ds and int_0^h W(s) ds against adaptive quadrature.
-
-    M = [[A, U], [0, N]] is the step's generator (``step_energy.energy_matrices``): w, then the
-    inputs f, n (f' = n / h), then with ``programs`` a program coordinate's chain pi, beta,
-    gamma, kappa forcing w; Q couples w and beta as the dissipation does. A has a mode at
-    -1e6 / h (the stage's stiffest at its step): Van Loan's block exponential would hold e^{1e6}
-    there; the doubling must not.
-    """
-    from flexure_sim.engine.solver.quadratic_integrals import quadratic_integrals
-
-    rng = np.random.default_rng(5)
-    m, h, q = 4, 1e-4, programs
-    A = rng.normal(size=(m, m)) / h - 2.0 / h * np.eye(m)
-    A[0, 0] = -1e6 / h
-    n = 3 * m + 4 * q
-    M = np.zeros((n, n))
-    M[:m, :m], M[:m, m:2 * m], M[m:2 * m, 2 * m:3 * m] = A, np.eye(m), np.eye(m) / h
-    M[:m, 3 * m:3 * m + 2 * q] = rng.normal(size=(m, 2 * q)) / h
-    M[3 * m:3 * m + 3 * q, 3 * m + q:] = np.eye(3 * q)
-    B = rng.normal(size=(m + q, m + q))
-    Q = np.zeros((n, n))
-    inner = np.r_[0:m, 3 * m + q:3 * m + 2 * q]
-    Q[np.ix_(inner, inner)] = B @ B.T
-    G, IW = quadratic_integrals(M, Q, h, m)
-
-    def integrand(s):
-        e = scipy.linalg.expm(s * M)
-        return np.concatenate([(e.T @ Q @ e).ravel(), e[:m, m:].ravel()])
-
-    points = list(np.logspace(-14, math.log10(h), 12))
-    ref = scipy.integrate.quad_vec(integrand, 0, h, epsrel=1e-12, points=points)[0]
-    assert G == pytest.approx(ref[:n * n].reshape(n, n), rel=1e-8, abs=1e-12 * np.abs(G).max())
-    assert IW == pytest.approx(ref[n * n:].reshape(m, n - m), rel=1e-8,
-                               abs=1e-12 * np.abs(IW).max())
-
-
 @pytest.mark.parametrize("name", ["microstage", "config/fourbar_mixed.yaml"])
 def test_without_energy_bookkeeping_the_motion_is_the_same_to_the_bit(name):
     """

@@ -1,9 +1,11 @@
 """
-The step's energy integrals with the stiff modes split off (``stiff_split``).
+The step's quadratic integrals: the whole doubling and the stiff modes split off.
 
-Against adaptive quadrature of the integrands (an independent method) on generators with a
-real and a complex pair of fast modes, and against the doubling of the whole generator on the
-stage's own linearization; generators it does not apply to are doubled as before, bit for bit.
+Against adaptive quadrature of the integrands (an independent method): the doubling
+(``quadratic_integrals``) on a generator with a mode at -1e6 / h, the split (``stiff_split``)
+on generators with a real and a complex pair of fast modes; the split against the doubling of
+the whole generator on the stage's own linearization; generators the split does not apply to
+are doubled as before, bit for bit.
 """
 import math
 
@@ -18,8 +20,13 @@ from flexure_sim.engine.solver.quadratic_integrals import balancing, quadratic_i
 from flexure_sim.engine.solver.simulation import Simulation
 
 
-def _generator(A, h, q, rng):
-    """M of ``step_energy.energy_matrices`` (w, f, n, then q program chains) and a Q like its."""
+def _generator(A, h, q, rng, undamped=1):
+    """
+    M of ``step_energy.energy_matrices`` (w, f, n, then q program chains) and a Q like its.
+
+    Q couples w and the chains' beta as the dissipation does; the first ``undamped`` states of
+    w are not damped (as C_x leaves the positions out).
+    """
     m = A.shape[0]
     n = 3 * m + 4 * q
     M = np.zeros((n, n))
@@ -28,9 +35,41 @@ def _generator(A, h, q, rng):
     M[3 * m:3 * m + 3 * q, 3 * m + q:] = np.eye(3 * q)
     B = rng.normal(size=(m + q, m + q))
     Q = np.zeros((n, n))
-    inner = np.r_[1:m, 3 * m + q:3 * m + 2 * q]      # like C_x: not every state is damped
-    Q[np.ix_(inner, inner)] = (B @ B.T)[1:, 1:]
+    inner = np.r_[undamped:m, 3 * m + q:3 * m + 2 * q]
+    Q[np.ix_(inner, inner)] = (B @ B.T)[undamped:, undamped:]
     return M, Q
+
+
+def _quadrature(M, Q, h, m):
+    """int_0^h e^{M^T s} Q e^{Ms} ds and int_0^h e^{Ms}[:m, m:] ds by adaptive quadrature."""
+    n = M.shape[0]
+
+    def integrand(s):
+        e = scipy.linalg.expm(s * M)
+        return np.concatenate([(e.T @ Q @ e).ravel(), e[:m, m:].ravel()])
+
+    points = list(np.logspace(-14, math.log10(h), 12))
+    ref = scipy.integrate.quad_vec(integrand, 0, h, epsrel=1e-12, points=points)[0]
+    return ref[:n * n].reshape(n, n), ref[n * n:].reshape(m, n - m)
+
+
+@pytest.mark.parametrize("programs", [0, 1])
+def test_quadratic_integrals_equal_their_integrals_for_a_stiff_generator(programs):
+    """
+    The whole doubling: G and int_0^h W(s) ds against adaptive quadrature.
+
+    A has a mode at -1e6 / h (the stage's stiffest at its step): Van Loan's block exponential
+    would hold e^{1e6} there; the doubling must not.
+    """
+    rng = np.random.default_rng(5)
+    m, h = 4, 1e-4
+    A = rng.normal(size=(m, m)) / h - 2.0 / h * np.eye(m)
+    A[0, 0] = -1e6 / h
+    M, Q = _generator(A, h, programs, rng, undamped=0)
+    G, IW = quadratic_integrals(M, Q, h, m)
+    G_ref, IW_ref = _quadrature(M, Q, h, m)
+    assert G == pytest.approx(G_ref, rel=1e-8, abs=1e-12 * np.abs(G).max())
+    assert IW == pytest.approx(IW_ref, rel=1e-8, abs=1e-12 * np.abs(IW).max())
 
 
 @pytest.mark.parametrize("programs", [0, 1])
@@ -52,17 +91,9 @@ def test_split_integrals_equal_their_integrals(programs):
     split = stiff_split._split(M, Q, h, m, balancing(A))
     assert split is not None
     G, IW = split
-    n = M.shape[0]
-
-    def integrand(s):
-        e = scipy.linalg.expm(s * M)
-        return np.concatenate([(e.T @ Q @ e)[m:, m:].ravel(), e[:m, m:].ravel()])
-
-    points = list(np.logspace(-14, math.log10(h), 12))
-    ref = scipy.integrate.quad_vec(integrand, 0, h, epsrel=1e-12, points=points)[0]
-    r = n - m
-    assert G == pytest.approx(ref[:r * r].reshape(r, r), rel=1e-8, abs=1e-12 * np.abs(G).max())
-    assert IW == pytest.approx(ref[r * r:].reshape(m, r), rel=1e-8, abs=1e-12 * np.abs(IW).max())
+    G_ref, IW_ref = _quadrature(M, Q, h, m)
+    assert G == pytest.approx(G_ref[m:, m:], rel=1e-8, abs=1e-12 * np.abs(G).max())
+    assert IW == pytest.approx(IW_ref, rel=1e-8, abs=1e-12 * np.abs(IW).max())
 
 
 def _stage_generator():
