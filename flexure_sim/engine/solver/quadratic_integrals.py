@@ -50,15 +50,10 @@ def quadratic_integrals(M: np.ndarray, Q: np.ndarray, h: float, m: int,
     balanced first, T = diag(D, I): M = T M_b T^-1, so G = T^-1 G_b T^-1 with Q_b = T Q T, and
     I_W = D I_Wb. ``scale``: D's diagonal if already at hand (``balancing``).
     """
-    n = M.shape[0]
     A, U, N = M[:m, :m], M[:m, m:], M[m:, m:]
     scale = balancing(A) if scale is None else scale
-    tscale = np.concatenate((scale, np.ones(n - m)))
-    inv = 1.0 / scale
-    Ab = A * inv[:, None] * scale[None, :]
-    Gb, IWb = _doubled(Ab, U * inv[:, None], N, Q * tscale[:, None] * tscale[None, :], h)
-    tinv = 1.0 / tscale
-    return tinv[:, None] * Gb * tinv[None, :], scale[:, None] * IWb
+    return balanced_doubling(np.ascontiguousarray(A), scale, np.ascontiguousarray(U),
+                             power_entries(N), np.ascontiguousarray(Q), h)
 
 
 def balancing(A: np.ndarray) -> np.ndarray:
@@ -77,14 +72,58 @@ def balancing(A: np.ndarray) -> np.ndarray:
     return scale
 
 
-def _doubled(A: np.ndarray, U: np.ndarray, N: np.ndarray, Q: np.ndarray, h: float):
-    """``quadratic_integrals`` of a balanced A by doubling (module doc)."""
-    norm = np.linalg.norm(A, 1) * h
-    k = max(0, int(math.ceil(math.log2(norm / START)))) if norm > START else 0
-    i, j = np.nonzero(U)
-    Ucoo = np.stack([i, j, U[i, j]], axis=1)
-    return _doubling(np.ascontiguousarray(A), Ucoo, power_entries(N), np.ascontiguousarray(Q),
-                     h / 2.0 ** k, k)
+@njit(cache=True)
+def doublings(norm):
+    """Doublings k from h / 2^k to h for |hA|_1 = ``norm``: |tA|_1 <= START at t = h / 2^k."""
+    return max(0, int(math.ceil(math.log2(norm / START)))) if norm > START else 0
+
+
+@njit(cache=True)
+def balanced_doubling(A, d, U, Ncoo, Q, h):
+    """
+    ``quadratic_integrals`` with D = diag(d) and N's ``power_entries`` Ncoo at hand, compiled.
+
+    A_b = D^-1 A D, U_b = D^-1 U, Q_b = T Q T with T = diag(D, I); G = T^-1 G_b T^-1 and
+    I_W = D I_Wb of ``_doubling`` on A_b (module doc). Also the split's slow generator
+    (``stiff_split``), which calls it from compiled code.
+    """
+    m, n = A.shape[0], Q.shape[0]
+    inv = 1.0 / d
+    ts = np.ones(n)
+    ts[:m] = d
+    Ab = np.empty((m, m))
+    norm = 0.0
+    for j in range(m):
+        col = 0.0
+        for i in range(m):
+            Ab[i, j] = A[i, j] * inv[i] * d[j]
+            col += abs(Ab[i, j])
+        norm = max(norm, col * h)
+    k = doublings(norm)
+    count = 0
+    for i in range(m):
+        for j in range(n - m):
+            if U[i, j] * inv[i] != 0.0:
+                count += 1
+    Ucoo = np.empty((count, 3))
+    count = 0
+    for i in range(m):
+        for j in range(n - m):
+            if U[i, j] * inv[i] != 0.0:
+                Ucoo[count, 0], Ucoo[count, 1], Ucoo[count, 2] = i, j, U[i, j] * inv[i]
+                count += 1
+    Qb = np.empty_like(Q)
+    for i in range(n):
+        for j in range(n):
+            Qb[i, j] = Q[i, j] * ts[i] * ts[j]
+    Gb, IWb = _doubling(Ab, Ucoo, Ncoo, Qb, h / 2.0 ** k, k)
+    for i in range(n):
+        for j in range(n):
+            Gb[i, j] = (1.0 / ts[i]) * Gb[i, j] * (1.0 / ts[j])
+    for i in range(m):
+        for j in range(n - m):
+            IWb[i, j] = d[i] * IWb[i, j]
+    return Gb, IWb
 
 
 #: The last N and its ``power_entries``: N depends on the step and the model's programs only,

@@ -33,15 +33,13 @@ A generator of another form, or one without fast modes, is doubled as a whole.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import scipy.linalg.lapack as lapack
 
 from flexure_sim.engine import jit as kernel_cache
 from flexure_sim.engine.jit import njit
 from flexure_sim.engine.solver.quadratic_integrals import (
-    START, _doubling, balancing, power_entries, quadratic_integrals,
+    balanced_doubling, balancing, doublings, power_entries, quadratic_integrals,
 )
 
 #: A mode is fast when Re(lambda) h < -FAST: its transient within the step is below e^-50 of
@@ -67,8 +65,7 @@ def step_integrals(M: np.ndarray, Q: np.ndarray, h: float, m: int):
     if m and np.trace(A) * h < -FAST:
         d = balancing(A)
         norm = np.linalg.norm(A / d[:, None] * d[None, :], 1) * h
-        k = math.ceil(math.log2(norm / START)) if norm > START else 0
-        if k * M.shape[0] ** 2 >= SPLIT_WORK and _step_generator(M, m):
+        if doublings(norm) * M.shape[0] ** 2 >= SPLIT_WORK and _step_generator(M, m):
             split = _split(M, Q, h, m, d)
             if split is not None:
                 return split
@@ -149,9 +146,10 @@ def _split(M, Q, h, m, d):
         return None
     T11, T22 = np.ascontiguousarray(T[:ms, :ms]), np.ascontiguousarray(T[ms:, ms:])
     Y = _sylvester(T11, T22, -T[:ms, ms:], False, -1)          # T11 Y - Y T22 = -T12
-    V, Vinv, Qh, Uh, Tinv, X, XQ, Qs = _coordinates(
+    Tinv = np.linalg.inv(T22)
+    V, Vinv, Qh, Uh, X, XQ, Qs = _coordinates(
         np.ascontiguousarray(Zq), np.ascontiguousarray(Y), d, np.ascontiguousarray(Q),
-        np.ascontiguousarray(M[:m, m3:]), N, np.linalg.inv(T22), ms)
+        np.ascontiguousarray(M[:m, m3:]), N, Tinv, ms)
     Zs = _sylvester(T11, T22, -Qh[:ms, ms:m], True, 1)         # A_s^T Z_s + Z_s A_f = -B_s
     Yf = _sylvester(T22, T22, -Qh[ms:m, ms:m], True, 1)        # A_f^T Y + Y A_f = -Q_ff
     return _assemble(T11, balancing(T11), Uh, N, power_entries(N), Qs, h,
@@ -161,7 +159,7 @@ def _split(M, Q, h, m, d):
 @njit(cache=True)
 def _coordinates(Zq, Y, d, Q, F, N, Tinv, ms):
     """
-    Return V, V^-1, Q^, U^, A_f^-1, X, (P^T Q^_{., f})'s input rows and the slow Q_s.
+    Return V, V^-1, Q^, U^, X, (P^T Q^_{., f})'s input rows and the slow Q_s.
 
     Tinv: A_f^-1 (from NumPy: numba's np.linalg.inv added ~1 s to the first compilation).
 
@@ -197,7 +195,7 @@ def _coordinates(Zq, Y, d, Q, F, N, Tinv, ms):
     Qs[:ms, ms:] = Qsf @ X + Qh[:ms, m:]
     Qs[ms:, :ms] = Qs[:ms, ms:].T
     Qs[ms:, ms:] = XQ @ X + X.T @ np.ascontiguousarray(Qh[ms:m, m:]) + Qh[m:, m:]
-    return V, Vinv, Qh, Uh, Tinv, X, XQ, Qs
+    return V, Vinv, Qh, Uh, X, XQ, Qs
 
 
 @njit(cache=True)
@@ -205,48 +203,12 @@ def _assemble(T11, d, Uh, N, Ncoo, Qs, h, Zs, Yf, XQ, X, Tinv, V, Vinv):
     """
     Return G's input block and I_W from the parts (module doc).
 
-    The slow generator's integrals as ``quadratic_integrals`` takes them (balanced, doubled),
-    then the cross term, the fast modes' own square and the change of coordinates back.
+    The slow generator's integrals (``balanced_doubling``), then the cross term, the fast
+    modes' own square and the change of coordinates back.
     """
     ms, r, m = T11.shape[0], N.shape[0], V.shape[0]
-    # Balanced slow generator: A_b = D^-1 A_s D, U_b = D^-1 U_s, Q_b = T Q_s T, T = diag(D, I).
-    inv = 1.0 / d
-    ts = np.ones(ms + r)
-    ts[:ms] = d
-    Ab = np.empty((ms, ms))
-    norm = 0.0
-    for j in range(ms):
-        col = 0.0
-        for i in range(ms):
-            Ab[i, j] = T11[i, j] * inv[i] * d[j]
-            col += abs(Ab[i, j])
-        norm = max(norm, col * h)
-    k = max(0, int(math.ceil(math.log2(norm / START)))) if norm > START else 0
-    count = 0
-    for i in range(ms):
-        for j in range(r):
-            if Uh[i, j] != 0.0:
-                count += 1
-    Ucoo = np.empty((count, 3))
-    count = 0
-    for i in range(ms):
-        for j in range(r):
-            if Uh[i, j] != 0.0:
-                Ucoo[count, 0], Ucoo[count, 1], Ucoo[count, 2] = i, j, Uh[i, j] * inv[i]
-                count += 1
-    Qb = np.empty_like(Qs)
-    for i in range(ms + r):
-        for j in range(ms + r):
-            Qb[i, j] = Qs[i, j] * ts[i] * ts[j]
-    Gb, IWb = _doubling(Ab, Ucoo, Ncoo, Qb, h / 2.0 ** k, k)
-    Guu = np.empty((r, r))
-    for i in range(r):
-        for j in range(r):
-            Guu[i, j] = Gb[ms + i, ms + j]               # T^-1 is I on the inputs
-    IWs = np.empty((ms, r))
-    for i in range(ms):
-        for j in range(r):
-            IWs[i, j] = d[i] * IWb[i, j]
+    Gs, IWs = balanced_doubling(T11, d, np.ascontiguousarray(Uh[:ms]), Ncoo, Qs, h)
+    Guu = np.ascontiguousarray(Gs[ms:, ms:])
     # The cross term and the fast modes' own square (module doc).
     C = -XQ - np.ascontiguousarray(Uh[:ms].T) @ Zs
     Zu = _nilpotent_sylvester(np.ascontiguousarray(Tinv.T), -N, np.ascontiguousarray(C.T)).T
