@@ -11,12 +11,15 @@ tick still takes `STEPS_PER_TICK` steps (what a slower machine does at 1 kHz).
 The stage is the built-in one with a sensor (`SENSOR`: its noise makes every reading unique,
 which is how commands are matched to the ticks they answer). Figures: the node's missed
 ticks and tick jitter (its diagnostics, `measure.run_node`), and the command-to-applied
-latency from the recording and the controller's trace (``trace_path``): the i-th command
-(trace line i) answers the reading it lists, published at the end of tick k (log time t_k);
-the node records each command with the log time of the tick start that applied it, which for
-the very next tick k + 1 is t_k. So ``late = (log time of command i - t_k) / T`` is 0 when
-the command was applied at the first tick after its measurement (latency at most 1 tick) and
-n when it waited n more ticks.
+latency from the recording and the controller's trace (``trace_path``): each command (a
+trace line) answers the reading it lists, published at the end of tick k (log time t_k), and
+is found in the recording by its value, as the reading is (a value seen twice matches
+nothing: counted unmatched); the node records each command with the log time of the tick
+start that applied it, which for the very next tick k + 1 is t_k. So ``late = (log time of
+the command - t_k) / T`` is 0 when the command was applied at the first tick after its
+measurement (latency at most 1 tick) and n when it waited n more ticks. Matching by value, not
+by order, a command lost before the node took it (one sent before its subscription matched)
+shifts no other.
 
 ``--hog`` runs a CPU-bound process at niceness 19 next to them for the whole run (`Hog`): the
 machine is then never idle, as a developer's desktop with a build or a browser running.
@@ -108,32 +111,36 @@ def command_latency(recording: Path, trace: Path, period: float) -> dict[str, An
     from mcap_ros2.decoder import DecoderFactory
 
     readings: dict[float, int] = {}
+    commands: dict[float, int] = {}
     repeated: set[float] = set()
-    commands: list[int] = []
+    recorded = 0
     with open(recording, "rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         for _, channel, message, decoded in reader.iter_decoded_messages(
                 topics=["/" + topics.MEASURED, "/" + topics.COMMAND], log_time_order=False):
-            if channel.topic == "/" + topics.COMMAND:
-                commands.append(message.log_time)
-            elif decoded.data in readings:
+            is_command = channel.topic == "/" + topics.COMMAND
+            seen = commands if is_command else readings
+            recorded += is_command
+            if decoded.data in seen:
                 repeated.add(decoded.data)
             else:
-                readings[decoded.data] = message.log_time
+                seen[decoded.data] = message.log_time
     period_ns = period * 1e9
     late: list[int] = []
     unmatched = 0
     lines = trace.read_text().splitlines()
-    for line, applied in zip(lines, commands):
-        y = float(line.split()[1])
-        if y not in readings or y in repeated:
-            unmatched += 1
+    for line in lines:
+        y, u = (float(v) for v in line.split()[1:3])
+        if u not in commands:          # never recorded (commands_traced - commands_recorded)
             continue
-        late.append(round((applied - readings[y]) / period_ns))
+        if y not in readings or y in repeated or u in repeated:
+            unmatched += 1             # recorded, but its reading cannot be told
+            continue
+        late.append(round((commands[u] - readings[y]) / period_ns))
     n = len(late)
     ordered = sorted(late)
     return {
-        "commands_traced": len(lines), "commands_recorded": len(commands),
+        "commands_traced": len(lines), "commands_recorded": recorded,
         "commands_matched": n, "commands_unmatched": unmatched,
         "applied_next_tick_fraction": sum(1 for v in late if v == 0) / n if n else None,
         "late_ticks_mean": statistics.fmean(late) if n else None,
