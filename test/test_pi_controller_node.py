@@ -113,7 +113,7 @@ def test_a_nan_setpoint_or_measurement_is_refused_and_the_loop_recovers(tmp_path
                              timeout=30)
     finally:
         peer.close()
-        rc = node.stop(signal.SIGINT)
+        rc = node.stop(signal.SIGTERM)  # ends it as SIGINT does (the other tests)
     assert rc == 0, node.stderr
     integral, expected = 0.0, []
     for y in (2e-6, 4e-6, 6e-6):

@@ -8,10 +8,11 @@ stepping thread is (``pacing.Pacer``, the node's default ``wake_spin`` and ``ste
 that at every tick takes the answers waiting in a polled subscription (``stage.polled``, as the
 node takes drive commands) and publishes a ping (std_msgs/Float64 holding the tick's number).
 The controller side, another process (``--echo``), answers every ping it receives with the
-same number from an rclpy callback (``rclpy.spin``; the measurement QoS of ``pi_controller``:
-reliable, keep last 1). Figures as ``closed_loop``'s: ticks missed by the pacing, and how many
-answers were taken at the first tick after their ping (a ping of tick k answered at tick k + 1
-is "next tick"; each tick later is one late tick). Whatever a stage node and a Python
+same number from an rclpy callback, served as ``pi_controller`` serves its measurements
+(``apps.answer_loop``; its measurement QoS: reliable, keep last 1). Figures as
+``closed_loop``'s: ticks missed by the pacing, and how many answers were taken at the first
+tick after their ping (a ping of tick k answered at tick k + 1 is "next tick"; each tick later
+is one late tick). Whatever a stage node and a Python
 controller do, a closed loop through rclpy on this machine cannot do better than this.
 """
 from __future__ import annotations
@@ -52,13 +53,19 @@ def echo() -> int:
     from rclpy.executors import ExternalShutdownException
     from std_msgs.msg import Float64
 
+    from flexure_sim.node.apps.answer_loop import AnswerLoop
+    from flexure_sim.node.stage.polled import PolledGroup
+
     rclpy.init()
     node = rclpy.create_node("flexure_sim_pong")
     pong = node.create_publisher(Float64, PONG, _qos(1000))
-    node.create_subscription(Float64, PING, lambda msg: pong.publish(Float64(data=msg.data)),
-                             _qos(1))
+
+    def answer(msg: Any) -> None:
+        pong.publish(Float64(data=msg.data))
+
+    ping = node.create_subscription(Float64, PING, answer, _qos(1), callback_group=PolledGroup())
     try:
-        rclpy.spin(node)
+        AnswerLoop(node, [(ping, answer)]).serve()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
