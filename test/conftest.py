@@ -24,6 +24,9 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
+# Before anything imports NumPy: flexure_sim's BLAS settings (thread count, kernels) apply to
+# the tests as to a user's process.
+import flexure_sim  # noqa: E402,F401
 #: The test process's DDS writers announce unacknowledged samples every 1 ms (the shipped
 #: profile), so a peer can wait for the stage's acknowledgement of a command
 #: (node_harness.Peer.publish_acked) in milliseconds instead of Fast DDS's 3 s heartbeat.
