@@ -2,20 +2,22 @@
 A controller's measurements taken and answered in its main thread, without rclpy's executor.
 
 Why: rclpy's executors rebuild their wait set in Python on every wake-up, and a controller
-that answers every measurement wakes at the stage's tick rate. Measured on a 2-core VM (one
-Float64 answered per message at 2 kHz, CPU time of the answering process per message):
-``SingleThreadedExecutor`` 281 us with a node's parameter services, 275 us without them, this
-loop (`serve`) 60-70 us (``bench/pingpong.py``'s echo and ``pi_controller``, same machine).
-At 2 kHz the executor's cost alone is more than half a core, and a reply that waits for it
-misses the stage's next tick. ``rclpy.experimental.EventsExecutor`` (94 us) deadlocked at
-shutdown in this rclpy (7.1.6): its spin keeps a lock that ``Context.try_shutdown`` waits for.
+that answers every measurement wakes at the stage's tick rate. Measured on a 2-core VM (a
+process answering each Float64 of a 2 kHz stream with one Float64; CPU time of the answering
+process per message, 13,000 messages, one run each): ``SingleThreadedExecutor`` 293 us (its
+thread alone 281 us, 275 us without the node's parameter services), this loop (`serve`)
+102 us, ``rclpy.experimental.EventsExecutor`` 94 us. At 2 kHz the executor's cost alone is
+more than half a core, and a reply that waits for it misses the stage's next tick (the ping-pong
+floor, ``bench/pingpong.py``, on that VM: 93.4-98.2 % answered at the next tick with
+``rclpy.spin``, 99.6-99.7 % with this loop). The EventsExecutor deadlocked at shutdown in this
+rclpy (7.1.6): its spinning thread keeps a lock that ``Context.try_shutdown`` waits for.
 
 How: the subscriptions are created in a `PolledGroup` (the executor never waits on them);
 `serve` waits on them with a wait set of its own, reused from one wake-up to the next, and
 runs their callbacks in the calling thread. A ``SingleThreadedExecutor`` in a second thread
 serves the rest of the node (services, parameters), which wakes it only when asked. The wait
 set is rclpy's own (``_rclpy.WaitSet``, as ``rclpy.wait_for_message`` uses it): rclpy
-(Jazzy) has no public wait set. test_pi_controller_node.py fails if it changes.
+(Jazzy) has no public wait set. test_answer_loop.py fails if it changes.
 SIGINT and SIGTERM end `serve` with KeyboardInterrupt, as they end ``rclpy.spin``; a
 shutdown of the context ends it with ExternalShutdownException, wherever it lands (rclpy
 raises its implementation's RCLError when it lands while a wait set or guard condition is
