@@ -1,4 +1,8 @@
 """The accuracy claims behind the benchmark figures (speed figures are printed, not tested)."""
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -76,3 +80,16 @@ def test_spatial_accuracy_ladder_halves_the_step_until_the_target(monkeypatch):
     reached = spatial_bench.at_accuracy(*args, target=0.5 * (first + second))
     assert [r["dt"] for r in reached["steps"]] == [1e-4, 5e-5]
     assert reached["reached"] == reached["steps"][-1]
+
+
+def test_the_installed_package_finds_the_fe_benchmarks_stage(tmp_path):
+    # Run from elsewhere, so that the installed copy is imported: its example mechanisms are
+    # under <prefix>/share/flexure_sim/config, not next to the module.
+    code = ("import sys; from flexure_sim.tools.bench.fe_bench import stage_file; "
+            "print(sys.prefix); print(stage_file())")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                       cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    prefix, path = p.stdout.splitlines()
+    assert path == f"{prefix}/share/flexure_sim/config/examples/microstage_fe.yaml"
+    assert Path(path).is_file()

@@ -18,11 +18,21 @@ import numpy as np
 
 from flexure_sim.engine.hinges.fe import fe_model as model
 from flexure_sim.engine.hinges.fe.solves import DEFAULT_RESOLUTION
+from flexure_sim.engine.mechanism.builtins import builtin_dir, searched
 from flexure_sim.engine.mechanism.loader import ConfigError, mechanism_from_dict
 from flexure_sim.engine.mechanism.yaml_files import read_yaml
 
 GEOMETRY = {"D": 3e-3, "h": 0.25e-3, "t": 0.02}
-STAGE = Path(__file__).resolve().parents[3] / "config" / "examples" / "microstage_fe.yaml"
+#: The stage with finite-element hinges, among the built-ins' examples.
+STAGE = Path("examples") / "microstage_fe.yaml"
+
+
+def stage_file() -> Path:
+    """Return `STAGE` where this install (or checkout) keeps its built-in mechanisms."""
+    folder = builtin_dir()
+    if folder is None:
+        raise ConfigError(f"{STAGE}: no built-in mechanisms found in {searched()}")
+    return folder / STAGE
 
 
 def _median(fn, n: int) -> float:
@@ -50,9 +60,10 @@ def bench_fe_hinge() -> dict:
             os.environ["FLEXURE_SIM_CACHE"] = tmp
             model.stiffness("circular", GEOMETRY, 69e9, 0.33)
             cached = _median(lambda: model.stiffness("circular", GEOMETRY, 69e9, 0.33), 50)
-            data = read_yaml(STAGE, ConfigError)
-            mechanism_from_dict(data, source=str(STAGE))
-            stage = _median(lambda: mechanism_from_dict(data, source=str(STAGE)), 10)
+            path = stage_file()
+            data = read_yaml(path, ConfigError)
+            mechanism_from_dict(data, source=str(path))
+            stage = _median(lambda: mechanism_from_dict(data, source=str(path)), 10)
     finally:
         if old is None:
             os.environ.pop("FLEXURE_SIM_CACHE", None)
