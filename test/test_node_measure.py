@@ -4,11 +4,14 @@ The node measuring harness behind `python -m flexure_sim.tools.bench.benchmarks 
 It is tested on a short real run (a real stage_node subprocess, Fast DDS on loopback, a real
 recording read back).
 """
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
 from flexure_sim.node.publish.diagnostics import TICK_PARTS
-from flexure_sim.tools.bench import measure
+from flexure_sim.tools.bench import closed_loop, measure
 
 from node_harness import next_domain_id
 
@@ -55,3 +58,52 @@ def test_the_ping_pong_floor_counts_every_paced_tick_and_the_answers_it_takes():
     assert r["answers"] + r["unanswered"] == r["paced_ticks"]
     assert r["late_ticks_max"] >= r["late_ticks_p99"] >= 0  # never before the next tick
     assert 0 <= r["applied_next_tick_fraction"] <= 1
+
+
+class _StuckCompanion:
+    """A companion (`run_node`) whose stop fails; it notes the node's process when started."""
+
+    def __init__(self, env, workdir):
+        # The node runs in workdir (its recording's relative path): find it by its cwd.
+        self.node_pid = None
+        here = Path(workdir).resolve()
+        for proc in Path("/proc").iterdir():
+            try:
+                if (proc.name.isdigit() and (proc / "cwd").resolve() == here
+                        and b"stage_node" in (proc / "cmdline").read_bytes()):
+                    self.node_pid = int(proc.name)
+            except OSError:
+                continue
+
+    def stop(self):
+        raise RuntimeError("the companion would not stop")
+
+
+def test_a_companion_that_fails_to_stop_still_leaves_no_node_running(tmp_path):
+    made = []
+
+    def start(env, workdir):
+        made.append(_StuckCompanion(env, workdir))
+        return made[-1]
+
+    with pytest.raises(RuntimeError, match="would not stop"):
+        measure.run_node("realtime", 0.5, 200.0, 1e-4, False, False, warmup=0.2,
+                         domain_id=next_domain_id(), keep_dir=tmp_path, companion=start)
+    assert made and made[0].node_pid is not None, "the node was not found while it ran"
+    # run_node waited for it (SIGINT, wait): the process is gone, not merely signalled.
+    assert not Path(f"/proc/{made[0].node_pid}").exists()
+
+
+def test_a_controller_that_ignores_sigint_is_killed_and_that_raised(tmp_path, monkeypatch):
+    monkeypatch.setattr(closed_loop, "STOP_TIMEOUT_S", 0.5)
+    ignore = ("import signal, sys, time; signal.signal(signal.SIGINT, signal.SIG_IGN); "
+              "print('ready', flush=True); time.sleep(600)")
+    controller = closed_loop.ControllerProcess.__new__(closed_loop.ControllerProcess)
+    controller.proc = subprocess.Popen([sys.executable, "-c", ignore], stdout=subprocess.PIPE,
+                                       text=True)
+    controller._log = open(tmp_path / "controller.stderr", "wb")  # noqa: SIM115
+    assert controller.proc.stdout.readline().strip() == "ready"  # SIGINT is ignored from here
+    with pytest.raises(RuntimeError, match="did not end within 0.5 s of SIGINT: killed"):
+        controller.stop()
+    assert controller.proc.poll() is not None and controller._log.closed
+    controller.proc.stdout.close()

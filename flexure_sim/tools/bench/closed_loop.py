@@ -50,6 +50,8 @@ SETPOINT = 2.0e-5
 RATE = 1000.0
 #: How long the controller may take to start, s.
 START_TIMEOUT_S = 60.0
+#: How long the controller may take to end after SIGINT, s (then it is killed).
+STOP_TIMEOUT_S = 30.0
 #: Engine steps per tick at every rate (the node's default at 1 kHz).
 STEPS_PER_TICK = 10
 #: A CPU-bound process at the lowest priority: it only takes time nobody else wants.
@@ -89,10 +91,16 @@ class ControllerProcess:
             time.sleep(0.05)
 
     def stop(self) -> None:
+        """SIGINT; a controller still running `STOP_TIMEOUT_S` later is killed, and that raised."""
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGINT)
         try:
-            self.proc.wait(30)
+            self.proc.wait(STOP_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(STOP_TIMEOUT_S)
+            raise RuntimeError(f"pi_controller did not end within {STOP_TIMEOUT_S:g} s of SIGINT: "
+                               "killed") from None
         finally:
             self._log.close()
 

@@ -159,17 +159,19 @@ def run_node(
         cpu_end, cpu_wall_end = _cpu_seconds(proc.pid), time.monotonic()
         flood = flooder.result() if flooder is not None else None
     finally:
-        if other is not None:
-            other.stop()
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
         try:
-            proc.wait(60)
+            if other is not None:
+                other.stop()  # may raise (a companion that would not stop): the node still stops
         finally:
-            stderr.close()
-            executor.shutdown(timeout_sec=1.0)
-            node.destroy_node()
-            rclpy.try_shutdown(context=context)
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(60)
+            finally:
+                stderr.close()
+                executor.shutdown(timeout_sec=1.0)
+                node.destroy_node()
+                rclpy.try_shutdown(context=context)
     if len(window) < 2:
         raise RuntimeError("fewer than two diagnostics in the measuring window")
     (w0, a), (w1, b) = window[0], window[-1]
