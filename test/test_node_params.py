@@ -1,7 +1,9 @@
 """Parameter validation, real-time pacing and recording names of the stage node (no ROS)."""
 import datetime as dt
+import math
 import multiprocessing
 
+import numpy as np
 import pytest
 
 from flexure_sim.node.stage.pacing import Pacer, PacingStats
@@ -152,6 +154,20 @@ def test_lateness_percentiles_split_a_mixed_distribution_at_the_right_bins():
     assert stats.late_percentile(1.0) == pytest.approx(20.001e-3)
     assert stats.max_late_s == 1.0
     assert PacingStats().late_percentile(0.99) == 0.0
+
+
+@pytest.mark.parametrize("scale", [2e-6, 1e-4, 3e-3, 3e-2])
+def test_lateness_percentiles_equal_the_order_statistics_of_the_samples(scale):
+    """The bin holding the ceil(q n)-th smallest lateness, at every spread of the histogram."""
+    samples = np.random.default_rng(7).exponential(scale, 4001)
+    stats = PacingStats()
+    for late in samples:
+        stats.observe(late)
+    ordered = np.sort(samples)
+    qs = (0.5, 0.9, 0.99, 1.0)
+    for q, got in zip(qs, stats.late_percentiles(*qs)):
+        kth = ordered[math.ceil(q * len(samples)) - 1]
+        assert got == pytest.approx(min(math.floor(kth / 1e-6) + 1, 20_001) * 1e-6)
 
 
 def test_pacer_counts_overruns_catches_up_and_slips_when_far_behind():

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Generator
 
 from flexure_sim.node.publish import interface as itf
 
@@ -162,10 +162,40 @@ class Diagnostics:
 
     def publish(self, stamp: int) -> None:
         """Publish (and record) the status of the window ending now; start a new window."""
-        self._publisher.publish(self.record(stamp))
+        for _ in self.stages(stamp):
+            pass
 
     def record(self, stamp: int) -> bytes:
         """Record the status of the window ending now and return it (CDR); start a new window."""
+        stages = self.stages(stamp, publish=False)
+        while True:
+            try:
+                next(stages)
+            except StopIteration as end:
+                return end.value
+
+    def stages(self, stamp: int, publish: bool = True) -> Generator[None, None, bytes]:
+        """
+        `publish` in stages, yielding between them (the paced loop's slack, `tick_extras`).
+
+        The window's values (and a new window), their text, its packing, the recording, the
+        publishing (unless not ``publish``); returns the status (CDR).
+        """
+        level, message, values = self._status()
+        yield
+        values = [(key, itf.value_text(value)) for key, value in values]
+        yield
+        payload = itf.encode_diagnostics(
+            stamp, f"{self._name}: simulation", self._hardware_id, level, message, values)
+        yield
+        self.loop.session.write(((self._channel, payload),), stamp)
+        if publish:
+            yield
+            self._publisher.publish(payload)
+        return payload
+
+    def _status(self) -> tuple[int, str, list[tuple[str, Any]]]:
+        """(level, message, values) of the window ending now; start a new window."""
         loop = self.loop
         w = self.window
         now = time.perf_counter()
@@ -263,15 +293,14 @@ class Diagnostics:
         values += extra_values + stress_values
         if loop.display is not None:
             values += loop.display.values()
+        extras = getattr(loop, "extras", None)
+        if extras is not None:
+            values += extras.values()
         values += [
             ("recording", rec is not None),
             ("recording_path", str(rec.path) if rec is not None else ""),
             ("recorded_messages", rec.accepted_count if rec is not None else 0),
             ("recording_dropped", rec.dropped_count if rec is not None else 0),
         ]
-        payload = itf.encode_diagnostics(
-            stamp, f"{self._name}: simulation", self._hardware_id, level,
-            "; ".join(notes) if notes else "running", values)
-        session.write(((self._channel, payload),), stamp)
         self.window = self.new_window()
-        return payload
+        return level, "; ".join(notes) if notes else "running", values

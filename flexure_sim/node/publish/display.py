@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any, Optional
+from typing import Any, Iterator, Optional
 
 import numpy as np
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -166,18 +166,25 @@ class Display:
         #: "stress ratio" or "|wrench| / peak": what the hinge colours show.
         self.colouring = "stress ratio" if self.stress is not None else "|wrench| / peak"
 
-    def markers(self, report: Any, stamp_ns: int) -> bytes:
+    def geometry(self, report: Any) -> dict:
         """
-        CDR bytes of the MarkerArray of a tick.
+        Return the drawn geometry of a tick (``MarkerScene.geometry``: arrays of its own).
 
         ``report``: the engine's tick report (``tick_report.ReportView``: poses, wrenches, the
         drive's force and the stress ratios, NaN where a hinge has no yield strength).
         """
         ratios = (np.nan_to_num(report.stress_ratios, nan=0.0)
                   if self.stress is not None else None)
-        specs = self.scene.specs(report.poses, report.wrenches, float(report.drive_force),
-                                 ratios)
-        return self.packer.pack(specs, stamp_ns)
+        return self.scene.geometry(report.poses, report.wrenches, float(report.drive_force),
+                                   ratios)
+
+    def specs(self, report: Any, geometry: Optional[dict] = None) -> list:
+        """Return the markers of a tick as plain data (``MarkerSpec``; `packer` packs them)."""
+        return self.scene.specs_of(geometry if geometry is not None else self.geometry(report))
+
+    def markers(self, report: Any, stamp_ns: int) -> bytes:
+        """CDR bytes of the MarkerArray of the tick report ``report`` (`specs`)."""
+        return self.packer.pack(self.specs(report), stamp_ns)
 
     def moving(self, report: Any) -> list[Transform]:
         """Return the transforms of the moving bodies at the tick report ``report``."""
@@ -212,13 +219,34 @@ class DisplayOutput:
 
     def publish(self, report: Any, stamp: int) -> None:
         """Publish (and record) the display of the tick report ``report`` (a ``ReportView``)."""
-        t0 = time.perf_counter()
-        payload = self.display.markers(report, stamp)
+        for _ in self.stages(report, stamp):
+            pass
+
+    def stages(self, report: Any, stamp: int) -> Iterator[None]:
+        """
+        `publish` in stages, yielding between them (the paced loop's slack, `tick_extras`).
+
+        The markers' geometry (and the TF transforms), their data, their packing, the recording,
+        the publishing. ``report`` must not change until the first stage has run.
+        """
+        perf = time.perf_counter
+        t0 = perf()
+        d = self.display
+        geometry = d.geometry(report)
+        moving = d.moving(report) if self._tf_pub is not None else None
+        spent = perf() - t0
+        yield
+        t0 = perf()
+        specs = d.specs(report, geometry)
+        spent += perf() - t0
+        yield
+        t0 = perf()
+        payload = d.packer.pack(specs, stamp)
+        tf = tf_message(moving, stamp, self._tf_class) if moving is not None else None
+        spent += perf() - t0
+        yield
+        t0 = perf()
         items = [(self._channels[0], payload)]
-        tf = None
-        if self._tf_pub is not None:
-            d = self.display
-            tf = tf_message(d.moving(report), stamp, self._tf_class)
         session = self._session
         if session.current is not None:
             if tf is not None:
@@ -229,13 +257,16 @@ class DisplayOutput:
                     items.append((self._channels[2], serialize_message(static)))
                     self._recorded_static = session.current
             session.write(items, stamp)
+        spent += perf() - t0
+        yield
+        t0 = perf()
         self._pub.publish(payload)
         if tf is not None:
             self._tf_pub.publish(tf)
-        dt = time.perf_counter() - t0
+        spent += perf() - t0
         self.ticks += 1
-        self.time_sum += dt
-        self.time_max = max(self.time_max, dt)
+        self.time_sum += spent
+        self.time_max = max(self.time_max, spent)
 
     def values(self) -> list[tuple[str, Any]]:
         """Diagnostics of the display ticks."""

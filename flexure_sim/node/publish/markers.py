@@ -190,7 +190,10 @@ class MarkerScene:
         `message` and `marker_cdr.MarkerArrayPacker` both turn it into a MarkerArray: one
         definition.
         """
-        g = self.geometry(poses, wrenches, drive_force, ratios)
+        return self.specs_of(self.geometry(poses, wrenches, drive_force, ratios))
+
+    def specs_of(self, g: dict) -> list["MarkerSpec"]:
+        """Return the markers of the drawn geometry ``g`` (`geometry`) as plain data."""
         out = []
         for k, (body, pts) in enumerate(zip(self.mechanism.bodies, g["outlines"])):
             out.append(MarkerSpec("bodies", k, LINE_STRIP, body.name, _IDENTITY,

@@ -22,7 +22,7 @@ Rotations are SciPy's (``scipy.spatial.transform.Rotation``).
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Optional
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -100,9 +100,17 @@ class SpatialDisplay:
         owner = self._owner
         return positions, positions[owner] + rotations[owner].apply(self._local)
 
-    def specs(self, snap: Any) -> list[MarkerSpec]:
-        """Return the markers of the snapshot ``snap`` as plain data (`marker_cdr` packs them)."""
-        positions, points = self.placed(snap)
+    def geometry(self, snap: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Return the drawn geometry of the snapshot ``snap`` (`placed`)."""
+        return self.placed(snap)
+
+    def specs(self, snap: Any, geometry: Optional[tuple] = None) -> list[MarkerSpec]:
+        """
+        Return the markers of the snapshot ``snap`` as plain data (`marker_cdr` packs them).
+
+        ``geometry``: its `geometry`, if already taken.
+        """
+        positions, points = geometry if geometry is not None else self.placed(snap)
         parts = np.split(points, self._splits)
         out = []
         for k, (body, pts) in enumerate(zip(self.mechanism.bodies, parts[:-1])):

@@ -74,14 +74,20 @@ class PacingStats:
         """
         Start lateness (s) below which a fraction q of the ticks started (bin upper edge).
 
-        One value for each q. Called from the paced loop (diagnostics), so it costs a bounded ~20
-        us whatever the distribution: one cumulative sum of the histogram, binary searches.
+        One value for each q. Called from the paced loop (diagnostics), so it sums the
+        histogram only as far as the largest q needs: 256 bins, four times more at a time while
+        short (the whole 160 kB histogram summed for each status cost ~20 us back to back and
+        more, paced, between ticks, where it is not in the core's caches).
         """
         if self.observed == 0:
             return tuple(0.0 for _ in qs)
-        cumulative = np.cumsum(self.late_histogram)
         # Integer targets: a float key would make searchsorted convert the whole array.
         targets = np.array([max(1, math.ceil(q * self.observed)) for q in qs], dtype=np.int64)
+        histogram, n = self.late_histogram, 256
+        cumulative = np.cumsum(histogram[:n])
+        while cumulative[-1] < targets.max() and n <= _BINS:
+            n *= 4
+            cumulative = np.cumsum(histogram[:n])
         indices = np.minimum(np.searchsorted(cumulative, targets, side="left"), _BINS)
         return tuple((int(i) + 1) * _BIN_S for i in indices)
 
@@ -201,6 +207,16 @@ class Pacer:
             return deadline + behind * self.period
         self.stats.observe(late)
         return deadline
+
+    @property
+    def next_deadline(self) -> float:
+        """Return when the tick after the current one is due (the clock's seconds)."""
+        return self._t0 + (self._k + 1) * self.period
+
+    @property
+    def clock(self) -> Callable[[], float]:
+        """Return the clock the deadlines are on."""
+        return self._clock
 
     def done(self) -> bool:
         """Mark the current tick's work finished; return True if it missed its slot."""

@@ -213,12 +213,13 @@ class SteppingLoop:
                 pacer.wait()
                 self.tick(defer=True)
                 missed = pacer.done()
-                self.extras.send()
+                self.extras.send(pacer.next_deadline, pacer.clock)
                 warning = self.overrun.tick(time.perf_counter(), self._tick_work, missed,
                                             self._settings_text())
                 if warning is not None:
                     self._log.warning(warning)
             self._check_graph()
+        self.extras.send()  # what still waits goes out before the final status
 
     def _check_graph(self) -> None:
         """Run `graph_check` if it is due (after a tick's work: it never delays one)."""
@@ -289,7 +290,7 @@ class SteppingLoop:
             message = self.hold.restore(sim, self.filter, exc)
             if self.throttle.event("engine") is not None:
                 self._log.error(message + f" ({self.hold.failures} engine failures in all)")
-            self._count_tick(round(sim.state.t * 1e9), span)
+            self._count_tick(span)
             self._tick_work = perf() - t0
             if not defer:
                 self.extras.send()
@@ -330,7 +331,7 @@ class SteppingLoop:
         if self.diagnostics is not None:
             self.diagnostics.window.add(t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5,
                                         t6 - t0)
-        self._count_tick(stamp, span, bool(self.display_every)
+        self._count_tick(span, bool(self.display_every)
                          and crossed(self.ticks, span, self.display_every))
         if not defer:
             self.extras.send()
@@ -341,11 +342,11 @@ class SteppingLoop:
         return (f"publish_rate {self.rate:g} Hz, monitor_rate {self.monitor_rate:g} Hz, "
                 f"stepping_priority {self.priority}")
 
-    def _count_tick(self, stamp: int, span: int = 1, display: bool = False) -> None:
+    def _count_tick(self, span: int = 1, display: bool = False) -> None:
         """Count the tick; make its display (if ``display``) and diagnostics due (`extras`)."""
         first = self.ticks + 1
         self.ticks += span
-        self.extras.note(stamp, display, crossed(first, span, self.diag_every))
+        self.extras.note(display, crossed(first, span, self.diag_every))
 
     # ------------------------------------------------------------- live changes
     def _set_merge(self, merge_after: int) -> None:
