@@ -36,9 +36,11 @@ class Kept:
 
     def __init__(self, name: str, sent: list[str], then=None) -> None:
         self.name, self.sent, self.then = name, sent, then
+        self.last = None
 
-    def publish(self, _data) -> None:
+    def publish(self, data) -> None:
         self.sent.append(self.name)
+        self.last = data
         if self.then is not None:
             self.then()
 
@@ -137,6 +139,13 @@ def test_a_display_in_stages_goes_out_in_the_slack_of_several_ticks():
     assert pacer.stats.max_late_s == pytest.approx(0.2 * PERIOD)
     assert pacer.stats.missed == 0
     assert loop.extras.deferred >= displays - 1 and loop.extras.forced == 0
+    # The diagnostics say so.
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import deserialize_message
+
+    status = deserialize_message(loop.diagnostics._publisher.last, DiagnosticArray).status[0]
+    values = {kv.key: kv.value for kv in status.values}
+    assert int(values["extras_deferred"]) > 0 and values["extras_forced"] == "0"
 
 
 def test_extras_follow_the_ticks_topics_in_every_mode():
