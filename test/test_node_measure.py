@@ -107,3 +107,17 @@ def test_a_controller_that_ignores_sigint_is_killed_and_that_raised(tmp_path, mo
         controller.stop()
     assert controller.proc.poll() is not None and controller._log.closed
     controller.proc.stdout.close()
+
+
+def test_the_tick_profile_times_every_part_of_ticks_that_send_their_status():
+    """``measure --profile``: a real node ticked in this process, its statuses falling due."""
+    from flexure_sim.tools.bench import tick_profile
+
+    r = tick_profile.profile(1000.0, 1e-4, ticks=250)  # two statuses (10 Hz) fall due
+    parts = [r[f"{part}_us"] for part in TICK_PARTS]
+    assert all(p >= 0 for p in parts) and r["engine_us"] > 0
+    assert sum(parts) == pytest.approx(r["tick_us"], rel=1e-6)
+    assert r["steps_per_tick"] == 10 and r["topics_per_tick"] == 26
+    steps = r["steps_per_tick"] * r["engine_step_us_reference"]
+    assert r["overhead_factor"] == pytest.approx(r["tick_us"] / steps)
+    assert r["engine_ratio"] == pytest.approx(r["engine_us"] / steps)

@@ -26,7 +26,7 @@ import os
 import random
 import tempfile
 import time
-from typing import Any
+from typing import Any, Iterator
 
 from flexure_sim.node.publish.diagnostics import TICK_PARTS
 
@@ -50,8 +50,9 @@ class _Parts:
             self.sums[k] += t
         self.engine.append(times[TICK_PARTS.index("engine")])
 
-    def publish(self, _stamp: int) -> None:
-        """Diagnostics are not part of the profile."""
+    def stages(self, _stamp: int) -> Iterator[None]:
+        """Diagnostics are not part of the profile (``Diagnostics.stages``: none here)."""
+        yield from ()
 
 
 def closed_loop_command(tick: int) -> float:
